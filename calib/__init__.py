@@ -1,0 +1,1 @@
+"""Camera profiles shipped with qrfield (installed as the data package ``qrfield_calib``)."""

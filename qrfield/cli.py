@@ -1,0 +1,57 @@
+"""The ``qrfield`` command line: one subcommand per module in :mod:`qrfield.commands`.
+
+Each command module defines ``HELP`` (one line), ``add_arguments(parser)`` and ``run(args) -> int``
+and imports its heavy dependencies inside ``run`` so that ``qrfield --help`` stays fast.
+No subcommand opens the bench app (``qrfield gui``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import pkgutil
+import sys
+from collections.abc import Sequence
+
+import qrfield
+from qrfield import commands
+from qrfield.camera import CameraModelError
+
+
+def command_names() -> list[str]:
+    """Subcommand names: the modules of qrfield.commands, ``_`` spelled ``-``."""
+    return sorted(m.name.replace("_", "-") for m in pkgutil.iter_modules(commands.__path__) if not m.name.startswith("_"))
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="qrfield",
+        description="Measure the 3D position and orientation of a printed QR code from one camera. "
+        "Without a subcommand, opens the bench app.",
+    )
+    parser.add_argument("--version", action="version", version=f"qrfield {qrfield.__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in command_names():
+        module = importlib.import_module(f"qrfield.commands.{name.replace('-', '_')}")
+        sp = sub.add_parser(name, help=module.HELP, description=getattr(module, "DESCRIPTION", module.HELP))
+        module.add_arguments(sp)
+        sp.set_defaults(_run=module.run)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the console script; returns the process exit code."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser()
+    if not argv or (argv[0].startswith("-") and argv[0] not in ("-h", "--help", "--version")):
+        argv = ["gui", *argv]  # no subcommand: the app, with any options given
+    args = parser.parse_args(argv)
+    try:
+        return int(args._run(args) or 0)
+    except (CameraModelError, ValueError, OSError) as exc:
+        # Bad input is the user's to fix: one clear line, no traceback.
+        print(f"qrfield {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"qrfield {args.command}: interrupted", file=sys.stderr)
+        return 130

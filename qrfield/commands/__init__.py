@@ -1,0 +1,1 @@
+"""Subcommands of ``qrfield``, discovered by :mod:`qrfield.cli` (one module each)."""

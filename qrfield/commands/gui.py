@@ -1,0 +1,41 @@
+"""``qrfield gui`` (also ``qrfield`` alone): the bench app window."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+HELP = "open the bench app window (the default when no subcommand is given)"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--source", default="auto",
+        help="camera source: auto (picamera2, then USB, then the virtual bench), virtual, picamera2, "
+        "usb:INDEX, a video file or a folder of images",
+    )
+    parser.add_argument("--camera", default=None, metavar="CAM", help="camera profile NAME[@WxH] or PATH.json")
+    parser.add_argument("--side-mm", type=float, default=None, metavar="L", help="QR symbol side, mm")
+
+
+def display_available() -> bool:
+    """True when Qt can open a window: a display server, or an explicit QT_QPA_PLATFORM."""
+    if os.environ.get("QT_QPA_PLATFORM"):
+        return True
+    if sys.platform.startswith("linux"):
+        return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+    return True
+
+
+def run(args: argparse.Namespace) -> int:
+    if not display_available():
+        print(
+            "qrfield: no display (DISPLAY and WAYLAND_DISPLAY are unset), so no window can open; "
+            "run headless instead: qrfield run --headless --source auto --json-lines",
+            file=sys.stderr,
+        )
+        return 3
+    from ui.app import main as app_main
+
+    return app_main(args)

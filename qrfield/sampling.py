@@ -1,0 +1,73 @@
+"""Seeded random poses in the workspace, for tests, benchmarks and the simulation.
+
+Tilt is the angle between the card's normal and the camera's optical axis; the in-plane rotation
+(about the card's normal) is uniform over the full turn.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from qrfield.camera import CameraModel
+from qrfield.geometry import Pose, angles_from_rotation, rotation_matrix
+
+
+def _axis_angle(axis: np.ndarray, angle_rad: float) -> np.ndarray:
+    kx, ky, kz = axis / np.linalg.norm(axis)
+    k = np.array([[0, -kz, ky], [kz, 0, -kx], [-ky, kx, 0]])
+    return np.eye(3) + np.sin(angle_rad) * k + (1 - np.cos(angle_rad)) * (k @ k)
+
+
+def random_tilted_rotation(rng: np.random.Generator, max_tilt_deg: float) -> np.ndarray:
+    """A rotation whose card normal lies within ``max_tilt_deg`` of the optical axis, any in-plane turn."""
+    gamma = rng.uniform(-180.0, 180.0)
+    tilt = np.radians(rng.uniform(0.0, max_tilt_deg))
+    phi = rng.uniform(0.0, 2 * np.pi)
+    return _axis_angle(np.array([np.cos(phi), np.sin(phi), 0.0]), tilt) @ rotation_matrix([0.0, 0.0, gamma])
+
+
+def random_visible_poses(
+    camera: CameraModel,
+    side_mm: float,
+    count: int,
+    seed: int = 0,
+    z_range_mm: tuple[float, float] = (150.0, 800.0),
+    max_tilt_deg: float = 50.0,
+    margin_px: float = 8.0,
+) -> list[Pose]:
+    """``count`` seeded poses whose four vertices lie at least ``margin_px`` inside the image.
+
+    Raises ValueError when the workspace cannot hold the code (e.g. a 300 mm code at 150 mm).
+    """
+    from qrfield.render import RenderError, check_view
+
+    rng = np.random.default_rng(seed)
+    poses: list[Pose] = []
+    attempts = 0
+    while len(poses) < count:
+        attempts += 1
+        if attempts > 200 * count + 1000:
+            raise ValueError(
+                f"could not place {count} visible {side_mm} mm codes in z {z_range_mm} mm "
+                f"for camera {camera.name}; widen the range or shrink the code"
+            )
+        z = rng.uniform(*z_range_mm)
+        half_w = (camera.width / 2) * z / camera.fx
+        half_h = (camera.height / 2) * z / camera.fy
+        x = rng.uniform(-half_w, half_w) + (camera.width / 2 - 0.5 - camera.cx) * z / camera.fx
+        y = rng.uniform(-half_h, half_h) + (camera.height / 2 - 0.5 - camera.cy) * z / camera.fy
+        rotation = random_tilted_rotation(rng, max_tilt_deg)
+        pose = Pose(np.array([x, y, z]), angles_from_rotation(rotation))
+        try:
+            corners = check_view(camera, side_mm, pose)
+        except RenderError:
+            continue
+        if (
+            corners[:, 0].min() < margin_px
+            or corners[:, 1].min() < margin_px
+            or corners[:, 0].max() > camera.width - 1 - margin_px
+            or corners[:, 1].max() > camera.height - 1 - margin_px
+        ):
+            continue
+        poses.append(pose)
+    return poses

@@ -1,0 +1,1 @@
+"""The qrfield bench app (PySide6 + pyqtgraph). Talks to :mod:`qrfield` only through its public API."""
