@@ -1,0 +1,120 @@
+"""Full-frame QR detection: backends in order, sub-pixel refinement, checks; never raises on image content."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from qrfield.detect.backends import Candidate, find_candidates, parse_backends
+from qrfield.detect.detection import Detection, DetectorSettings
+from qrfield.detect.patterns import best_module_count, check_patterns
+from qrfield.detect.refine import refine_corners
+from qrfield.settings import validated
+
+
+class DetectorInputError(ValueError):
+    """The image is not a numpy uint8 grey (H, W) or colour (H, W, 3|4) array."""
+
+
+def as_grey(image: np.ndarray) -> np.ndarray:
+    """(H, W) uint8 grey view of a grey, BGR or BGRA uint8 image; DetectorInputError otherwise."""
+    import cv2
+
+    if not isinstance(image, np.ndarray):
+        raise DetectorInputError(f"image must be a numpy array, got {type(image).__name__}")
+    if image.dtype != np.uint8:
+        raise DetectorInputError(f"image must be uint8 (0..255), got {image.dtype}")
+    if image.ndim == 3 and image.shape[2] == 1:
+        image = image[:, :, 0]
+    if image.ndim == 2:
+        return np.ascontiguousarray(image)
+    if image.ndim == 3 and image.shape[2] in (3, 4):
+        code = cv2.COLOR_BGR2GRAY if image.shape[2] == 3 else cv2.COLOR_BGRA2GRAY
+        return cv2.cvtColor(np.ascontiguousarray(image), code)
+    raise DetectorInputError(f"image must be (H, W) grey or (H, W, 3) BGR, got shape {image.shape}")
+
+
+def _inside(point: np.ndarray, quad: np.ndarray) -> bool:
+    """True when ``point`` lies inside the convex quadrilateral ``quad`` (4, 2)."""
+    edges = np.roll(quad, -1, axis=0) - quad
+    rel = point - quad
+    cross = edges[:, 0] * rel[:, 1] - edges[:, 1] * rel[:, 0]
+    return bool(np.all(cross >= 0) or np.all(cross <= 0))
+
+
+class Detector:
+    """Find QR codes in one image: corners V1..V4 (sub-pixel when refined), text, quality.
+
+    Backends run in the order of ``settings.backends`` until one of them yields an accepted code
+    (a fast one first, slower ones as fallbacks). Each candidate is checked against the symbol's
+    fixed patterns (:mod:`qrfield.detect.patterns`), refined (:mod:`qrfield.detect.refine`) and kept
+    only when its quality reaches ``settings.min_quality`` (and its text was read, if required).
+    """
+
+    def __init__(self, settings: DetectorSettings | None = None) -> None:
+        self.settings = validated(settings or DetectorSettings())
+        self.backends = parse_backends(self.settings.backends)
+
+    def detect(self, image: np.ndarray) -> list[Detection]:
+        """All accepted codes in a grey or BGR uint8 image of any size (empty list when none).
+
+        Raises DetectorInputError only for a wrong array type/shape; never for image content.
+        """
+        grey = as_grey(image)
+        if grey.shape[0] < 21 or grey.shape[1] < 21:
+            return []
+        found: list[Detection] = []
+        for backend in self.backends:
+            for candidate in find_candidates(grey, backend):
+                if any(_inside(candidate.corners_px.mean(axis=0), d.corners_px) for d in found):
+                    continue  # the same code seen again
+                detection = self.accept(grey, candidate)
+                if detection is not None:
+                    found.append(detection)
+            if found:
+                break
+        return found
+
+    def accept(self, grey: np.ndarray, candidate: Candidate, backend: str | None = None) -> Detection | None:
+        """Check and refine one backend candidate on a grey image; None when it does not hold up."""
+        settings = self.settings
+        corners = candidate.corners_px
+        if corners.shape != (4, 2) or not np.all(np.isfinite(corners)):
+            return None
+        if settings.require_text and not candidate.text:
+            return None
+        if candidate.modules:
+            rough = check_patterns(grey, corners, candidate.modules)
+        else:
+            rough = best_module_count(grey, corners)
+        if rough.reason and rough.score == 0.0:
+            return None
+        modules = rough.modules
+        result = Detection(
+            corners,
+            candidate.text,
+            rough.score,
+            np.full(4, np.nan),
+            backend or candidate.backend,
+            False,
+            modules,
+        )
+        if settings.refine:
+            fit = refine_corners(
+                grey, corners, modules, inverted=rough.inverted, search_px=settings.search_px
+            )
+            if fit.ok:
+                fine = check_patterns(grey, fit.corners_px, modules)
+                # A refinement that makes the patterns fit worse is not trusted.
+                if fine.score >= rough.score - 0.02:
+                    result = Detection(
+                        fit.corners_px,
+                        candidate.text,
+                        fine.score,
+                        fit.corner_rms_px,
+                        result.backend,
+                        True,
+                        modules,
+                    )
+        if result.quality < settings.min_quality:
+            return None
+        return result
