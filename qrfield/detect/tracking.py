@@ -110,7 +110,10 @@ class Tracker:
             if last.text is not None and candidate.text != last.text:
                 continue
             shifted = Candidate(
-                (*candidate.corners_px, x0, y0), candidate.text, candidate.backend, candidate.modules
+                candidate.corners_px + np.array([x0, y0], dtype=np.float64),
+                candidate.text,
+                candidate.backend,
+                candidate.modules,
             )
             detection = self.detector.accept(grey, shifted)
             if detection is not None:
