@@ -48,7 +48,11 @@ def _zxing(grey: np.ndarray) -> list[Candidate]:
     import zxingcpp
 
     out = []
-    for barcode in zxingcpp.read_barcodes(grey, formats=zxingcpp.BarcodeFormat.QRCode):
+    # Plain text: the payload as encoded (HRI mode would spell control characters as <SOH> etc.)
+    barcodes = zxingcpp.read_barcodes(
+        grey, formats=zxingcpp.BarcodeFormat.QRCode, text_mode=zxingcpp.TextMode.Plain
+    )
+    for barcode in barcodes:
         p = barcode.position
         corners = np.array(
             [
@@ -82,18 +86,28 @@ def _opencv_multi(
     detector: cv2.QRCodeDetector | cv2.QRCodeDetectorAruco, name: str, grey: np.ndarray
 ) -> list[Candidate]:
     try:
-        ok, texts, points, _ = detector.detectAndDecodeMulti(grey)
+        ok, payloads, points, _ = detector.detectAndDecodeBytesMulti(grey)
     except cv2.error:
         return []
     if not ok or points is None:
         return []
     points = np.asarray(points, dtype=float).reshape(-1, 4, 2)
     out = []
-    for text, corners in zip(texts, points, strict=False):
+    for payload, corners in zip(payloads, points, strict=False):
         if not np.all(np.isfinite(corners)):
             continue
-        out.append(Candidate(corners.copy(), text or None, name, None))
+        out.append(Candidate(corners.copy(), _text(payload), name, None))
     return out
+
+
+def _text(payload: bytes | None) -> str | None:
+    """Payload bytes as text: UTF-8, else Latin-1 (QR's default byte charset); None when empty."""
+    if not payload:
+        return None
+    try:
+        return bytes(payload).decode("utf-8")
+    except UnicodeDecodeError:
+        return bytes(payload).decode("latin-1")
 
 
 def _opencv(grey: np.ndarray) -> list[Candidate]:

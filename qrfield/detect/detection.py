@@ -20,9 +20,11 @@ class Detection:
             finder pattern, V2 top-right, V3 bottom-right (no finder pattern), V4 bottom-left, following
             the code when it is rotated); OpenCV pixel convention (top-left pixel centre = (0, 0)).
         text: the decoded payload, or None when it could not be read.
-        quality: 0..1, the share of the symbol's fixed modules (finder patterns, separators, timing
-            patterns, first ring of the quiet zone) that show the expected colour at these corners;
-            about 0.5 for corners that are not on a code, near 1 for a good detection.
+        quality: 0..1. For refined corners: the share of the symbol's fixed modules (finder
+            patterns, separators, timing patterns, first ring of the quiet zone) that show the
+            expected colour at these corners (about 0.5 for corners that are not on a code, near 1
+            for a good detection). Unrefined corners (the backend's, about 1 px off and V3 sometimes
+            several px) get half of that, so quality >= 0.85 means sub-pixel corners that check out.
         corner_quality: (4,) px, per corner the RMS distance of the sub-pixel edge points to the two
             fitted sides that meet there (smaller is better; about 0.01-0.05 px on a clean view);
             NaN when not refined.
@@ -101,7 +103,8 @@ class DetectorSettings:
         label="minimum quality",
         minimum=0.0,
         maximum=1.0,
-        help="share of the fixed QR modules that must check out at the corners; below it a code is dropped",
+        help="share of the fixed QR modules (finders, timing, quiet zone) that must check out at the "
+        "corners; below it a code is dropped",
     )
     require_text: bool = setting(
         True, label="require decoded text", help="drop codes whose text could not be read (safer corners)"

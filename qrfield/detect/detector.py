@@ -33,12 +33,20 @@ def as_grey(image: np.ndarray) -> np.ndarray:
     raise DetectorInputError(f"image must be (H, W) grey or (H, W, 3) BGR, got shape {image.shape}")
 
 
-def _inside(point: np.ndarray, quad: np.ndarray) -> bool:
-    """True when ``point`` lies inside the convex quadrilateral ``quad`` (4, 2)."""
-    edges = np.roll(quad, -1, axis=0) - quad
-    rel = point - quad
-    cross = edges[:, 0] * rel[:, 1] - edges[:, 1] * rel[:, 0]
-    return bool(np.all(cross >= 0) or np.all(cross <= 0))
+#: An unrefined detection's quality is its pattern score times this: its corners are the backend's
+#: (about 1 px, V3 sometimes several px off), checked only to within a fraction of a module.
+UNREFINED_QUALITY_FACTOR = 0.5
+#: Pattern score an unrefined detection needs (its text was decoded; checking rough corners against
+#: modules of 1-2 px is noisy, so the bar is lower than ``min_quality``).
+UNREFINED_MIN_SCORE = 0.7
+
+
+def same_code(a: np.ndarray, b: np.ndarray) -> bool:
+    """True when corner sets ``a`` and ``b`` (4, 2) outline the same code (centres and sizes close)."""
+    size_a = float(np.linalg.norm(a[2] - a[0]))
+    size_b = float(np.linalg.norm(b[2] - b[0]))
+    close = np.linalg.norm(a.mean(axis=0) - b.mean(axis=0)) < 0.2 * max(size_a, size_b)
+    return bool(close and 0.7 < size_a / max(size_b, 1e-9) < 1.0 / 0.7)
 
 
 class Detector:
@@ -65,7 +73,7 @@ class Detector:
         found: list[Detection] = []
         for backend in self.backends:
             for candidate in find_candidates(grey, backend):
-                if any(_inside(candidate.corners_px.mean(axis=0), d.corners_px) for d in found):
+                if any(same_code(candidate.corners_px, d.corners_px) for d in found):
                     continue  # the same code seen again
                 detection = self.accept(grey, candidate)
                 if detection is not None:
@@ -89,15 +97,7 @@ class Detector:
         if rough.reason and rough.score == 0.0:
             return None
         modules = rough.modules
-        result = Detection(
-            corners,
-            candidate.text,
-            rough.score,
-            np.full(4, np.nan),
-            backend or candidate.backend,
-            False,
-            modules,
-        )
+        score, final, corner_quality, refined = rough.score, corners, np.full(4, np.nan), False
         if settings.refine:
             fit = refine_corners(
                 grey, corners, modules, inverted=rough.inverted, search_px=settings.search_px
@@ -106,15 +106,17 @@ class Detector:
                 fine = check_patterns(grey, fit.corners_px, modules)
                 # A refinement that makes the patterns fit worse is not trusted.
                 if fine.score >= rough.score - 0.02:
-                    result = Detection(
-                        fit.corners_px,
-                        candidate.text,
+                    score, final, corner_quality, refined = (
                         fine.score,
+                        fit.corners_px,
                         fit.corner_rms_px,
-                        result.backend,
                         True,
-                        modules,
                     )
-        if result.quality < settings.min_quality:
+        if score < (settings.min_quality if refined else min(settings.min_quality, UNREFINED_MIN_SCORE)):
             return None
-        return result
+        if not refined and not candidate.text:
+            return None  # unrefined corners are only trusted for a code whose text was read
+        quality = score if refined else UNREFINED_QUALITY_FACTOR * score
+        return Detection(
+            final, candidate.text, quality, corner_quality, backend or candidate.backend, refined, modules
+        )

@@ -45,8 +45,9 @@ class PatternCheck:
 
 
 @functools.lru_cache(maxsize=64)
-def fixed_modules(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Module centres (k, 2) in module units (x, y) and their expected colour (k,) bool, True = dark."""
+def fixed_modules(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Module centres (k, 2) in module units (x, y), their expected colour (k,) bool (True = dark),
+    and whether each lies in the quiet zone (k,) bool."""
     cells: list[tuple[int, int, bool]] = []
 
     def finder(r0: int, c0: int) -> None:
@@ -68,9 +69,10 @@ def fixed_modules(n: int) -> tuple[np.ndarray, np.ndarray]:
     cells = list(dict.fromkeys(cells))  # separators overlap at the corners
     xy = np.array([(c + 0.5, r + 0.5) for c, r, _ in cells], dtype=np.float64)
     dark = np.array([d for _, _, d in cells], dtype=bool)
-    xy.setflags(write=False)
-    dark.setflags(write=False)
-    return xy, dark
+    quiet = (xy < 0).any(axis=1) | (xy > n).any(axis=1)
+    for array in (xy, dark, quiet):
+        array.setflags(write=False)
+    return xy, dark, quiet
 
 
 def module_homography(corners_px: np.ndarray, n: int) -> np.ndarray:
@@ -87,12 +89,13 @@ def to_pixels(h: np.ndarray, xy: np.ndarray) -> np.ndarray:
 
 def check_patterns(grey: np.ndarray, corners_px: np.ndarray, n: int) -> PatternCheck:
     """Score corners V1..V4 (pixels) of a symbol of ``n`` modules per side against its fixed patterns."""
-    xy, dark = fixed_modules(n)
+    xy, dark, quiet = fixed_modules(n)
     values = sample_bilinear(grey, to_pixels(module_homography(corners_px, n), xy))
-    if np.isnan(values).any():
-        return PatternCheck(
-            0.0, n, False, np.nan, np.nan, "the code or its quiet zone is cut by the image border"
-        )
+    outside = np.isnan(values)
+    if outside[~quiet].any():
+        return PatternCheck(0.0, n, False, np.nan, np.nan, "the code is cut by the image border")
+    if outside.any():  # a tightly cropped image: judge by the quiet zone that is there
+        values, dark = values[~outside], dark[~outside]
     d = float(np.median(values[dark]))
     light = float(np.median(values[~dark]))
     inverted = d > light

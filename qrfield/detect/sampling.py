@@ -14,8 +14,8 @@ def sample_bilinear(grey: np.ndarray, points: np.ndarray) -> np.ndarray:
         points: (..., 2) float pixel coordinates.
 
     Returns:
-        (...) float64 values, bilinear between pixel centres; NaN where a point lies less than one
-        pixel inside the image border (no extrapolation).
+        (...) float64 values, bilinear between pixel centres (in the outer half pixel, the edge
+        pixel's value); NaN outside the image, i.e. beyond -0.5 or W - 0.5 (H - 0.5).
     """
     shape = points.shape[:-1]
     flat = points.reshape(-1, 2)
@@ -35,8 +35,9 @@ def sample_bilinear(grey: np.ndarray, points: np.ndarray) -> np.ndarray:
     maps = np.empty((1, flat.shape[0], 2), dtype=np.float32)
     maps[0, :, 0] = x - x0
     maps[0, :, 1] = y - y0
-    out = cv2.remap(roi, maps, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan)
+    # Replicating the border only matters at the image's own border (the ROI has a margin elsewhere).
+    out = cv2.remap(roi, maps, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
     out = out.reshape(-1).astype(np.float64)
-    if x_min < 0 or y_min < 0 or x_max > w - 1 or y_max > h - 1:
-        out[(x < 0) | (y < 0) | (x > w - 1) | (y > h - 1)] = np.nan
+    if x_min < -0.5 or y_min < -0.5 or x_max > w - 0.5 or y_max > h - 0.5:
+        out[(x < -0.5) | (y < -0.5) | (x > w - 0.5) | (y > h - 0.5)] = np.nan
     return out.reshape(shape)
