@@ -87,6 +87,13 @@ def to_pixels(h: np.ndarray, xy: np.ndarray) -> np.ndarray:
     return p[:, :2] / p[:, 2:3]
 
 
+def _median(values: np.ndarray) -> float:
+    """Median of a small 1-D array (np.median's overhead dominates at this size)."""
+    ordered = np.sort(values)
+    n = len(ordered)
+    return float(0.5 * (ordered[(n - 1) // 2] + ordered[n // 2]))
+
+
 def check_patterns(grey: np.ndarray, corners_px: np.ndarray, n: int) -> PatternCheck:
     """Score corners V1..V4 (pixels) of a symbol of ``n`` modules per side against its fixed patterns."""
     xy, dark, quiet = fixed_modules(n)
@@ -96,8 +103,8 @@ def check_patterns(grey: np.ndarray, corners_px: np.ndarray, n: int) -> PatternC
         return PatternCheck(0.0, n, False, np.nan, np.nan, "the code is cut by the image border")
     if outside.any():  # a tightly cropped image: judge by the quiet zone that is there
         values, dark = values[~outside], dark[~outside]
-    d = float(np.median(values[dark]))
-    light = float(np.median(values[~dark]))
+    d = _median(values[dark])
+    light = _median(values[~dark])
     inverted = d > light
     if abs(light - d) < MIN_CONTRAST:
         return PatternCheck(

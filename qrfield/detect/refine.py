@@ -27,14 +27,17 @@ import numpy as np
 from qrfield.detect.patterns import module_homography, to_pixels
 from qrfield.detect.sampling import sample_bilinear
 
+#: Index of the next and of the previous corner (or side), cyclically.
+_NEXT = np.array([1, 2, 3, 0])
+_PREVIOUS = np.array([3, 0, 1, 2])
 #: Step between samples along a profile, px.
 PROFILE_STEP_PX = 0.5
 #: Distance beyond the search window, px, at which the quiet-zone level is read.
 QUIET_OFFSET_PX = 1.5
 #: Most profiles sampled across one side (about one per pixel below that).
-MAX_PROFILES_PER_SIDE = 64
+MAX_PROFILES_PER_SIDE = 40
 #: Samples integrated across each edge (over a window of 2 to 5 px).
-AREA_SAMPLES = 13
+AREA_SAMPLES = 9
 #: Largest share of the contrast by which the ends of an edge window may differ from dark and light.
 CLEAN_STEP = 0.12
 
@@ -88,7 +91,7 @@ def _dark_level(grey: np.ndarray, corners: np.ndarray, n: int) -> float:
     values = sample_bilinear(grey, to_pixels(module_homography(corners, n), _finder_cores(n)))
     if np.isnan(values).any():
         return np.nan
-    return float(np.median(values))
+    return float(np.sort(values)[len(values) // 2])
 
 
 def _as_seen(values: np.ndarray, inverted: bool) -> np.ndarray:
@@ -124,18 +127,20 @@ def _fit_sides(
     Edge points are measured along each side's normal at fixed positions along it, so the error is in
     ``offset`` only and ordinary least squares is the right fit. Trimming: first drop points farther
     than a third of a module from the median (edges of the next module in), then points beyond
-    3 robust sigmas (at least 0.15 px). Inputs are (4, k); returns c0, c1, rms px, inliers (4,).
+    3 RMS of that fit (at least 0.15 px). Inputs are (4, k); returns c0, c1, rms px, inliers (4,).
     """
     offset = np.where(valid, offset, 0.0)
-    keep = valid
-    c0, c1 = _masked_ols(along, offset, keep.astype(np.float64))
+    c0, c1 = _masked_ols(along, offset, valid.astype(np.float64))
     residual = offset - (c0[:, None] + c1[:, None] * along)
-    deviation = np.abs(residual - _masked_median(residual, keep)[:, None])
+    deviation = np.abs(residual - _masked_median(residual, valid)[:, None])
     keep = valid & (deviation < np.maximum(0.35 * module_px, 0.5)[:, None])
-    c0, c1 = _masked_ols(along, offset, keep.astype(np.float64))
+    w = keep.astype(np.float64)
+    c0, c1 = _masked_ols(along, offset, w)
     residual = offset - (c0[:, None] + c1[:, None] * along)
-    sigma = 1.4826 * np.nan_to_num(_masked_median(np.abs(residual), keep))
-    keep = keep & (np.abs(residual) < np.maximum(3.0 * sigma, 0.15)[:, None])
+    # Second, finer trim: beyond 3 RMS (at least 0.15 px) of the first fit.
+    inliers = w.sum(axis=1)
+    rms = np.sqrt((w * residual**2).sum(axis=1) / np.maximum(inliers, 1))
+    keep &= np.abs(residual) < np.maximum(3.0 * rms, 0.15)[:, None]
     w = keep.astype(np.float64)
     c0, c1 = _masked_ols(along, offset, w)
     residual = offset - (c0[:, None] + c1[:, None] * along)
@@ -184,6 +189,17 @@ def refine_corners(
     if modules < 21:
         raise ValueError(f"a QR symbol has at least 21 modules per side, got {modules}")
     if from_finders:
+        # Usually one pass over the whole sides finds enough of the edges near V2 and V4 to place
+        # V3 even when the backend missed it; only when it does not, fit the finders first.
+        direct = _refine(grey, corners, modules, inverted, search_px, finders_only=False, loose_v3=True)
+        if direct.ok:
+            if np.linalg.norm(direct.corners_px[2] - corners[2]) < 0.6 * search_px:
+                return direct
+            # V3 moved: part of its sides lay outside the window; once more with all of them.
+            again = _refine(
+                grey, direct.corners_px, modules, inverted, min(search_px, 1.5), finders_only=False
+            )
+            return again if again.ok else direct
         first = _refine(grey, corners, modules, inverted, search_px, finders_only=True)
         if not first.ok:
             return first
@@ -195,14 +211,20 @@ def refine_corners(
 
 
 def _refine(
-    grey: np.ndarray, corners: np.ndarray, modules: int, inverted: bool, search_px: float, finders_only: bool
+    grey: np.ndarray,
+    corners: np.ndarray,
+    modules: int,
+    inverted: bool,
+    search_px: float,
+    finders_only: bool,
+    loose_v3: bool = False,
 ) -> RefineResult:
     nan4 = np.full(4, np.nan)
 
     def fail(reason: str) -> RefineResult:
         return RefineResult(False, corners.copy(), nan4, reason)
 
-    edge_vectors = np.roll(corners, -1, axis=0) - corners
+    edge_vectors = corners[_NEXT] - corners
     sides = np.sqrt((edge_vectors**2).sum(axis=1))
     if sides.min() < 8:
         return fail(f"the code is too small to refine ({sides.min():.1f} px side)")
@@ -219,7 +241,7 @@ def _refine(
     normals[outward] *= -1.0  # outward, whatever the handedness of the corner order
     module_px = sides / modules
     # Module size across each side (what a profile crosses): from the two neighbouring sides.
-    across_px = np.minimum(np.roll(module_px, 1), np.roll(module_px, -1))
+    across_px = np.minimum(module_px[_PREVIOUS], module_px[_NEXT])
     margin = 2.0 + 0.5 * module_px
     if finders_only:
         # Only along the outer edges of the finder patterns (modules 0..7 from V1, V2, V4), where
@@ -248,8 +270,9 @@ def _refine(
     below = values < threshold[:, :, None]
     first = np.maximum(np.argmax(below, axis=2), 1)
     valid = below.any(axis=2) & ~below[:, :, 0] & np.isfinite(quiet) & (quiet - level_dark > 12.0)
-    v_out = np.take_along_axis(values, (first - 1)[:, :, None], axis=2)[:, :, 0]
-    v_in = np.take_along_axis(values, first[:, :, None], axis=2)[:, :, 0]
+    flat_index = np.arange(first.size).reshape(first.shape) * values.shape[2] + first
+    v_out = values.reshape(-1)[flat_index - 1]
+    v_in = values.reshape(-1)[flat_index]
     with np.errstate(invalid="ignore", divide="ignore"):
         crossing = offsets[first - 1] - (v_out - threshold) / (v_out - v_in) * PROFILE_STEP_PX
     crossing = np.where(valid, crossing, 0.0)
@@ -303,9 +326,9 @@ def _refine(
             return fail("two sides are parallel")
         refined[i] = point
     moved = np.sqrt(((refined - corners) ** 2).sum(axis=1))
-    if finders_only and moved[2] < search_px + 1.0 + 3.0 * module_px.max():
+    if (finders_only or loose_v3) and moved[2] < search_px + 1.0 + 3.0 * module_px.max():
         moved[2] = 0.0  # V3 may move a lot: that is the point of this pass
     if moved.max() > search_px + 1.0:
         return fail(f"a refined corner moved {moved.max():.1f} px, beyond the search window")
-    corner_rms = np.sqrt(0.5 * (np.roll(rms, 1) ** 2 + rms**2))
+    corner_rms = np.sqrt(0.5 * (rms[_PREVIOUS] ** 2 + rms**2))
     return RefineResult(True, refined, corner_rms, "", lines)

@@ -25,6 +25,7 @@ from qrfield.detect.refine import refine_corners
 class _Track:
     detection: Detection
     previous_corners: np.ndarray | None = None
+    inverted: bool = False
 
     def predicted(self) -> np.ndarray:
         corners = self.detection.corners_px
@@ -67,11 +68,17 @@ class Tracker:
             else:
                 for track, detection in zip(self._tracks, found, strict=True):
                     track.previous_corners = track.detection.corners_px
+                    if detection.backend != "track":  # re-found by a backend: re-read its polarity
+                        track.inverted = check_patterns(
+                            grey, detection.corners_px, detection.modules
+                        ).inverted
                     track.detection = detection
                 self.last_mode = "roi" if "roi" in modes else "refined"
                 return found
         detections = self.detector.detect(grey)
-        self._tracks = [_Track(d) for d in detections]
+        self._tracks = [
+            _Track(d, inverted=check_patterns(grey, d.corners_px, d.modules).inverted) for d in detections
+        ]
         self.last_mode = "full"
         return detections
 
@@ -80,23 +87,21 @@ class Tracker:
         last = track.detection
         predicted = track.predicted()
         if settings.refine and last.refined:
-            rough = check_patterns(grey, predicted, last.modules)
-            if rough.score > 0:
-                fit = refine_corners(
-                    grey, predicted, last.modules, inverted=rough.inverted, search_px=settings.search_px
-                )
-                if fit.ok:
-                    check = check_patterns(grey, fit.corners_px, last.modules)
-                    if check.score >= settings.min_quality:
-                        return Detection(
-                            fit.corners_px,
-                            last.text,
-                            check.score,
-                            fit.corner_rms_px,
-                            "track",
-                            True,
-                            last.modules,
-                        ), "refined"
+            fit = refine_corners(
+                grey,
+                predicted,
+                last.modules,
+                inverted=track.inverted,
+                search_px=settings.search_px,
+                from_finders=False,
+            )
+            if fit.ok:
+                check = check_patterns(grey, fit.corners_px, last.modules)
+                if check.score >= settings.min_quality and check.inverted == track.inverted:
+                    detection = Detection(
+                        fit.corners_px, last.text, check.score, fit.corner_rms_px, "track", True, last.modules
+                    )
+                    return detection, "refined"
         h, w = grey.shape
         size = float(np.ptp(predicted, axis=0).max())
         margin = settings.track_margin_px + 0.25 * size
