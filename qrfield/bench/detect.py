@@ -261,14 +261,14 @@ def run(args: argparse.Namespace) -> int:
         print(f"codes reported on {len(empty)} photos without a code (chessboards) + 3 blank frames: {false}")
 
     # ------------------------------------------------------------------ 4: detection rate, rendered
-    n_all = len(found_by["default pipeline, all"])
-    print(f"\n4. detection rate on the {len(views)} rendered views of (1):")
-    print(
-        f"default pipeline {n_all}/{len(views)} ({100.0 * n_all / len(views):.1f} %), refined {len(refined_idx)}"
-    )
-    for name in ["plain OpenCV detect", *[f"{b} (own corners)" for b in BACKEND_NAMES]]:
-        print(
-            f"{name} alone {len(found_by[name])}/{len(views)} ({100.0 * len(found_by[name]) / len(views):.1f}%)"
-        )
+    total = len(views)
+    print(f"\n4. detection rate on the {total} rendered views of (1):")
+    for name in [
+        "default pipeline, all",
+        "plain OpenCV detect",
+        *[f"{b} (own corners)" for b in BACKEND_NAMES],
+    ]:
+        hits = len(found_by[name])
+        print(f"{name:<34}{hits:>5}/{total:<5}{100.0 * hits / total:6.1f} %")
     print("target >= 99 %")
     return 0

@@ -149,15 +149,6 @@ def _fit_sides(
     return c0, c1, rms, inliers
 
 
-def _intersect(a: EdgeLine, b: EdgeLine) -> np.ndarray | None:
-    det = a.direction[1] * b.direction[0] - a.direction[0] * b.direction[1]
-    if abs(det) < 1e-3:
-        return None
-    d = b.point - a.point
-    t = (b.direction[0] * d[1] - b.direction[1] * d[0]) / det
-    return a.point + t * a.direction
-
-
 def refine_corners(
     grey: np.ndarray,
     corners_px: np.ndarray,
@@ -285,10 +276,10 @@ def _refine(
     window_offsets = crossing[:, :, None] + half[:, :, None] * t[None, None, :]
     window = base[:, :, None, :] + window_offsets[..., None] * normals[:, None, None, :]
     seen = _as_seen(sample_bilinear(grey, window), inverted)
-    with np.errstate(invalid="ignore", divide="ignore"):
+    with np.errstate(invalid="ignore", divide="ignore"):  # profiles without contrast: dropped below
         darkness = (quiet[:, :, None] - seen) / (quiet - level_dark)[:, :, None]
-    trapezoid = darkness[:, :, 1:-1].sum(axis=2) + 0.5 * (darkness[:, :, 0] + darkness[:, :, -1])
-    edge = crossing - half + (2.0 * half / (AREA_SAMPLES - 1)) * trapezoid
+        trapezoid = darkness[:, :, 1:-1].sum(axis=2) + 0.5 * (darkness[:, :, 0] + darkness[:, :, -1])
+        edge = crossing - half + (2.0 * half / (AREA_SAMPLES - 1)) * trapezoid
     # Clean steps (fully dark inside and fully light outside the window) take the area estimate.
     # With small modules (2-3 px) blur keeps the window from saturating: there the half-level
     # crossing stands in, if the inside is clearly dark. A profile that grazes the corner of a dark
@@ -315,16 +306,19 @@ def _refine(
         return fail(f"side V{worst + 1}V{(worst + 1) % 4 + 1}: the edge points do not line up")
     line_dirs = directions + c1[:, None] * normals
     line_dirs /= np.sqrt((line_dirs**2).sum(axis=1))[:, None]
+    line_points = corners + c0[:, None] * normals
+    # V_i = intersection of side i-1 (ending at V_i) and side i (starting at V_i)
+    d_prev, p_prev = line_dirs[_PREVIOUS], line_points[_PREVIOUS]
+    det = d_prev[:, 1] * line_dirs[:, 0] - d_prev[:, 0] * line_dirs[:, 1]
+    if np.abs(det).min() < 1e-3:
+        return fail("two sides are parallel")
+    gap = line_points - p_prev
+    t = (line_dirs[:, 0] * gap[:, 1] - line_dirs[:, 1] * gap[:, 0]) / det
+    refined = p_prev + t[:, None] * d_prev
     lines = tuple(
-        EdgeLine(corners[i] + c0[i] * normals[i], line_dirs[i], float(rms[i]), int(inliers[i]), int(found[i]))
+        EdgeLine(line_points[i], line_dirs[i], float(rms[i]), int(inliers[i]), int(found[i]))
         for i in range(4)
     )
-    refined = np.empty((4, 2))
-    for i in range(4):
-        point = _intersect(lines[(i - 1) % 4], lines[i])
-        if point is None:
-            return fail("two sides are parallel")
-        refined[i] = point
     moved = np.sqrt(((refined - corners) ** 2).sum(axis=1))
     if (finders_only or loose_v3) and moved[2] < search_px + 1.0 + 3.0 * module_px.max():
         moved[2] = 0.0  # V3 may move a lot: that is the point of this pass
