@@ -38,8 +38,8 @@ class Tracker:
     """Follow QR codes from frame to frame; ``update`` returns what :meth:`Detector.detect` would.
 
     Attributes:
-        last_mode: how the last frame was processed: "refined" (step 1 for every code), "roi"
-            (step 2 for at least one), "full" (full-frame detection) or "" before the first frame.
+        last_mode: how the last frame was processed: "refined" (step 1 for every code, on a crop
+            around them), "roi" (step 2), "full" (full-frame detection) or "" before the first frame.
     """
 
     def __init__(self, settings: DetectorSettings | None = None) -> None:
@@ -55,25 +55,23 @@ class Tracker:
 
     def update(self, image: np.ndarray) -> list[Detection]:
         """Detections in the next video frame (grey or BGR uint8); never raises on image content."""
+        if self.settings.track and self._tracks:
+            found = self._refine_all(image)
+            if found is not None:
+                self._advance(found)
+                self.last_mode = "refined"
+                return found
         grey = as_grey(image)
         if self.settings.track and self._tracks:
-            modes = []
             found = []
             for track in self._tracks:
-                detection, mode = self._follow(grey, track)
+                detection = self._search_around(grey, track)
                 if detection is None:
                     break
                 found.append(detection)
-                modes.append(mode)
             else:
-                for track, detection in zip(self._tracks, found, strict=True):
-                    track.previous_corners = track.detection.corners_px
-                    if detection.backend != "track":  # re-found by a backend: re-read its polarity
-                        track.inverted = check_patterns(
-                            grey, detection.corners_px, detection.modules
-                        ).inverted
-                    track.detection = detection
-                self.last_mode = "roi" if "roi" in modes else "refined"
+                self._advance(found, grey)
+                self.last_mode = "roi"
                 return found
         detections = self.detector.detect(grey)
         self._tracks = [
@@ -82,34 +80,75 @@ class Tracker:
         self.last_mode = "full"
         return detections
 
-    def _follow(self, grey: np.ndarray, track: _Track) -> tuple[Detection | None, str]:
+    def _advance(self, found: list[Detection], grey: np.ndarray | None = None) -> None:
+        for track, detection in zip(self._tracks, found, strict=True):
+            track.previous_corners = track.detection.corners_px
+            if grey is not None:  # re-found by a backend: re-read its polarity
+                track.inverted = check_patterns(grey, detection.corners_px, detection.modules).inverted
+            track.detection = detection
+
+    def _refine_all(self, image: np.ndarray) -> list[Detection] | None:
+        """Step 1 for every track, on the grey of just the region around them (a cheap crop)."""
         settings = self.settings
-        last = track.detection
-        predicted = track.predicted()
-        if settings.refine and last.refined:
+        if not settings.refine or not all(t.detection.refined for t in self._tracks):
+            return None
+        predictions = [t.predicted() for t in self._tracks]
+        everything = np.concatenate(predictions)
+        module = max(
+            float(np.ptp(p, axis=0).max()) / t.detection.modules
+            for p, t in zip(predictions, self._tracks, strict=True)
+        )
+        # Room for the edge profiles and the quiet-zone check (one module out) around the code.
+        margin = 2.0 * module + settings.search_px + 6.0
+        h, w = image.shape[:2]
+        x0, y0 = np.floor(everything.min(axis=0) - margin).astype(int)
+        x1, y1 = np.ceil(everything.max(axis=0) + margin).astype(int) + 1
+        x0, y0, x1, y1 = max(int(x0), 0), max(int(y0), 0), min(int(x1), w), min(int(y1), h)
+        if x1 - x0 < 21 or y1 - y0 < 21:
+            return None
+        grey = as_grey(image[y0:y1, x0:x1])
+        offset = np.array([x0, y0], dtype=np.float64)
+        found = []
+        for track, predicted in zip(self._tracks, predictions, strict=True):
+            last = track.detection
             fit = refine_corners(
                 grey,
-                predicted,
+                predicted - offset,
                 last.modules,
                 inverted=track.inverted,
                 search_px=settings.search_px,
                 from_finders=False,
             )
-            if fit.ok:
-                check = check_patterns(grey, fit.corners_px, last.modules)
-                if check.score >= settings.min_quality and check.inverted == track.inverted:
-                    detection = Detection(
-                        fit.corners_px, last.text, check.score, fit.corner_rms_px, "track", True, last.modules
-                    )
-                    return detection, "refined"
+            if not fit.ok:
+                return None
+            check = check_patterns(grey, fit.corners_px, last.modules)
+            if check.score < settings.min_quality or check.inverted != track.inverted:
+                return None
+            found.append(
+                Detection(
+                    fit.corners_px + offset,
+                    last.text,
+                    check.score,
+                    fit.corner_rms_px,
+                    "track",
+                    True,
+                    last.modules,
+                )
+            )
+        return found
+
+    def _search_around(self, grey: np.ndarray, track: _Track) -> Detection | None:
+        """Step 2: the first backend on a region around the prediction, then the usual checks."""
+        last = track.detection
+        predicted = track.predicted()
         h, w = grey.shape
         size = float(np.ptp(predicted, axis=0).max())
-        margin = settings.track_margin_px + 0.25 * size
+        margin = self.settings.track_margin_px + 0.25 * size
         x0, y0 = np.floor(predicted.min(axis=0) - margin).astype(int)
         x1, y1 = np.ceil(predicted.max(axis=0) + margin).astype(int) + 1
-        x0, y0, x1, y1 = max(x0, 0), max(y0, 0), min(x1, w), min(y1, h)
+        x0, y0, x1, y1 = max(int(x0), 0), max(int(y0), 0), min(int(x1), w), min(int(y1), h)
         if x1 - x0 < 21 or y1 - y0 < 21:
-            return None, ""
+            return None
         roi = np.ascontiguousarray(grey[y0:y1, x0:x1])
         for candidate in find_candidates(roi, self.detector.backends[0]):
             if last.text is not None and candidate.text != last.text:
@@ -122,5 +161,5 @@ class Tracker:
             )
             detection = self.detector.accept(grey, shifted)
             if detection is not None:
-                return detection, "roi"
-        return None, ""
+                return detection
+        return None
