@@ -19,8 +19,9 @@ import cv2
 import numpy as np
 
 #: Backend names accepted by the ``backends`` setting, fastest first. "zxing-x2" runs zxing-cpp on the
-#: image upscaled twice (bicubic): slower, but it reads codes whose modules are 2-3 px.
-BACKEND_NAMES = ("zxing", "zxing-x2", "opencv-aruco", "opencv")
+#: image upscaled twice (bicubic): slower, but it reads codes whose modules are 2-3 px. "finders"
+#: locates finder patterns by contours and decodes the rectified symbol (strong perspective).
+BACKEND_NAMES = ("zxing", "zxing-x2", "opencv-aruco", "opencv", "finders")
 
 
 class BackendError(ValueError):
@@ -118,11 +119,18 @@ def _opencv_aruco(grey: np.ndarray) -> list[Candidate]:
     return _opencv_multi(cv2.QRCodeDetectorAruco(), "opencv-aruco", grey)
 
 
+def _finders(grey: np.ndarray) -> list[Candidate]:
+    from qrfield.detect.finders import locate_by_finders
+
+    return [Candidate(corners, text, "finders", n) for corners, n, text in locate_by_finders(grey)]
+
+
 _BACKENDS: dict[str, Callable[[np.ndarray], list[Candidate]]] = {
     "zxing": _zxing,
     "zxing-x2": _zxing_x2,
     "opencv-aruco": _opencv_aruco,
     "opencv": _opencv,
+    "finders": _finders,
 }
 
 

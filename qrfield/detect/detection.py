@@ -82,10 +82,11 @@ class DetectorSettings:
     """Settings of QR detection, refinement, tracking and selection (see qrfield.settings)."""
 
     backends: str = setting(
-        "zxing,zxing-x2,opencv-aruco",
+        "zxing,zxing-x2,finders",
         label="detector backends",
         help="comma-separated, tried in order until one finds a code: zxing, zxing-x2 (zxing on the "
-        "image upscaled 2x, for small codes), opencv-aruco, opencv",
+        "image upscaled 2x, for small codes), finders (finder patterns by contours, for strong "
+        "perspective), opencv-aruco, opencv",
     )
     refine: bool = setting(
         True, label="sub-pixel refinement", help="fit the symbol's outer edges for sub-pixel corners"
