@@ -274,3 +274,12 @@ def test_cli(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
         assert main(["marker", *argv]) == 2
         err = capsys.readouterr().err
         assert message in err and err.count("\n") == 1, err
+
+
+@pytest.mark.parametrize("side_mm", [50, 100])
+def test_assets_are_what_the_command_writes(side_mm: int) -> None:
+    """assets/qrfield-Lmm.svg|pdf: regenerate with `qrfield marker --text qrfield --side-mm L --out ...`."""
+    assets = Path(__file__).resolve().parent.parent / "assets"
+    layout = marker_layout("qrfield", float(side_mm))
+    assert (assets / f"qrfield-{side_mm}mm.svg").read_text(encoding="utf-8") == marker_svg(layout)
+    assert (assets / f"qrfield-{side_mm}mm.pdf").read_bytes() == marker_pdf(layout)
