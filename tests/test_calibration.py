@@ -174,6 +174,17 @@ def test_rendered_views_round_trip(synthetic_views: list) -> None:
     assert np.abs(project_points(corner_ray, cam) - project_points(corner_ray, TRUE_CAMERA)).max() < 1.0
 
 
+def test_sector_detector_takes_over(synthetic_views: list, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Where the classic detector fails, findChessboardCornersSB finds the board (unless not thorough)."""
+    view = synthetic_views[0]
+    monkeypatch.setattr(cv2, "findChessboardCorners", lambda *args, **kwargs: (False, None))
+    assert not detect_board(view.image, SYNTH_BOARD, thorough=False).found
+    detection = detect_board(view.image, SYNTH_BOARD)
+    assert detection.found and detection.method == "sb"
+    gaps = min(np.abs(c - view.corners_px).max() for c in (detection.corners_px, detection.corners_px[::-1]))
+    assert gaps < 0.3
+
+
 # ---------------------------------------------------------------------- skipped views and errors
 
 
