@@ -334,3 +334,27 @@ def test_cli_no_usable_images(tmp_path: Path, capsys: pytest.CaptureFixture) -> 
     err = capsys.readouterr().err
     assert "no usable images among 2" in err and "no such file" in err and err.count("\n") == 1
     assert not out.exists()
+
+
+def test_cli_takes_a_folder(image_files: list[str], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    (Path(image_files[0]).parent / "readme.txt").write_text("not an image, not listed")
+    out = tmp_path / "cam.json"
+    folder = str(Path(image_files[0]).parent)
+    assert (
+        main(["calibrate", folder, "--board", "9x6", "--square-mm", "25", "--out", str(out), "--json"]) == 0
+    )
+    data = json.loads(capsys.readouterr().out)
+    assert data["used"] == image_files and data["skipped"] == [] and data["out"] == str(out)
+    (tmp_path / "empty").mkdir()
+    argv = [
+        "calibrate",
+        str(tmp_path / "empty"),
+        "--board",
+        "9x6",
+        "--square-mm",
+        "25",
+        "--out",
+        str(tmp_path / "x.json"),
+    ]
+    assert main(argv) == 2
+    assert "holds no images" in capsys.readouterr().err

@@ -16,6 +16,8 @@ import json
 import sys
 from pathlib import Path
 
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".pgm", ".ppm")
+
 HELP = "calibrate a camera from chessboard photos and write a camera profile (JSON)"
 DESCRIPTION = (
     "Find a chessboard in each image (OpenCV, sub-pixel corners), calibrate (cv2.calibrateCamera: "
@@ -27,7 +29,10 @@ DESCRIPTION = (
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "images", nargs="+", metavar="IMAGE", help="photos of the board (10-20 views, spread over the image)"
+        "images",
+        nargs="+",
+        metavar="IMAGE",
+        help="photos of the board (10-20 views, spread over the image), or folders of them",
     )
     parser.add_argument(
         "--board",
@@ -47,6 +52,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def expand_images(items: list[str]) -> list[str]:
+    """The image paths given, with each folder replaced by its image files (sorted by name)."""
+    paths: list[str] = []
+    for item in items:
+        folder = Path(item)
+        if folder.is_dir():
+            found = sorted(str(p) for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+            if not found:
+                raise ValueError(f"folder {folder} holds no images ({', '.join(IMAGE_SUFFIXES)})")
+            paths.extend(found)
+        else:
+            paths.append(item)
+    return paths
+
+
 def run(args: argparse.Namespace) -> int:
     from qrfield.calibration import calibrate_images, uncovered_cells
     from qrfield.chessboard import Board
@@ -55,11 +75,12 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() != ".json":
         raise ValueError(f"--out {out}: a camera profile is a .json file")
-    if out.exists() and not args.force:
-        raise FileExistsError(f"--out {out} exists; choose another name or add --force to overwrite it")
     if out.is_dir():
         raise IsADirectoryError(f"--out {out} is a folder; give a file name such as {out / 'NAME.json'}")
-    result = calibrate_images(args.images, board, fix_k3=args.fix_k3, name=out.stem)
+    if out.exists() and not args.force:
+        raise FileExistsError(f"--out {out} exists; choose another name or add --force to overwrite it")
+    images = expand_images(args.images)
+    result = calibrate_images(images, board, fix_k3=args.fix_k3, name=out.stem)
     out.parent.mkdir(parents=True, exist_ok=True)
     result.camera.save(out)
 
@@ -69,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     cam = result.camera
     print(
-        f"calibrated {cam.width}x{cam.height} from {len(result.views)} of {len(args.images)} images, "
+        f"calibrated {cam.width}x{cam.height} from {len(result.views)} of {len(images)} images, "
         f"board {board.label} inner corners, {board.square_mm:g} mm squares"
     )
     print(f"RMS reprojection error: {result.rms_px:.3f} px")
