@@ -325,6 +325,42 @@ def _split_usable(
     return used, skipped, size
 
 
+_VARY_HINT = (
+    "take views with the board tilted 20-45 degrees in different directions and spread over the image"
+)
+#: Views whose board normals all lie within this angle of each other cannot fix the focal length.
+MIN_TILT_SPREAD_DEG = 5.0
+#: Plausible focal lengths, in image widths (a field of view from about 160 to 1 degrees).
+FOCAL_RANGE_WIDTHS = (0.09, 60.0)
+
+
+def _check_plausible(
+    K: np.ndarray,
+    rvecs: Sequence[np.ndarray],
+    size: tuple[int, int],
+    count: int,
+    skipped: Sequence[SkippedView],
+) -> None:
+    """Raise CalibrationError for a degenerate solution (views too alike, absurd focal lengths)."""
+    normals = np.array([cv2.Rodrigues(np.asarray(r, dtype=float))[0][:, 2] for r in rvecs])
+    cosines = np.clip(normals @ normals.T, -1.0, 1.0)
+    spread = float(np.degrees(np.arccos(cosines.min())))
+    if spread < MIN_TILT_SPREAD_DEG:
+        raise CalibrationError(
+            f"the {count} views are too alike: the board faces the same way in all of them (its normal "
+            f"turns by at most {spread:.1f} deg, at least {MIN_TILT_SPREAD_DEG:g} needed); {_VARY_HINT}",
+            skipped,
+        )
+    fx, fy = float(K[0, 0]), float(K[1, 1])
+    lo, hi = (f * size[0] for f in FOCAL_RANGE_WIDTHS)
+    if not (lo <= fx <= hi and lo <= fy <= hi and 0.5 <= fx / fy <= 2.0):
+        raise CalibrationError(
+            f"the calibration is implausible (fx = {fx:.4g} px, fy = {fy:.4g} px for a {size[0]} px wide "
+            f"image); {_VARY_HINT}",
+            skipped,
+        )
+
+
 def calibrate(
     detections: Sequence[BoardDetection],
     board: Board,
@@ -366,9 +402,15 @@ def calibrate(
     image_points = [d.corners_px.reshape(-1, 1, 2).astype(np.float32) for d in used]
     flags = cv2.CALIB_FIX_K3 if fix_k3 else 0
     criteria = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 100, 1e-12)
-    rms, K, dist, rvecs, tvecs, std_intrinsics, _std_extrinsics, _per_view = cv2.calibrateCameraExtended(
-        object_points, image_points, size, None, None, flags=flags, criteria=criteria
-    )
+    try:
+        rms, K, dist, rvecs, tvecs, std_intrinsics, _std_extr, _per_view = cv2.calibrateCameraExtended(
+            object_points, image_points, size, None, None, flags=flags, criteria=criteria
+        )
+    except cv2.error as exc:
+        raise CalibrationError(
+            f"OpenCV could not calibrate from these {len(used)} views ({exc.err}); {_VARY_HINT}", skipped
+        ) from None
+    _check_plausible(K, rvecs, size, len(used), skipped)
     views = []
     for d, obj, rvec, tvec in zip(used, object_points, rvecs, tvecs, strict=True):
         projected, _ = cv2.projectPoints(obj, rvec, tvec, K, dist)
@@ -385,17 +427,20 @@ def calibrate(
         f"1-sigma fx {std_px['fx']:.2f}, fy {std_px['fy']:.2f}, "
         f"cx {std_px['cx']:.2f}, cy {std_px['cy']:.2f} px"
     )
-    camera = CameraModel(
-        fx=K[0, 0],
-        fy=K[1, 1],
-        cx=K[0, 2],
-        cy=K[1, 2],
-        width=size[0],
-        height=size[1],
-        dist=dist.reshape(-1)[:5],
-        name=name,
-        notes=notes,
-    )
+    try:
+        camera = CameraModel(
+            fx=K[0, 0],
+            fy=K[1, 1],
+            cx=K[0, 2],
+            cy=K[1, 2],
+            width=size[0],
+            height=size[1],
+            dist=dist.reshape(-1)[:5],
+            name=name,
+            notes=notes,
+        )
+    except ValueError as exc:
+        raise CalibrationError(f"the calibration is unusable: {exc}; {_VARY_HINT}", skipped) from None
     coverage = coverage_grid([d.corners_px for d in used], size, cells)
     return CalibrationResult(
         camera, float(rms), tuple(views), tuple(skipped), board, std_px, coverage, tuple(used)

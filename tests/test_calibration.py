@@ -126,20 +126,17 @@ def synthetic_views() -> list:
     ]
 
 
+def _exact_detection(pose: Pose, label: str = "exact") -> object:
+    corners = project_points(
+        transform_points(pose.rotation, pose.position_mm, SYNTH_BOARD.centred_points()), TRUE_CAMERA
+    )
+    return detection_from_corners(corners, TRUE_CAMERA.size, SYNTH_BOARD, label)
+
+
 def test_exact_corners_recover_the_camera() -> None:
     """With exact corner pixels, calibrateCamera must return the true camera to numerical precision."""
     poses = _board_poses(TRUE_CAMERA, SYNTH_BOARD, 10, 3)
-    detections = [
-        detection_from_corners(
-            project_points(
-                transform_points(p.rotation, p.position_mm, SYNTH_BOARD.centred_points()), TRUE_CAMERA
-            ),
-            TRUE_CAMERA.size,
-            SYNTH_BOARD,
-            f"pose {i}",
-        )
-        for i, p in enumerate(poses)
-    ]
+    detections = [_exact_detection(p, f"pose {i}") for i, p in enumerate(poses)]
     result = calibrate(detections, SYNTH_BOARD)
     cam = result.camera
     assert result.rms_px < 1e-4
@@ -217,6 +214,21 @@ def test_too_few_views_raise_with_reasons() -> None:
     assert len(info.value.skipped) == 2
     wrong = detection_from_corners(np.zeros((10, 2)), (640, 480), SYNTH_BOARD, "given")
     assert not wrong.found and "has 10 corners" in wrong.reason
+
+
+def test_degenerate_views_are_refused() -> None:
+    """Boards that all face the same way (shifted, or turned in their plane) cannot fix the focal length."""
+    same_way = [
+        _exact_detection(Pose([0, 0, 450], [0, 0, 0])),
+        _exact_detection(Pose([30, 0, 400], [0, 0, 40])),
+        _exact_detection(Pose([0, 20, 500], [2, 0, -30])),
+    ]
+    # (the 2 degrees of true tilt come out as 3.6 from the degenerate solution: still refused)
+    with pytest.raises(CalibrationError, match=r"too alike.*board tilted"):
+        calibrate(same_way, SYNTH_BOARD)
+    collapsed = detection_from_corners(np.full((54, 2), 100.0), TRUE_CAMERA.size, SYNTH_BOARD, "collapsed")
+    with pytest.raises(CalibrationError, match="could not calibrate"):
+        calibrate([collapsed] * 3, SYNTH_BOARD)
 
 
 def test_detect_board_never_raises_on_bad_arrays() -> None:
