@@ -115,6 +115,29 @@ class CalibrationResult:
         """Labels of the views used, in input order."""
         return [v.label for v in self.views]
 
+    def advice(self) -> list[str]:
+        """Hints for a better calibration: image cells no view reached, views whose error stands out
+        (over 3 times the median and over 0.3 px), focal lengths uncertain by more than 1 %."""
+        hints = []
+        missing = uncovered_cells(self.coverage)
+        if missing:
+            hints.append(f"no view reached the {', '.join(missing)} of the image: add views there")
+        median = float(np.median([v.rms_px for v in self.views]))
+        for v in self.views:
+            if v.rms_px > max(3.0 * median, 0.3):
+                hints.append(
+                    f"{v.label}: error {v.rms_px:.2f} px, {v.rms_px / median:.0f}x the median; "
+                    "check its corners (motion blur? a bent board?) or leave it out"
+                )
+        for key in ("fx", "fy"):
+            value, sigma = getattr(self.camera, key), self.std_px[key]
+            if sigma > 0.01 * value:
+                hints.append(
+                    f"{key} is uncertain by +-{sigma:.1f} px ({100 * sigma / value:.1f} %): "
+                    "add views with the board tilted in different directions"
+                )
+        return hints
+
     def to_json(self) -> dict[str, Any]:
         """JSON-ready summary (the shape ``qrfield calibrate --json`` prints; see that command)."""
         cam = self.camera
@@ -134,6 +157,7 @@ class CalibrationResult:
             "board": self.board.label,
             "square_mm": self.board.square_mm,
             "coverage": self.coverage.tolist(),
+            "advice": self.advice(),
         }
 
 

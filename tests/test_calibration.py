@@ -370,3 +370,17 @@ def test_cli_takes_a_folder(image_files: list[str], tmp_path: Path, capsys: pyte
     ]
     assert main(argv) == 2
     assert "holds no images" in capsys.readouterr().err
+
+
+def test_advice_names_the_outlier_view_and_empty_cells() -> None:
+    poses = _board_poses(TRUE_CAMERA, SYNTH_BOARD, 10, 3)
+    detections = [_exact_detection(p, f"pose {i}") for i, p in enumerate(poses)]
+    shaken = detections[4].corners_px + np.random.default_rng(1).normal(0.0, 1.0, (54, 2))
+    detections[4] = detection_from_corners(shaken, TRUE_CAMERA.size, SYNTH_BOARD, "shaken")
+    result = calibrate(detections, SYNTH_BOARD)
+    advice = result.advice()
+    assert [a for a in advice if a.startswith("shaken:")], advice
+    assert not [a for a in advice if a.startswith("pose ")], advice
+    expected_missing = uncovered_cells(coverage_grid([d.corners_px for d in detections], TRUE_CAMERA.size))
+    assert bool(expected_missing) == any("no view reached" in a for a in advice)
+    assert result.to_json()["advice"] == advice

@@ -6,7 +6,8 @@
      "used": [image path, ...], "skipped": [{"image": path, "reason": text}, ...],
      "width", "height": px, "per_image": [{"image", "rms_px", "max_px"}, ...],
      "std_px": {"fx", "fy", "cx", "cy"}, "board": "COLSxROWS", "square_mm": mm,
-     "coverage": [[views per cell], ...] (3 rows x 3 columns of the image), "out": path written}
+     "coverage": [[views per cell], ...] (3 rows x 3 columns of the image),
+     "advice": [hint, ...], "out": path written}
 """
 
 from __future__ import annotations
@@ -68,7 +69,7 @@ def expand_images(items: list[str]) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from qrfield.calibration import calibrate_images, uncovered_cells
+    from qrfield.calibration import calibrate_images
     from qrfield.chessboard import Board
 
     board = Board.parse(args.board, args.square_mm)
@@ -106,12 +107,11 @@ def run(args: argparse.Namespace) -> int:
     print(f"fx = {cam.fx:.2f} +- {sd['fx']:.2f} px   fy = {cam.fy:.2f} +- {sd['fy']:.2f} px")
     print(f"cx = {cam.cx:.2f} +- {sd['cx']:.2f} px   cy = {cam.cy:.2f} +- {sd['cy']:.2f} px")
     print("dist (k1, k2, p1, p2, k3) = " + ", ".join(f"{d:.5f}" for d in cam.dist))
-    missing = uncovered_cells(result.coverage)
     print("coverage (views per cell, 3x3 grid of the image):")
     for row in result.coverage:
         print("  " + " ".join(f"{n:3d}" for n in row))
-    if missing:
-        print(f"  no view reached: {', '.join(missing)} (add views there for a better model)")
+    for hint in result.advice():
+        print(f"advice: {hint}")
     print(
         f"wrote {out}: use --camera {out}"
         + (
