@@ -49,7 +49,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     parser.add_argument("--fix-k3", action="store_true", help="keep k3 = 0 (few views, or a mild lens)")
     parser.add_argument(
-        "--json", action="store_true", help="print the result as one JSON object (see the module docs)"
+        "--json",
+        action="store_true",
+        help="print one JSON object: fx, fy, cx, cy (px), dist [k1, k2, p1, p2, k3], rms_px, "
+        "used [paths], skipped [{image, reason}], width, height, per_image [{image, rms_px, max_px}], "
+        "std_px, board, square_mm, coverage (3x3 views per cell), advice, out",
     )
 
 
