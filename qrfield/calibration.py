@@ -5,8 +5,10 @@ what the picture holds: it returns a :class:`BoardDetection` with a reason, so a
 call it on every frame); :func:`calibrate` turns a list of detections into a
 :class:`CalibrationResult`: a :class:`~qrfield.camera.CameraModel` (pixels in OpenCV's
 convention, distortion k1, k2, p1, p2, k3), the RMS reprojection error, each view's error, the views
-skipped with their reason, and a coverage grid of where in the image the board has been.
-:func:`calibrate_images` does both for image files or arrays.
+skipped with their reason, a coverage grid of where in the image the board has been, and advice
+(:meth:`CalibrationResult.advice`). Degenerate sets (boards all facing one way, absurd focal
+lengths) raise :class:`CalibrationError` instead of returning a wrong model.
+:func:`calibrate_images` does both steps for image files or arrays.
 
 The square side S only scales the board poses; the intrinsics do not depend on it.
 """
@@ -37,7 +39,10 @@ _COL_NAMES = ("left", "centre", "right")
 
 
 class CalibrationError(ValueError):
-    """Calibration cannot proceed (too few usable views); ``skipped`` lists each view and its reason."""
+    """No usable calibration: too few usable views, or a degenerate solution (views too alike).
+
+    ``skipped`` lists the views left out and why, for a dialog to show.
+    """
 
     def __init__(self, message: str, skipped: Sequence[SkippedView] = ()) -> None:
         super().__init__(message)
