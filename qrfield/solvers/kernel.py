@@ -1,0 +1,178 @@
+"""Arithmetic of the numerical model, written once for Python floats and for numpy arrays.
+
+Every function here takes its values as lists of 4 (or 6) items that are either Python floats
+(the single-pose path, fast on 4 points: no numpy call overhead) or numpy arrays of shape (N,)
+(the batch path, one pass of numpy per operation). Only +, -, *, / and the ``sqrt``/``maximum``
+passed in are used, all correctly rounded IEEE operations applied in the same order, so both
+paths give bit-identical depths and iteration counts.
+
+Notation (DESIGN.md): the corner i has normalised (undistorted) image coordinates (x_i, y_i), its
+line of sight m_i = (x_i, y_i, 1), and the vertex V_i = z_i * m_i at depth z_i (mm). The six
+lengths are the four sides V1V2, V2V3, V3V4, V4V1 (L) and the diagonals V1V3, V2V4 (L*sqrt(2)).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any
+
+#: Vertex pairs of the six lengths: four sides, then two diagonals.
+PAIRS = ((0, 1), (1, 2), (2, 3), (3, 0), (0, 2), (1, 3))
+#: Pivots of the 4x4 normal equations below this share of their trace count as singular.
+PIVOT_FLOOR = 1e-12
+
+Num = Any  # float or np.ndarray
+
+
+def lengths_for(side: float) -> list[float]:
+    """Actual lengths L_i of the six pairs in :data:`PAIRS`, mm."""
+    diagonal = side * math.sqrt(2.0)
+    return [side, side, side, side, diagonal, diagonal]
+
+
+def gn_system(
+    z: list[Num], x: list[Num], y: list[Num], lengths: list[float], sqrt: Callable
+) -> tuple[list[Num], list[Num], dict[tuple[int, int], Num], list[Num]]:
+    """Residuals diff_k (calculated minus actual length, mm) and the normal equations J^T J, J^T diff.
+
+    Row k of the Jacobian J = d diff_k / d z has two entries, at the pair's vertices i and j:
+    (V_i - V_j) . m_i / |V_i - V_j| and -(V_i - V_j) . m_j / |V_i - V_j|. Each vertex pair
+    occurs once, so the off-diagonal of J^T J is one product per pair.
+    Returns (diff[6], diag[4], off{(i, j): value}, grad[4]).
+    """
+    px = [z[i] * x[i] for i in range(4)]
+    py = [z[i] * y[i] for i in range(4)]
+    diff: list[Num] = []
+    diag: list[Num] = [0.0, 0.0, 0.0, 0.0]
+    grad: list[Num] = [0.0, 0.0, 0.0, 0.0]
+    off: dict[tuple[int, int], Num] = {}
+    for k, (i, j) in enumerate(PAIRS):
+        dx = px[i] - px[j]
+        dy = py[i] - py[j]
+        dz = z[i] - z[j]
+        d = sqrt(dx * dx + dy * dy + dz * dz)
+        r = d - lengths[k]
+        ji = (dx * x[i] + dy * y[i] + dz) / d
+        jj = -(dx * x[j] + dy * y[j] + dz) / d
+        diff.append(r)
+        diag[i] = diag[i] + ji * ji
+        diag[j] = diag[j] + jj * jj
+        grad[i] = grad[i] + ji * r
+        grad[j] = grad[j] + jj * r
+        off[(min(i, j), max(i, j))] = ji * jj
+    return diff, diag, off, grad
+
+
+def solve4(diag: list[Num], off: dict[tuple[int, int], Num], grad: list[Num], maximum: Callable) -> tuple[list[Num], Num]:
+    """Solve (J^T J) dz = J^T diff by an unrolled LDL^T factorisation; returns (dz[4], singular).
+
+    Pivots are floored at PIVOT_FLOOR times the trace; ``singular`` is True where one was floored.
+    """
+    a01, a02, a03 = off[(0, 1)], off[(0, 2)], off[(0, 3)]
+    a12, a13, a23 = off[(1, 2)], off[(1, 3)], off[(2, 3)]
+    floor = PIVOT_FLOOR * (diag[0] + diag[1] + diag[2] + diag[3])
+    p0 = diag[0]
+    d0 = maximum(p0, floor)
+    l10 = a01 / d0
+    l20 = a02 / d0
+    l30 = a03 / d0
+    p1 = diag[1] - l10 * l10 * d0
+    d1 = maximum(p1, floor)
+    l21 = (a12 - l20 * l10 * d0) / d1
+    l31 = (a13 - l30 * l10 * d0) / d1
+    p2 = diag[2] - l20 * l20 * d0 - l21 * l21 * d1
+    d2 = maximum(p2, floor)
+    l32 = (a23 - l30 * l20 * d0 - l31 * l21 * d1) / d2
+    p3 = diag[3] - l30 * l30 * d0 - l31 * l31 * d1 - l32 * l32 * d2
+    d3 = maximum(p3, floor)
+    singular = (p0 <= floor) | (p1 <= floor) | (p2 <= floor) | (p3 <= floor)
+    y0 = grad[0]
+    y1 = grad[1] - l10 * y0
+    y2 = grad[2] - l20 * y0 - l21 * y1
+    y3 = grad[3] - l30 * y0 - l31 * y1 - l32 * y2
+    x3 = y3 / d3
+    x2 = y2 / d2 - l32 * x3
+    x1 = y1 / d1 - l21 * x2 - l31 * x3
+    x0 = y0 / d0 - l10 * x1 - l20 * x2 - l30 * x3
+    return [x0, x1, x2, x3], singular
+
+
+def mean_side(x: list[Num], y: list[Num], sqrt: Callable) -> Num:
+    """Mean length of the four sides of the corner quadrilateral in normalised image units."""
+    total: Num = 0.0
+    for i, j in PAIRS[:4]:
+        dx = x[i] - x[j]
+        dy = y[i] - y[j]
+        total = total + sqrt(dx * dx + dy * dy)
+    return total / 4.0
+
+
+def parallelogram_depths(x: list[Num], y: list[Num], sqrt: Callable) -> tuple[list[Num], Num]:
+    """Depths up to scale from V1 + V3 = V2 + V4 (the square is a parallelogram); ours, not the seed's.
+
+    z1 m1 - z2 m2 + z3 m3 = z4 m4 is three linear equations; with z4 = 1 Cramer's rule gives z1..z3.
+    Returns ([z1, z2, z3, 1], det); the caller rejects det == 0 or a non-positive depth.
+    """
+
+    def det3(a: tuple[Num, Num, Num], b: tuple[Num, Num, Num], c: tuple[Num, Num, Num]) -> Num:
+        return a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) + a[2] * (b[0] * c[1] - b[1] * c[0])
+
+    m1 = (x[0], y[0], 1.0)
+    m2n = (-x[1], -y[1], -1.0)
+    m3 = (x[2], y[2], 1.0)
+    m4 = (x[3], y[3], 1.0)
+    det = det3(m1, m2n, m3)
+    return [det3(m4, m2n, m3), det3(m1, m4, m3), det3(m1, m2n, m4), det], det
+
+
+def scale_to_side(z: list[Num], x: list[Num], y: list[Num], lengths: list[float], sqrt: Callable) -> Num:
+    """Least-squares scale s making the six lengths of s * z match the actual ones."""
+    px = [z[i] * x[i] for i in range(4)]
+    py = [z[i] * y[i] for i in range(4)]
+    num: Num = 0.0
+    den: Num = 0.0
+    for k, (i, j) in enumerate(PAIRS):
+        dx = px[i] - px[j]
+        dy = py[i] - py[j]
+        dz = z[i] - z[j]
+        d = sqrt(dx * dx + dy * dy + dz * dz)
+        num = num + d * lengths[k]
+        den = den + d * d
+    return num / den
+
+
+def pose_from_vertices(
+    z: list[Num], x: list[Num], y: list[Num], sqrt: Callable, maximum: Callable
+) -> tuple[list[list[Num]], list[Num]]:
+    """Rotation (rows of R) and centre of the solved vertices V_i = z_i m_i (our reconstruction).
+
+    The seed extracts the orientation "using the rotation matrix" of the solved vertices; we fit the
+    marker's X axis to V1->V2 (and V4->V3) and its Y axis to V1->V4 (and V2->V3) by the nearest
+    orthonormal pair (polar decomposition), which is exactly the least-squares (Procrustes/Kabsch)
+    rotation of the marker's four points onto the solved ones; Z = X x Y. Centre = mean vertex.
+    """
+    vx = [z[i] * x[i] for i in range(4)]
+    vy = [z[i] * y[i] for i in range(4)]
+    vz = z
+    a = [(v[1] - v[0] + v[2] - v[3]) * 0.5 for v in (vx, vy, vz)]
+    b = [(v[3] - v[0] + v[2] - v[1]) * 0.5 for v in (vx, vy, vz)]
+    saa = a[0] * a[0] + a[1] * a[1] + a[2] * a[2]
+    sbb = b[0] * b[0] + b[1] * b[1] + b[2] * b[2]
+    sab = a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+    s = sqrt(maximum(saa * sbb - sab * sab, 0.0))
+    t = sqrt(saa + sbb + 2.0 * s)
+    # sqrt of the 2x2 Gram matrix in closed form, then its inverse.
+    q00 = (saa + s) / t
+    q01 = sab / t
+    q11 = (sbb + s) / t
+    dq = q00 * q11 - q01 * q01
+    i00 = q11 / dq
+    i01 = -q01 / dq
+    i11 = q00 / dq
+    ex = [a[k] * i00 + b[k] * i01 for k in range(3)]
+    ey = [a[k] * i01 + b[k] * i11 for k in range(3)]
+    ez = [ex[1] * ey[2] - ex[2] * ey[1], ex[2] * ey[0] - ex[0] * ey[2], ex[0] * ey[1] - ex[1] * ey[0]]
+    rows = [[ex[k], ey[k], ez[k]] for k in range(3)]
+    centre = [(v[0] + v[1] + v[2] + v[3]) * 0.25 for v in (vx, vy, vz)]
+    return rows, centre

@@ -1,0 +1,478 @@
+"""The thesis' numerical positioning model (Teoh 2022), as DESIGN.md reconstructs it.
+
+What is the seed's (named in its abstract, symbol list and chapter 1): the four vertices as
+positioning points; the pinhole model and similar triangles (vertex i lies on its line of sight,
+V_i = z_i (x_i, y_i, 1)); the two known parameters f and L; "guessing parameters and updating
+rules"; actual lengths L_i, calculated lengths L_i,calculated and their differences diff_i; the
+tuning factor tf; the tolerance; the iteration count n and n_max = 30; the working-distance bounds
+Z_w,min and Z_w,max; the orientation extracted "using the rotation matrix".
+
+What is our reconstruction (the seed gives no equations):
+  - unknowns: the four depths z_1..z_4 (mm) along the lines of sight of the undistorted corners;
+  - residuals: diff = calculated minus actual length of the four sides (L) and two diagonals (L sqrt 2);
+  - update: a Gauss-Newton step on the six residuals, scaled by tf (tf = 1 is the full step);
+  - stop rule "seed" (DESIGN.md's reading of the seed): converged as soon as max |diff_i| < tolerance;
+    not converged when n reaches n_max, when the step falls below STALL_MM (a least-squares optimum
+    whose residual stays above the tolerance, e.g. with noisy corners) or when the normal equations
+    are singular;
+  - stop rule "settled" (ours): iterate until the step falls below STALL_MM (the least-squares
+    optimum of the six lengths), then converged if max |diff_i| < tolerance there. With noisy
+    corners no depths fit all six lengths exactly, so the seed rule needs a tolerance loose enough
+    to stop early (and stopping early leaves the tilt inaccurate: lengths change only to second
+    order with tilt); the settled rule reaches the optimum and judges it;
+  - initial guess "seed": equal depths z = f L / (mean side in pixels), in normalised units so that
+    fx != fy is handled, clamped to [Z_w,min, Z_w,max]; the bounds are used only for this clamp;
+  - initial guess "parallelogram" (ours, not the seed's): a square's vertices satisfy
+    V1 + V3 = V2 + V4, so z1 m1 - z2 m2 + z3 m3 - z4 m4 = 0 gives the depths up to scale in closed
+    form; the scale is fitted to the six actual lengths. Exact for exact corners; with noise it
+    starts on the right side of the planar (mirror) ambiguity. Falls back to "seed" if degenerate;
+  - orientation: the least-squares rotation of the marker's points onto the solved vertices
+    (X along V1->V2, Y along V1->V4, orthonormalised), position = mean of the solved vertices;
+  - mirror: the plane of the solution reflected about the line of sight to its centre gives a
+    second starting point; iterating from it finds the other candidate of the planar ambiguity,
+    reported as ``alternative`` when it is a distinct pose (single path only).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from qrfield.camera import CameraModel
+from qrfield.geometry import angles_from_rotation, marker_vertices, project_points
+from qrfield.settings import setting, validated
+from qrfield.solvers import kernel
+from qrfield.solvers.result import BatchResult, PoseResult, SolverError
+
+#: A Gauss-Newton step whose largest depth change is below this (mm) means the iteration stalled.
+STALL_MM = 1e-7
+#: The mirror search stops earlier: its candidate is wanted to 0.1 micrometre, not to rounding.
+MIRROR_STALL_MM = 1e-4
+#: Depths are kept at least this positive (mm) so that the vertices stay in front of the camera.
+Z_FLOOR_MM = 1e-3
+#: Iteration of cv2.undistortPoints: exact to far below a micro-pixel for usual lenses (OpenCV's
+#: default of 5 iterations leaves errors of 1e-3 px and more near the image corners).
+UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-15)
+
+
+def undistort(points: np.ndarray, camera: CameraModel, pixels: bool = False) -> np.ndarray:
+    """Undistorted (M, 1, 2) normalised coordinates of pixels (M, 1, 2), or ideal pixels if ``pixels``."""
+    return cv2.undistortPoints(
+        np.ascontiguousarray(points, dtype=float), camera.K, camera.dist,
+        R=None, P=camera.K if pixels else None, criteria=UNDISTORT_CRITERIA,
+    )
+
+GUESSES = ("seed", "parallelogram")
+STOP_RULES = ("seed", "settled")
+
+# Status codes of one solve (the batch path keeps them per row).
+CONVERGED, N_MAX, STALLED, SINGULAR, DIVERGED, INVALID = range(6)
+
+
+@dataclass(frozen=True)
+class NumericalSettings:
+    """Settings of the numerical model (defaults documented; seed's symbols in brackets)."""
+
+    tf: float = setting(
+        1.0, label="tuning factor tf", minimum=0.05, maximum=2.0,
+        help="scale of each Gauss-Newton depth update (seed: tf; 1 = full step, below 1 damps it)",
+    )
+    tolerance_mm: float = setting(
+        1.0, label="tolerance", unit="mm", minimum=1e-9, maximum=100.0, decimals=6,
+        help="converged when every side and diagonal is within this of its true length (seed: "
+        "tolerance); with stop rule 'seed' use a small value such as 0.01 mm",
+    )
+    n_max: int = setting(
+        30, label="n_max", unit="iterations", minimum=1, maximum=10000,
+        help="most updates before giving up (seed: n_max = 30)",
+    )
+    z_min_mm: float = setting(
+        100.0, label="Z_w,min", unit="mm", minimum=1.0, maximum=100000.0,
+        help="nearest working distance; the seed guess is clamped to it",
+    )
+    z_max_mm: float = setting(
+        2000.0, label="Z_w,max", unit="mm", minimum=1.0, maximum=100000.0,
+        help="farthest working distance; the seed guess is clamped to it",
+    )
+    initial_guess: str = setting(
+        "parallelogram", label="initial guess", choices=GUESSES,
+        help="seed: equal depths from the apparent size (the thesis); parallelogram: closed-form "
+        "depths from V1+V3 = V2+V4 (ours)",
+    )
+    stop: str = setting(
+        "settled", label="stop rule", choices=STOP_RULES,
+        help="seed: stop as soon as max |diff| < tolerance (the thesis); settled: iterate to the "
+        "least-squares optimum, then test max |diff| < tolerance (ours; robust to corner noise)",
+    )
+    mirror: bool = setting(
+        True, label="search the mirror solution",
+        help="also iterate from the reflected plane and report the other candidate (single solves only)",
+    )
+
+
+#: The thesis' model as DESIGN.md reads it: seed guess, seed stop rule, a tight tolerance.
+SEED_SETTINGS = NumericalSettings(tolerance_mm=0.01, initial_guess="seed", stop="seed")
+
+
+@functools.lru_cache(maxsize=64)
+def checked_settings(settings: NumericalSettings | None) -> NumericalSettings:
+    """Validated settings (cached: settings are frozen); SolverError when they are inconsistent."""
+    if settings is None:
+        settings = NumericalSettings()
+    if not isinstance(settings, NumericalSettings):
+        raise SolverError(f"method 'numerical' takes NumericalSettings, got {type(settings).__name__}")
+    settings = validated(settings)
+    if settings.z_min_mm >= settings.z_max_mm:
+        raise SolverError(
+            f"setting z_min_mm ({settings.z_min_mm} mm) must be below z_max_mm ({settings.z_max_mm} mm)"
+        )
+    return settings
+
+
+def _reason(status: int, worst: float, n: int, settings: NumericalSettings) -> str:
+    if status == CONVERGED:
+        return ""
+    if status == N_MAX:
+        return (
+            f"not converged within n_max = {settings.n_max} iterations (max |diff| {worst:.3g} mm, "
+            f"tolerance {settings.tolerance_mm:g} mm)"
+        )
+    if status == STALLED:
+        return (
+            f"stalled after {n} iterations at max |diff| {worst:.3g} mm above the tolerance "
+            f"{settings.tolerance_mm:g} mm (corners not consistent with a square; noise?)"
+        )
+    if status == SINGULAR:
+        return f"the update equations became singular after {n} iterations"
+    if status == DIVERGED:
+        return f"the iteration diverged (non-finite lengths) after {n} iterations"
+    return "invalid corners"
+
+
+# ---------------------------------------------------------------------- single path (Python floats)
+
+
+def _has_distortion(camera: CameraModel) -> bool:
+    return camera.dist.tolist() != [0.0, 0.0, 0.0, 0.0, 0.0]
+
+
+def normalised_single(corners: np.ndarray, flat: list[float], camera: CameraModel) -> tuple[list[float], list[float]]:
+    """Normalised undistorted coordinates (x_i, y_i) of the four corners as Python floats."""
+    if _has_distortion(camera):
+        und = undistort(corners.reshape(4, 1, 2), camera).reshape(8).tolist()
+        return und[0::2], und[1::2]
+    fx, fy, cx, cy = camera.fx, camera.fy, camera.cx, camera.cy
+    return [(flat[2 * i] - cx) / fx for i in range(4)], [(flat[2 * i + 1] - cy) / fy for i in range(4)]
+
+
+def _initial_single(x: list[float], y: list[float], lengths: list[float], side: float, s: NumericalSettings) -> list[float]:
+    if s.initial_guess == "parallelogram":
+        z_rel, det = kernel.parallelogram_depths(x, y, math.sqrt)
+        if det != 0.0:
+            z_rel = [v / det for v in z_rel]
+            if all(v > 0.0 and math.isfinite(v) for v in z_rel):
+                scale = kernel.scale_to_side(z_rel, x, y, lengths, math.sqrt)
+                z = [scale * v for v in z_rel]
+                if all(v > 0.0 and math.isfinite(v) for v in z):
+                    return z
+    z0 = side / kernel.mean_side(x, y, math.sqrt)
+    z0 = min(max(z0, s.z_min_mm), s.z_max_mm)
+    return [z0, z0, z0, z0]
+
+
+def iterate_single(
+    z: list[float], x: list[float], y: list[float], lengths: list[float], s: NumericalSettings,
+    stall_mm: float = STALL_MM,
+) -> tuple[list[float], int, int, float]:
+    """The damped Gauss-Newton iteration on one corner set; returns (z, n, status, max |diff|)."""
+    tf, tol, n_max = s.tf, s.tolerance_mm, s.n_max
+    early = s.stop == "seed"
+    sqrt = math.sqrt
+    for n in range(n_max + 1):
+        diff, diag, off, grad = kernel.gn_system(z, x, y, lengths, sqrt)
+        worst = max(abs(diff[0]), abs(diff[1]), abs(diff[2]), abs(diff[3]), abs(diff[4]), abs(diff[5]))
+        if early and worst < tol:
+            return z, n, CONVERGED, worst
+        if not math.isfinite(worst):
+            return z, n, DIVERGED, worst
+        if n == n_max:
+            return z, n, N_MAX, worst
+        dz, singular = kernel.solve4(diag, off, grad, max)
+        if singular:
+            return z, n, SINGULAR, worst
+        step = [tf * dz[0], tf * dz[1], tf * dz[2], tf * dz[3]]
+        if max(abs(step[0]), abs(step[1]), abs(step[2]), abs(step[3])) < stall_mm:
+            return z, n, CONVERGED if worst < tol else STALLED, worst
+        z = [max(z[k] - step[k], Z_FLOOR_MM) for k in range(4)]
+    raise AssertionError("unreachable")  # pragma: no cover
+
+
+def _angles_single(r: list[list[float]]) -> list[float]:
+    """Scalar twin of geometry.angles_from_rotation (degrees)."""
+    s = min(max(r[0][2], -1.0), 1.0)
+    beta = math.asin(s)
+    if abs(s) > 1.0 - 1e-9:
+        alpha = math.atan2(math.copysign(1.0, s) * r[1][0], r[1][1])
+        gamma = 0.0
+    else:
+        alpha = math.atan2(-r[1][2], r[2][2])
+        gamma = math.atan2(-r[0][1], r[0][0])
+    out = [math.degrees(alpha), math.degrees(beta), math.degrees(gamma)]
+    for k in (0, 2):
+        if out[k] <= -180.0:
+            out[k] += 360.0
+    return out
+
+
+def reprojection_single(r: list[list[float]], t: list[float], side: float, camera: CameraModel, flat: list[float]) -> float:
+    """RMS pixel distance between the corners and the projection of the rigid square at pose (R, t)."""
+    h = side / 2.0
+    k1, k2, p1, p2, k3 = dist = camera.dist.tolist()
+    distort = dist != [0.0, 0.0, 0.0, 0.0, 0.0]
+    total = 0.0
+    for i, (qx, qy) in enumerate(((-h, -h), (h, -h), (h, h), (-h, h))):
+        px = r[0][0] * qx + r[0][1] * qy + t[0]
+        py = r[1][0] * qx + r[1][1] * qy + t[1]
+        pz = r[2][0] * qx + r[2][1] * qy + t[2]
+        if pz <= 0.0:
+            return math.inf
+        xn, yn = px / pz, py / pz
+        if distort:
+            r2 = xn * xn + yn * yn
+            radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+            xn, yn = (
+                xn * radial + 2.0 * p1 * xn * yn + p2 * (r2 + 2.0 * xn * xn),
+                yn * radial + p1 * (r2 + 2.0 * yn * yn) + 2.0 * p2 * xn * yn,
+            )
+        du = camera.fx * xn + camera.cx - flat[2 * i]
+        dv = camera.fy * yn + camera.cy - flat[2 * i + 1]
+        total += du * du + dv * dv
+    return math.sqrt(total / 4.0)
+
+
+def _result_single(
+    z: list[float], n: int, status: int, worst: float, x: list[float], y: list[float],
+    side: float, camera: CameraModel, corners: np.ndarray, flat: list[float], s: NumericalSettings,
+) -> PoseResult:
+    if status in (SINGULAR, DIVERGED) or not all(math.isfinite(v) for v in z):
+        return PoseResult.failed("numerical", corners, _reason(status, worst, n, s), iterations=n)
+    rows, centre = kernel.pose_from_vertices(z, x, y, math.sqrt, max)
+    vertices = np.array([[z[i] * x[i], z[i] * y[i], z[i]] for i in range(4)])
+    return PoseResult(
+        method="numerical",
+        position_mm=np.array(centre),
+        angles_deg=np.array(_angles_single(rows)),
+        rotation=np.array(rows),
+        vertices_mm=vertices,
+        converged=status == CONVERGED,
+        iterations=n,
+        residual_mm=worst,
+        reprojection_px=reprojection_single(rows, centre, side, camera, flat),
+        reason=_reason(status, worst, n, s),
+        corners_px=corners,
+    )
+
+
+def _mirror_guess(rows: list[list[float]], centre: list[float], x: list[float], y: list[float]) -> list[float] | None:
+    """Depths on the solution's plane reflected about the line of sight to its centre (None if behind)."""
+    norm = math.sqrt(centre[0] ** 2 + centre[1] ** 2 + centre[2] ** 2)
+    d = [c / norm for c in centre]
+    n = [rows[0][2], rows[1][2], rows[2][2]]
+    nd = n[0] * d[0] + n[1] * d[1] + n[2] * d[2]
+    m = [2.0 * nd * d[k] - n[k] for k in range(3)]
+    num = m[0] * centre[0] + m[1] * centre[1] + m[2] * centre[2]
+    z = []
+    for i in range(4):
+        den = m[0] * x[i] + m[1] * y[i] + m[2]
+        if den == 0.0 or num / den <= 0.0:
+            return None
+        z.append(num / den)
+    return z
+
+
+def solve_numerical(
+    corners: np.ndarray, flat: list[float], camera: CameraModel, side: float, settings: NumericalSettings | None
+) -> PoseResult:
+    """One pose by the numerical model, from checked corners (see :func:`qrfield.solvers.solve`)."""
+    s = checked_settings(settings)
+    x, y = normalised_single(corners, flat, camera)
+    lengths = kernel.lengths_for(side)
+    z0 = _initial_single(x, y, lengths, side, s)
+    z, n, status, worst = iterate_single(z0, x, y, lengths, s)
+    result = _result_single(z, n, status, worst, x, y, side, camera, corners, flat, s)
+    if not s.mirror or not np.isfinite(result.position_mm[0]):
+        return result
+    guess = _mirror_guess(result.rotation.tolist(), result.position_mm.tolist(), x, y)
+    if guess is None:
+        return result
+    z_alt, n_alt, status_alt, worst_alt = iterate_single(guess, x, y, lengths, s, MIRROR_STALL_MM)
+    if status_alt in (SINGULAR, DIVERGED) or max(abs(a - b) for a, b in zip(z_alt, z, strict=True)) <= 1e-6 * max(z):
+        return result  # the mirror start slid back to the same pose: no second candidate
+    alternative = _result_single(z_alt, n_alt, status_alt, worst_alt, x, y, side, camera, corners, flat, s)
+    ratio = (
+        result.reprojection_px / alternative.reprojection_px
+        if alternative.reprojection_px > 0.0
+        else (1.0 if result.reprojection_px == 0.0 else math.inf)
+    )
+    return _replace_alt(result, alternative, ratio)
+
+
+def _replace_alt(result: PoseResult, alternative: PoseResult, ambiguity: float) -> PoseResult:
+    from dataclasses import replace
+
+    return replace(result, alternative=alternative, ambiguity=ambiguity)
+
+
+# ---------------------------------------------------------------------- batch path (numpy arrays)
+
+
+def normalised_batch(corners: np.ndarray, camera: CameraModel) -> tuple[np.ndarray, np.ndarray]:
+    """Normalised undistorted coordinates, (N, 4) each; the same per-point numbers as the single path."""
+    if camera.has_distortion:
+        n = corners.shape[0]
+        und = undistort(corners.reshape(-1, 1, 2), camera).reshape(n, 4, 2)
+        return und[..., 0].copy(), und[..., 1].copy()
+    return (corners[..., 0] - camera.cx) / camera.fx, (corners[..., 1] - camera.cy) / camera.fy
+
+
+def _initial_batch(x: list[np.ndarray], y: list[np.ndarray], lengths: list[float], side: float, s: NumericalSettings) -> list[np.ndarray]:
+    z0 = side / kernel.mean_side(x, y, np.sqrt)
+    z0 = np.minimum(np.maximum(z0, s.z_min_mm), s.z_max_mm)
+    z = [z0.copy() for _ in range(4)]
+    if s.initial_guess != "parallelogram":
+        return z
+    z_rel, det = kernel.parallelogram_depths(x, y, np.sqrt)
+    ok = det != 0.0
+    safe = np.where(ok, det, 1.0)
+    z_rel = [v / safe for v in z_rel]
+    for v in z_rel:
+        ok &= (v > 0.0) & np.isfinite(v)
+    if not ok.any():
+        return z
+    idx = np.flatnonzero(ok)
+    sub = [v[idx] for v in z_rel]
+    scale = kernel.scale_to_side(sub, [v[idx] for v in x], [v[idx] for v in y], lengths, np.sqrt)
+    zs = [scale * v for v in sub]
+    good = np.ones(idx.size, bool)
+    for v in zs:
+        good &= (v > 0.0) & np.isfinite(v)
+    for k in range(4):
+        z[k][idx[good]] = zs[k][good]
+    return z
+
+
+def solve_numerical_batch(
+    corners: np.ndarray, valid: np.ndarray, camera: CameraModel, side: float, settings: NumericalSettings | None
+) -> BatchResult:
+    """N poses by the numerical model at once; rows identical to :func:`solve_numerical` (no mirror)."""
+    s = checked_settings(settings)
+    count = corners.shape[0]
+    lengths = kernel.lengths_for(side)
+    xn, yn = normalised_batch(np.where(valid[:, None, None], corners, 0.0), camera)
+    x_all = [xn[:, k].copy() for k in range(4)]
+    y_all = [yn[:, k].copy() for k in range(4)]
+    z_out = np.full((count, 4), np.nan)
+    n_out = np.zeros(count, dtype=int)
+    status = np.full(count, INVALID, dtype=int)
+    worst_out = np.full(count, np.nan)
+
+    idx = np.flatnonzero(valid)
+    x = [v[idx] for v in x_all]
+    y = [v[idx] for v in y_all]
+    z = _initial_batch(x, y, lengths, side, s)
+    tf, tol = s.tf, s.tolerance_mm
+    early = s.stop == "seed"
+
+    def finish(mask: np.ndarray, code: int, n: int, worst: np.ndarray) -> None:
+        rows = idx[mask]
+        z_out[rows] = np.stack([v[mask] for v in z], axis=1)
+        n_out[rows] = n
+        status[rows] = code
+        worst_out[rows] = worst[mask]
+
+    with np.errstate(all="ignore"):
+        for n in range(s.n_max + 1):
+            if idx.size == 0:
+                break
+            diff, diag, off, grad = kernel.gn_system(z, x, y, lengths, np.sqrt)
+            worst = np.abs(diff[0])
+            for k in range(1, 6):
+                worst = np.maximum(worst, np.abs(diff[k]))
+            done = np.zeros(idx.size, bool)
+            if early:
+                conv = worst < tol
+                finish(conv, CONVERGED, n, worst)
+                done |= conv
+            bad = ~done & ~np.isfinite(worst)
+            finish(bad, DIVERGED, n, worst)
+            done |= bad
+            if n == s.n_max:
+                finish(~done, N_MAX, n, worst)
+                break
+            dz, singular = kernel.solve4(diag, off, grad, np.maximum)
+            sing = ~done & singular
+            finish(sing, SINGULAR, n, worst)
+            done |= sing
+            step = [tf * v for v in dz]
+            biggest = np.maximum(np.maximum(np.abs(step[0]), np.abs(step[1])), np.maximum(np.abs(step[2]), np.abs(step[3])))
+            stall = ~done & (biggest < STALL_MM)
+            finish(stall & (worst < tol), CONVERGED, n, worst)
+            finish(stall & ~(worst < tol), STALLED, n, worst)
+            done |= stall
+            keep = ~done
+            if not keep.all():
+                idx = idx[keep]
+                x = [v[keep] for v in x]
+                y = [v[keep] for v in y]
+                z = [v[keep] for v in z]
+                step = [v[keep] for v in step]
+            z = [np.maximum(z[k] - step[k], Z_FLOOR_MM) for k in range(4)]
+
+    return _batch_result(z_out, n_out, status, worst_out, x_all, y_all, corners, valid, camera, side)
+
+
+def _batch_result(
+    z_out: np.ndarray, n_out: np.ndarray, status: np.ndarray, worst: np.ndarray,
+    x_all: list[np.ndarray], y_all: list[np.ndarray], corners: np.ndarray, valid: np.ndarray,
+    camera: CameraModel, side: float,
+) -> BatchResult:
+    count = z_out.shape[0]
+    has_pose = np.isin(status, (CONVERGED, N_MAX, STALLED)) & np.all(np.isfinite(z_out), axis=1)
+    rotation = np.full((count, 3, 3), np.nan)
+    position = np.full((count, 3), np.nan)
+    angles = np.full((count, 3), np.nan)
+    reproj = np.full(count, np.nan)
+    idx = np.flatnonzero(has_pose)
+    if idx.size:
+        z = [z_out[idx, k] for k in range(4)]
+        rows, centre = kernel.pose_from_vertices(z, [v[idx] for v in x_all], [v[idx] for v in y_all], np.sqrt, np.maximum)
+        rot = np.empty((idx.size, 3, 3))
+        for i in range(3):
+            for j in range(3):
+                rot[:, i, j] = rows[i][j]
+        pos = np.stack(centre, axis=1)
+        rotation[idx] = rot
+        position[idx] = pos
+        angles[idx] = angles_from_rotation(rot)
+        model = np.einsum("nij,kj->nki", rot, marker_vertices(side)) + pos[:, None, :]
+        with np.errstate(all="ignore"):
+            projected = project_points(model, camera)
+            err = np.sqrt(np.sum((projected - corners[idx]) ** 2, axis=(1, 2)) / 4.0)
+        err[np.any(model[..., 2] <= 0.0, axis=1)] = np.inf
+        reproj[idx] = err
+    worst = np.where(has_pose | (status != INVALID), worst, np.nan)
+    return BatchResult(
+        method="numerical",
+        position_mm=position,
+        angles_deg=angles,
+        rotation=rotation,
+        converged=status == CONVERGED,
+        iterations=n_out,
+        residual_mm=worst,
+        reprojection_px=reproj,
+        valid=valid.copy(),
+    )
