@@ -62,7 +62,7 @@ def _segments_cross(a, b, c, d) -> bool:  # type: ignore[no-untyped-def]
 
 
 def quad_problem(flat: list[float]) -> str:
-    """"" when the 8 floats (u1, v1, ..., u4, v4) are a usable corner set, else what is wrong."""
+    """ "" when the 8 floats (u1, v1, ..., u4, v4) are a usable corner set, else what is wrong."""
     cross, length = _turns(flat)
     if all(cross[k] > COLLINEAR_SIN * length[k - 1] * length[k] for k in range(4)):
         return ""
@@ -86,9 +86,11 @@ def quad_problem(flat: list[float]) -> str:
         )
     if _segments_cross(pts[0], pts[1], pts[2], pts[3]) or _segments_cross(pts[1], pts[2], pts[3], pts[0]):
         return "corners form a self-intersecting quadrilateral (two corners swapped?); expected order V1..V4"
-    reflex = [_NAMES[k] for k in range(4) if cross[k] < 0.0] if sum(x > 0 for x in cross) >= 2 else [
-        _NAMES[k] for k in range(4) if cross[k] > 0.0
-    ]
+    reflex = (
+        [_NAMES[k] for k in range(4) if cross[k] < 0.0]
+        if sum(x > 0 for x in cross) >= 2
+        else [_NAMES[k] for k in range(4) if cross[k] > 0.0]
+    )
     return f"corners form a concave quadrilateral (reflex at {', '.join(reflex)}); no square projects to it"
 
 

@@ -33,7 +33,9 @@ class IppeSettings:
     """Settings of the IPPE solver."""
 
     refine: str = setting(
-        "lm", label="refinement", choices=REFINERS,
+        "lm",
+        label="refinement",
+        choices=REFINERS,
         help="refine both IPPE candidates by reprojection error: lm (cv2.solvePnPRefineLM), "
         "vvs (cv2.solvePnPRefineVVS) or none",
     )
@@ -98,7 +100,9 @@ def _result(cand: tuple, corners: np.ndarray) -> PoseResult:  # type: ignore[typ
     )
 
 
-def solve_ippe(corners: np.ndarray, camera: CameraModel, side: float, settings: IppeSettings | None) -> PoseResult:
+def solve_ippe(
+    corners: np.ndarray, camera: CameraModel, side: float, settings: IppeSettings | None
+) -> PoseResult:
     """One pose by IPPE_SQUARE from checked corners (see :func:`qrfield.solvers.solve`); never raises."""
     s = checked_settings(settings)
     obj = _object_points(side)

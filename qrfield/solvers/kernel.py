@@ -64,7 +64,9 @@ def gn_system(
     return diff, diag, off, grad
 
 
-def solve4(diag: list[Num], off: dict[tuple[int, int], Num], grad: list[Num], maximum: Callable) -> tuple[list[Num], Num]:
+def solve4(
+    diag: list[Num], off: dict[tuple[int, int], Num], grad: list[Num], maximum: Callable
+) -> tuple[list[Num], Num]:
     """Solve (J^T J) dz = J^T diff by an unrolled LDL^T factorisation; returns (dz[4], singular).
 
     Pivots are floored at PIVOT_FLOOR times the trace; ``singular`` is True where one was floored.
@@ -116,7 +118,11 @@ def parallelogram_depths(x: list[Num], y: list[Num], sqrt: Callable) -> tuple[li
     """
 
     def det3(a: tuple[Num, Num, Num], b: tuple[Num, Num, Num], c: tuple[Num, Num, Num]) -> Num:
-        return a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) + a[2] * (b[0] * c[1] - b[1] * c[0])
+        return (
+            a[0] * (b[1] * c[2] - b[2] * c[1])
+            - a[1] * (b[0] * c[2] - b[2] * c[0])
+            + a[2] * (b[0] * c[1] - b[1] * c[0])
+        )
 
     m1 = (x[0], y[0], 1.0)
     m2n = (-x[1], -y[1], -1.0)

@@ -62,9 +62,14 @@ UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-1
 def undistort(points: np.ndarray, camera: CameraModel, pixels: bool = False) -> np.ndarray:
     """Undistorted (M, 1, 2) normalised coordinates of pixels (M, 1, 2), or ideal pixels if ``pixels``."""
     return cv2.undistortPoints(
-        np.ascontiguousarray(points, dtype=float), camera.K, camera.dist,
-        R=None, P=camera.K if pixels else None, criteria=UNDISTORT_CRITERIA,
+        np.ascontiguousarray(points, dtype=float),
+        camera.K,
+        camera.dist,
+        R=None,
+        P=camera.K if pixels else None,
+        criteria=UNDISTORT_CRITERIA,
     )
+
 
 GUESSES = ("seed", "parallelogram")
 STOP_RULES = ("seed", "settled")
@@ -78,38 +83,63 @@ class NumericalSettings:
     """Settings of the numerical model (defaults documented; seed's symbols in brackets)."""
 
     tf: float = setting(
-        1.0, label="tuning factor tf", minimum=0.05, maximum=2.0,
+        1.0,
+        label="tuning factor tf",
+        minimum=0.05,
+        maximum=2.0,
         help="scale of each Gauss-Newton depth update (seed: tf; 1 = full step, below 1 damps it)",
     )
     tolerance_mm: float = setting(
-        1.0, label="tolerance", unit="mm", minimum=1e-9, maximum=100.0, decimals=6,
+        1.0,
+        label="tolerance",
+        unit="mm",
+        minimum=1e-9,
+        maximum=100.0,
+        decimals=6,
         help="converged when every side and diagonal is within this of its true length (seed: "
         "tolerance); with stop rule 'seed' use a small value such as 0.01 mm",
     )
     n_max: int = setting(
-        30, label="n_max", unit="iterations", minimum=1, maximum=10000,
+        30,
+        label="n_max",
+        unit="iterations",
+        minimum=1,
+        maximum=10000,
         help="most updates before giving up (seed: n_max = 30)",
     )
     z_min_mm: float = setting(
-        100.0, label="Z_w,min", unit="mm", minimum=1.0, maximum=100000.0,
+        100.0,
+        label="Z_w,min",
+        unit="mm",
+        minimum=1.0,
+        maximum=100000.0,
         help="nearest working distance; the seed guess is clamped to it",
     )
     z_max_mm: float = setting(
-        2000.0, label="Z_w,max", unit="mm", minimum=1.0, maximum=100000.0,
+        2000.0,
+        label="Z_w,max",
+        unit="mm",
+        minimum=1.0,
+        maximum=100000.0,
         help="farthest working distance; the seed guess is clamped to it",
     )
     initial_guess: str = setting(
-        "parallelogram", label="initial guess", choices=GUESSES,
+        "parallelogram",
+        label="initial guess",
+        choices=GUESSES,
         help="seed: equal depths from the apparent size (the thesis); parallelogram: closed-form "
         "depths from V1+V3 = V2+V4 (ours)",
     )
     stop: str = setting(
-        "settled", label="stop rule", choices=STOP_RULES,
+        "settled",
+        label="stop rule",
+        choices=STOP_RULES,
         help="seed: stop as soon as max |diff| < tolerance (the thesis); settled: iterate to the "
         "least-squares optimum, then test max |diff| < tolerance (ours; robust to corner noise)",
     )
     mirror: bool = setting(
-        True, label="search the mirror solution",
+        True,
+        label="search the mirror solution",
         help="also iterate from the reflected plane and report the other candidate (single solves only)",
     )
 
@@ -160,7 +190,9 @@ def _has_distortion(camera: CameraModel) -> bool:
     return camera.dist.tolist() != [0.0, 0.0, 0.0, 0.0, 0.0]
 
 
-def normalised_single(corners: np.ndarray, flat: list[float], camera: CameraModel) -> tuple[list[float], list[float]]:
+def normalised_single(
+    corners: np.ndarray, flat: list[float], camera: CameraModel
+) -> tuple[list[float], list[float]]:
     """Normalised undistorted coordinates (x_i, y_i) of the four corners as Python floats."""
     if _has_distortion(camera):
         und = undistort(corners.reshape(4, 1, 2), camera).reshape(8).tolist()
@@ -169,7 +201,9 @@ def normalised_single(corners: np.ndarray, flat: list[float], camera: CameraMode
     return [(flat[2 * i] - cx) / fx for i in range(4)], [(flat[2 * i + 1] - cy) / fy for i in range(4)]
 
 
-def _initial_single(x: list[float], y: list[float], lengths: list[float], side: float, s: NumericalSettings) -> list[float]:
+def _initial_single(
+    x: list[float], y: list[float], lengths: list[float], side: float, s: NumericalSettings
+) -> list[float]:
     if s.initial_guess == "parallelogram":
         z_rel, det = kernel.parallelogram_depths(x, y, math.sqrt)
         if det != 0.0:
@@ -185,7 +219,11 @@ def _initial_single(x: list[float], y: list[float], lengths: list[float], side: 
 
 
 def iterate_single(
-    z: list[float], x: list[float], y: list[float], lengths: list[float], s: NumericalSettings,
+    z: list[float],
+    x: list[float],
+    y: list[float],
+    lengths: list[float],
+    s: NumericalSettings,
     stall_mm: float = STALL_MM,
 ) -> tuple[list[float], int, int, float]:
     """The damped Gauss-Newton iteration on one corner set; returns (z, n, status, max |diff|)."""
@@ -228,7 +266,9 @@ def _angles_single(r: list[list[float]]) -> list[float]:
     return out
 
 
-def reprojection_single(r: list[list[float]], t: list[float], side: float, camera: CameraModel, flat: list[float]) -> float:
+def reprojection_single(
+    r: list[list[float]], t: list[float], side: float, camera: CameraModel, flat: list[float]
+) -> float:
     """RMS pixel distance between the corners and the projection of the rigid square at pose (R, t)."""
     h = side / 2.0
     k1, k2, p1, p2, k3 = dist = camera.dist.tolist()
@@ -255,8 +295,17 @@ def reprojection_single(r: list[list[float]], t: list[float], side: float, camer
 
 
 def _result_single(
-    z: list[float], n: int, status: int, worst: float, x: list[float], y: list[float],
-    side: float, camera: CameraModel, corners: np.ndarray, flat: list[float], s: NumericalSettings,
+    z: list[float],
+    n: int,
+    status: int,
+    worst: float,
+    x: list[float],
+    y: list[float],
+    side: float,
+    camera: CameraModel,
+    corners: np.ndarray,
+    flat: list[float],
+    s: NumericalSettings,
 ) -> PoseResult:
     if status in (SINGULAR, DIVERGED) or not all(math.isfinite(v) for v in z):
         return PoseResult.failed("numerical", corners, _reason(status, worst, n, s), iterations=n)
@@ -277,7 +326,9 @@ def _result_single(
     )
 
 
-def _mirror_guess(rows: list[list[float]], centre: list[float], x: list[float], y: list[float]) -> list[float] | None:
+def _mirror_guess(
+    rows: list[list[float]], centre: list[float], x: list[float], y: list[float]
+) -> list[float] | None:
     """Depths on the solution's plane reflected about the line of sight to its centre (None if behind)."""
     norm = math.sqrt(centre[0] ** 2 + centre[1] ** 2 + centre[2] ** 2)
     d = [c / norm for c in centre]
@@ -295,7 +346,11 @@ def _mirror_guess(rows: list[list[float]], centre: list[float], x: list[float], 
 
 
 def solve_numerical(
-    corners: np.ndarray, flat: list[float], camera: CameraModel, side: float, settings: NumericalSettings | None
+    corners: np.ndarray,
+    flat: list[float],
+    camera: CameraModel,
+    side: float,
+    settings: NumericalSettings | None,
 ) -> PoseResult:
     """One pose by the numerical model, from checked corners (see :func:`qrfield.solvers.solve`)."""
     s = checked_settings(settings)
@@ -310,7 +365,9 @@ def solve_numerical(
     if guess is None:
         return result
     z_alt, n_alt, status_alt, worst_alt = iterate_single(guess, x, y, lengths, s, MIRROR_STALL_MM)
-    if status_alt in (SINGULAR, DIVERGED) or max(abs(a - b) for a, b in zip(z_alt, z, strict=True)) <= 1e-6 * max(z):
+    if status_alt in (SINGULAR, DIVERGED) or max(
+        abs(a - b) for a, b in zip(z_alt, z, strict=True)
+    ) <= 1e-6 * max(z):
         return result  # the mirror start slid back to the same pose: no second candidate
     alternative = _result_single(z_alt, n_alt, status_alt, worst_alt, x, y, side, camera, corners, flat, s)
     ratio = (
@@ -339,7 +396,9 @@ def normalised_batch(corners: np.ndarray, camera: CameraModel) -> tuple[np.ndarr
     return (corners[..., 0] - camera.cx) / camera.fx, (corners[..., 1] - camera.cy) / camera.fy
 
 
-def _initial_batch(x: list[np.ndarray], y: list[np.ndarray], lengths: list[float], side: float, s: NumericalSettings) -> list[np.ndarray]:
+def _initial_batch(
+    x: list[np.ndarray], y: list[np.ndarray], lengths: list[float], side: float, s: NumericalSettings
+) -> list[np.ndarray]:
     z0 = side / kernel.mean_side(x, y, np.sqrt)
     z0 = np.minimum(np.maximum(z0, s.z_min_mm), s.z_max_mm)
     z = [z0.copy() for _ in range(4)]
@@ -366,7 +425,11 @@ def _initial_batch(x: list[np.ndarray], y: list[np.ndarray], lengths: list[float
 
 
 def solve_numerical_batch(
-    corners: np.ndarray, valid: np.ndarray, camera: CameraModel, side: float, settings: NumericalSettings | None
+    corners: np.ndarray,
+    valid: np.ndarray,
+    camera: CameraModel,
+    side: float,
+    settings: NumericalSettings | None,
 ) -> BatchResult:
     """N poses by the numerical model at once; rows identical to :func:`solve_numerical` (no mirror)."""
     s = checked_settings(settings)
@@ -418,7 +481,9 @@ def solve_numerical_batch(
             finish(sing, SINGULAR, n, worst)
             done |= sing
             step = [tf * v for v in dz]
-            biggest = np.maximum(np.maximum(np.abs(step[0]), np.abs(step[1])), np.maximum(np.abs(step[2]), np.abs(step[3])))
+            biggest = np.maximum(
+                np.maximum(np.abs(step[0]), np.abs(step[1])), np.maximum(np.abs(step[2]), np.abs(step[3]))
+            )
             stall = ~done & (biggest < STALL_MM)
             finish(stall & (worst < tol), CONVERGED, n, worst)
             finish(stall & ~(worst < tol), STALLED, n, worst)
@@ -436,9 +501,16 @@ def solve_numerical_batch(
 
 
 def _batch_result(
-    z_out: np.ndarray, n_out: np.ndarray, status: np.ndarray, worst: np.ndarray,
-    x_all: list[np.ndarray], y_all: list[np.ndarray], corners: np.ndarray, valid: np.ndarray,
-    camera: CameraModel, side: float,
+    z_out: np.ndarray,
+    n_out: np.ndarray,
+    status: np.ndarray,
+    worst: np.ndarray,
+    x_all: list[np.ndarray],
+    y_all: list[np.ndarray],
+    corners: np.ndarray,
+    valid: np.ndarray,
+    camera: CameraModel,
+    side: float,
 ) -> BatchResult:
     count = z_out.shape[0]
     has_pose = np.isin(status, (CONVERGED, N_MAX, STALLED)) & np.all(np.isfinite(z_out), axis=1)
@@ -449,7 +521,9 @@ def _batch_result(
     idx = np.flatnonzero(has_pose)
     if idx.size:
         z = [z_out[idx, k] for k in range(4)]
-        rows, centre = kernel.pose_from_vertices(z, [v[idx] for v in x_all], [v[idx] for v in y_all], np.sqrt, np.maximum)
+        rows, centre = kernel.pose_from_vertices(
+            z, [v[idx] for v in x_all], [v[idx] for v in y_all], np.sqrt, np.maximum
+        )
         rot = np.empty((idx.size, 3, 3))
         for i in range(3):
             for j in range(3):
