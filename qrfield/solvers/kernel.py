@@ -31,37 +31,65 @@ def lengths_for(side: float) -> list[float]:
     return [side, side, side, side, diagonal, diagonal]
 
 
+def _pair(
+    pxi: Num,
+    pyi: Num,
+    zi: Num,
+    xi: Num,
+    yi: Num,
+    pxj: Num,
+    pyj: Num,
+    zj: Num,
+    xj: Num,
+    yj: Num,
+    length: float,
+    sqrt: Callable,
+) -> tuple[Num, Num, Num]:
+    """diff and the two Jacobian entries of one vertex pair (i, j)."""
+    dx = pxi - pxj
+    dy = pyi - pyj
+    dz = zi - zj
+    d = sqrt(dx * dx + dy * dy + dz * dz)
+    return d - length, (dx * xi + dy * yi + dz) / d, -(dx * xj + dy * yj + dz) / d
+
+
 def gn_system(
     z: list[Num], x: list[Num], y: list[Num], lengths: list[float], sqrt: Callable
-) -> tuple[list[Num], list[Num], dict[tuple[int, int], Num], list[Num]]:
+) -> tuple[list[Num], list[Num], list[Num], list[Num]]:
     """Residuals diff_k (calculated minus actual length, mm) and the normal equations J^T J, J^T diff.
 
     Row k of the Jacobian J = d diff_k / d z has two entries, at the pair's vertices i and j:
     (V_i - V_j) . m_i / |V_i - V_j| and -(V_i - V_j) . m_j / |V_i - V_j|. Each vertex pair
     occurs once, so the off-diagonal of J^T J is one product per pair.
-    Returns (diff[6], diag[4], off{(i, j): value}, grad[4]).
+    Returns (diff[6] in PAIRS order, diag[4], off[6] in PAIRS order, grad[4]). Unrolled: this is
+    the inner loop of both paths.
     """
-    px = [z[i] * x[i] for i in range(4)]
-    py = [z[i] * y[i] for i in range(4)]
-    diff: list[Num] = []
-    diag: list[Num] = [0.0, 0.0, 0.0, 0.0]
-    grad: list[Num] = [0.0, 0.0, 0.0, 0.0]
-    off: dict[tuple[int, int], Num] = {}
-    for k, (i, j) in enumerate(PAIRS):
-        dx = px[i] - px[j]
-        dy = py[i] - py[j]
-        dz = z[i] - z[j]
-        d = sqrt(dx * dx + dy * dy + dz * dz)
-        r = d - lengths[k]
-        ji = (dx * x[i] + dy * y[i] + dz) / d
-        jj = -(dx * x[j] + dy * y[j] + dz) / d
-        diff.append(r)
-        diag[i] = diag[i] + ji * ji
-        diag[j] = diag[j] + jj * jj
-        grad[i] = grad[i] + ji * r
-        grad[j] = grad[j] + jj * r
-        off[(min(i, j), max(i, j))] = ji * jj
-    return diff, diag, off, grad
+    z0, z1, z2, z3 = z
+    x0, x1, x2, x3 = x
+    y0, y1, y2, y3 = y
+    px0, px1, px2, px3 = z0 * x0, z1 * x1, z2 * x2, z3 * x3
+    py0, py1, py2, py3 = z0 * y0, z1 * y1, z2 * y2, z3 * y3
+    r01, a01, b01 = _pair(px0, py0, z0, x0, y0, px1, py1, z1, x1, y1, lengths[0], sqrt)
+    r12, a12, b12 = _pair(px1, py1, z1, x1, y1, px2, py2, z2, x2, y2, lengths[1], sqrt)
+    r23, a23, b23 = _pair(px2, py2, z2, x2, y2, px3, py3, z3, x3, y3, lengths[2], sqrt)
+    r30, a30, b30 = _pair(px3, py3, z3, x3, y3, px0, py0, z0, x0, y0, lengths[3], sqrt)
+    r02, a02, b02 = _pair(px0, py0, z0, x0, y0, px2, py2, z2, x2, y2, lengths[4], sqrt)
+    r13, a13, b13 = _pair(px1, py1, z1, x1, y1, px3, py3, z3, x3, y3, lengths[5], sqrt)
+    # a_ij: d diff_ij / d z_i; b_ij: d diff_ij / d z_j.
+    diag = [
+        a01 * a01 + b30 * b30 + a02 * a02,
+        b01 * b01 + a12 * a12 + a13 * a13,
+        b12 * b12 + a23 * a23 + b02 * b02,
+        b23 * b23 + a30 * a30 + b13 * b13,
+    ]
+    grad = [
+        a01 * r01 + b30 * r30 + a02 * r02,
+        b01 * r01 + a12 * r12 + a13 * r13,
+        b12 * r12 + a23 * r23 + b02 * r02,
+        b23 * r23 + a30 * r30 + b13 * r13,
+    ]
+    off = [a01 * b01, a12 * b12, a23 * b23, a30 * b30, a02 * b02, a13 * b13]
+    return [r01, r12, r23, r30, r02, r13], diag, off, grad
 
 
 def solve4(
@@ -71,8 +99,7 @@ def solve4(
 
     Pivots are floored at PIVOT_FLOOR times the trace; ``singular`` is True where one was floored.
     """
-    a01, a02, a03 = off[(0, 1)], off[(0, 2)], off[(0, 3)]
-    a12, a13, a23 = off[(1, 2)], off[(1, 3)], off[(2, 3)]
+    a01, a12, a23, a03, a02, a13 = off  # PAIRS order: (0,1) (1,2) (2,3) (3,0) (0,2) (1,3)
     floor = PIVOT_FLOOR * (diag[0] + diag[1] + diag[2] + diag[3])
     p0 = diag[0]
     d0 = maximum(p0, floor)

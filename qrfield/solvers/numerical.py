@@ -50,8 +50,8 @@ from qrfield.solvers.result import BatchResult, PoseResult, SolverError
 
 #: A Gauss-Newton step whose largest depth change is below this (mm) means the iteration stalled.
 STALL_MM = 1e-7
-#: The mirror search stops earlier: its candidate is wanted to 0.1 micrometre, not to rounding.
-MIRROR_STALL_MM = 1e-4
+#: The mirror search stops earlier: its candidate is a diagnostic, wanted to 1 micrometre in depth.
+MIRROR_STALL_MM = 1e-3
 #: Depths are kept at least this positive (mm) so that the vertices stay in front of the camera.
 Z_FLOOR_MM = 1e-3
 #: Iteration of cv2.undistortPoints: exact to far below a micro-pixel for usual lenses (OpenCV's
@@ -532,7 +532,12 @@ def _batch_result(
         rotation[idx] = rot
         position[idx] = pos
         angles[idx] = angles_from_rotation(rot)
-        model = np.einsum("nij,kj->nki", rot, marker_vertices(side)) + pos[:, None, :]
+        q = marker_vertices(side)
+        model = (
+            pos[:, None, :]
+            + rot[:, None, :, 0] * q[None, :, 0, None]
+            + rot[:, None, :, 1] * q[None, :, 1, None]
+        )
         with np.errstate(all="ignore"):
             projected = project_points(model, camera)
             err = np.sqrt(np.sum((projected - corners[idx]) ** 2, axis=(1, 2)) / 4.0)
