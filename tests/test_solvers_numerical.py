@@ -174,13 +174,13 @@ def _assert_batch_equals_single(corners, camera, settings):
 
 @pytest.mark.parametrize(
     "settings",
-    [None, SEED_SETTINGS, NumericalSettings(initial_guess="seed", tf=0.8)],
+    [None, SEED_SETTINGS, NumericalSettings(initial_guess="seed", tf=0.8, tolerance_mm=0.3)],
     ids=["defaults", "thesis", "seed-damped"],
 )
 def test_batch_equals_single(settings):
     camera, _, corners, *_ = cases(150, seed=37)
     rng = np.random.default_rng(3)
-    sample = np.concatenate([corners[:40], corners[40:80] + rng.normal(0, 0.5, (40, 4, 2))])
+    sample = np.concatenate([corners[:50], corners + rng.normal(0, 0.5, corners.shape)])
     b = _assert_batch_equals_single(sample, camera, settings)
     assert b.valid.all()
 
