@@ -185,14 +185,19 @@ def pose_from_vertices(
     orthonormal pair (polar decomposition), which is exactly the least-squares (Procrustes/Kabsch)
     rotation of the marker's four points onto the solved ones; Z = X x Y. Centre = mean vertex.
     """
-    vx = [z[i] * x[i] for i in range(4)]
-    vy = [z[i] * y[i] for i in range(4)]
-    vz = z
-    a = [(v[1] - v[0] + v[2] - v[3]) * 0.5 for v in (vx, vy, vz)]
-    b = [(v[3] - v[0] + v[2] - v[1]) * 0.5 for v in (vx, vy, vz)]
-    saa = a[0] * a[0] + a[1] * a[1] + a[2] * a[2]
-    sbb = b[0] * b[0] + b[1] * b[1] + b[2] * b[2]
-    sab = a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+    z0, z1, z2, z3 = z
+    x0, x1, x2, x3 = z0 * x[0], z1 * x[1], z2 * x[2], z3 * x[3]
+    y0, y1, y2, y3 = z0 * y[0], z1 * y[1], z2 * y[2], z3 * y[3]
+    # a: mean of V1->V2 and V4->V3 (marker X); b: mean of V1->V4 and V2->V3 (marker Y).
+    ax = (x1 - x0 + x2 - x3) * 0.5
+    ay = (y1 - y0 + y2 - y3) * 0.5
+    az = (z1 - z0 + z2 - z3) * 0.5
+    bx = (x3 - x0 + x2 - x1) * 0.5
+    by = (y3 - y0 + y2 - y1) * 0.5
+    bz = (z3 - z0 + z2 - z1) * 0.5
+    saa = ax * ax + ay * ay + az * az
+    sbb = bx * bx + by * by + bz * bz
+    sab = ax * bx + ay * by + az * bz
     s = sqrt(maximum(saa * sbb - sab * sab, 0.0))
     t = sqrt(saa + sbb + 2.0 * s)
     # sqrt of the 2x2 Gram matrix in closed form, then its inverse.
@@ -203,9 +208,12 @@ def pose_from_vertices(
     i00 = q11 / dq
     i01 = -q01 / dq
     i11 = q00 / dq
-    ex = [a[k] * i00 + b[k] * i01 for k in range(3)]
-    ey = [a[k] * i01 + b[k] * i11 for k in range(3)]
-    ez = [ex[1] * ey[2] - ex[2] * ey[1], ex[2] * ey[0] - ex[0] * ey[2], ex[0] * ey[1] - ex[1] * ey[0]]
-    rows = [[ex[k], ey[k], ez[k]] for k in range(3)]
-    centre = [(v[0] + v[1] + v[2] + v[3]) * 0.25 for v in (vx, vy, vz)]
+    ex0, ex1, ex2 = ax * i00 + bx * i01, ay * i00 + by * i01, az * i00 + bz * i01
+    ey0, ey1, ey2 = ax * i01 + bx * i11, ay * i01 + by * i11, az * i01 + bz * i11
+    rows = [
+        [ex0, ey0, ex1 * ey2 - ex2 * ey1],
+        [ex1, ey1, ex2 * ey0 - ex0 * ey2],
+        [ex2, ey2, ex0 * ey1 - ex1 * ey0],
+    ]
+    centre = [(x0 + x1 + x2 + x3) * 0.25, (y0 + y1 + y2 + y3) * 0.25, (z0 + z1 + z2 + z3) * 0.25]
     return rows, centre

@@ -29,8 +29,9 @@ What is our reconstruction (the seed gives no equations):
   - orientation: the least-squares rotation of the marker's points onto the solved vertices
     (X along V1->V2, Y along V1->V4, orthonormalised), position = mean of the solved vertices;
   - mirror: the plane of the solution reflected about the line of sight to its centre gives a
-    second starting point; iterating from it finds the other candidate of the planar ambiguity,
-    reported as ``alternative`` when it is a distinct pose (single path only).
+    second starting point; iterating from it (until its step is below MIRROR_STALL_MM) finds the
+    other candidate of the planar ambiguity, reported as ``alternative`` when some depth differs
+    from the answer's by more than MIRROR_DISTINCT_MM (single path only; setting ``mirror``).
 """
 
 from __future__ import annotations
@@ -50,8 +51,10 @@ from qrfield.solvers.result import BatchResult, PoseResult, SolverError
 
 #: A Gauss-Newton step whose largest depth change is below this (mm) means the iteration stalled.
 STALL_MM = 1e-7
-#: The mirror search stops earlier: its candidate is a diagnostic, wanted to 1 micrometre in depth.
-MIRROR_STALL_MM = 1e-3
+#: The mirror search stops earlier: its candidate is a diagnostic, wanted to 10 micrometres in depth.
+MIRROR_STALL_MM = 1e-2
+#: A mirror candidate whose depths all lie within this of the answer's is the answer again (mm).
+MIRROR_DISTINCT_MM = 0.1
 #: Depths are kept at least this positive (mm) so that the vertices stay in front of the camera.
 Z_FLOOR_MM = 1e-3
 #: Iteration of cv2.undistortPoints: exact to far below a micro-pixel for usual lenses (OpenCV's
@@ -271,16 +274,19 @@ def reprojection_single(
 ) -> float:
     """RMS pixel distance between the corners and the projection of the rigid square at pose (R, t)."""
     h = side / 2.0
-    k1, k2, p1, p2, k3 = dist = camera.dist.tolist()
+    dist = camera.dist.tolist()
     distort = dist != [0.0, 0.0, 0.0, 0.0, 0.0]
+    k1, k2, p1, p2, k3 = dist
+    fx, fy, cx, cy = camera.fx, camera.fy, camera.cx, camera.cy
+    (r00, r01, _), (r10, r11, _), (r20, r21, _) = r
+    tx, ty, tz = t
     total = 0.0
-    for i, (qx, qy) in enumerate(((-h, -h), (h, -h), (h, h), (-h, h))):
-        px = r[0][0] * qx + r[0][1] * qy + t[0]
-        py = r[1][0] * qx + r[1][1] * qy + t[1]
-        pz = r[2][0] * qx + r[2][1] * qy + t[2]
+    for i, qx, qy in ((0, -h, -h), (2, h, -h), (4, h, h), (6, -h, h)):
+        pz = r20 * qx + r21 * qy + tz
         if pz <= 0.0:
             return math.inf
-        xn, yn = px / pz, py / pz
+        xn = (r00 * qx + r01 * qy + tx) / pz
+        yn = (r10 * qx + r11 * qy + ty) / pz
         if distort:
             r2 = xn * xn + yn * yn
             radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
@@ -288,8 +294,8 @@ def reprojection_single(
                 xn * radial + 2.0 * p1 * xn * yn + p2 * (r2 + 2.0 * xn * xn),
                 yn * radial + p1 * (r2 + 2.0 * yn * yn) + 2.0 * p2 * xn * yn,
             )
-        du = camera.fx * xn + camera.cx - flat[2 * i]
-        dv = camera.fy * yn + camera.cy - flat[2 * i + 1]
+        du = fx * xn + cx - flat[i]
+        dv = fy * yn + cy - flat[i + 1]
         total += du * du + dv * dv
     return math.sqrt(total / 4.0)
 
@@ -365,9 +371,10 @@ def solve_numerical(
     if guess is None:
         return result
     z_alt, n_alt, status_alt, worst_alt = iterate_single(guess, x, y, lengths, s, MIRROR_STALL_MM)
-    if status_alt in (SINGULAR, DIVERGED) or max(
-        abs(a - b) for a, b in zip(z_alt, z, strict=True)
-    ) <= 1e-6 * max(z):
+    if (
+        status_alt in (SINGULAR, DIVERGED)
+        or max(abs(a - b) for a, b in zip(z_alt, z, strict=True)) <= MIRROR_DISTINCT_MM
+    ):
         return result  # the mirror start slid back to the same pose: no second candidate
     alternative = _result_single(z_alt, n_alt, status_alt, worst_alt, x, y, side, camera, corners, flat, s)
     ratio = (
