@@ -64,14 +64,15 @@ UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-1
 
 def undistort(points: np.ndarray, camera: CameraModel, pixels: bool = False) -> np.ndarray:
     """Undistorted (M, 1, 2) normalised coordinates of pixels (M, 1, 2), or ideal pixels if ``pixels``."""
-    return cv2.undistortPoints(
-        np.ascontiguousarray(points, dtype=float),
-        camera.K,
-        camera.dist,
-        R=None,
-        P=camera.K if pixels else None,
-        criteria=UNDISTORT_CRITERIA,
-    )
+    pts = np.ascontiguousarray(points, dtype=float)
+    target = camera.K if pixels else None
+    if _ITER is not None:  # OpenCV 4.x
+        return _ITER(pts, camera.K, camera.dist, None, target, UNDISTORT_CRITERIA)
+    return cv2.undistortPoints(pts, camera.K, camera.dist, R=None, P=target, criteria=UNDISTORT_CRITERIA)
+
+
+#: OpenCV 4.x has cv2.undistortPointsIter; OpenCV 5 takes the criteria in cv2.undistortPoints.
+_ITER = getattr(cv2, "undistortPointsIter", None)
 
 
 GUESSES = ("seed", "parallelogram")
