@@ -163,3 +163,13 @@ def test_batch_loops_over_the_single_path():
         np.testing.assert_array_equal(b.position_mm[i], r.position_mm)
         np.testing.assert_array_equal(b.angles_deg[i], r.angles_deg)
         assert b.converged[i] and b.iterations[i] == 0
+
+
+def test_rendered_view_through_a_distorted_lens():
+    from qrfield.render import render_view
+
+    view = render_view(DISTORTED, SIDE_MM, Pose([40.0, -30.0, 280.0], [-25.0, 35.0, 160.0]))
+    for method in ("numerical", "ippe"):
+        r = solve(view.corners_px, DISTORTED, SIDE_MM, method)
+        pos_err, ang_err = errors(r.position_mm, r.angles_deg, view.pose.position_mm, view.pose.angles_deg)
+        assert r.converged and pos_err < 1e-6 and ang_err < 1e-6

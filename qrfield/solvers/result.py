@@ -31,7 +31,7 @@ def _plain(value: float | None) -> float | None:
     return value if math.isfinite(value) else None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class PoseResult:
     """The pose of one QR code from its four corner pixels.
 
@@ -108,7 +108,7 @@ class PoseResult:
         }
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class BatchResult:
     """Poses of N corner sets at once (index i is the i-th corner set).
 
