@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -383,13 +383,7 @@ def solve_numerical(
         if alternative.reprojection_px > 0.0
         else (1.0 if result.reprojection_px == 0.0 else math.inf)
     )
-    return _replace_alt(result, alternative, ratio)
-
-
-def _replace_alt(result: PoseResult, alternative: PoseResult, ambiguity: float) -> PoseResult:
-    from dataclasses import replace
-
-    return replace(result, alternative=alternative, ambiguity=ambiguity)
+    return replace(result, alternative=alternative, ambiguity=ratio)
 
 
 # ---------------------------------------------------------------------- batch path (numpy arrays)
