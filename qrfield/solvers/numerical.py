@@ -60,6 +60,8 @@ Z_FLOOR_MM = 1e-3
 #: Iteration of cv2.undistortPoints: exact to far below a micro-pixel for usual lenses (OpenCV's
 #: default of 5 iterations leaves errors of 1e-3 px and more near the image corners).
 UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-15)
+#: OpenCV 4.x has cv2.undistortPointsIter; OpenCV 5 takes the criteria in cv2.undistortPoints.
+_ITER = getattr(cv2, "undistortPointsIter", None)
 
 
 def undistort(points: np.ndarray, camera: CameraModel, pixels: bool = False) -> np.ndarray:
@@ -71,10 +73,6 @@ def undistort(points: np.ndarray, camera: CameraModel, pixels: bool = False) -> 
     return cv2.undistortPoints(pts, camera.K, camera.dist, R=None, P=target, criteria=UNDISTORT_CRITERIA)
 
 
-#: OpenCV 4.x has cv2.undistortPointsIter; OpenCV 5 takes the criteria in cv2.undistortPoints.
-_ITER = getattr(cv2, "undistortPointsIter", None)
-
-
 GUESSES = ("seed", "parallelogram")
 STOP_RULES = ("seed", "settled")
 
@@ -84,7 +82,12 @@ CONVERGED, N_MAX, STALLED, SINGULAR, DIVERGED, INVALID = range(6)
 
 @dataclass(frozen=True)
 class NumericalSettings:
-    """Settings of the numerical model (defaults documented; seed's symbols in brackets)."""
+    """Settings of the numerical model; each help text names the seed's symbol where it has one.
+
+    The defaults are for measuring real images: our parallelogram guess and settled stop rule with
+    a 1 mm tolerance. :data:`SEED_SETTINGS` is the thesis' model as DESIGN.md reads it (seed guess,
+    seed stop rule, 0.01 mm) for reproducing its simulation.
+    """
 
     tf: float = setting(
         1.0,
