@@ -1,6 +1,8 @@
 """``qrfield bench solvers``: microseconds per pose of each solver beside raw OpenCV, from one run.
 
-Baseline, measured in the same run on the same corners: one raw cv2.solvePnP call with
+Times are CPU time of this process (time.process_time), so that other work on a shared machine
+does not inflate them; the solvers are single-threaded. Baseline, measured in the same run on the
+same corners: one raw cv2.solvePnP call with
 SOLVEPNP_IPPE_SQUARE (no refinement, no conversion), so the ratios are comparable across machines.
 Targets: a single numerical solve at most 10x the baseline; the batch at least 200,000 poses/s.
 Poses: seeded random visible poses (qrfield.sampling), z 150-800 mm, tilt up to 60 degrees, any
@@ -29,10 +31,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _per_call_us(fn, items) -> float:  # type: ignore[no-untyped-def]
     fn(items[0])  # warm caches
-    t0 = time.perf_counter()
+    t0 = time.process_time()
     for item in items:
         fn(item)
-    return (time.perf_counter() - t0) * 1e6 / len(items)
+    return (time.process_time() - t0) * 1e6 / len(items)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -85,10 +87,10 @@ def run(args: argparse.Namespace) -> int:
     big = np.tile(corners, (reps, 1, 1))[: args.batch]
     for label, settings in (("defaults", default), ("thesis settings", SEED_SETTINGS)):
         solve_batch(big[:1000], camera, side, settings)
-        t0 = time.perf_counter()
+        t0 = time.process_time()
         solve_batch(big, camera, side, settings)
         rows.append(
-            (f"numerical batch of {len(big)}, {label}, per pose", (time.perf_counter() - t0) * 1e6 / len(big))
+            (f"numerical batch of {len(big)}, {label}, per pose", (time.process_time() - t0) * 1e6 / len(big))
         )
 
     print(

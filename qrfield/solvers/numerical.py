@@ -429,6 +429,10 @@ def _initial_batch(
     return z
 
 
+#: Rows solved per pass: small enough that numpy's temporaries stay in the CPU cache.
+BATCH_CHUNK = 16384
+
+
 def solve_numerical_batch(
     corners: np.ndarray,
     valid: np.ndarray,
@@ -438,6 +442,33 @@ def solve_numerical_batch(
 ) -> BatchResult:
     """N poses by the numerical model at once; rows identical to :func:`solve_numerical` (no mirror)."""
     s = checked_settings(settings)
+    if corners.shape[0] <= BATCH_CHUNK:
+        return _solve_chunk(corners, valid, camera, side, s)
+    parts = [
+        _solve_chunk(corners[i : i + BATCH_CHUNK], valid[i : i + BATCH_CHUNK], camera, side, s)
+        for i in range(0, corners.shape[0], BATCH_CHUNK)
+    ]
+    return BatchResult(
+        method="numerical",
+        **{
+            name: np.concatenate([getattr(p, name) for p in parts])
+            for name in (
+                "position_mm",
+                "angles_deg",
+                "rotation",
+                "converged",
+                "iterations",
+                "residual_mm",
+                "reprojection_px",
+                "valid",
+            )
+        },
+    )
+
+
+def _solve_chunk(
+    corners: np.ndarray, valid: np.ndarray, camera: CameraModel, side: float, s: NumericalSettings
+) -> BatchResult:
     count = corners.shape[0]
     lengths = kernel.lengths_for(side)
     xn, yn = normalised_batch(np.where(valid[:, None, None], corners, 0.0), camera)
@@ -456,6 +487,8 @@ def solve_numerical_batch(
     early = s.stop == "seed"
 
     def finish(mask: np.ndarray, code: int, n: int, worst: np.ndarray) -> None:
+        if not mask.any():
+            return
         rows = idx[mask]
         z_out[rows] = np.stack([v[mask] for v in z], axis=1)
         n_out[rows] = n
