@@ -217,3 +217,16 @@ def test_settings_are_checked():
         solve(corners[0], camera, SIDE_MM, "numerical", IppeSettings())
     with pytest.raises(SolverError, match="unknown solver method"):
         solve(corners[0], camera, SIDE_MM, "epnp")
+
+
+def test_batch_in_chunks_equals_single(monkeypatch):
+    from qrfield.solvers import numerical
+
+    monkeypatch.setattr(numerical, "BATCH_CHUNK", 7)  # 60 rows: 8 full chunks and a partial one
+    camera, _, corners, *_ = cases(150, seed=37)
+    sample = corners[:60] + np.random.default_rng(8).normal(0, 0.5, (60, 4, 2))
+    sample[9, 0] = np.nan
+    b = _assert_batch_equals_single(np.delete(sample, 9, axis=0), camera, SEED_SETTINGS)
+    assert len(b) == 59
+    b = solve_batch(sample, camera, SIDE_MM, SEED_SETTINGS)
+    assert len(b) == 60 and not b.valid[9] and b.valid.sum() == 59
