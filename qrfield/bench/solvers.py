@@ -79,6 +79,14 @@ def run(args: argparse.Namespace) -> int:
             _per_call_us(lambda c: solve(c, camera, side, "numerical", seed_single), corners),
         ),
         (
+            "numerical single, defaults, 0.5 px noise",
+            _per_call_us(lambda c: solve(c, camera, side, "numerical", default), noisy),
+        ),
+        (
+            "numerical single, no mirror search, 0.5 px noise",
+            _per_call_us(lambda c: solve(c, camera, side, "numerical", no_mirror), noisy),
+        ),
+        (
             "ippe single (both candidates, LM refined)",
             _per_call_us(lambda c: solve(c, camera, side, "ippe"), corners),
         ),
@@ -95,7 +103,7 @@ def run(args: argparse.Namespace) -> int:
 
     print(
         f"qrfield bench solvers: camera {camera.name}, QR {side:g} mm, {len(corners)} seeded poses "
-        "(z 150-800 mm, tilt <= 60 deg, any in-plane turn), exact corners"
+        "(z 150-800 mm, tilt <= 60 deg, any in-plane turn), exact corners unless marked; CPU time"
     )
     print(f"{'solve':<52}{'us/pose':>10}{'x baseline':>12}{'poses/s':>12}")
     for label, us in rows:

@@ -137,6 +137,15 @@ def mean_side(x: list[Num], y: list[Num], sqrt: Callable) -> Num:
     return total / 4.0
 
 
+def _det3(a: tuple[Num, Num, Num], b: tuple[Num, Num, Num], c: tuple[Num, Num, Num]) -> Num:
+    """a . (b x c)."""
+    return (
+        a[0] * (b[1] * c[2] - b[2] * c[1])
+        - a[1] * (b[0] * c[2] - b[2] * c[0])
+        + a[2] * (b[0] * c[1] - b[1] * c[0])
+    )
+
+
 def parallelogram_depths(x: list[Num], y: list[Num], sqrt: Callable) -> tuple[list[Num], Num]:
     """Depths up to scale from V1 + V3 = V2 + V4 (the square is a parallelogram); ours, not the seed's.
 
@@ -144,19 +153,12 @@ def parallelogram_depths(x: list[Num], y: list[Num], sqrt: Callable) -> tuple[li
     Returns ([z1, z2, z3, 1], det); the caller rejects det == 0 or a non-positive depth.
     """
 
-    def det3(a: tuple[Num, Num, Num], b: tuple[Num, Num, Num], c: tuple[Num, Num, Num]) -> Num:
-        return (
-            a[0] * (b[1] * c[2] - b[2] * c[1])
-            - a[1] * (b[0] * c[2] - b[2] * c[0])
-            + a[2] * (b[0] * c[1] - b[1] * c[0])
-        )
-
     m1 = (x[0], y[0], 1.0)
     m2n = (-x[1], -y[1], -1.0)
     m3 = (x[2], y[2], 1.0)
     m4 = (x[3], y[3], 1.0)
-    det = det3(m1, m2n, m3)
-    return [det3(m4, m2n, m3), det3(m1, m4, m3), det3(m1, m2n, m4), det], det
+    det = _det3(m1, m2n, m3)
+    return [_det3(m4, m2n, m3), _det3(m1, m4, m3), _det3(m1, m2n, m4), det], det
 
 
 def scale_to_side(z: list[Num], x: list[Num], y: list[Num], lengths: list[float], sqrt: Callable) -> Num:

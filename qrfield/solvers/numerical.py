@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -49,8 +49,9 @@ from qrfield.settings import setting, validated
 from qrfield.solvers import kernel
 from qrfield.solvers.result import BatchResult, PoseResult, SolverError
 
-#: A Gauss-Newton step whose largest depth change is below this (mm) means the iteration stalled.
-STALL_MM = 1e-7
+#: A Gauss-Newton step whose largest depth change is below this (mm, 0.1 micrometre) means the
+#: iteration has settled at its least-squares optimum.
+STALL_MM = 1e-4
 #: The mirror search stops earlier: its candidate is a diagnostic, wanted to 10 micrometres in depth.
 MIRROR_STALL_MM = 1e-2
 #: A mirror candidate whose depths all lie within this of the answer's is the answer again (mm).
@@ -316,24 +317,43 @@ def _result_single(
     corners: np.ndarray,
     flat: list[float],
     s: NumericalSettings,
+    alternative: PoseResult | None = None,
+    ambiguity: float | None = None,
+    pose: tuple[list[list[float]], list[float], float] | None = None,
 ) -> PoseResult:
-    if status in (SINGULAR, DIVERGED) or not all(math.isfinite(v) for v in z):
+    """The PoseResult of solved depths (or a failed one when they are unusable).
+
+    ``pose`` = (rows of R, centre, reprojection px) when already computed by :func:`_pose_single`.
+    """
+    if not _usable(status, z):
         return PoseResult.failed("numerical", corners, _reason(status, worst, n, s), iterations=n)
-    rows, centre = kernel.pose_from_vertices(z, x, y, math.sqrt, max)
-    vertices = np.array([[z[i] * x[i], z[i] * y[i], z[i]] for i in range(4)])
+    rows, centre, reprojection = pose or _pose_single(z, x, y, side, camera, flat)
     return PoseResult(
         method="numerical",
         position_mm=np.array(centre),
         angles_deg=np.array(_angles_single(rows)),
         rotation=np.array(rows),
-        vertices_mm=vertices,
+        vertices_mm=np.array([[z[i] * x[i], z[i] * y[i], z[i]] for i in range(4)]),
         converged=status == CONVERGED,
         iterations=n,
         residual_mm=worst,
-        reprojection_px=reprojection_single(rows, centre, side, camera, flat),
+        reprojection_px=reprojection,
         reason=_reason(status, worst, n, s),
         corners_px=corners,
+        alternative=alternative,
+        ambiguity=ambiguity,
     )
+
+
+def _pose_single(
+    z: list[float], x: list[float], y: list[float], side: float, camera: CameraModel, flat: list[float]
+) -> tuple[list[list[float]], list[float], float]:
+    rows, centre = kernel.pose_from_vertices(z, x, y, math.sqrt, max)
+    return rows, centre, reprojection_single(rows, centre, side, camera, flat)
+
+
+def _usable(status: int, z: list[float]) -> bool:
+    return status not in (SINGULAR, DIVERGED) and all(math.isfinite(v) for v in z)
 
 
 def _mirror_guess(
@@ -368,25 +388,42 @@ def solve_numerical(
     lengths = kernel.lengths_for(side)
     z0 = _initial_single(x, y, lengths, side, s)
     z, n, status, worst = iterate_single(z0, x, y, lengths, s)
-    result = _result_single(z, n, status, worst, x, y, side, camera, corners, flat, s)
-    if not s.mirror or not np.isfinite(result.position_mm[0]):
-        return result
-    guess = _mirror_guess(result.rotation.tolist(), result.position_mm.tolist(), x, y)
+    if not (s.mirror and _usable(status, z)):
+        return _result_single(z, n, status, worst, x, y, side, camera, corners, flat, s)
+    pose = _pose_single(z, x, y, side, camera, flat)
+    alternative = _mirror_candidate(z, pose, x, y, lengths, side, camera, corners, flat, s)
+    ambiguity = None
+    if alternative is not None:
+        mine, other = pose[2], alternative.reprojection_px
+        ambiguity = mine / other if other > 0.0 else (1.0 if mine == 0.0 else math.inf)
+    return _result_single(
+        z, n, status, worst, x, y, side, camera, corners, flat, s, alternative, ambiguity, pose
+    )
+
+
+def _mirror_candidate(
+    z: list[float],
+    pose: tuple[list[list[float]], list[float], float],
+    x: list[float],
+    y: list[float],
+    lengths: list[float],
+    side: float,
+    camera: CameraModel,
+    corners: np.ndarray,
+    flat: list[float],
+    s: NumericalSettings,
+) -> PoseResult | None:
+    """The other candidate of the planar ambiguity, iterated from the mirrored plane, or None."""
+    guess = _mirror_guess(pose[0], pose[1], x, y)
     if guess is None:
-        return result
+        return None
     z_alt, n_alt, status_alt, worst_alt = iterate_single(guess, x, y, lengths, s, MIRROR_STALL_MM)
     if (
-        status_alt in (SINGULAR, DIVERGED)
+        not _usable(status_alt, z_alt)
         or max(abs(a - b) for a, b in zip(z_alt, z, strict=True)) <= MIRROR_DISTINCT_MM
     ):
-        return result  # the mirror start slid back to the same pose: no second candidate
-    alternative = _result_single(z_alt, n_alt, status_alt, worst_alt, x, y, side, camera, corners, flat, s)
-    ratio = (
-        result.reprojection_px / alternative.reprojection_px
-        if alternative.reprojection_px > 0.0
-        else (1.0 if result.reprojection_px == 0.0 else math.inf)
-    )
-    return replace(result, alternative=alternative, ambiguity=ratio)
+        return None  # the mirror start slid back to the same pose: no second candidate
+    return _result_single(z_alt, n_alt, status_alt, worst_alt, x, y, side, camera, corners, flat, s)
 
 
 # ---------------------------------------------------------------------- batch path (numpy arrays)
