@@ -16,7 +16,6 @@ import functools
 import math
 from dataclasses import dataclass, replace
 
-import cv2
 import numpy as np
 
 from qrfield.camera import CameraModel
@@ -66,6 +65,8 @@ def _candidate(
     rvec: np.ndarray, tvec: np.ndarray, side: float, camera: CameraModel, corners: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
     """Marker-frame rotation, position, vertices, RMS reprojection (px) and line-of-sight residual (mm)."""
+    import cv2
+
     rot_cv, _ = cv2.Rodrigues(rvec)
     rotation = rotation_from_ippe(rot_cv)
     position = tvec.reshape(3).astype(float)
@@ -104,6 +105,8 @@ def solve_ippe(
     corners: np.ndarray, camera: CameraModel, side: float, settings: IppeSettings | None
 ) -> PoseResult:
     """One pose by IPPE_SQUARE from checked corners (see :func:`qrfield.solvers.solve`); never raises."""
+    import cv2  # lazily: the CLI imports this module for its settings
+
     s = checked_settings(settings)
     obj = _object_points(side)
     pts = _ideal_pixels(corners, camera)

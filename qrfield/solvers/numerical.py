@@ -40,7 +40,6 @@ import functools
 import math
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
 from qrfield.camera import CameraModel
@@ -60,17 +59,18 @@ MIRROR_DISTINCT_MM = 0.1
 Z_FLOOR_MM = 1e-3
 #: Iteration of cv2.undistortPoints: exact to far below a micro-pixel for usual lenses (OpenCV's
 #: default of 5 iterations leaves errors of 1e-3 px and more near the image corners).
-UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-15)
-#: OpenCV 4.x has cv2.undistortPointsIter; OpenCV 5 takes the criteria in cv2.undistortPoints.
-_ITER = getattr(cv2, "undistortPointsIter", None)
+#: (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, count, eps); cv2 is imported lazily (fast CLI).
+UNDISTORT_CRITERIA = (1 | 2, 100, 1e-15)
 
 
 def undistort(points: np.ndarray, camera: CameraModel, pixels: bool = False) -> np.ndarray:
     """Undistorted (M, 1, 2) normalised coordinates of pixels (M, 1, 2), or ideal pixels if ``pixels``."""
+    import cv2
+
     pts = np.ascontiguousarray(points, dtype=float)
     target = camera.K if pixels else None
-    if _ITER is not None:  # OpenCV 4.x
-        return _ITER(pts, camera.K, camera.dist, None, target, UNDISTORT_CRITERIA)
+    if hasattr(cv2, "undistortPointsIter"):  # OpenCV 4.x; OpenCV 5 takes the criteria below
+        return cv2.undistortPointsIter(pts, camera.K, camera.dist, None, target, UNDISTORT_CRITERIA)
     return cv2.undistortPoints(pts, camera.K, camera.dist, R=None, P=target, criteria=UNDISTORT_CRITERIA)
 
 
