@@ -44,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
     from qrfield.camera import resolve_camera
     from qrfield.geometry import angle_difference, ippe_object_points
     from qrfield.sampling import random_visible_poses
-    from qrfield.solvers import SEED_SETTINGS, NumericalSettings, solve, solve_batch
+    from qrfield.solvers import SEED_SETTINGS, IppeSettings, NumericalSettings, solve, solve_batch
 
     camera = resolve_camera(args.camera)
     side = args.side_mm
@@ -89,6 +89,14 @@ def run(args: argparse.Namespace) -> int:
         (
             "ippe single (both candidates, LM refined)",
             _per_call_us(lambda c: solve(c, camera, side, "ippe"), corners),
+        ),
+        (
+            "ippe single (both candidates, VVS refined)",
+            _per_call_us(lambda c: solve(c, camera, side, "ippe", IppeSettings(refine="vvs")), corners),
+        ),
+        (
+            "ippe single (both candidates, not refined)",
+            _per_call_us(lambda c: solve(c, camera, side, "ippe", IppeSettings(refine="none")), corners),
         ),
     ]
     reps = -(-args.batch // len(corners))
