@@ -5,7 +5,9 @@ cv2.solvePnPGeneric with SOLVEPNP_IPPE_SQUARE returns the two poses of the plana
 (V1..V4 in OpenCV's frame: +Y up, +Z towards the camera); both are refined (LM or VVS) and
 converted to the marker frame of DESIGN.md with :func:`qrfield.geometry.rotation_from_ippe`. The
 one with the smaller reprojection error is the answer, the other its ``alternative``, and
-``ambiguity`` = best error / second error (near 1: the image cannot tell the two apart).
+``ambiguity`` = best error / second error (near 1: the image cannot tell the two apart). When
+refining the second candidate slides it onto the answer (it is then no local minimum of its own),
+the alternative is IPPE's unrefined closed-form mirror, so that the two always differ.
 Corners are undistorted first (exactly, by iteration) when the camera has distortion, so the
 solver works on ideal pinhole pixels; reprojection errors are measured on the corners as given.
 """
@@ -25,6 +27,8 @@ from qrfield.solvers.numerical import undistort
 from qrfield.solvers.result import BatchResult, PoseResult, SolverError
 
 REFINERS = ("lm", "vvs", "none")
+#: Card normals closer than this (degrees) mean the two candidates are one pose.
+SAME_NORMAL_DEG = 0.01
 
 
 @dataclass(frozen=True)
@@ -84,6 +88,11 @@ def _candidate(
     return rotation, position, vertices, err, residual
 
 
+def _same_normal(rot_a: np.ndarray, rot_b: np.ndarray) -> bool:
+    """True when two rotations put the card normal within SAME_NORMAL_DEG of each other."""
+    return float(rot_a[:, 2] @ rot_b[:, 2]) > math.cos(math.radians(SAME_NORMAL_DEG))
+
+
 def _result(cand: tuple, corners: np.ndarray) -> PoseResult:  # type: ignore[type-arg]
     rotation, position, vertices, err, residual = cand
     return PoseResult(
@@ -118,8 +127,8 @@ def solve_ippe(
     if count < 1:
         return PoseResult.failed("ippe", corners, "OpenCV IPPE_SQUARE returned no pose")
     candidates = []
-    for rvec, tvec in zip(rvecs[:count], tvecs[:count], strict=True):
-        rvec, tvec = rvec.copy(), tvec.copy()
+    for raw_rvec, raw_tvec in zip(rvecs[:count], tvecs[:count], strict=True):
+        rvec, tvec = raw_rvec.copy(), raw_tvec.copy()
         try:
             if s.refine == "lm":
                 rvec, tvec = cv2.solvePnPRefineLM(obj, pts, k, None, rvec, tvec)
@@ -128,16 +137,21 @@ def solve_ippe(
         except cv2.error:
             pass  # keep the unrefined closed-form candidate
         if np.all(np.isfinite(rvec)) and np.all(np.isfinite(tvec)):
-            candidates.append(_candidate(rvec, tvec, side, camera, corners))
+            candidates.append((_candidate(rvec, tvec, side, camera, corners), raw_rvec, raw_tvec))
     if not candidates:
         return PoseResult.failed("ippe", corners, "OpenCV IPPE_SQUARE returned no finite pose")
-    candidates.sort(key=lambda c: c[3])
-    best = _result(candidates[0], corners)
+    candidates.sort(key=lambda c: c[0][3])
+    first = candidates[0][0]
+    best = _result(first, corners)
     if len(candidates) < 2:
         return best
-    alternative = _result(candidates[1], corners)
-    second = candidates[1][3]
-    ambiguity = candidates[0][3] / second if second > 0.0 else 1.0
+    second = candidates[1][0]
+    if _same_normal(first[0], second[0]):
+        # Refining the mirror slid it onto the answer (it is no local minimum of its own): keep
+        # IPPE's closed-form mirror, so that the ambiguity compares two different poses.
+        second = _candidate(candidates[1][1], candidates[1][2], side, camera, corners)
+    alternative = _result(second, corners)
+    ambiguity = first[3] / second[3] if second[3] > 0.0 else 1.0
     return replace(best, alternative=alternative, ambiguity=ambiguity)
 
 
