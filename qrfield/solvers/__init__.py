@@ -75,7 +75,7 @@ def solve(
     corners, flat = check_corners_single(corners_px)
     if method == "numerical":
         return solve_numerical(corners, flat, cam, side, settings)  # type: ignore[arg-type]
-    return solve_ippe(corners, cam, side, settings)  # type: ignore[arg-type]
+    return solve_ippe(corners, flat, cam, side, settings)  # type: ignore[arg-type]
 
 
 def solve_batch(

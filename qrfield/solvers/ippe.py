@@ -21,9 +21,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from qrfield.camera import CameraModel
-from qrfield.geometry import angles_from_rotation, ippe_object_points, marker_vertices, rotation_from_ippe
+from qrfield.geometry import ippe_object_points, rotation_from_ippe
 from qrfield.settings import setting, validated
-from qrfield.solvers.numerical import undistort
+from qrfield.solvers.numerical import angles_single, normalised_single, reprojection_single, undistort
 from qrfield.solvers.result import BatchResult, PoseResult, SolverError
 
 REFINERS = ("lm", "vvs", "none")
@@ -65,53 +65,76 @@ def _ideal_pixels(corners: np.ndarray, camera: CameraModel) -> np.ndarray:
     return pts
 
 
-def _candidate(
-    rvec: np.ndarray, tvec: np.ndarray, side: float, camera: CameraModel, corners: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
-    """Marker-frame rotation, position, vertices, RMS reprojection (px) and line-of-sight residual (mm)."""
-    import cv2
+class _Candidate:
+    """One IPPE pose in the marker frame of DESIGN.md, as Python floats (cheap on 4 points)."""
 
-    rot_cv, _ = cv2.Rodrigues(rvec)
-    rotation = rotation_from_ippe(rot_cv)
-    position = tvec.reshape(3).astype(float)
-    vertices = marker_vertices(side) @ rotation.T + position
-    projected, _ = cv2.projectPoints(_object_points(side), rvec, tvec, camera.K, camera.dist)
-    err = float(np.sqrt(np.mean(np.sum((projected.reshape(4, 2) - corners) ** 2, axis=1))))
-    if np.any(vertices[:, 2] <= 0):
-        err = math.inf
-    # Distance of each vertex from the line of sight through its (undistorted) corner.
-    rays = undistort(corners.reshape(4, 1, 2), camera).reshape(4, 2)
-    rays = np.hstack([rays, np.ones((4, 1))])
-    rays /= np.linalg.norm(rays, axis=1, keepdims=True)
-    along = np.sum(vertices * rays, axis=1, keepdims=True)
-    residual = float(np.max(np.linalg.norm(vertices - along * rays, axis=1)))
-    return rotation, position, vertices, err, residual
+    __slots__ = ("error", "position", "residual", "rows", "vertices")
+
+    def __init__(
+        self,
+        rvec: np.ndarray,
+        tvec: np.ndarray,
+        side: float,
+        camera: CameraModel,
+        flat: list[float],
+        rays: list[tuple[float, float, float]],
+    ) -> None:
+        import cv2
+
+        # OpenCV's IPPE frame has +Y up and +Z towards the camera: convert to DESIGN.md's marker frame.
+        self.rows = rotation_from_ippe(cv2.Rodrigues(rvec)[0]).tolist()
+        (a, b, _), (d, e, _), (g, h, _) = self.rows
+        self.position = tvec.reshape(3).tolist()
+        self.error = reprojection_single(self.rows, self.position, side, camera, flat)
+        half = side / 2.0
+        tx, ty, tz = self.position
+        self.vertices = []
+        residual = 0.0
+        corners = ((-half, -half), (half, -half), (half, half), (-half, half))
+        for (qx, qy), (rx, ry, rz) in zip(corners, rays, strict=True):
+            vx = a * qx + b * qy + tx
+            vy = d * qx + e * qy + ty
+            vz = g * qx + h * qy + tz
+            self.vertices.append([vx, vy, vz])
+            # Distance of the vertex from the line of sight through its (undistorted) corner.
+            along = vx * rx + vy * ry + vz * rz
+            ox, oy, oz = vx - along * rx, vy - along * ry, vz - along * rz
+            residual = max(residual, math.sqrt(ox * ox + oy * oy + oz * oz))
+        self.residual = residual
+
+    def result(self, corners: np.ndarray) -> PoseResult:
+        return PoseResult(
+            method="ippe",
+            position_mm=np.array(self.position),
+            angles_deg=np.array(angles_single(self.rows)),
+            rotation=np.array(self.rows),
+            vertices_mm=np.array(self.vertices),
+            converged=True,
+            iterations=0,
+            residual_mm=self.residual,
+            reprojection_px=self.error,
+            reason="",
+            corners_px=corners,
+        )
 
 
-def _same_normal(rot_a: np.ndarray, rot_b: np.ndarray) -> bool:
-    """True when two rotations put the card normal within SAME_NORMAL_DEG of each other."""
-    return float(rot_a[:, 2] @ rot_b[:, 2]) > math.cos(math.radians(SAME_NORMAL_DEG))
+def _unit_rays(x: list[float], y: list[float]) -> list[tuple[float, float, float]]:
+    """Unit vectors along the lines of sight of normalised image points."""
+    out = []
+    for xi, yi in zip(x, y, strict=True):
+        norm = math.sqrt(xi * xi + yi * yi + 1.0)
+        out.append((xi / norm, yi / norm, 1.0 / norm))
+    return out
 
 
-def _result(cand: tuple, corners: np.ndarray) -> PoseResult:  # type: ignore[type-arg]
-    rotation, position, vertices, err, residual = cand
-    return PoseResult(
-        method="ippe",
-        position_mm=position,
-        angles_deg=angles_from_rotation(rotation),
-        rotation=rotation,
-        vertices_mm=vertices,
-        converged=True,
-        iterations=0,
-        residual_mm=residual,
-        reprojection_px=err,
-        reason="",
-        corners_px=corners,
-    )
+def _same_normal(a: _Candidate, b: _Candidate) -> bool:
+    """True when two candidates put the card normal within SAME_NORMAL_DEG of each other."""
+    dot = a.rows[0][2] * b.rows[0][2] + a.rows[1][2] * b.rows[1][2] + a.rows[2][2] * b.rows[2][2]
+    return dot > math.cos(math.radians(SAME_NORMAL_DEG))
 
 
 def solve_ippe(
-    corners: np.ndarray, camera: CameraModel, side: float, settings: IppeSettings | None
+    corners: np.ndarray, flat: list[float], camera: CameraModel, side: float, settings: IppeSettings | None
 ) -> PoseResult:
     """One pose by IPPE_SQUARE from checked corners (see :func:`qrfield.solvers.solve`); never raises."""
     import cv2  # lazily: the CLI imports this module for its settings
@@ -126,6 +149,7 @@ def solve_ippe(
         return PoseResult.failed("ippe", corners, f"OpenCV IPPE_SQUARE failed: {exc.err}")
     if count < 1:
         return PoseResult.failed("ippe", corners, "OpenCV IPPE_SQUARE returned no pose")
+    rays = _unit_rays(*normalised_single(corners, flat, camera))
     candidates = []
     for raw_rvec, raw_tvec in zip(rvecs[:count], tvecs[:count], strict=True):
         rvec, tvec = raw_rvec.copy(), raw_tvec.copy()
@@ -137,22 +161,20 @@ def solve_ippe(
         except cv2.error:
             pass  # keep the unrefined closed-form candidate
         if np.all(np.isfinite(rvec)) and np.all(np.isfinite(tvec)):
-            candidates.append((_candidate(rvec, tvec, side, camera, corners), raw_rvec, raw_tvec))
+            candidates.append((_Candidate(rvec, tvec, side, camera, flat, rays), raw_rvec, raw_tvec))
     if not candidates:
         return PoseResult.failed("ippe", corners, "OpenCV IPPE_SQUARE returned no finite pose")
-    candidates.sort(key=lambda c: c[0][3])
+    candidates.sort(key=lambda c: c[0].error)
     first = candidates[0][0]
-    best = _result(first, corners)
     if len(candidates) < 2:
-        return best
+        return first.result(corners)
     second = candidates[1][0]
-    if _same_normal(first[0], second[0]):
+    if _same_normal(first, second):
         # Refining the mirror slid it onto the answer (it is no local minimum of its own): keep
         # IPPE's closed-form mirror, so that the ambiguity compares two different poses.
-        second = _candidate(candidates[1][1], candidates[1][2], side, camera, corners)
-    alternative = _result(second, corners)
-    ambiguity = first[3] / second[3] if second[3] > 0.0 else 1.0
-    return replace(best, alternative=alternative, ambiguity=ambiguity)
+        second = _Candidate(candidates[1][1], candidates[1][2], side, camera, flat, rays)
+    ambiguity = first.error / second.error if second.error > 0.0 else 1.0
+    return replace(first.result(corners), alternative=second.result(corners), ambiguity=ambiguity)
 
 
 def solve_ippe_batch(
@@ -169,7 +191,7 @@ def solve_ippe_batch(
     }
     converged = np.zeros(count, bool)
     for i in np.flatnonzero(valid):
-        r = solve_ippe(corners[i], camera, side, settings)
+        r = solve_ippe(corners[i], corners[i].ravel().tolist(), camera, side, settings)
         converged[i] = r.converged
         out["position_mm"][i] = r.position_mm
         out["angles_deg"][i] = r.angles_deg

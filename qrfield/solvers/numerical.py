@@ -257,8 +257,8 @@ def iterate_single(
     raise AssertionError("unreachable")  # pragma: no cover
 
 
-def _angles_single(r: list[list[float]]) -> list[float]:
-    """Scalar twin of geometry.angles_from_rotation (degrees)."""
+def angles_single(r: list[list[float]]) -> list[float]:
+    """Scalar twin of geometry.angles_from_rotation: (alpha, beta, gamma) in degrees from rows of R."""
     s = min(max(r[0][2], -1.0), 1.0)
     beta = math.asin(s)
     if abs(s) > 1.0 - 1e-9:
@@ -331,7 +331,7 @@ def _result_single(
     return PoseResult(
         method="numerical",
         position_mm=np.array(centre),
-        angles_deg=np.array(_angles_single(rows)),
+        angles_deg=np.array(angles_single(rows)),
         rotation=np.array(rows),
         vertices_mm=np.array([[z[i] * x[i], z[i] * y[i], z[i]] for i in range(4)]),
         converged=status == CONVERGED,
