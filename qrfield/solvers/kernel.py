@@ -31,28 +31,6 @@ def lengths_for(side: float) -> list[float]:
     return [side, side, side, side, diagonal, diagonal]
 
 
-def _pair(
-    pxi: Num,
-    pyi: Num,
-    zi: Num,
-    xi: Num,
-    yi: Num,
-    pxj: Num,
-    pyj: Num,
-    zj: Num,
-    xj: Num,
-    yj: Num,
-    length: float,
-    sqrt: Callable,
-) -> tuple[Num, Num, Num]:
-    """diff and the two Jacobian entries of one vertex pair (i, j)."""
-    dx = pxi - pxj
-    dy = pyi - pyj
-    dz = zi - zj
-    d = sqrt(dx * dx + dy * dy + dz * dz)
-    return d - length, (dx * xi + dy * yi + dz) / d, -(dx * xj + dy * yj + dz) / d
-
-
 def gn_system(
     z: list[Num], x: list[Num], y: list[Num], lengths: list[float], sqrt: Callable
 ) -> tuple[list[Num], list[Num], list[Num], list[Num]]:
@@ -69,13 +47,49 @@ def gn_system(
     y0, y1, y2, y3 = y
     px0, px1, px2, px3 = z0 * x0, z1 * x1, z2 * x2, z3 * x3
     py0, py1, py2, py3 = z0 * y0, z1 * y1, z2 * y2, z3 * y3
-    r01, a01, b01 = _pair(px0, py0, z0, x0, y0, px1, py1, z1, x1, y1, lengths[0], sqrt)
-    r12, a12, b12 = _pair(px1, py1, z1, x1, y1, px2, py2, z2, x2, y2, lengths[1], sqrt)
-    r23, a23, b23 = _pair(px2, py2, z2, x2, y2, px3, py3, z3, x3, y3, lengths[2], sqrt)
-    r30, a30, b30 = _pair(px3, py3, z3, x3, y3, px0, py0, z0, x0, y0, lengths[3], sqrt)
-    r02, a02, b02 = _pair(px0, py0, z0, x0, y0, px2, py2, z2, x2, y2, lengths[4], sqrt)
-    r13, a13, b13 = _pair(px1, py1, z1, x1, y1, px3, py3, z3, x3, y3, lengths[5], sqrt)
-    # a_ij: d diff_ij / d z_i; b_ij: d diff_ij / d z_j.
+    # Pair (i, j): diff = |V_i - V_j| - L_ij, a_ij = d diff / d z_i, b_ij = d diff / d z_j.
+    dx = px0 - px1
+    dy = py0 - py1
+    dz = z0 - z1
+    d = sqrt(dx * dx + dy * dy + dz * dz)
+    r01 = d - lengths[0]
+    a01 = (dx * x0 + dy * y0 + dz) / d
+    b01 = -(dx * x1 + dy * y1 + dz) / d
+    dx = px1 - px2
+    dy = py1 - py2
+    dz = z1 - z2
+    d = sqrt(dx * dx + dy * dy + dz * dz)
+    r12 = d - lengths[1]
+    a12 = (dx * x1 + dy * y1 + dz) / d
+    b12 = -(dx * x2 + dy * y2 + dz) / d
+    dx = px2 - px3
+    dy = py2 - py3
+    dz = z2 - z3
+    d = sqrt(dx * dx + dy * dy + dz * dz)
+    r23 = d - lengths[2]
+    a23 = (dx * x2 + dy * y2 + dz) / d
+    b23 = -(dx * x3 + dy * y3 + dz) / d
+    dx = px3 - px0
+    dy = py3 - py0
+    dz = z3 - z0
+    d = sqrt(dx * dx + dy * dy + dz * dz)
+    r30 = d - lengths[3]
+    a30 = (dx * x3 + dy * y3 + dz) / d
+    b30 = -(dx * x0 + dy * y0 + dz) / d
+    dx = px0 - px2
+    dy = py0 - py2
+    dz = z0 - z2
+    d = sqrt(dx * dx + dy * dy + dz * dz)
+    r02 = d - lengths[4]
+    a02 = (dx * x0 + dy * y0 + dz) / d
+    b02 = -(dx * x2 + dy * y2 + dz) / d
+    dx = px1 - px3
+    dy = py1 - py3
+    dz = z1 - z3
+    d = sqrt(dx * dx + dy * dy + dz * dz)
+    r13 = d - lengths[5]
+    a13 = (dx * x1 + dy * y1 + dz) / d
+    b13 = -(dx * x3 + dy * y3 + dz) / d
     diag = [
         a01 * a01 + b30 * b30 + a02 * a02,
         b01 * b01 + a12 * a12 + a13 * a13,
