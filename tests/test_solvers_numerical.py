@@ -220,9 +220,9 @@ def test_settings_are_checked():
 
 
 def test_batch_in_chunks_equals_single(monkeypatch):
-    from qrfield.solvers import numerical
+    from qrfield.solvers import numerical_batch
 
-    monkeypatch.setattr(numerical, "BATCH_CHUNK", 7)  # 60 rows: 8 full chunks and a partial one
+    monkeypatch.setattr(numerical_batch, "BATCH_CHUNK", 7)  # 60 rows: 8 full chunks and a partial one
     camera, _, corners, *_ = cases(150, seed=37)
     sample = corners[:60] + np.random.default_rng(8).normal(0, 0.5, (60, 4, 2))
     sample[9, 0] = np.nan

@@ -19,7 +19,8 @@ import numpy as np
 from qrfield.camera import CameraModel
 from qrfield.solvers.checks import check_camera, check_corners_batch, check_corners_single, check_side
 from qrfield.solvers.ippe import IppeSettings, solve_ippe, solve_ippe_batch
-from qrfield.solvers.numerical import SEED_SETTINGS, NumericalSettings, solve_numerical, solve_numerical_batch
+from qrfield.solvers.numerical import SEED_SETTINGS, NumericalSettings, solve_numerical
+from qrfield.solvers.numerical_batch import solve_numerical_batch
 from qrfield.solvers.result import BatchResult, PoseResult, SolverError
 
 __all__ = [

@@ -23,7 +23,8 @@ import numpy as np
 from qrfield.camera import CameraModel
 from qrfield.geometry import ippe_object_points, rotation_from_ippe
 from qrfield.settings import setting, validated
-from qrfield.solvers.numerical import angles_single, normalised_single, reprojection_single, undistort
+from qrfield.solvers.floats import angles_single, reprojection_single
+from qrfield.solvers.rays import normalised_single, undistort
 from qrfield.solvers.result import BatchResult, PoseResult, SolverError
 
 REFINERS = ("lm", "vvs", "none")

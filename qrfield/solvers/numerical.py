@@ -43,10 +43,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from qrfield.camera import CameraModel
-from qrfield.geometry import angles_from_rotation, marker_vertices, project_points
 from qrfield.settings import setting, validated
 from qrfield.solvers import kernel
-from qrfield.solvers.result import BatchResult, PoseResult, SolverError
+from qrfield.solvers.floats import angles_single, reprojection_single
+from qrfield.solvers.rays import normalised_single
+from qrfield.solvers.result import PoseResult, SolverError
 
 #: A Gauss-Newton step whose largest depth change is below this (mm, 0.1 micrometre) means the
 #: iteration has settled at its least-squares optimum.
@@ -57,23 +58,6 @@ MIRROR_STALL_MM = 1e-2
 MIRROR_DISTINCT_MM = 0.1
 #: Depths are kept at least this positive (mm) so that the vertices stay in front of the camera.
 Z_FLOOR_MM = 1e-3
-#: Iteration of cv2.undistortPoints: exact to far below a micro-pixel for usual lenses (OpenCV's
-#: default of 5 iterations leaves errors of 1e-3 px and more near the image corners).
-#: (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, count, eps); cv2 is imported lazily (fast CLI).
-UNDISTORT_CRITERIA = (1 | 2, 100, 1e-15)
-
-
-def undistort(points: np.ndarray, camera: CameraModel, pixels: bool = False) -> np.ndarray:
-    """Undistorted (M, 1, 2) normalised coordinates of pixels (M, 1, 2), or ideal pixels if ``pixels``."""
-    import cv2
-
-    pts = np.ascontiguousarray(points, dtype=float)
-    target = camera.K if pixels else None
-    if hasattr(cv2, "undistortPointsIter"):  # OpenCV 4.x; OpenCV 5 takes the criteria below
-        return cv2.undistortPointsIter(pts, camera.K, camera.dist, None, target, UNDISTORT_CRITERIA)
-    return cv2.undistortPoints(pts, camera.K, camera.dist, R=None, P=target, criteria=UNDISTORT_CRITERIA)
-
-
 GUESSES = ("seed", "parallelogram")
 STOP_RULES = ("seed", "settled")
 
@@ -194,21 +178,6 @@ def _reason(status: int, worst: float, n: int, settings: NumericalSettings) -> s
 # ---------------------------------------------------------------------- single path (Python floats)
 
 
-def _has_distortion(camera: CameraModel) -> bool:
-    return camera.dist.tolist() != [0.0, 0.0, 0.0, 0.0, 0.0]
-
-
-def normalised_single(
-    corners: np.ndarray, flat: list[float], camera: CameraModel
-) -> tuple[list[float], list[float]]:
-    """Normalised undistorted coordinates (x_i, y_i) of the four corners as Python floats."""
-    if _has_distortion(camera):
-        und = undistort(corners.reshape(4, 1, 2), camera).reshape(8).tolist()
-        return und[0::2], und[1::2]
-    fx, fy, cx, cy = camera.fx, camera.fy, camera.cx, camera.cy
-    return [(flat[2 * i] - cx) / fx for i in range(4)], [(flat[2 * i + 1] - cy) / fy for i in range(4)]
-
-
 def _initial_single(
     x: list[float], y: list[float], lengths: list[float], side: float, s: NumericalSettings
 ) -> list[float]:
@@ -255,54 +224,6 @@ def iterate_single(
             return z, n, CONVERGED if worst < tol else STALLED, worst
         z = [max(z[k] - step[k], Z_FLOOR_MM) for k in range(4)]
     raise AssertionError("unreachable")  # pragma: no cover
-
-
-def angles_single(r: list[list[float]]) -> list[float]:
-    """Scalar twin of geometry.angles_from_rotation: (alpha, beta, gamma) in degrees from rows of R."""
-    s = min(max(r[0][2], -1.0), 1.0)
-    beta = math.asin(s)
-    if abs(s) > 1.0 - 1e-9:
-        alpha = math.atan2(math.copysign(1.0, s) * r[1][0], r[1][1])
-        gamma = 0.0
-    else:
-        alpha = math.atan2(-r[1][2], r[2][2])
-        gamma = math.atan2(-r[0][1], r[0][0])
-    out = [math.degrees(alpha), math.degrees(beta), math.degrees(gamma)]
-    for k in (0, 2):
-        if out[k] <= -180.0:
-            out[k] += 360.0
-    return out
-
-
-def reprojection_single(
-    r: list[list[float]], t: list[float], side: float, camera: CameraModel, flat: list[float]
-) -> float:
-    """RMS pixel distance between the corners and the projection of the rigid square at pose (R, t)."""
-    h = side / 2.0
-    dist = camera.dist.tolist()
-    distort = dist != [0.0, 0.0, 0.0, 0.0, 0.0]
-    k1, k2, p1, p2, k3 = dist
-    fx, fy, cx, cy = camera.fx, camera.fy, camera.cx, camera.cy
-    (r00, r01, _), (r10, r11, _), (r20, r21, _) = r
-    tx, ty, tz = t
-    total = 0.0
-    for i, qx, qy in ((0, -h, -h), (2, h, -h), (4, h, h), (6, -h, h)):
-        pz = r20 * qx + r21 * qy + tz
-        if pz <= 0.0:
-            return math.inf
-        xn = (r00 * qx + r01 * qy + tx) / pz
-        yn = (r10 * qx + r11 * qy + ty) / pz
-        if distort:
-            r2 = xn * xn + yn * yn
-            radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-            xn, yn = (
-                xn * radial + 2.0 * p1 * xn * yn + p2 * (r2 + 2.0 * xn * xn),
-                yn * radial + p1 * (r2 + 2.0 * yn * yn) + 2.0 * p2 * xn * yn,
-            )
-        du = fx * xn + cx - flat[i]
-        dv = fy * yn + cy - flat[i + 1]
-        total += du * du + dv * dv
-    return math.sqrt(total / 4.0)
 
 
 def _result_single(
@@ -424,209 +345,3 @@ def _mirror_candidate(
     ):
         return None  # the mirror start slid back to the same pose: no second candidate
     return _result_single(z_alt, n_alt, status_alt, worst_alt, x, y, side, camera, corners, flat, s)
-
-
-# ---------------------------------------------------------------------- batch path (numpy arrays)
-
-
-def normalised_batch(corners: np.ndarray, camera: CameraModel) -> tuple[np.ndarray, np.ndarray]:
-    """Normalised undistorted coordinates, (N, 4) each; the same per-point numbers as the single path."""
-    if camera.has_distortion:
-        n = corners.shape[0]
-        und = undistort(corners.reshape(-1, 1, 2), camera).reshape(n, 4, 2)
-        return und[..., 0].copy(), und[..., 1].copy()
-    return (corners[..., 0] - camera.cx) / camera.fx, (corners[..., 1] - camera.cy) / camera.fy
-
-
-def _initial_batch(
-    x: list[np.ndarray], y: list[np.ndarray], lengths: list[float], side: float, s: NumericalSettings
-) -> list[np.ndarray]:
-    z0 = side / kernel.mean_side(x, y, np.sqrt)
-    z0 = np.minimum(np.maximum(z0, s.z_min_mm), s.z_max_mm)
-    z = [z0.copy() for _ in range(4)]
-    if s.initial_guess != "parallelogram":
-        return z
-    z_rel, det = kernel.parallelogram_depths(x, y, np.sqrt)
-    ok = det != 0.0
-    safe = np.where(ok, det, 1.0)
-    z_rel = [v / safe for v in z_rel]
-    for v in z_rel:
-        ok &= (v > 0.0) & np.isfinite(v)
-    if not ok.any():
-        return z
-    idx = np.flatnonzero(ok)
-    sub = [v[idx] for v in z_rel]
-    scale = kernel.scale_to_side(sub, [v[idx] for v in x], [v[idx] for v in y], lengths, np.sqrt)
-    zs = [scale * v for v in sub]
-    good = np.ones(idx.size, bool)
-    for v in zs:
-        good &= (v > 0.0) & np.isfinite(v)
-    for k in range(4):
-        z[k][idx[good]] = zs[k][good]
-    return z
-
-
-#: Rows solved per pass: small enough that numpy's temporaries stay in the CPU cache.
-BATCH_CHUNK = 16384
-
-
-def solve_numerical_batch(
-    corners: np.ndarray,
-    valid: np.ndarray,
-    camera: CameraModel,
-    side: float,
-    settings: NumericalSettings | None,
-) -> BatchResult:
-    """N poses by the numerical model at once; rows identical to :func:`solve_numerical` (no mirror)."""
-    s = checked_settings(settings)
-    if corners.shape[0] <= BATCH_CHUNK:
-        return _solve_chunk(corners, valid, camera, side, s)
-    parts = [
-        _solve_chunk(corners[i : i + BATCH_CHUNK], valid[i : i + BATCH_CHUNK], camera, side, s)
-        for i in range(0, corners.shape[0], BATCH_CHUNK)
-    ]
-    return BatchResult(
-        method="numerical",
-        **{
-            name: np.concatenate([getattr(p, name) for p in parts])
-            for name in (
-                "position_mm",
-                "angles_deg",
-                "rotation",
-                "converged",
-                "iterations",
-                "residual_mm",
-                "reprojection_px",
-                "valid",
-            )
-        },
-    )
-
-
-def _solve_chunk(
-    corners: np.ndarray, valid: np.ndarray, camera: CameraModel, side: float, s: NumericalSettings
-) -> BatchResult:
-    count = corners.shape[0]
-    lengths = kernel.lengths_for(side)
-    xn, yn = normalised_batch(np.where(valid[:, None, None], corners, 0.0), camera)
-    x_all = [xn[:, k].copy() for k in range(4)]
-    y_all = [yn[:, k].copy() for k in range(4)]
-    z_out = np.full((count, 4), np.nan)
-    n_out = np.zeros(count, dtype=int)
-    status = np.full(count, INVALID, dtype=int)
-    worst_out = np.full(count, np.nan)
-
-    idx = np.flatnonzero(valid)
-    x = [v[idx] for v in x_all]
-    y = [v[idx] for v in y_all]
-    z = _initial_batch(x, y, lengths, side, s)
-    tf, tol = s.tf, s.tolerance_mm
-    early = s.stop == "seed"
-
-    def finish(mask: np.ndarray, code: int, n: int, worst: np.ndarray) -> None:
-        if not mask.any():
-            return
-        rows = idx[mask]
-        z_out[rows] = np.stack([v[mask] for v in z], axis=1)
-        n_out[rows] = n
-        status[rows] = code
-        worst_out[rows] = worst[mask]
-
-    with np.errstate(all="ignore"):
-        for n in range(s.n_max + 1):
-            if idx.size == 0:
-                break
-            diff, diag, off, grad = kernel.gn_system(z, x, y, lengths, np.sqrt)
-            worst = np.abs(diff[0])
-            for k in range(1, 6):
-                worst = np.maximum(worst, np.abs(diff[k]))
-            done = np.zeros(idx.size, bool)
-            if early:
-                conv = worst < tol
-                finish(conv, CONVERGED, n, worst)
-                done |= conv
-            bad = ~done & ~np.isfinite(worst)
-            finish(bad, DIVERGED, n, worst)
-            done |= bad
-            if n == s.n_max:
-                finish(~done, N_MAX, n, worst)
-                break
-            dz, singular = kernel.solve4(diag, off, grad, np.maximum)
-            sing = ~done & singular
-            finish(sing, SINGULAR, n, worst)
-            done |= sing
-            step = [tf * v for v in dz]
-            biggest = np.maximum(
-                np.maximum(np.abs(step[0]), np.abs(step[1])), np.maximum(np.abs(step[2]), np.abs(step[3]))
-            )
-            stall = ~done & (biggest < STALL_MM)
-            finish(stall & (worst < tol), CONVERGED, n, worst)
-            finish(stall & ~(worst < tol), STALLED, n, worst)
-            done |= stall
-            keep = ~done
-            if not keep.all():
-                idx = idx[keep]
-                x = [v[keep] for v in x]
-                y = [v[keep] for v in y]
-                z = [v[keep] for v in z]
-                step = [v[keep] for v in step]
-            z = [np.maximum(z[k] - step[k], Z_FLOOR_MM) for k in range(4)]
-
-    return _batch_result(z_out, n_out, status, worst_out, x_all, y_all, corners, valid, camera, side)
-
-
-def _batch_result(
-    z_out: np.ndarray,
-    n_out: np.ndarray,
-    status: np.ndarray,
-    worst: np.ndarray,
-    x_all: list[np.ndarray],
-    y_all: list[np.ndarray],
-    corners: np.ndarray,
-    valid: np.ndarray,
-    camera: CameraModel,
-    side: float,
-) -> BatchResult:
-    count = z_out.shape[0]
-    has_pose = np.isin(status, (CONVERGED, N_MAX, STALLED)) & np.all(np.isfinite(z_out), axis=1)
-    rotation = np.full((count, 3, 3), np.nan)
-    position = np.full((count, 3), np.nan)
-    angles = np.full((count, 3), np.nan)
-    reproj = np.full(count, np.nan)
-    idx = np.flatnonzero(has_pose)
-    if idx.size:
-        z = [z_out[idx, k] for k in range(4)]
-        rows, centre = kernel.pose_from_vertices(
-            z, [v[idx] for v in x_all], [v[idx] for v in y_all], np.sqrt, np.maximum
-        )
-        rot = np.empty((idx.size, 3, 3))
-        for i in range(3):
-            for j in range(3):
-                rot[:, i, j] = rows[i][j]
-        pos = np.stack(centre, axis=1)
-        rotation[idx] = rot
-        position[idx] = pos
-        angles[idx] = angles_from_rotation(rot)
-        q = marker_vertices(side)
-        model = (
-            pos[:, None, :]
-            + rot[:, None, :, 0] * q[None, :, 0, None]
-            + rot[:, None, :, 1] * q[None, :, 1, None]
-        )
-        with np.errstate(all="ignore"):
-            projected = project_points(model, camera)
-            err = np.sqrt(np.sum((projected - corners[idx]) ** 2, axis=(1, 2)) / 4.0)
-        err[np.any(model[..., 2] <= 0.0, axis=1)] = np.inf
-        reproj[idx] = err
-    worst = np.where(has_pose | (status != INVALID), worst, np.nan)
-    return BatchResult(
-        method="numerical",
-        position_mm=position,
-        angles_deg=angles,
-        rotation=rotation,
-        converged=status == CONVERGED,
-        iterations=n_out,
-        residual_mm=worst,
-        reprojection_px=reproj,
-        valid=valid.copy(),
-    )
