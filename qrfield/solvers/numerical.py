@@ -165,8 +165,9 @@ def _reason(status: int, worst: float, n: int, settings: NumericalSettings) -> s
         )
     if status == STALLED:
         return (
-            f"stalled after {n} iterations at max |diff| {worst:.3g} mm above the tolerance "
-            f"{settings.tolerance_mm:g} mm (corners not consistent with a square; noise?)"
+            f"settled after {n} iterations at max |diff| {worst:.3g} mm, above the tolerance "
+            f"{settings.tolerance_mm:g} mm (no depths fit all six lengths: corner noise, a wrong "
+            "side length or camera model, or the mirror side of the ambiguity)"
         )
     if status == SINGULAR:
         return f"the update equations became singular after {n} iterations"
