@@ -34,6 +34,14 @@ def test_ok_frame_matches_hand_computed_checksum():
     assert encode_frame(1, 2, (0, 0, 0), (0, 0, 0), "OK") == b"$QRF,1,2,0.0,0.0,0.0,0.00,0.00,0.00,OK*5E\r\n"
 
 
+def test_readme_example_line_matches_hand_computed_checksum():
+    # Body "QRF,42,1234,12.5,-3.0,250.0,1.25,-0.50,90.00,OK". Characters seen an even number of times
+    # cancel: '4' 2x, '3' 2x, '5' 4x, '0' 8x, '.' 6x, '-' 2x. Odd: Q R F O K, ',' 9x, '2' 5x, '1' 3x, '9' 1x.
+    # Q^R^F = 45; ^ O 4F = 0A; ^ K 4B = 41; ^ ',' 2C = 6D; ^ '2' 32 = 5F; ^ '1' 31 = 6E; ^ '9' 39 = 57.
+    line = encode_frame(42, 1234, (12.5, -3.0, 250.0), (1.25, -0.5, 90.0), "OK")
+    assert line == b"$QRF,42,1234,12.5,-3.0,250.0,1.25,-0.50,90.00,OK*57\r\n"
+
+
 def test_ok_frame_values_in_mm_and_degrees_with_fixed_decimals():
     line = encode_frame(42, 1234, np.array([12.5, -3.04, 250.0]), [1.25, -0.5, 90.0], "OK")
     assert line.startswith(b"$QRF,42,1234,12.5,-3.0,250.0,1.25,-0.50,90.00,OK*")
