@@ -69,26 +69,34 @@ def _format_fixed(value: float, decimals: int) -> str:
     return text
 
 
-def _as_triplet(values: Sequence[float] | np.ndarray, name: str, unit: str, limit: float) -> np.ndarray:
+Triplet = tuple[float, ...]
+
+
+def _as_triplet(values: Sequence[float] | np.ndarray, name: str, unit: str, limit: float) -> Triplet:
+    # Plain floats, not numpy: this runs once per frame and numpy's per-call overhead dominated it.
+    if isinstance(values, np.ndarray):
+        if values.shape != (3,):
+            raise FrameError(f"{name}: expected shape (3,) in {unit}, got shape {values.shape}")
+        values = values.tolist()
     try:
-        array = np.asarray(values, dtype=float)
+        triplet = tuple(float(v) for v in values)
     except (TypeError, ValueError):
         raise FrameError(f"{name}: expected 3 numbers in {unit}, got {values!r}") from None
-    if array.shape != (3,):
-        raise FrameError(f"{name}: expected shape (3,) in {unit}, got shape {array.shape}")
-    if not np.all(np.isfinite(array)):
-        raise FrameError(f"{name}: values must be finite, got {array.tolist()} {unit}")
-    if np.any(np.abs(array) > limit):
-        raise FrameError(f"{name}: values must lie within +-{limit} {unit}, got {array.tolist()}")
-    return array
+    if len(triplet) != 3:
+        raise FrameError(f"{name}: expected shape (3,) in {unit}, got {len(triplet)} values")
+    if not all(math.isfinite(v) for v in triplet):
+        raise FrameError(f"{name}: values must be finite, got {list(triplet)} {unit}")
+    if any(abs(v) > limit for v in triplet):
+        raise FrameError(f"{name}: values must lie within +-{limit} {unit}, got {list(triplet)}")
+    return triplet
 
 
 def check_pose_fields(
     status: str,
     position_mm: Sequence[float] | np.ndarray | None,
     angles_deg: Sequence[float] | np.ndarray | None,
-) -> tuple[np.ndarray | None, np.ndarray | None]:
-    """Validate status and pose for one frame; returns (position, angles) as float arrays or Nones.
+) -> tuple[Triplet | None, Triplet | None]:
+    """Validate status and pose for one frame; returns (position, angles) as 3-tuples of floats or Nones.
 
     OK needs both position (x, y, z in mm, camera frame) and angles (alpha, beta, gamma in degrees);
     NOQR and NOCONV need both None; STALE takes both or neither. Raises FrameError otherwise.

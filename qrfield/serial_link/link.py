@@ -153,8 +153,8 @@ def open_pyserial(settings: SerialLinkSettings) -> PortLike:
 @dataclass
 class _Pending:
     t_ms: int
-    position: np.ndarray | None
-    angles: np.ndarray | None
+    position: tuple[float, ...] | None
+    angles: tuple[float, ...] | None
     status: str
     published_at: float  # time.perf_counter() at publish, for latency measurements
 
