@@ -319,12 +319,26 @@ def test_rate_limit_spaces_frames_and_drops_superseded_poses():
     assert port.times[1] - port.times[0] >= 0.2 - 0.002  # 1 / max_rate_hz at least (load only adds)
 
 
+def test_non_finite_pose_goes_out_as_noconv_with_the_reason_recorded():
+    port = SlowPort(write_s=0)
+    with SerialLink(SerialLinkSettings(port="fake", stale_after_s=0), opener=lambda s: port) as link:
+        assert link.publish(5, (1.0, float("nan"), 3.0), (0, 0, 0), "OK")  # no exception in the frame loop
+        wait_until(lambda: len(port.written) == 1, what="the frame")
+        status = link.status()
+    frame = parse_frame_line(port.written[0])
+    assert (frame["status"], frame["pose"], frame["t_ms"]) == ("NOCONV", None, 5)
+    assert status.errors == 1 and "finite" in status.last_error and "t_ms=5" in status.last_error
+    assert status.last_sent == port.written[0].decode().rstrip()
+
+
 def test_publish_rejects_misuse_and_returns_false_once_closed():
     link = SerialLink(SerialLinkSettings(), opener=lambda s: SlowPort(0))
     with pytest.raises(FrameError, match="shape"):
         link.publish(0, (1, 2), (0, 0, 0))
     with pytest.raises(ValueError, match="t_ms"):
         link.publish(float("nan"), (1, 2, 3), (0, 0, 0))
+    with pytest.raises(FrameError, match="give both"):
+        link.publish(0, (1, 2, 3), None)
     with pytest.raises(ValueError, match="status must be one of"):
         link.publish(0, None, None, "LOST")
     link.close()

@@ -54,6 +54,10 @@ class FrameError(ValueError):
     """A frame could not be encoded from the values given; the message names the value."""
 
 
+class PoseValueError(FrameError):
+    """The pose has the right shape but a value is not finite or out of range (see MAX_*)."""
+
+
 def checksum(body: bytes) -> int:
     """XOR of the bytes of ``body`` (the text between '$' and '*')."""
     value = 0
@@ -85,9 +89,9 @@ def _as_triplet(values: Sequence[float] | np.ndarray, name: str, unit: str, limi
     if len(triplet) != 3:
         raise FrameError(f"{name}: expected shape (3,) in {unit}, got {len(triplet)} values")
     if not all(math.isfinite(v) for v in triplet):
-        raise FrameError(f"{name}: values must be finite, got {list(triplet)} {unit}")
+        raise PoseValueError(f"{name}: values must be finite, got {list(triplet)} {unit}")
     if any(abs(v) > limit for v in triplet):
-        raise FrameError(f"{name}: values must lie within +-{limit} {unit}, got {list(triplet)}")
+        raise PoseValueError(f"{name}: values must lie within +-{limit} {unit}, got {list(triplet)}")
     return triplet
 
 

@@ -29,6 +29,7 @@ from qrfield.serial_link.frames import (
     T_MS_MODULUS,
     ControllerCommand,
     FrameDecoder,
+    PoseValueError,
     QrfFrame,
     check_pose_fields,
     encode_frame,
@@ -103,6 +104,7 @@ class LinkStatus:
     pending: int = 0  # poses waiting to be written: 0 or 1, never more
     reconnects: int = 0
     received: dict[str, int] = field(default_factory=dict)  # the decoder's counters for incoming bytes
+    last_sent: str = ""  # the last frame written, without CR LF
 
 
 @dataclass(frozen=True)
@@ -213,6 +215,7 @@ class SerialLink:
         self._state = CONNECTING
         self._counts = {"frames_sent": 0, "frames_dropped": 0, "errors": 0, "reconnects": 0}
         self._last_error = ""
+        self._last_sent = ""
 
     # ----- the frame loop's side -------------------------------------------------------------
     def start(self) -> SerialLink:
@@ -247,10 +250,16 @@ class SerialLink:
         t_ms: capture time in ms since the stream started (None: :meth:`stream_time_ms`; floats are
         rounded; wraps at 2**32). position_mm (x, y, z, camera frame, mm) and angles_deg (alpha,
         beta, gamma, degrees) as for :func:`encode_frame`. Returns False once the link is closed.
-        Raises FrameError (ValueError) on misuse (bad status, shapes, non-finite values), so the
-        mistake shows at the call site rather than in the link's thread.
+        Raises FrameError (ValueError) on misuse (unknown status, wrong shapes, pose given or missing
+        against the status), so the mistake shows at the call site. A pose of the right shape with a
+        non-finite or out-of-range value is data, not misuse: it goes out as NOCONV with empty fields,
+        and ``errors`` / ``last_error`` say why (the frame loop goes on).
         """
-        position, angles = check_pose_fields(status, position_mm, angles_deg)
+        try:
+            position, angles = check_pose_fields(status, position_mm, angles_deg)
+        except PoseValueError as exc:
+            self._error(f"pose at t_ms={t_ms} sent as NOCONV: {exc}")
+            position, angles, status = None, None, "NOCONV"
         if t_ms is None:
             t = self.stream_time_ms()
         else:
@@ -307,6 +316,7 @@ class SerialLink:
             last_error=self._last_error,
             pending=0 if self._pending is None else 1,
             received=self._decoder.counters.as_dict(),
+            last_sent=self._last_sent,
             **self._counts,
         )
 
@@ -439,6 +449,7 @@ class SerialLink:
         with self._lock:
             self._seq = (self._seq + 1) % SEQ_MODULUS
             self._counts["frames_sent"] += 1
+            self._last_sent = frame.decode("ascii").rstrip()
             if not is_stale:
                 self._last_frame = item
         if self._on_sent is not None:
