@@ -18,7 +18,7 @@
 #include <stdio.h>
 #include <string.h>
 
-#define QRF_MAX_LINE 96 /* longest frame is 84 bytes */
+#define QRF_MAX_LINE 96 /* longest frame is 86 bytes with CR LF */
 
 typedef struct {
     uint16_t seq;

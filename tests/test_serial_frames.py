@@ -192,3 +192,4 @@ def test_decoder_never_raises_on_non_bytes():
     decoder = FrameDecoder()
     assert decoder.feed(None) == []  # type: ignore[arg-type]
     assert decoder.feed("text") == []  # type: ignore[arg-type]
+    assert decoder.feed(10**12) == []  # type: ignore[arg-type]  # bytes(10**12) would allocate 1 TB

@@ -41,7 +41,7 @@ SEQ_MODULUS = 65536
 T_MS_MODULUS = 2**32
 MAX_POSITION_MM = 999999.9
 MAX_ANGLE_DEG = 180.0
-# Longest frame: $QRF,65535,4294967295,-999999.9 x3,-180.00 x3,NOCONV*CS\r\n = 84 bytes.
+# Longest frame: $QRF,65535,4294967295,-999999.9 x3,-180.00 x3,STALE*CS\r\n = 86 bytes.
 MAX_QRF_LINE = 96
 # Longest line the decoder keeps (frames and controller commands); longer lines are dropped.
 MAX_LINE_BYTES = 256
@@ -250,10 +250,13 @@ class FrameDecoder:
 
     def feed(self, data: bytes | bytearray | memoryview) -> list[QrfFrame | ControllerCommand]:
         out: list[QrfFrame | ControllerCommand] = []
+        if not isinstance(data, (bytes, bytearray, memoryview)):  # never raise, whatever it is
+            self._note(f"ignored non-bytes input {type(data).__name__}")
+            return out
         try:
             data = bytes(data)
-        except Exception:  # never raise: not bytes-like at all
-            self._note(f"ignored non-bytes input {type(data).__name__}")
+        except Exception:  # e.g. a released memoryview
+            self._note("ignored unreadable buffer")
             return out
         i, n = 0, len(data)
         while i < n:
