@@ -60,7 +60,8 @@ class SerialLinkSettings:
         minimum=0.1,
         maximum=1000.0,
         decimals=1,
-        help="frames per second at most; newer poses replace unsent ones (115200 baud 8N1 carries ~175 frames/s of 66 bytes)",
+        help="frames per second at most; newer poses replace unsent ones "
+        "(115200 baud 8N1 carries ~175 frames/s of 66 bytes)",
     )
     reconnect_interval_s: float = setting(
         1.0,
