@@ -372,6 +372,7 @@ def test_missing_port_reports_disconnected_and_keeps_trying(tmp_path):
         assert link.wait_for_state(DISCONNECTED, 5)
         wait_until(lambda: link.status().errors >= 3, what="repeated attempts")
         assert "cannot open" in link.status().last_error and str(path) in link.status().last_error
+        assert link.status().summary().startswith(f"serial {path}: disconnected, 0 sent")
         assert link.publish(0, None, None, "NOQR")
         pty = PtyTwin(path)
         try:

@@ -107,6 +107,14 @@ class LinkStatus:
     received: dict[str, int] = field(default_factory=dict)  # the decoder's counters for incoming bytes
     last_sent: str = ""  # the last frame written, without CR LF
 
+    def summary(self) -> str:
+        """One line for a status bar or a headless log."""
+        text = (
+            f"serial {self.port}: {self.state}, {self.frames_sent} sent, {self.frames_dropped} superseded, "
+            f"{self.errors} errors"
+        )
+        return f"{text} (last: {self.last_error})" if self.errors and self.last_error else text
+
 
 @dataclass(frozen=True)
 class PortInfo:
