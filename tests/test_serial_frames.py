@@ -55,6 +55,11 @@ def test_values_rounding_to_zero_have_no_minus_sign():
     assert b"-" not in line
 
 
+def test_angle_rounding_to_minus_180_is_written_as_180():
+    line = encode_frame(0, 0, (0, 0, 100), (-179.999, -89.999, -180.0), "OK")
+    assert parse_frame_line(line)["text"][3:] == ["180.00", "-90.00", "180.00"]
+
+
 def test_seeded_random_poses_survive_encode_decode_within_rounding():
     rng = np.random.default_rng(8)
     decoder = FrameDecoder()
@@ -64,7 +69,8 @@ def test_seeded_random_poses_survive_encode_decode_within_rounding():
         line = encode_frame(i, 10 * i, position, angles, "OK")
         truth = parse_frame_line(line)  # the independent parser checks framing and checksum
         assert np.all(np.abs(np.array(truth["pose"][:3]) - position) <= 0.05 + 1e-9)
-        assert np.all(np.abs(np.array(truth["pose"][3:]) - angles) <= 0.005 + 1e-9)
+        angle_error = (np.array(truth["pose"][3:]) - angles + 180.0) % 360.0 - 180.0  # 180 == -180
+        assert np.all(np.abs(angle_error) <= 0.005 + 1e-9)
         (frame,) = decoder.feed(line)
         assert frame == QrfFrame(i, 10 * i, tuple(truth["pose"][:3]), tuple(truth["pose"][3:]), "OK")
     assert decoder.counters.frames == 300

@@ -15,11 +15,12 @@ The frame is fixed in DESIGN.md ("Serial frames"), one ASCII line per frame, NME
   was OK, empty otherwise, with a new ``seq``; the controller learns "no news since t_ms").
 - ``CS``: two uppercase hex digits, XOR of every byte between ``$`` and ``*`` (both excluded).
 
-Number formatting (our decisions): values are rounded by Python's ``format`` (nearest, ties to even
-on the binary value); a value that rounds to zero is written without a sign ("0.0", never "-0.0"),
-so equal poses give equal bytes and a controller never sees a negative zero. Positions must lie
-within +-999999.9 mm and angles within +-180 degrees (DESIGN.md's ranges), so a frame is at most
-:data:`MAX_QRF_LINE` bytes.
+Number formatting (our decisions): values are rounded by Python's ``format`` (correctly rounded from
+the binary value, exact ties to even); a value that rounds to zero is written without a sign ("0.0",
+never "-0.0"), so equal poses give equal bytes and a controller never sees a negative zero; an angle
+that rounds to -180.00 is written 180.00 (DESIGN.md's range for alpha and gamma is (-180, 180]).
+Positions must lie within +-999999.9 mm (our limit) and angles within +-180 degrees, so a frame is
+at most 86 bytes (:data:`MAX_QRF_LINE` leaves room).
 
 Commands from the controller use the same framing: ``$<TALKER>[,<field>...]*<CS>\\r\\n`` where TALKER
 is 1 to 8 characters A-Z/0-9 (not ``QRF``); fields are printable ASCII without ``$ * ,``. The decoder
@@ -149,7 +150,8 @@ def encode_frame(
     if position is None or angles is None:
         pose = ",,,,,"
     else:
-        pose = ",".join([_format_fixed(v, 1) for v in position] + [_format_fixed(v, 2) for v in angles])
+        angle_texts = ["180.00" if (t := _format_fixed(v, 2)) == "-180.00" else t for v in angles]
+        pose = ",".join([_format_fixed(v, 1) for v in position] + angle_texts)
     body = f"QRF,{seq},{t_ms},{pose},{status}".encode("ascii")
     return b"$%s*%02X\r\n" % (body, checksum(body))
 
