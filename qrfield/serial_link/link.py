@@ -187,7 +187,8 @@ class SerialLink:
     on_status(LinkStatus) is called from the link's thread on every state change and error;
     on_receive(item) for every decoded QrfFrame or ControllerCommand read from the port (over
     ``loop://`` these are the link's own frames coming back). Callbacks must be quick; a Qt app
-    forwards them by signal. ``opener`` makes a port from the settings (default: pyserial).
+    forwards them by signal. on_sent(frame_bytes, seconds_since_publish) after each frame written.
+    ``opener`` makes a port from the settings (default: pyserial; tests pass fakes).
     ``first_seq`` is the seq of the first frame written.
     """
 
