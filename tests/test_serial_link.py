@@ -332,13 +332,16 @@ def test_rate_limit_caps_frames_per_second_and_the_newest_pose_goes_last():
 
 def test_non_finite_pose_goes_out_as_noconv_with_the_reason_recorded():
     port = SlowPort(write_s=0)
-    with SerialLink(SerialLinkSettings(port="fake", stale_after_s=0), opener=lambda s: port) as link:
-        assert link.publish(5, (1.0, float("nan"), 3.0), (0, 0, 0), "OK")  # no exception in the frame loop
+    sent = []
+    settings = SerialLinkSettings(port="fake", stale_after_s=0)
+    with SerialLink(settings, opener=lambda s: port, on_sent=lambda b, dt: sent.append(b)) as link:
+        assert link.publish(5.4, (1.0, float("nan"), 3.0), (0, 0, 0), "OK")  # no exception in the frame loop
         wait_until(lambda: link.status().frames_sent == 1, what="the frame")
         status = link.status()
     frame = parse_frame_line(port.written[0])
     assert (frame["status"], frame["pose"], frame["t_ms"]) == ("NOCONV", None, 5)
-    assert status.errors == 1 and "finite" in status.last_error and "t_ms=5" in status.last_error
+    assert status.errors == 1 and "finite" in status.last_error and "t_ms=5.4" in status.last_error
+    assert sent == port.written
     assert status.last_sent == port.written[0].decode().rstrip()
 
 
