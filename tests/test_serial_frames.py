@@ -1,4 +1,4 @@
-"""Frame encoding and decoding (qrfield.serial_link.frames) against hand-computed truth."""
+"""Frame encoding and decoding (qrfield.serial_frames) against hand-computed truth."""
 
 from __future__ import annotations
 

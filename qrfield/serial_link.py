@@ -1,14 +1,17 @@
 """The serial link: streams pose frames from its own thread; the frame loop never blocks.
 
-The frame loop calls :meth:`SerialLink.publish` (mm and degrees, see :mod:`.frames`). The pose goes
-into a one-slot mailbox: a newer pose replaces one not yet written (counted in ``frames_dropped``),
-so the queue can never grow and the controller always gets the newest pose. The link's thread owns
+The frame loop calls :meth:`SerialLink.publish` (mm and degrees, see :mod:`qrfield.serial_frames`).
+The pose goes into a one-slot mailbox: a newer pose replaces one not yet written (counted in
+``frames_dropped``), so the queue can never grow and the controller always gets the newest pose. The link's thread owns
 the port: it writes at most ``max_rate_hz`` frames per second, numbers them (``seq``), reads and
 decodes what the controller sends, and when the port vanishes (a write or read raises) it reports
 ``disconnected`` and reopens the port every ``reconnect_interval_s`` until it is back.
 
 The simulated twin of a serial port is pyserial's ``loop://`` (every byte written is read back) or a
 pty pair; :func:`list_ports` offers ``loop://`` beside the machine's ports.
+
+Named ``serial_link`` so as not to shadow pyserial's ``serial`` module. The frame format, encoder and
+decoder live in :mod:`qrfield.serial_frames` (no I/O) and are re-exported here.
 """
 
 from __future__ import annotations
@@ -24,14 +27,20 @@ from typing import Protocol
 
 import numpy as np
 
-from qrfield.serial_link.frames import (
+from qrfield.serial_frames import (  # re-exported: one import gives the whole serial API
+    MAX_LINE_BYTES,
     SEQ_MODULUS,
+    STATUSES,
     T_MS_MODULUS,
     ControllerCommand,
+    DecoderCounters,
     FrameDecoder,
+    FrameError,
     PoseValueError,
     QrfFrame,
     check_pose_fields,
+    checksum,
+    encode_command,
     encode_frame,
 )
 from qrfield.settings import setting, validated
@@ -41,6 +50,31 @@ CONNECTED = "connected"
 DISCONNECTED = "disconnected"
 CLOSED = "closed"
 LOOP_URL = "loop://"
+
+__all__ = [
+    "CLOSED",
+    "CONNECTED",
+    "CONNECTING",
+    "DISCONNECTED",
+    "LOOP_URL",
+    "MAX_LINE_BYTES",
+    "STATUSES",
+    "ControllerCommand",
+    "DecoderCounters",
+    "FrameDecoder",
+    "FrameError",
+    "LinkStatus",
+    "PortInfo",
+    "PoseValueError",
+    "QrfFrame",
+    "SerialLink",
+    "SerialLinkSettings",
+    "checksum",
+    "encode_command",
+    "encode_frame",
+    "list_ports",
+    "open_pyserial",
+]
 
 
 @dataclass(frozen=True)
