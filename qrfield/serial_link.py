@@ -2,10 +2,11 @@
 
 The frame loop calls :meth:`SerialLink.publish` (mm and degrees, see :mod:`qrfield.serial_frames`).
 The pose goes into a one-slot mailbox: a newer pose replaces one not yet written (counted in
-``frames_dropped``), so the queue can never grow and the controller always gets the newest pose. The link's thread owns
-the port: it writes at most ``max_rate_hz`` frames per second, numbers them (``seq``), reads and
-decodes what the controller sends, and when the port vanishes (a write or read raises) it reports
-``disconnected`` and reopens the port every ``reconnect_interval_s`` until it is back.
+``frames_dropped``), so the queue can never grow and the controller always gets the newest pose.
+The link's thread owns the port: it writes at most ``max_rate_hz`` frames per second, numbers them
+(``seq``), reads and decodes what the controller sends, and when the port vanishes (a write or read
+raises) it reports ``disconnected`` and reopens the port every ``reconnect_interval_s`` until it is
+back.
 
 The simulated twin of a serial port is pyserial's ``loop://`` (every byte written is read back) or a
 pty pair; :func:`list_ports` offers ``loop://`` beside the machine's ports.
