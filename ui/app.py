@@ -27,9 +27,13 @@ def main(args: argparse.Namespace) -> int:
     bgr = cv2.cvtColor(view.image, cv2.COLOR_GRAY2BGR)
     for i, (u, v) in enumerate(view.corners_px):
         cv2.circle(bgr, (round(u), round(v)), 4, (0, 0, 255), 1, cv2.LINE_AA)
-        cv2.putText(bgr, f"V{i + 1}", (round(u) + 6, round(v) - 6), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0, 0, 255), 1)
+        cv2.putText(
+            bgr, f"V{i + 1}", (round(u) + 6, round(v) - 6), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0, 0, 255), 1
+        )
     rgb = np.ascontiguousarray(bgr[..., ::-1])
-    image = QtGui.QImage(rgb.data, rgb.shape[1], rgb.shape[0], rgb.strides[0], QtGui.QImage.Format.Format_RGB888)
+    image = QtGui.QImage(
+        rgb.data, rgb.shape[1], rgb.shape[0], rgb.strides[0], QtGui.QImage.Format.Format_RGB888
+    )
     window = QtWidgets.QLabel()
     window.setWindowTitle("qrfield: virtual bench (foundation preview)")
     window.setPixmap(QtGui.QPixmap.fromImage(image.copy()))

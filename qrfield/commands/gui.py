@@ -11,11 +11,14 @@ HELP = "open the bench app window (the default when no subcommand is given)"
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "--source", default="auto",
+        "--source",
+        default="auto",
         help="camera source: auto (picamera2, then USB, then the virtual bench), virtual, picamera2, "
         "usb:INDEX, a video file or a folder of images",
     )
-    parser.add_argument("--camera", default=None, metavar="CAM", help="camera profile NAME[@WxH] or PATH.json")
+    parser.add_argument(
+        "--camera", default=None, metavar="CAM", help="camera profile NAME[@WxH] or PATH.json"
+    )
     parser.add_argument("--side-mm", type=float, default=None, metavar="L", help="QR symbol side, mm")
 
 
