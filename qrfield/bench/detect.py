@@ -225,8 +225,10 @@ def run(args: argparse.Namespace) -> int:
         photos = sorted(p for p in (data / "qr-photos").glob("*/*") if p.suffix in (".png", ".jpg"))
         print(f"\n3. real photos: {len(photos)} in {data / 'qr-photos'} (label = payload text)")
         print(f"{'method':<40}{'right':>7}{'other text':>12}{'none':>6}")
+        # A backend's own answer: the texts it decoded (a code located but not read counts as none).
         raw = {
-            name: (lambda g, name=name: [c.text for c in find_candidates(g, name)]) for name in BACKEND_NAMES
+            name: (lambda g, name=name: [c.text for c in find_candidates(g, name) if c.text])
+            for name in BACKEND_NAMES
         }
         runs = {f"{name} alone, unchecked": fn for name, fn in raw.items()}
         for name in BACKEND_NAMES:
