@@ -109,16 +109,24 @@ def _time_sequence(cam, side: float, count: int, solver) -> None:
             solver(d.corners_px, cam, side)
         return bool(found)
 
+    def detect_refine(frame) -> bool:
+        return bool(refined.detect(frame))
+
     def track_solve(frame) -> bool:
         found = tracker.update(frame)
         for d in found:
             solver(d.corners_px, cam, side)
         return bool(found)
 
+    def track(frame) -> bool:
+        return bool(tracker.update(frame))
+
     rows = [
         ("naive cv2 detectAndDecode (baseline)", naive),
         ("full-frame detection (no refine)", detect_full),
+        ("full-frame detect + refine", detect_refine),
         ("full-frame detect + refine + solve", detect_refine_solve),
+        ("tracked + refine", track),
         ("tracked + refine + solve (default)", track_solve),
     ]
     base_ms = None

@@ -94,6 +94,30 @@ def _dark_level(grey: np.ndarray, corners: np.ndarray, n: int) -> float:
     return float(np.sort(values)[len(values) // 2])
 
 
+@functools.lru_cache(maxsize=16)
+def _unit_steps(k: int) -> np.ndarray:
+    """k evenly spaced values from 0 to 1 (cached: called on every frame)."""
+    out = np.linspace(0.0, 1.0, k)
+    out.setflags(write=False)
+    return out
+
+
+@functools.lru_cache(maxsize=16)
+def _profile_offsets(search_px: float) -> np.ndarray:
+    """Offsets along the outward normal, px, from the quiet zone in to past the search window."""
+    out = np.arange(search_px + QUIET_OFFSET_PX, -(search_px + 1.0) - 1e-9, -PROFILE_STEP_PX)
+    out.setflags(write=False)
+    return out
+
+
+@functools.lru_cache(maxsize=16)
+def _row_starts(shape: tuple[int, int], length: int) -> np.ndarray:
+    """Flat index of the first sample of each profile in a (4, k, length) array."""
+    out = np.arange(shape[0] * shape[1]).reshape(shape) * length
+    out.setflags(write=False)
+    return out
+
+
 def _as_seen(values: np.ndarray, inverted: bool) -> np.ndarray:
     """Grey levels with dark modules dark: inverted codes are flipped."""
     return 255.0 - values if inverted else values
@@ -238,8 +262,8 @@ def _refine(
         # Only along the outer edges of the finder patterns (modules 0..7 from V1, V2, V4), where
         # the rough sides are close to the truth; sides V2V3 and V3V4 have one finder each.
         k = int(np.clip(6.0 * module_px.min(), 8, MAX_PROFILES_PER_SIDE // 2)) * 2
-        h = np.linspace(0.0, 1.0, k // 2)[None, :] * (6.5 * module_px - margin)[:, None] + margin[:, None]
-        h2 = np.linspace(0.0, 1.0, k)[None, :] * (6.5 * module_px - margin)[:, None] + margin[:, None]
+        h = _unit_steps(k // 2)[None, :] * (6.5 * module_px - margin)[:, None] + margin[:, None]
+        h2 = _unit_steps(k)[None, :] * (6.5 * module_px - margin)[:, None] + margin[:, None]
         along = np.empty((4, k))
         along[0] = np.concatenate([h[0], sides[0] - h[0]])
         along[1] = h2[1]
@@ -247,13 +271,13 @@ def _refine(
         along[3] = np.concatenate([h[3], sides[3] - h[3]])
     else:
         k = int(np.clip((sides - 2 * margin).min(), 8, MAX_PROFILES_PER_SIDE))
-        along = margin[:, None] + np.linspace(0.0, 1.0, k)[None, :] * (sides - 2 * margin)[:, None]
+        along = margin[:, None] + _unit_steps(k)[None, :] * (sides - 2 * margin)[:, None]
     base = corners[:, None, :] + along[:, :, None] * directions[:, None, :]
 
     # Pass 1: where the profile, coming in from the quiet zone, first crosses the half level.
     # Big modules: backends' corners are off by more, and a wider window stays within one module.
     search_px = max(search_px, 0.4 * float(module_px.min()))
-    offsets = np.arange(search_px + QUIET_OFFSET_PX, -(search_px + 1.0) - 1e-9, -PROFILE_STEP_PX)
+    offsets = _profile_offsets(round(search_px, 3))
     points = base[:, :, None, :] + offsets[None, None, :, None] * normals[:, None, None, :]
     values = _as_seen(sample_bilinear(grey, points), inverted)
     quiet = values[:, :, 0]
@@ -261,7 +285,7 @@ def _refine(
     below = values < threshold[:, :, None]
     first = np.maximum(np.argmax(below, axis=2), 1)
     valid = below.any(axis=2) & ~below[:, :, 0] & np.isfinite(quiet) & (quiet - level_dark > 12.0)
-    flat_index = np.arange(first.size).reshape(first.shape) * values.shape[2] + first
+    flat_index = _row_starts(first.shape, values.shape[2]) + first
     v_out = values.reshape(-1)[flat_index - 1]
     v_in = values.reshape(-1)[flat_index]
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -272,7 +296,7 @@ def _refine(
     # area sampling); the area under the normalised darkness profile around it is not: for a step
     # at e blurred by any symmetric kernel, the integral of darkness over [c - h, c + h] = e - (c - h).
     half = np.clip(0.45 * across_px, 1.0, 2.5)[:, None]
-    t = np.linspace(-1.0, 1.0, AREA_SAMPLES)
+    t = _unit_steps(AREA_SAMPLES) * 2.0 - 1.0
     window_offsets = crossing[:, :, None] + half[:, :, None] * t[None, None, :]
     window = base[:, :, None, :] + window_offsets[..., None] * normals[:, None, None, :]
     seen = _as_seen(sample_bilinear(grey, window), inverted)
