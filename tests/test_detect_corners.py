@@ -139,3 +139,22 @@ def test_strong_perspective_is_found_by_the_finder_patterns(camera_vga, position
     (d,) = Detector().detect(view.image)
     assert d.backend == "finders" and d.text == view.text and d.refined
     assert np.abs(d.corners_px - view.corners_px).max() < 0.3
+
+
+def test_a_backend_corner_far_off_is_reseeded_from_the_finder_patterns(camera_vga):
+    # Backends occasionally miss a corner by more than the refinement's search window (seen: 6 px).
+    from qrfield.detect.backends import Candidate
+
+    view = render_view(
+        camera_vga,
+        SIDE_MM,
+        Pose([-20.0, 10.0, 350.0], [20.0, 25.0, -40.0]),
+        noise_sigma=2.0,
+        blur_px=0.6,
+        seed=9,
+    )
+    rough = view.corners_px + np.array([[0.5, -0.5], [6.0, -4.0], [1.0, 1.0], [-0.5, 0.5]])
+    detector = Detector()
+    d = detector.accept(view.image, Candidate(rough, view.text, "zxing", view.modules))
+    assert d is not None and d.refined
+    assert np.abs(d.corners_px - view.corners_px).max() < 0.3

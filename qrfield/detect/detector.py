@@ -82,6 +82,25 @@ class Detector:
                 break
         return found
 
+    @staticmethod
+    def _seeds(grey: np.ndarray, corners: np.ndarray):
+        """Starting corners for refinement: the backend's, then (only if those fail) the corners the
+        finder-pattern locator finds for the same code in a crop around it (backends sometimes miss
+        a corner by more than the search window)."""
+        yield corners
+        from qrfield.detect.finders import locate_by_finders
+
+        h, w = grey.shape
+        margin = 0.3 * float(np.ptp(corners, axis=0).max()) + 8.0
+        x0, y0 = (max(int(v), 0) for v in np.floor(corners.min(axis=0) - margin))
+        x1, y1 = (int(v) for v in np.minimum(np.ceil(corners.max(axis=0) + margin) + 1, (w, h)))
+        if x1 - x0 < 21 or y1 - y0 < 21:
+            return
+        offset = np.array([x0, y0], dtype=np.float64)
+        for located, _, _ in locate_by_finders(np.ascontiguousarray(grey[y0:y1, x0:x1]), decode=False):
+            if same_code(located + offset, corners):
+                yield located + offset
+
     def accept(self, grey: np.ndarray, candidate: Candidate, backend: str | None = None) -> Detection | None:
         """Check and refine one backend candidate on a grey image; None when it does not hold up."""
         settings = self.settings
@@ -99,10 +118,12 @@ class Detector:
         modules = rough.modules
         score, final, corner_quality, refined = rough.score, corners, np.full(4, np.nan), False
         if settings.refine:
-            fit = refine_corners(
-                grey, corners, modules, inverted=rough.inverted, search_px=settings.search_px
-            )
-            if fit.ok:
+            for seed in self._seeds(grey, corners):
+                fit = refine_corners(
+                    grey, seed, modules, inverted=rough.inverted, search_px=settings.search_px
+                )
+                if not fit.ok:
+                    continue
                 fine = check_patterns(grey, fit.corners_px, modules)
                 # A refinement that makes the patterns fit worse is not trusted.
                 if fine.score >= rough.score - 0.02:
@@ -112,6 +133,7 @@ class Detector:
                         fit.corner_rms_px,
                         True,
                     )
+                    break
         if score < (settings.min_quality if refined else min(settings.min_quality, UNREFINED_MIN_SCORE)):
             return None
         if not refined and not candidate.text:

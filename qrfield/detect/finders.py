@@ -141,8 +141,11 @@ def decode_rectified(grey: np.ndarray, corners: np.ndarray, modules: int) -> str
     return barcodes[0].text if barcodes and barcodes[0].valid else None
 
 
-def locate_by_finders(grey: np.ndarray) -> list[tuple[np.ndarray, int, str | None]]:
-    """Codes located by their finder patterns: (corners V1..V4 px, modules, text or None)."""
+def locate_by_finders(grey: np.ndarray, decode: bool = True) -> list[tuple[np.ndarray, int, str | None]]:
+    """Codes located by their finder patterns: (corners V1..V4 px, modules, text or None).
+
+    With ``decode`` False the symbols are only located (text None), e.g. to re-seed a refinement.
+    """
     found: list[tuple[np.ndarray, int, str | None]] = []
     small = cv2.resize(
         grey, (max(grey.shape[1] // 4, 1), max(grey.shape[0] // 4, 1)), interpolation=cv2.INTER_AREA
@@ -159,7 +162,7 @@ def locate_by_finders(grey: np.ndarray) -> list[tuple[np.ndarray, int, str | Non
                 for c, _, _ in found
             ):
                 continue
-            found.append((corners, n, decode_rectified(grey, corners, n)))
+            found.append((corners, n, decode_rectified(grey, corners, n) if decode else None))
         if found:
             break
     return found

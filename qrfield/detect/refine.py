@@ -20,6 +20,7 @@ blurred, noisy or distorted images). Smaller is better.
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -239,24 +240,35 @@ def _refine(
     def fail(reason: str) -> RefineResult:
         return RefineResult(False, corners.copy(), nan4, reason)
 
-    edge_vectors = corners[_NEXT] - corners
-    sides = np.sqrt((edge_vectors**2).sum(axis=1))
-    if sides.min() < 8:
-        return fail(f"the code is too small to refine ({sides.min():.1f} px side)")
+    # Per-side geometry in plain floats (four values each: numpy's per-call cost would dominate).
+    pts = corners.tolist()
+    centre_x = 0.25 * sum(p[0] for p in pts)
+    centre_y = 0.25 * sum(p[1] for p in pts)
+    side_list, dir_list, normal_list = [], [], []
+    for i in range(4):
+        (x0, y0), (x1, y1) = pts[i], pts[(i + 1) % 4]
+        length = math.hypot(x1 - x0, y1 - y0)
+        if length < 8:
+            return fail(f"the code is too small to refine ({length:.1f} px side)")
+        dx, dy = (x1 - x0) / length, (y1 - y0) / length
+        nx, ny = dy, -dx
+        if nx * (0.5 * (x0 + x1) - centre_x) + ny * (0.5 * (y0 + y1) - centre_y) < 0:
+            nx, ny = -nx, -ny  # outward, whatever the handedness of the corner order
+        side_list.append(length)
+        dir_list.append((dx, dy))
+        normal_list.append((nx, ny))
     dark = _dark_level(grey, corners, modules)
-    if not np.isfinite(dark):
+    if not math.isfinite(dark):
         return fail("the finder patterns are outside the image")
     level_dark = 255.0 - dark if inverted else dark
-
-    # k profiles across each side (rows: V1V2, V2V3, V3V4, V4V1), about one per pixel, not too close
-    # to the corners where the other side's edge blurs in.
-    directions = edge_vectors / sides[:, None]
-    normals = np.column_stack([directions[:, 1], -directions[:, 0]])
-    outward = (normals * (corners + 0.5 * edge_vectors - corners.mean(axis=0))).sum(axis=1) < 0
-    normals[outward] *= -1.0  # outward, whatever the handedness of the corner order
+    sides = np.array(side_list)
+    directions = np.array(dir_list)
+    normals = np.array(normal_list)
     module_px = sides / modules
     # Module size across each side (what a profile crosses): from the two neighbouring sides.
     across_px = np.minimum(module_px[_PREVIOUS], module_px[_NEXT])
+    # k profiles across each side (rows: V1V2, V2V3, V3V4, V4V1), about one per pixel, not too close
+    # to the corners where the other side's edge blurs in.
     margin = 2.0 + 0.5 * module_px
     if finders_only:
         # Only along the outer edges of the finder patterns (modules 0..7 from V1, V2, V4), where
@@ -328,17 +340,24 @@ def _refine(
     if inliers.min() < max(6, k // 5):
         worst = int(np.argmin(inliers))
         return fail(f"side V{worst + 1}V{(worst + 1) % 4 + 1}: the edge points do not line up")
-    line_dirs = directions + c1[:, None] * normals
-    line_dirs /= np.sqrt((line_dirs**2).sum(axis=1))[:, None]
-    line_points = corners + c0[:, None] * normals
-    # V_i = intersection of side i-1 (ending at V_i) and side i (starting at V_i)
-    d_prev, p_prev = line_dirs[_PREVIOUS], line_points[_PREVIOUS]
-    det = d_prev[:, 1] * line_dirs[:, 0] - d_prev[:, 0] * line_dirs[:, 1]
-    if np.abs(det).min() < 1e-3:
-        return fail("two sides are parallel")
-    gap = line_points - p_prev
-    t = (line_dirs[:, 0] * gap[:, 1] - line_dirs[:, 1] * gap[:, 0]) / det
-    refined = p_prev + t[:, None] * d_prev
+    # V_i = intersection of side i-1 (ending at V_i) and side i (starting at V_i), in plain floats.
+    line_points, line_dirs = [], []
+    for i in range(4):
+        (px, py), (dx, dy), (nx, ny) = pts[i], dir_list[i], normal_list[i]
+        ux, uy = dx + float(c1[i]) * nx, dy + float(c1[i]) * ny
+        norm = math.hypot(ux, uy)
+        line_points.append((px + float(c0[i]) * nx, py + float(c0[i]) * ny))
+        line_dirs.append((ux / norm, uy / norm))
+    refined_list = []
+    for i in range(4):
+        (ax, ay), (adx, ady) = line_points[i - 1], line_dirs[i - 1]
+        (bx, by), (bdx, bdy) = line_points[i], line_dirs[i]
+        det = ady * bdx - adx * bdy
+        if abs(det) < 1e-3:
+            return fail("two sides are parallel")
+        t = (bdx * (by - ay) - bdy * (bx - ax)) / det
+        refined_list.append((ax + t * adx, ay + t * ady))
+    refined = np.array(refined_list)
     lines = tuple(
         EdgeLine(line_points[i], line_dirs[i], float(rms[i]), int(inliers[i]), int(found[i]))
         for i in range(4)
