@@ -3,7 +3,7 @@
 1. Corner accuracy on seeded rendered views (noise sigma 2 grey levels, blur 0.6 px): RMS corner
    error against the renderer's exact vertex pixels, for plain OpenCV, each backend's own corners,
    and the refined corners of the default pipeline.
-2. Milliseconds per frame on a moving rendered sequence at 640x480 and 1280x720: the naive
+2. Milliseconds per frame (best of 3 runs) on a moving rendered sequence at 640x480 and 1280x720: the naive
    ``cv2.QRCodeDetector().detectAndDecode`` (the baseline, measured in the same run), full-frame
    detection without refinement, detection + refinement (+ solve), and tracking (+ solve).
 3. Detection rate on the real photos in ../shared/data/qr-photos (payload text as label) for each
@@ -17,6 +17,9 @@ from __future__ import annotations
 import argparse
 import time
 from pathlib import Path
+
+#: Timing runs per method; the fastest counts (the same rule for the baseline).
+REPEATS = 3
 
 HELP = (
     "QR detection: corner accuracy, ms per frame vs naive OpenCV, detection rates (rendered and real photos)"
@@ -132,10 +135,13 @@ def _time_sequence(cam, side: float, count: int, solver) -> None:
     base_ms = None
     for name, method in rows:
         method(frames[0])  # warm caches
-        tracker.reset()
-        t0 = time.perf_counter()
-        hits = sum(method(f) for f in frames)
-        ms = (time.perf_counter() - t0) * 1e3 / len(frames)
+        best = float("inf")
+        for _ in range(REPEATS):  # the best of a few runs: other processes only ever add time
+            tracker.reset()
+            t0 = time.perf_counter()
+            hits = sum(method(f) for f in frames)
+            best = min(best, (time.perf_counter() - t0) * 1e3 / len(frames))
+        ms = best
         base_ms = base_ms or ms
         print(f"{cam.name:<22}{name:<38}{ms:>10.2f}{hits:>5}/{len(frames):<3}{base_ms / ms:>8.1f}x")
 
