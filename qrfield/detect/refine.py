@@ -3,18 +3,25 @@
 Method: each side of the symbol (V1V2 top, V2V3 right, V3V4 bottom, V4V1 left) is a straight line
 in the image (no lens distortion) along which the outer edges of the finder patterns and of every
 dark boundary module lie. Across each side, short profiles are sampled (bilinear) at about one
-pixel spacing; on each, the edge is where the grey level, coming in from the quiet zone, first
-crosses the level halfway between the local quiet zone and the dark level of the finder cores
-(linear interpolation: sub-pixel, unbiased for a symmetric blur). A total-least-squares line is
-fitted to those edge points with trimming of outliers (a light boundary module lets the profile
-reach the next dark module one module further in: those points are dropped). Corners are the
-intersections of neighbouring lines; V3, which has no finder pattern, comes from the right and
-bottom lines, i.e. the outer edges of the top-right and bottom-left finder patterns and the dark
-boundary modules that continue them.
+pixel spacing (at most 40 per side). On each profile, coming in from the quiet zone, the first
+crossing of the level halfway between the local quiet zone and the dark level of the finder cores
+locates the edge to a fraction of a pixel; the edge is then placed by the area under the
+normalised darkness profile in a window around that crossing (for a straight step blurred by any
+symmetric kernel, and for pixels that average over their area, that area is exact, where a
+threshold crossing is biased by up to 0.1 px). A line offset = c0 + c1 * along is fitted per side
+by least squares with two trims: points a third of a module or more inside the median (a light
+boundary module lets the profile reach the next dark module), then points beyond 3 RMS.
+Corners are the intersections of neighbouring lines; V3, which has no finder pattern, comes from
+the right and bottom lines, i.e. the outer edges of the top-right and bottom-left finder patterns
+and of the dark boundary modules that continue them.
+
+Backends often misplace V3 (they extrapolate it): the first pass lets V3 move by up to three
+modules, a second pass refits from the corrected corners when it moved, and if the first pass
+fails the finder-pattern edges alone are fitted first (then the whole sides).
 
 Corner quality: the RMS distance in pixels of the accepted edge points to the two lines meeting at
-the corner (noise and edge roughness; about 0.02-0.05 px on a clean rendered view, more on
-blurred, noisy or distorted images). Smaller is better.
+the corner (noise and edge roughness; about 0.01-0.05 px on a rendered view with noise sigma 2,
+more on blurred, noisy or distorted images). Smaller is better.
 """
 
 from __future__ import annotations
