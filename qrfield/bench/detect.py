@@ -238,31 +238,34 @@ def run(args: argparse.Namespace) -> int:
     else:
         photos = sorted(p for p in (data / "qr-photos").glob("*/*") if p.suffix in (".png", ".jpg"))
         print(f"\n3. real photos: {len(photos)} in {data / 'qr-photos'} (label = payload text)")
-        print(f"{'method':<40}{'right':>7}{'other text':>12}{'none':>6}")
+        print(f"{'method':<40}{'right':>7}{'other text':>12}{'none':>6}{'located':>9}")
         # A backend's own answer: the texts it decoded (a code located but not read counts as none).
-        raw = {
-            name: (lambda g, name=name: [c.text for c in find_candidates(g, name) if c.text])
-            for name in BACKEND_NAMES
-        }
-        runs = {f"{name} alone, unchecked": fn for name, fn in raw.items()}
+        runs = {}
+        for name in BACKEND_NAMES:
+            runs[f"{name} alone, unchecked"] = lambda g, name=name: find_candidates(g, name)
         for name in BACKEND_NAMES:
             det = Detector(DetectorSettings(backends=name))
-            runs[f"{name} alone, through the pipeline"] = lambda g, det=det: [d.text for d in det.detect(g)]
-        runs["default pipeline"] = lambda g: [d.text for d in pipeline.detect(g)]
+            runs[f"{name} alone, through the pipeline"] = det.detect
+        runs["default pipeline"] = pipeline.detect
         for name, fn in runs.items():
-            right = other = none = 0
+            right = other = none = located = 0
             others = []
             for photo in photos:
                 label = photo.with_suffix(".txt").read_bytes().decode("utf-8", errors="replace")
                 grey = as_grey(cv2.imread(str(photo), cv2.IMREAD_COLOR))
-                texts = fn(grey)
+                found = fn(grey)
+                texts = [f.text for f in found if f.text]
+                located += bool(found)
                 right += label in texts
                 if any(t != label for t in texts):
                     other += 1
                     others.append(photo.name)
                 none += not texts
             note = f"  ({', '.join(others[:3])}{', ...' if len(others) > 3 else ''})" if others else ""
-            print(f"{name:<40}{right:>4}/{len(photos):<3}{other:>8}{none:>8}{note}")
+            print(f"{name:<40}{right:>4}/{len(photos):<3}{other:>8}{none:>8}{located:>7}{note}")
+        print(
+            "right: the label's text was read; none: no text read; located: any code reported (read or not)"
+        )
         print("other text: qrcode-2/16.png holds two codes (an inner one, the label, inside an outer one);")
         print("  elsewhere a wrong or differently decoded text (OpenCV: Shift-JIS payloads read as bytes)")
         empty = sorted((data / "calibration").glob("*/*.jpg")) if (data / "calibration").is_dir() else []

@@ -86,19 +86,32 @@ def _zxing_x2(grey: np.ndarray) -> list[Candidate]:
 def _opencv_multi(
     detector: cv2.QRCodeDetector | cv2.QRCodeDetectorAruco, name: str, grey: np.ndarray
 ) -> list[Candidate]:
+    """All codes by OpenCV's multi-code API; if it reads none, its single-code API (which decodes
+    more of the real photos: 29 of 77 against 15)."""
+    out = []
     try:
         ok, payloads, points, _ = detector.detectAndDecodeBytesMulti(grey)
     except cv2.error:
-        return []
-    if not ok or points is None:
-        return []
-    points = np.asarray(points, dtype=float).reshape(-1, 4, 2)
-    out = []
-    for payload, corners in zip(payloads, points, strict=False):
-        if not np.all(np.isfinite(corners)):
-            continue
-        out.append(Candidate(corners.copy(), _text(payload), name, None))
-    return out
+        ok, payloads, points = False, (), None
+    if ok and points is not None:
+        for payload, corners in zip(
+            payloads, np.asarray(points, dtype=float).reshape(-1, 4, 2), strict=False
+        ):
+            if np.all(np.isfinite(corners)):
+                out.append(Candidate(corners.copy(), _text(payload), name, None))
+    if any(c.text for c in out):
+        return out
+    try:
+        payload, points, _ = detector.detectAndDecodeBytes(grey)
+    except cv2.error:
+        return out
+    if points is None:
+        return out
+    corners = np.asarray(points, dtype=float).reshape(-1, 2)
+    if corners.shape != (4, 2) or not np.all(np.isfinite(corners)):
+        return out
+    single = Candidate(corners, _text(payload), name, None)
+    return [single, *[c for c in out if np.abs(c.corners_px - corners).max() > 2.0]]
 
 
 def _text(payload: bytes | None) -> str | None:
