@@ -5,23 +5,37 @@
     code = select_code(detections, select_text="")  # the largest, or the one with that text
 
 Vertex order V1..V4 and pixel convention: DESIGN.md. Modules: backends (zxing-cpp, OpenCV),
-patterns (checks against the symbol's fixed patterns), refine (sub-pixel edges), detector,
-tracking, select.
+finders (finder patterns by contours, for strong perspective), patterns (checks against the
+symbol's fixed patterns), refine (sub-pixel edges), detector, tracking, select.
+
+Names are imported on first use, so that declaring settings (``DetectorSettings``, e.g. for CLI
+options) does not load OpenCV or zxing-cpp.
 """
 
-from qrfield.detect.backends import BACKEND_NAMES, BackendError
-from qrfield.detect.detection import Detection, DetectorSettings
-from qrfield.detect.detector import Detector, DetectorInputError
-from qrfield.detect.select import select_code
-from qrfield.detect.tracking import Tracker
+from __future__ import annotations
 
-__all__ = [
-    "BACKEND_NAMES",
-    "BackendError",
-    "Detection",
-    "Detector",
-    "DetectorInputError",
-    "DetectorSettings",
-    "Tracker",
-    "select_code",
-]
+import importlib
+from typing import Any
+
+_WHERE = {
+    "BACKEND_NAMES": "qrfield.detect.backends",
+    "BackendError": "qrfield.detect.backends",
+    "Detection": "qrfield.detect.detection",
+    "DetectorSettings": "qrfield.detect.detection",
+    "Detector": "qrfield.detect.detector",
+    "DetectorInputError": "qrfield.detect.detector",
+    "select_code": "qrfield.detect.select",
+    "Tracker": "qrfield.detect.tracking",
+}
+
+__all__ = sorted(_WHERE)
+
+
+def __getattr__(name: str) -> Any:
+    if name in _WHERE:
+        return getattr(importlib.import_module(_WHERE[name]), name)
+    raise AttributeError(f"module 'qrfield.detect' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return __all__
