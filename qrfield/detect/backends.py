@@ -74,7 +74,14 @@ def _zxing(grey: np.ndarray) -> list[Candidate]:
     return out
 
 
+#: zxing-x2 skips images above this many pixels (12 MP and more after upscaling: slow, and in such
+#: images a code with 2-3 px modules is rare).
+X2_MAX_PIXELS = 3_000_000
+
+
 def _zxing_x2(grey: np.ndarray) -> list[Candidate]:
+    if grey.size > X2_MAX_PIXELS:
+        return []
     big = cv2.resize(grey, None, fx=2.0, fy=2.0, interpolation=cv2.INTER_CUBIC)
     out = []
     for c in _zxing(big):
