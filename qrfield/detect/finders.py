@@ -22,7 +22,10 @@ MAX_FINDERS = 12
 #: Pixels per module and quiet-zone modules of the rectified image handed to the decoder.
 RECTIFIED_PX = 5
 RECTIFIED_QUIET = 4
-#: Least spread of grey levels (in the frame averaged over 4 x 4 pixels, which quells noise) for a
+#: Largest median grey-level step between neighbouring pixels (sampled rows) of a frame that is
+#: searched: a scene with a code is mostly smooth (a few levels); noise and fine texture are not.
+MAX_ROUGHNESS = 40.0
+#: Least spread of grey levels (in the frame averaged over 8 x 8 pixels, which quells noise) for a
 #: frame to be searched at all.
 MIN_CONTRAST = 40.0
 
@@ -148,10 +151,13 @@ def locate_by_finders(grey: np.ndarray, decode: bool = True) -> list[tuple[np.nd
     """
     found: list[tuple[np.ndarray, int, str | None]] = []
     small = cv2.resize(
-        grey, (max(grey.shape[1] // 4, 1), max(grey.shape[0] // 4, 1)), interpolation=cv2.INTER_AREA
+        grey, (max(grey.shape[1] // 8, 1), max(grey.shape[0] // 8, 1)), interpolation=cv2.INTER_AREA
     )
     if float(small.max()) - float(small.min()) < MIN_CONTRAST:
         return found  # a flat (blank or noise-only) frame: nothing to find, and noise is slow to trace
+    rows = grey[:: max(grey.shape[0] // 64, 1)]
+    if np.median(np.abs(np.diff(rows.astype(np.int16), axis=1))) > MAX_ROUGHNESS:
+        return found  # mostly noise or fine texture: millions of contours and no finder pattern
     _, otsu = cv2.threshold(grey, 0, 255, cv2.THRESH_BINARY_INV | cv2.THRESH_OTSU)
     block = max(15, (min(grey.shape) // 16) | 1)
     adaptive = cv2.adaptiveThreshold(grey, 255, cv2.ADAPTIVE_THRESH_MEAN_C, cv2.THRESH_BINARY_INV, block, 7)
