@@ -58,3 +58,25 @@ def test_tracking_off_always_detects_full_frame(camera_vga):
     for i in range(3):
         tracker.update(_frame(camera_vga, i, 4.0 * i).image)
         assert tracker.last_mode == "full"
+
+
+def test_a_code_coming_into_view_is_picked_up_by_the_periodic_full_look(camera_vga):
+    from qrfield.detect import DetectorSettings
+
+    first = render_view(
+        camera_vga, 60.0, Pose([-90.0, 0.0, 450.0], [0.0, 10.0, 5.0]), text="alpha", noise_sigma=2.0, seed=1
+    )
+    both = render_view(
+        camera_vga,
+        60.0,
+        Pose([60.0, 10.0, 350.0], [-10.0, 0.0, -20.0]),
+        text="bravo",
+        background=first.image,
+        noise_sigma=2.0,
+        seed=2,
+    )
+    tracker = Tracker(DetectorSettings(redetect_frames=5))
+    assert [d.text for d in tracker.update(first.image)] == ["alpha"]
+    texts = [sorted(d.text for d in tracker.update(both.image)) for _ in range(6)]
+    assert texts[:3] == [["alpha"]] * 3  # tracked by refinement: "bravo" not looked for yet
+    assert texts[-1] == ["alpha", "bravo"]

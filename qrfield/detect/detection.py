@@ -120,6 +120,15 @@ class DetectorSettings:
         label="track between frames",
         help="in video, search around the last corners before the whole frame",
     )
+    redetect_frames: int = setting(
+        30,
+        label="full-frame check every",
+        unit="frames",
+        minimum=0,
+        maximum=100000,
+        help="while tracking, a full-frame detection every this many frames picks up codes that came "
+        "into view (0 = only when a tracked code is lost)",
+    )
     track_margin_px: float = setting(
         24.0,
         label="tracking search margin",

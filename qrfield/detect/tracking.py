@@ -5,7 +5,8 @@ Per frame and per code tracked, cheapest first:
    over) and check the symbol's fixed patterns there;
 2. else run the first backend on a region around the prediction (``track_margin_px`` plus a quarter
    of the code's size), refine and check; the text must be the one tracked;
-3. else (any code lost) a full-frame detection with every backend, which also picks up new codes.
+3. else (any code lost), and every ``redetect_frames`` frames, a full-frame detection with every
+   backend, which also picks up codes that came into view.
 """
 
 from __future__ import annotations
@@ -46,6 +47,7 @@ class Tracker:
         self.detector = Detector(settings)
         self.settings = self.detector.settings
         self._tracks: list[_Track] = []
+        self._frames_since_full = 0
         self.last_mode = ""
 
     def reset(self) -> None:
@@ -55,6 +57,10 @@ class Tracker:
 
     def update(self, image: np.ndarray) -> list[Detection]:
         """Detections in the next video frame (grey or BGR uint8); never raises on image content."""
+        self._frames_since_full += 1
+        every = self.settings.redetect_frames
+        if every and self._frames_since_full >= every:
+            self._tracks = []  # time for a full-frame look: new codes may have come into view
         if self.settings.track and self._tracks:
             found = self._refine_all(image)
             if found is not None:
@@ -74,6 +80,7 @@ class Tracker:
                 self.last_mode = "roi"
                 return found
         detections = self.detector.detect(grey)
+        self._frames_since_full = 0
         self._tracks = [
             _Track(d, inverted=check_patterns(grey, d.corners_px, d.modules).inverted) for d in detections
         ]
