@@ -80,3 +80,4 @@ def test_a_code_coming_into_view_is_picked_up_by_the_periodic_full_look(camera_v
     texts = [sorted(d.text for d in tracker.update(both.image)) for _ in range(6)]
     assert texts[:3] == [["alpha"]] * 3  # tracked by refinement: "bravo" not looked for yet
     assert texts[-1] == ["alpha", "bravo"]
+    assert tracker.last_mode == "refined"  # both tracked now

@@ -5,8 +5,8 @@ Per frame and per code tracked, cheapest first:
    over) and check the symbol's fixed patterns there;
 2. else run the first backend on a region around the prediction (``track_margin_px`` plus a quarter
    of the code's size), refine and check; the text must be the one tracked;
-3. else (any code lost), and every ``redetect_frames`` frames, a full-frame detection with every
-   backend, which also picks up codes that came into view.
+3. else (any code lost) a full-frame detection with every backend. Every ``redetect_frames``
+   frames a full-frame detection also runs beside the tracking, to pick up codes that came into view.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import numpy as np
 
 from qrfield.detect.backends import Candidate, find_candidates
 from qrfield.detect.detection import Detection, DetectorSettings
-from qrfield.detect.detector import Detector, as_grey
+from qrfield.detect.detector import Detector, as_grey, same_code
 from qrfield.detect.patterns import check_patterns
 from qrfield.detect.refine import refine_corners
 
@@ -59,33 +59,50 @@ class Tracker:
         """Detections in the next video frame (grey or BGR uint8); never raises on image content."""
         self._frames_since_full += 1
         every = self.settings.redetect_frames
-        if every and self._frames_since_full >= every:
-            self._tracks = []  # time for a full-frame look: new codes may have come into view
+        due = bool(every) and self._frames_since_full >= every
+        found: list[Detection] | None = None
+        grey = None
         if self.settings.track and self._tracks:
             found = self._refine_all(image)
             if found is not None:
                 self._advance(found)
                 self.last_mode = "refined"
-                return found
-        grey = as_grey(image)
-        if self.settings.track and self._tracks:
-            found = []
-            for track in self._tracks:
-                detection = self._search_around(grey, track)
-                if detection is None:
-                    break
-                found.append(detection)
             else:
-                self._advance(found, grey)
-                self.last_mode = "roi"
-                return found
+                grey = as_grey(image)
+                found = self._search_all(grey)
+                if found is not None:
+                    self._advance(found, grey)
+                    self.last_mode = "roi"
+        if found is not None and not due:
+            return found
+        grey = as_grey(image) if grey is None else grey
         detections = self.detector.detect(grey)
         self._frames_since_full = 0
-        self._tracks = [
-            _Track(d, inverted=check_patterns(grey, d.corners_px, d.modules).inverted) for d in detections
-        ]
+        if found is not None:
+            # The periodic full look: keep the codes tracked (the backends may miss a code that
+            # tracking holds), add the ones that came into view.
+            new = [d for d in detections if not any(same_code(d.corners_px, f.corners_px) for f in found)]
+            self._tracks += [self._new_track(grey, d) for d in new]
+            return found + new
+        self._tracks = [self._new_track(grey, d) for d in detections]
         self.last_mode = "full"
         return detections
+
+    @staticmethod
+    def _new_track(grey: np.ndarray, detection: Detection) -> _Track:
+        return _Track(
+            detection, inverted=check_patterns(grey, detection.corners_px, detection.modules).inverted
+        )
+
+    def _search_all(self, grey: np.ndarray) -> list[Detection] | None:
+        """Step 2 for every track; None as soon as one is not found."""
+        found = []
+        for track in self._tracks:
+            detection = self._search_around(grey, track)
+            if detection is None:
+                return None
+            found.append(detection)
+        return found
 
     def _advance(self, found: list[Detection], grey: np.ndarray | None = None) -> None:
         for track, detection in zip(self._tracks, found, strict=True):
