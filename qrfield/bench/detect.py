@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import time
 from pathlib import Path
+from typing import Any
 
 #: Timing runs per method; the fastest counts (the same rule for the baseline).
 REPEATS = 3
@@ -54,14 +55,11 @@ def _shared_data(path: Path | None) -> Path | None:
     return None
 
 
-def _solver():
-    """(name, function(corners, camera, side_mm)) of the pose step timed with the pipeline."""
+def _solvers() -> list[tuple[str, Any]]:
+    """(name, function(corners, camera, side_mm)) of the pose steps timed with the pipeline: the
+    solvers' default IPPE, and IPPE without its iterative refinement (the closed form alone)."""
     try:
-        from qrfield.solvers import solve  # type: ignore[import-not-found]
-
-        return "qrfield.solvers.solve(ippe)", lambda corners, camera, side: solve(
-            corners, camera, side, method="ippe"
-        )
+        from qrfield.solvers import IppeSettings, solve
     except ImportError:
         import cv2
         import numpy as np
@@ -73,10 +71,18 @@ def _solver():
                 obj, corners.reshape(4, 1, 2), camera.K, camera.dist, flags=cv2.SOLVEPNP_IPPE_SQUARE
             )
 
-        return "cv2.solvePnP IPPE_SQUARE (stand-in: qrfield.solvers not on this branch)", stand_in
+        return [("cv2.solvePnP IPPE_SQUARE (stand-in: qrfield.solvers not on this branch)", stand_in)]
+    closed_form = IppeSettings(refine="none")
+    return [
+        ("qrfield.solvers.solve(ippe), default settings", lambda c, cam, side: solve(c, cam, side, "ippe")),
+        (
+            "qrfield.solvers.solve(ippe, refine=none)",
+            lambda c, cam, side: solve(c, cam, side, "ippe", closed_form),
+        ),
+    ]
 
 
-def _time_sequence(cam, side: float, count: int, solver) -> None:
+def _time_sequence(cam, side: float, count: int, solvers: list[tuple[str, Any]]) -> None:
     """Print ms per frame of each method on a seeded moving sequence seen by ``cam``."""
     import cv2
     import numpy as np
@@ -103,35 +109,24 @@ def _time_sequence(cam, side: float, count: int, solver) -> None:
         text, _, _ = cv2.QRCodeDetector().detectAndDecode(frame)
         return bool(text)
 
-    def detect_full(frame) -> bool:
-        return bool(full.detect(frame))
+    def with_solve(step, solver):
+        def run(frame) -> bool:
+            found = step(frame)
+            for d in found:
+                solver(d.corners_px, cam, side)
+            return bool(found)
 
-    def detect_refine_solve(frame) -> bool:
-        found = refined.detect(frame)
-        for d in found:
-            solver(d.corners_px, cam, side)
-        return bool(found)
-
-    def detect_refine(frame) -> bool:
-        return bool(refined.detect(frame))
-
-    def track_solve(frame) -> bool:
-        found = tracker.update(frame)
-        for d in found:
-            solver(d.corners_px, cam, side)
-        return bool(found)
-
-    def track(frame) -> bool:
-        return bool(tracker.update(frame))
+        return run
 
     rows = [
         ("naive cv2 detectAndDecode (baseline)", naive),
-        ("full-frame detection (no refine)", detect_full),
-        ("full-frame detect + refine", detect_refine),
-        ("full-frame detect + refine + solve", detect_refine_solve),
-        ("tracked + refine", track),
-        ("tracked + refine + solve (default)", track_solve),
+        ("full-frame detection (no refine)", lambda f: bool(full.detect(f))),
+        ("full-frame detect + refine", lambda f: bool(refined.detect(f))),
+        ("full-frame detect + refine + solve [1]", with_solve(refined.detect, solvers[0][1])),
+        ("tracked + refine", lambda f: bool(tracker.update(f))),
     ]
+    for i, (_, solver) in enumerate(solvers, start=1):
+        rows.append((f"tracked + refine + solve [{i}]", with_solve(tracker.update, solver)))
     base_ms = None
     for name, method in rows:
         method(frames[0])  # warm caches
@@ -143,7 +138,7 @@ def _time_sequence(cam, side: float, count: int, solver) -> None:
             best = min(best, (time.perf_counter() - t0) * 1e3 / len(frames))
         ms = best
         base_ms = base_ms or ms
-        print(f"{cam.name:<22}{name:<38}{ms:>10.2f}{hits:>5}/{len(frames):<3}{base_ms / ms:>8.1f}x")
+        print(f"{cam.name:<22}{name:<40}{ms:>10.2f}{hits:>5}/{len(frames):<3}{base_ms / ms:>8.1f}x")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -221,14 +216,15 @@ def run(args: argparse.Namespace) -> int:
         print("target: refined <= 0.15 px")
 
     # ------------------------------------------------------------------ 2: speed
-    solver_name, solver = _solver()
+    solvers = _solvers()
     print(
         f"\n2. ms per frame, moving sequence ({args.frames} BGR frames, {side:g} mm code, noise 2, blur 0.6)"
     )
-    print(f"   solve = {solver_name}")
-    print(f"{'camera':<22}{'method':<38}{'ms/frame':>10}{'found':>8}{'x naive':>9}")
+    for i, (name, _) in enumerate(solvers, start=1):
+        print(f"   solve [{i}] = {name}")
+    print(f"{'camera':<22}{'method':<40}{'ms/frame':>10}{'found':>8}{'x naive':>9}")
     for spec in ("picam-v2@640x480", "webcam-60@1280x720"):
-        _time_sequence(resolve_camera(spec), side, args.frames, solver)
+        _time_sequence(resolve_camera(spec), side, args.frames, solvers)
     print("target: the default pipeline >= 10x the naive throughput at 640x480")
 
     # ------------------------------------------------------------------ 3: real photos
