@@ -274,6 +274,7 @@ def test_pending_rows_are_written_before_the_next_row(tmp_path, camera_vga):
     assert outcome.ok and outcome.logged == ("1", "2")
     lines = csv_rows(session.rows_path)[1:]
     assert [(line[0], line[11]) for line in lines] == [("1", "301.000"), ("2", "302.000")]
+    assert not list(session.path.glob("rows.csv.partial-*"))  # the whole line was kept, not moved aside
     session.close()
 
 
