@@ -21,7 +21,11 @@ from qrfield.sessions import (
 
 def frame(pos, ang, converged=True, iterations=4, reprojection_px=0.2):
     return SimpleNamespace(
-        position_mm=pos, angles_deg=ang, converged=converged, iterations=iterations, reprojection_px=reprojection_px
+        position_mm=pos,
+        angles_deg=ang,
+        converged=converged,
+        iterations=iterations,
+        reprojection_px=reprojection_px,
     )
 
 

@@ -28,10 +28,11 @@ from qrfield.sessions import (
 )
 from qrfield.sessions.files import FileOps
 
-DESIGN_COLUMNS = (
+_DESIGN_TEXT = (  # the column list exactly as DESIGN.md writes it
     "row,time,combo,gt_x,gt_y,gt_z,gt_alpha,gt_beta,gt_gamma,x,y,z,alpha,beta,gamma,n_frames,"
     "n_converged,err_pos,err_alpha,err_beta,err_gamma,pass,note"
-).split(",")
+)
+DESIGN_COLUMNS = _DESIGN_TEXT.split(",")
 NOW = dt.datetime(2026, 11, 22, 10, 30, 5)
 
 
@@ -56,7 +57,9 @@ def a_row(z=301.0, alpha=(179.0, -179.0), combo="alpha", note=""):
         {"position_mm": [1.0, 2.0, z + 1.0], "angles_deg": [alpha[1], 1.5, 0.0], "converged": True},
         {"position_mm": [0.0, 0.0, 0.0], "angles_deg": [0.0, 0.0, 0.0], "converged": False},
     ]
-    return measure(frames, GroundTruth(0.0, 2.0, 300.0, 179.0, 0.0, 0.0, combo), method="numerical", note=note)
+    return measure(
+        frames, GroundTruth(0.0, 2.0, 300.0, 179.0, 0.0, 0.0, combo), method="numerical", note=note
+    )
 
 
 def csv_rows(path):
