@@ -243,7 +243,10 @@ def format_report(result: dict[str, Any]) -> str:
     lines.append("")
     res = result["resemblance"]
     if res is None:
-        lines.append(f"resemblance to the simulation: not computed ({result['resemblance_reason']})")
+        lines.append(
+            f"resemblance to the simulation: not computed ({result['resemblance_reason']}); "
+            f"seed: {SEED_RESEMBLANCE_PERCENT:.2f}%"
+        )
     else:
         lines.append(
             f"resemblance to the simulation: {res['percent']:.2f}% "
