@@ -312,6 +312,10 @@ def _degrade(
     if gradient > 0:
         out *= 1.0 + np.float32(gradient) * _gradient_ramp(image.shape[1], image.shape[0])
     if noise_sigma > 0:
-        rng = np.random.default_rng(seed)
-        out += rng.standard_normal(out.shape, dtype=np.float32) * np.float32(noise_sigma)
+        # OpenCV's generator is 4x faster than numpy's here; it is per thread, so seeding it
+        # makes the image repeatable without touching other threads.
+        cv2.setRNGSeed(int(seed) if seed is not None else int(np.random.SeedSequence().entropy % 2**31))
+        noise = np.empty(out.shape, np.float32)
+        cv2.randn(noise, 0.0, float(noise_sigma))
+        out += noise
     return np.clip(out + 0.5, 0, 255).astype(np.uint8)
