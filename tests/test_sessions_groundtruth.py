@@ -4,7 +4,13 @@ from __future__ import annotations
 
 import pytest
 
-from qrfield.sessions import GroundTruthError, check_ground_truth, parse_ground_truth, validate_field
+from qrfield.sessions import (
+    GroundTruthError,
+    check_ground_truth,
+    parse_ground_truth,
+    truth_fields,
+    validate_field,
+)
 
 GOOD = {"x": "-12.5", "y": "40", "z": "350", "alpha": "10", "beta": "-20", "gamma": "179.5", "combo": "alpha"}
 
@@ -94,3 +100,17 @@ def test_combo_must_be_one_of_the_simulation_combinations_when_given():
 def test_the_form_keeps_the_last_values():
     truth = parse_ground_truth(GOOD)
     assert parse_ground_truth(truth.as_fields()) == truth
+
+
+def test_the_virtual_bench_pose_pre_fills_the_form():
+    fields = truth_fields([12.34567, -0.0001, 300.0], [10.0, -0.5, 179.9999], "alpha")
+    assert fields == {
+        "x": "12.346",
+        "y": "0",
+        "z": "300",
+        "alpha": "10",
+        "beta": "-0.5",
+        "gamma": "180",
+        "combo": "alpha",
+    }
+    assert parse_ground_truth(fields).gamma == 180.0

@@ -364,3 +364,35 @@ def test_criteria_and_frames_are_saved(tmp_path, camera_vga):
     assert info.criteria.max_angle_error_deg == 1.0 and info.criteria.max_position_error_mm == 3.0
     assert info.frames_per_row == 25
     assert info.camera == camera_vga
+
+
+def test_pending_rows_can_be_saved_elsewhere_before_closing(tmp_path, camera_vga):
+    ops = FaultyOps()
+    session = make(tmp_path / "full-disk", camera_vga, file_ops=ops)
+    ops.fault = {"write": errno.ENOSPC}
+    session.log(a_row(z=301.0))
+    session.log(a_row(z=302.0))
+    rescue = tmp_path / "usb-stick" / "pending.csv"
+    rescue.parent.mkdir()
+    assert session.export_pending(rescue) == 2
+    saved = csv_rows(rescue)
+    assert saved[0] == list(COLUMNS)
+    assert [(r[0], r[11]) for r in saved[1:]] == [("1", "301.000"), ("2", "302.000")]
+    session.close()
+
+
+def test_notes_can_be_updated(tmp_path, camera_vga):
+    session = make(tmp_path, camera_vga)
+    session.update_notes("lamp moved at row 12", operator="B. Other")
+    meta = json.loads((session.path / "session.json").read_text(encoding="utf-8"))
+    assert (meta["notes"], meta["operator"]) == ("lamp moved at row 12", "B. Other")
+    assert meta["camera"] == camera_vga.to_dict()
+    session.close()
+
+
+def test_solver_settings_are_checked_when_the_solvers_are_installed(tmp_path, camera_vga):
+    pytest.importorskip("qrfield.solvers", reason="qrfield.solvers is not merged yet")
+    with pytest.raises(SessionError, match="n_max"):
+        Session.create(
+            tmp_path, "x", camera=camera_vga, side_mm=60, solver="numerical", solver_settings={"n_max": 0}
+        )

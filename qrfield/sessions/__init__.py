@@ -25,6 +25,7 @@ from qrfield.sessions.groundtruth import (
     check_ground_truth,
     known_combinations,
     parse_ground_truth,
+    truth_fields,
     validate_field,
 )
 from qrfield.sessions.store import (
@@ -69,5 +70,6 @@ __all__ = [
     "read_session",
     "sanitize_name",
     "session_folders",
+    "truth_fields",
     "validate_field",
 ]

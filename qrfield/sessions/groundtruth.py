@@ -93,9 +93,28 @@ class GroundTruth:
 
     def as_fields(self) -> dict[str, str]:
         """Texts for the form (what the form keeps for the next row), dots as decimal separators."""
-        out = {name: f"{getattr(self, name):g}" for name in (*POSITION_FIELDS, *ANGLE_FIELDS)}
-        out["combo"] = self.combo
-        return out
+        return truth_fields(self.position_mm, self.angles_deg, self.combo)
+
+
+def truth_fields(
+    position_mm: Sequence[float], angles_deg: Sequence[float], combo: str = ""
+) -> dict[str, str]:
+    """Form texts for a known pose (the virtual bench's true pose pre-fills the form with this).
+
+    Position in mm (camera frame), angles (alpha, beta, gamma) in degrees; 0.001 mm and deg steps.
+    """
+    pos = [float(v) for v in position_mm]
+    ang = [float(v) for v in angles_deg]
+    if len(pos) != 3 or len(ang) != 3:
+        raise ValueError(f"3 position values (mm) and 3 angles (deg) expected, got {len(pos)} and {len(ang)}")
+    out = {name: _short(v) for name, v in zip((*POSITION_FIELDS, *ANGLE_FIELDS), (*pos, *ang), strict=True)}
+    out["combo"] = combo
+    return out
+
+
+def _short(value: float) -> str:
+    text = f"{value:.3f}".rstrip("0").rstrip(".")
+    return "0" if text in ("-0", "") else text
 
 
 def parse_number(text: Any, unit: str) -> float:

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import dataclasses
 import datetime as dt
 import errno
 import io
@@ -470,6 +471,7 @@ class Session:
             settings_dict = dict(solver_settings)
         else:
             settings_dict = to_dict(solver_settings)
+        settings_dict = _checked_solver_settings(solver, settings_dict)
         frames = from_dict(
             SessionSettings,
             {} if frames_per_row is None else {"frames_per_row": frames_per_row},
@@ -548,6 +550,27 @@ class Session:
             with contextlib.suppress(OSError):
                 self._ops.close(self._fd)
             self._fd = None
+
+    def export_pending(self, path: str | os.PathLike[str]) -> int:
+        """Save the pending records (header + lines, as rows.csv would get them) to another file.
+
+        For when rows.csv cannot be written and the app must close: the operator saves the rows
+        elsewhere (another drive) instead of losing them. Returns how many records were saved.
+        """
+        if not self.pending:
+            return 0
+        data = _csv_line({c: c for c in self.columns}, self.columns) + b"".join(r.line for r in self.pending)
+        atomic_write(Path(path), data)
+        return len(self.pending)
+
+    def update_notes(self, notes: str, operator: str | None = None) -> None:
+        """Change the notes (and operator) in session.json, atomically. Raises OSError if it cannot."""
+        changes: dict[str, Any] = {"notes": notes or ""}
+        if operator is not None:
+            changes["operator"] = _one_line(operator)
+        info = dataclasses.replace(self.info, **changes)
+        atomic_write(self.path / SESSION_FILE, (json.dumps(info.to_dict(), indent=2) + "\n").encode("utf-8"))
+        self.info = info
 
     def __enter__(self) -> Session:
         return self
@@ -688,6 +711,18 @@ class Session:
                 raise OSError(errno.ENOSPC, f"short write: {written} of {len(line)} bytes")
         self._ops.fsync(self._fd)
         self._good_size += len(line)
+
+
+def _checked_solver_settings(solver: str, settings: dict[str, Any]) -> dict[str, Any]:
+    """The solver's settings validated by its own declaration when qrfield.solvers is installed."""
+    try:
+        from qrfield.solvers import settings_class
+    except ImportError:
+        return settings  # saved as given; checked again by whoever solves with them
+    try:
+        return to_dict(from_dict(settings_class(solver), settings))
+    except SettingError as exc:
+        raise SessionError(f"solver settings: {exc}") from None
 
 
 def _explain(exc: OSError) -> str:
