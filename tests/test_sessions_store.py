@@ -114,9 +114,10 @@ def test_bad_arguments_are_named(tmp_path, camera_vga):
 
 def test_a_logged_row_has_the_hand_computed_values(tmp_path, camera_vga):
     session = make(tmp_path, camera_vga)
-    outcome = session.log(a_row(note="card\nre-taped"), time_text="2026-11-22T10:31:00+00:00")
+    outcome = session.log(a_row(note="card\nre-taped\u2028again"), time_text="2026-11-22T10:31:00+00:00")
     assert outcome.ok and outcome.status == "logged" and outcome.row == 1
     assert outcome.message == "logged row 1"
+    assert session.rows_path.read_bytes().count(b"\n") == 2
     header, line = csv_rows(session.rows_path)
     row = dict(zip(header, line, strict=True))
     # Frames: positions (1,2,300) and (1,2,302) -> mean (1,2,301); alpha 179 and -179 -> 180;
@@ -145,7 +146,7 @@ def test_a_logged_row_has_the_hand_computed_values(tmp_path, camera_vga):
         "err_beta": "1.000",
         "err_gamma": "0.000",
         "pass": "1",
-        "note": "card re-taped",  # kept to one line: every record is one physical line
+        "note": "card re-taped again",  # kept to one line: every record is one physical line
         "std_z": "1.414",
         "std_alpha": "1.414",
         "std_beta": "0.707",

@@ -256,7 +256,7 @@ def _fmt(value: float, decimals: int = DECIMALS) -> str:
 
 def _one_line(text: str) -> str:
     """Notes are kept to one physical line so that every record is exactly one line."""
-    return re.sub(r"[\r\n\t\x00-\x1f]+", " ", text or "").strip()
+    return re.sub(r"[\x00-\x1f\x7f\x85\u2028\u2029]+", " ", text or "").strip()
 
 
 def measurement_values(measurement: Measurement, number: int, time_text: str) -> dict[str, str]:
@@ -325,7 +325,7 @@ def parse_rows(data: bytes, where: str = ROWS_FILE) -> RowsContent:
         text = complete.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise SessionError(f"{where}: not UTF-8 text (byte {exc.start})") from None
-    lines = text.splitlines()
+    lines = text.split("\n")[:-1]  # records end with "\n"; other line breaks may sit inside quoted notes
     if not lines:
         raise SessionError(f"{where}: no header row")
     header = next(csv.reader([lines[0]]))
