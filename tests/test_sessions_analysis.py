@@ -153,3 +153,21 @@ def test_resemblance_with_the_solver(tmp_path, camera_vga):
     assert (res["matches"], res["compared"]) == (2, 4)
     assert res["percent"] == pytest.approx(50.0)
     assert res["seed_percent"] == 73.15
+
+
+def test_sessions_pull_in_no_qt():
+    import os
+    import subprocess
+    import sys
+
+    repo = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    code = (
+        "import sys, qrfield.sessions, qrfield.sessions.analysis, qrfield.sessions.plots, "
+        "qrfield.commands.analyze; "
+        "banned = ('PySide6', 'pyqtgraph', 'shiboken6', 'matplotlib'); "
+        "bad = [m for m in sys.modules if m.startswith(banned)]; "
+        "assert not bad, bad"
+    )
+    subprocess.run(
+        [sys.executable, "-c", code], check=True, env={**os.environ, "PYTHONPATH": repo}, timeout=120
+    )

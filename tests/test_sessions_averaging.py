@@ -122,3 +122,25 @@ def test_frame_collector_progress():
     assert row.judgement.err_pos_mm == pytest.approx(0.0)
     with pytest.raises(ValueError, match="at least 1"):
         FrameCollector(0)
+
+
+def test_pipeline_frames_give_the_chosen_methods_result():
+    def pipeline_frame(numerical_z, ippe_z):
+        return SimpleNamespace(
+            poses={
+                "numerical": frame([0, 0, numerical_z], [0, 0, 0]),
+                "ippe": frame([0, 0, ippe_z], [0, 0, 0]),
+            }
+        )
+
+    frames = [pipeline_frame(300.0, 310.0), pipeline_frame(302.0, 312.0), SimpleNamespace(poses={})]
+    truth = GroundTruth(0, 0, 301, 0, 0, 0, "alpha")
+    collector = FrameCollector(3, method="ippe")
+    for f in frames:
+        collector.add(f)
+    row = collector.measurement(truth)
+    assert row.method == "ippe"
+    assert (row.average.n_frames, row.average.n_converged) == (3, 2)
+    assert row.average.position_mm[2] == pytest.approx(311.0)
+    # Without a method, a pipeline frame's first method is used.
+    assert average_frames(frames).position_mm[2] == pytest.approx(301.0)

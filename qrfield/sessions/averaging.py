@@ -63,15 +63,31 @@ class AveragedPose:
         return self.n_converged > 0 and bool(np.all(np.isfinite(self.position_mm)))
 
 
-def average_frames(frames: Iterable[Any]) -> AveragedPose:
-    """Means and standard deviations of the converged frames (see the module doc)."""
+def pose_of(frame: Any, method: str = "") -> Any:
+    """The PoseResult-like part of a frame: a pipeline FrameResult (it has ``poses``, method name ->
+    PoseResult) gives the result of ``method`` (or its first method when ``method`` is empty);
+    anything else is taken as it is (None = no code in the frame)."""
+    poses = frame.get("poses") if isinstance(frame, Mapping) else getattr(frame, "poses", None)
+    if isinstance(poses, Mapping):
+        if method:
+            return poses.get(method)
+        return next(iter(poses.values()), None)
+    return frame
+
+
+def average_frames(frames: Iterable[Any], method: str = "") -> AveragedPose:
+    """Means and standard deviations of the converged frames (see the module doc).
+
+    ``method`` picks the solver's result out of pipeline frames (see :func:`pose_of`).
+    """
     positions: list[np.ndarray] = []
     angles: list[np.ndarray] = []
     iterations: list[float] = []
     reprojections: list[float] = []
     n_frames = 0
-    for index, frame in enumerate(frames):
+    for index, item in enumerate(frames):
         n_frames += 1
+        frame = pose_of(item, method)
         if frame is None or not bool(_get(frame, "converged", False)):
             continue
         pos = np.asarray(_get(frame, "position_mm"), dtype=float).reshape(-1)
@@ -175,7 +191,7 @@ def measure(
     note: str = "",
 ) -> Measurement:
     """Average ``frames`` and judge the mean against ``truth`` (pass needs >= 1 converged frame)."""
-    average = average_frames(frames)
+    average = average_frames(frames, method)
     judgement = judge(average.position_mm, average.angles_deg, truth, criteria, has_pose=average.has_pose)
     return Measurement(truth, average, judgement, method=method, note=note)
 
@@ -184,11 +200,14 @@ def measure(
 class FrameCollector:
     """Collects the next N frames for 'Log row' (the GUI feeds it and shows ``progress``).
 
-    ``add`` takes a PoseResult-like frame (or None for a frame without a code) and returns True
-    once N frames are in; further frames are ignored. ``measurement(truth)`` averages and judges.
+    ``add`` takes a frame: a pipeline FrameResult, a PoseResult-like object or dict, or None for
+    a frame without a code; it returns True once N frames are in; further frames are ignored.
+    ``method`` names the solver whose results are averaged (default: a FrameResult's first method).
+    ``measurement(truth)`` averages and judges.
     """
 
     frames_wanted: int
+    method: str = ""
     frames: list[Any] = field(default_factory=list)
 
     def __post_init__(self) -> None:
@@ -215,7 +234,6 @@ class FrameCollector:
         truth: GroundTruth,
         criteria: AcceptanceCriteria | None = None,
         *,
-        method: str = "",
         note: str = "",
     ) -> Measurement:
-        return measure(self.frames, truth, criteria, method=method, note=note)
+        return measure(self.frames, truth, criteria, method=self.method, note=note)
