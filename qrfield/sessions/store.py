@@ -3,7 +3,10 @@
 ``session.json`` (written atomically: temp file, fsync, os.replace) records the camera model, QR
 side, solver and its settings, acceptance criteria, frames per row, app version, operator, notes
 and creation time. ``rows.csv`` is UTF-8 with a header row: the required columns in DESIGN.md's
-order, then EXTRA_COLUMNS. Values in mm and degrees; empty where unknown (no converged frame).
+order, then EXTRA_COLUMNS. Values in mm and degrees with 3 decimals, empty where unknown (no
+converged frame); ``time`` is local ISO 8601 time with its UTC offset; ``pass`` is 1 or 0;
+``x``..``gamma`` are the means over the converged frames (angles: circular means), ``err_*`` are
+measured minus ground truth (angles wrapped to (-180, 180]), ``err_pos`` the Euclidean distance.
 
 Crash safety: each record is one physical line (notes are kept to one line), appended with one
 ``write`` on an O_APPEND descriptor and fsynced before :meth:`Session.log` reports "logged".
