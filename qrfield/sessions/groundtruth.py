@@ -240,21 +240,15 @@ def parse_ground_truth(fields: Mapping[str, Any], combinations: Sequence[str] | 
     return truth
 
 
-def known_combinations() -> list[str] | None:
-    """The simulation's combination names when qrfield.simulation provides them, else None (free text)."""
+def known_combinations(source: str = "default") -> list[str] | None:
+    """The simulation's combination names (``source``: "default" or a combinations CSV file),
+    or None when qrfield.simulation is not installed or the list cannot be read (free text then)."""
     try:
-        from qrfield import simulation  # type: ignore[attr-defined]
+        from qrfield.simulation.combinations import load_combinations  # type: ignore[import-not-found]
     except ImportError:
         return None
-    for attr in ("combination_names", "load_combinations", "default_combinations", "COMBINATIONS"):
-        source = getattr(simulation, attr, None)
-        if source is None:
-            continue
-        try:
-            items = source() if callable(source) else source
-            names = [item if isinstance(item, str) else getattr(item, "name", None) for item in items]
-        except Exception:  # the list is optional here: free text is the documented fallback
-            return None
-        if names and all(isinstance(n, str) and n for n in names):
-            return names
-    return None
+    try:
+        names = [c.name for c in load_combinations(source)]
+    except (ValueError, OSError, AttributeError, TypeError):
+        return None
+    return names or None
