@@ -1,0 +1,337 @@
+"""Write a study's results to a folder: samples, largest-angle maps, heatmaps, summary.
+
+Files (mm and degrees throughout):
+  study.toml         the study as run (every field explicit; ``qrfield simulate study.toml`` reruns it)
+  summary.json       {"combinations": [{"name", "coverage": {solver: f}}], "mean_coverage": {solver: f},
+                     "samples", "seconds", "partial"}; coverage is a fraction 0..1 (null if nothing ran)
+  summary.md         the same as a table with the seed's 77.28 % beside it, plus the study's size
+  samples.npz        every sample (arrays named as in :class:`qrfield.simulation.runner.StudyResult`,
+                     plus max_angle_deg and sweep_end), compressed
+  samples.csv        one row per solver and sample, when the study is small (at most CSV_MAX_ROWS rows)
+  max_angles.csv     one row per solver, combination and grid point: the largest solvable angle
+  heatmaps/COMBINATION_zZ.png   per combination and z: a panel per solver
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from qrfield.simulation import heatmap
+from qrfield.simulation.runner import (
+    END_FAILED,
+    END_LIMIT,
+    END_NAMES,
+    END_NOT_RUN,
+    END_OUT_OF_VIEW,
+    NOT_RUN,
+    PASSED,
+    StudyResult,
+)
+
+#: The seed's figure: mean share of the simulated plane that converged within the criteria (percent).
+SEED_COVERAGE_PERCENT = 77.28
+#: samples.csv is written only up to this many rows (solvers x samples).
+CSV_MAX_ROWS = 200_000
+SOLVER_NOTES = {
+    "numerical": "the thesis' model as DESIGN.md reads it (seed initial guess, seed stop rule)",
+    "ippe": "OpenCV IPPE_SQUARE (closed form, both candidates ranked by reprojection error)",
+}
+
+
+def solver_note(key: str, result: StudyResult) -> str:
+    if key in SOLVER_NOTES:
+        return SOLVER_NOTES[key]
+    spec = next(s for s in result.config.solver_specs() if s.key == key)
+    if spec.method == "numerical":
+        return f"the numerical model with initial guess '{spec.settings.initial_guess}' (ours)"
+    return "OpenCV IPPE_SQUARE"
+
+
+def percent(value: float | None) -> str:
+    return "n/a" if value is None else f"{100 * value:.2f} %"
+
+
+def write_outputs(
+    result: StudyResult, out_dir: str | Path, *, csv_samples: bool = True, heatmaps: bool = True
+) -> list[Path]:
+    """Write every output file into ``out_dir`` (created if needed); returns the paths written."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    written = [
+        _write_text(out / "study.toml", result.config.to_toml()),
+        _write_text(out / "summary.json", json.dumps(result.summary(), indent=2) + "\n"),
+        _write_text(out / "summary.md", summary_markdown(result)),
+        write_npz(result, out / "samples.npz"),
+        write_max_angles_csv(result, out / "max_angles.csv"),
+    ]
+    rows = len(result.solvers) * result.poses_done
+    if csv_samples and rows <= CSV_MAX_ROWS:
+        written.append(write_samples_csv(result, out / "samples.csv"))
+    if heatmaps:
+        written += write_heatmaps(result, out / "heatmaps")
+    return written
+
+
+def _write_text(path: Path, text: str) -> Path:
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def write_npz(result: StudyResult, path: Path) -> Path:
+    best, end = result.max_angle_deg()
+    np.savez_compressed(
+        path,
+        x_mm=result.x_mm,
+        y_mm=result.y_mm,
+        z_mm=result.z_mm,
+        sweep_deg=result.sweep_deg,
+        combinations=np.array([c.name for c in result.combinations]),
+        multipliers=np.array([c.multipliers for c in result.combinations], float).reshape(-1, 3),
+        solvers=np.array(result.solvers),
+        truth_angles_deg=result.truth_angles_deg,
+        done=result.done,
+        in_view=result.in_view,
+        status=result.status,
+        position_mm=result.position_mm,
+        angles_deg=result.angles_deg,
+        converged=result.converged,
+        iterations=result.iterations,
+        position_error_mm=result.position_error_mm,
+        angle_error_deg=result.angle_error_deg,
+        max_angle_deg=best,
+        sweep_end=end,
+        seconds=np.array(result.seconds),
+        partial=np.array(result.partial),
+    )
+    return path
+
+
+STATUS_NAMES = {NOT_RUN: "not run", 0: "out of view", 1: "failed", PASSED: "passed"}
+
+
+def write_samples_csv(result: StudyResult, path: Path) -> Path:
+    """One row per solver and done sample (out-of-view samples included, with empty pose fields)."""
+    positions = result.grid_positions()
+    with path.open("w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(
+            [
+                "solver",
+                "combination",
+                "x_mm",
+                "y_mm",
+                "z_mm",
+                "t_deg",
+                "alpha_true",
+                "beta_true",
+                "gamma_true",
+                "status",
+                "x",
+                "y",
+                "z",
+                "alpha",
+                "beta",
+                "gamma",
+                "converged",
+                "iterations",
+                "position_error_mm",
+                "angle_error_deg",
+            ]
+        )
+        for s, key in enumerate(result.solvers):
+            for c, combo in enumerate(result.combinations):
+                for g in np.flatnonzero(result.done[c]):
+                    for a, t in enumerate(result.sweep_deg):
+                        st = int(result.status[s, c, g, a])
+                        pose = [*result.position_mm[s, c, g, a], *result.angles_deg[s, c, g, a]]
+                        w.writerow(
+                            [
+                                key,
+                                combo.name,
+                                *_fmt(positions[g]),
+                                f"{t:g}",
+                                *_fmt(result.truth_angles_deg[c, a]),
+                                STATUS_NAMES[st],
+                                *_fmt(pose, 4),
+                                int(result.converged[s, c, g, a]),
+                                int(result.iterations[s, c, g, a]),
+                                *_fmt(
+                                    [
+                                        result.position_error_mm[s, c, g, a],
+                                        result.angle_error_deg[s, c, g, a],
+                                    ],
+                                    4,
+                                ),
+                            ]
+                        )
+    return path
+
+
+def _fmt(values: Any, digits: int = 6) -> list[str]:
+    return ["" if not np.isfinite(v) else f"{float(v):.{digits}g}" for v in values]
+
+
+def write_max_angles_csv(result: StudyResult, path: Path) -> Path:
+    best, end = result.max_angle_deg()
+    positions = result.grid_positions()
+    with path.open("w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(["solver", "combination", "x_mm", "y_mm", "z_mm", "max_angle_deg", "sweep_end"])
+        for s, key in enumerate(result.solvers):
+            for c, combo in enumerate(result.combinations):
+                for g in range(positions.shape[0]):
+                    w.writerow(
+                        [
+                            key,
+                            combo.name,
+                            *_fmt(positions[g]),
+                            *_fmt([best[s, c, g]]),
+                            END_NAMES[int(end[s, c, g])],
+                        ]
+                    )
+    return path
+
+
+def cell_kinds(result: StudyResult, best: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """(S, C, G) str: "" (a value), or why a cell has none (see heatmap.CELL_*)."""
+    kinds = np.full(best.shape, "", dtype=object)
+    first_status = result.status[..., 0]
+    kinds[np.isnan(best) & (first_status == 0)] = heatmap.CELL_OUT_OF_VIEW
+    kinds[np.isnan(best) & (first_status == 1)] = heatmap.CELL_NONE
+    kinds[end == END_NOT_RUN] = heatmap.CELL_NOT_RUN
+    return kinds
+
+
+def write_heatmaps(result: StudyResult, folder: Path) -> list[Path]:
+    """One PNG per combination and z (a panel per solver); returns the paths."""
+    folder.mkdir(parents=True, exist_ok=True)
+    best, end = result.max_angle_deg()
+    kinds = cell_kinds(result, best, end)
+    nz, ny, nx = result.grid_shape
+    cfg = result.config
+    paths = []
+    for c, combo in enumerate(result.combinations):
+        if not result.done[c].any():
+            continue
+        for iz, z in enumerate(result.z_mm):
+            maps = [best[s, c].reshape(nz, ny, nx)[iz] for s in range(len(result.solvers))]
+            kind = [kinds[s, c].reshape(nz, ny, nx)[iz] for s in range(len(result.solvers))]
+            title = f"{combo.name} ({combo.describe()}), z = {z:g} mm: largest solvable angle t (deg)"
+            subtitle = (
+                f"{result.camera.name}, L = {cfg.side_mm:g} mm, degradation {cfg.degradation}"
+                + (f" {cfg.noise_px:g} px" if cfg.degradation == "noise" else "")
+                + f"; pass: <= {cfg.criteria.angle_deg:g} deg, < {cfg.criteria.position_mm:g} mm, "
+                f"n <= {cfg.criteria.n_max}; sweep 0..{cfg.sweep_limit_deg:g} step {cfg.sweep_step_deg:g}"
+            )
+            img = heatmap.draw_heatmap(
+                maps,
+                kind,
+                list(result.solvers),
+                result.x_mm,
+                result.y_mm,
+                cfg.sweep_limit_deg,
+                title,
+                subtitle,
+            )
+            path = folder / f"{_safe(combo.name)}_z{z:g}.png"
+            if not cv2.imwrite(str(path), img):
+                raise OSError(f"cannot write {path}")
+            paths.append(path)
+    return paths
+
+
+def _safe(name: str) -> str:
+    return "".join(ch if ch.isalnum() or ch in "+-_." else "_" for ch in name)
+
+
+def sweep_end_shares(result: StudyResult) -> dict[str, dict[str, float]]:
+    """Per solver, the share of run sweeps that reached the limit, failed, or left the view."""
+    _, end = result.max_angle_deg()
+    out = {}
+    for s, key in enumerate(result.solvers):
+        run = end[s] != END_NOT_RUN
+        n = int(run.sum())
+        out[key] = {
+            END_NAMES[code]: (float(np.count_nonzero(end[s] == code)) / n if n else 0.0)
+            for code in (END_LIMIT, END_FAILED, END_OUT_OF_VIEW)
+        }
+    return out
+
+
+def summary_markdown(result: StudyResult) -> str:
+    """summary.md: coverage table, the seed's 77.28 % beside it, size and time."""
+    cfg = result.config
+    cam = result.camera
+    summary = result.summary()
+    keys = result.solvers
+    lines = [
+        "# qrfield simulation study: summary",
+        "",
+        f"Study: {cfg.describe_size()}.",
+        f"Camera {cam.name} ({cam.width}x{cam.height}, fx {cam.fx:.1f} px), QR side {cfg.side_mm:g} mm; "
+        f"x {_range(cfg.x_range)}, y {_range(cfg.y_range)}, z {_range(cfg.z_range)} mm; "
+        f"tilt t swept 0..{cfg.sweep_limit_deg:g} deg in {cfg.sweep_step_deg:g} deg steps.",
+        f"Corners: {_degradation(cfg)}. "
+        f"Acceptance (the seed's): angle error <= {cfg.criteria.angle_deg:g} deg "
+        f"on each of alpha, beta, gamma, position error < {cfg.criteria.position_mm:g} mm, "
+        f"within n_max = {cfg.criteria.n_max} iterations.",
+        "",
+        "Coverage = share of in-view samples (grid point, swept angle) that meet the criteria; "
+        f"out-of-view samples (a vertex outside the image, the card facing away or seen more than "
+        f"{cfg.max_view_angle_deg:g} deg from its normal) are left out of the denominator. "
+        "The mean is over combinations.",
+        "",
+        "| combination | " + " | ".join(keys) + " |",
+        "|---|" + "---|" * len(keys),
+    ]
+    for entry in summary["combinations"]:
+        lines.append(f"| {entry['name']} | " + " | ".join(percent(entry["coverage"][k]) for k in keys) + " |")
+    lines.append(
+        "| **mean** | " + " | ".join(f"**{percent(summary['mean_coverage'][k])}**" for k in keys) + " |"
+    )
+    lines.append(
+        f"| seed (Teoh 2022, MATLAB, numerical model) | {SEED_COVERAGE_PERCENT:.2f} % |"
+        + " |" * (len(keys) - 1)
+    )
+    lines += ["", "Solvers:"]
+    lines += [f"- `{k}`: {solver_note(k, result)}" for k in keys]
+    lines += [
+        "",
+        "How the sweeps ended (share of sweeps: every step passed / a step failed / "
+        "the card left the view first):",
+    ]
+    for key, shares in sweep_end_shares(result).items():
+        lines.append(
+            f"- `{key}`: limit {percent(shares['limit'])}, failed {percent(shares['failed'])}, "
+            f"out of view {percent(shares['out of view'])}"
+        )
+    in_view = int(result.in_view[result.done].sum())
+    rate = summary["samples"] / result.seconds if result.seconds > 0 else 0.0
+    lines += [
+        "",
+        f"Samples: {summary['samples']} poses ({in_view} in view), each solved by {len(keys)} solvers, "
+        f"in {summary['seconds']:.1f} s ({rate:.0f} poses/s).",
+    ]
+    if result.partial:
+        lines.append(
+            "**Partial**: the run was stopped; the figures cover the grid points whose sweeps were done."
+        )
+    return "\n".join(lines) + "\n"
+
+
+def _range(r: tuple[float, float, float]) -> str:
+    return f"{r[0]:g}" if r[0] == r[1] else f"{r[0]:g}..{r[1]:g} step {r[2]:g}"
+
+
+def _degradation(cfg: Any) -> str:
+    if cfg.degradation == "round":
+        return "rounded to whole pixels"
+    if cfg.degradation == "noise":
+        return f"Gaussian noise sigma {cfg.noise_px:g} px per coordinate (seed {cfg.noise_seed})"
+    return "exact (noise-free)"
