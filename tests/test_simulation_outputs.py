@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import io
 import json
 
@@ -14,7 +15,7 @@ pytest.importorskip("qrfield.solvers", reason="the solvers (issue 3) are not mer
 from qrfield.cli import main
 from qrfield.simulation import heatmap
 from qrfield.simulation.progress import TerminalProgress
-from qrfield.simulation.runner import Progress
+from qrfield.simulation.runner import OUT_OF_VIEW, PASSED, Progress
 
 
 def test_heatmap_cells_carry_the_viridis_colour_of_their_angle():
@@ -68,6 +69,17 @@ def test_simulate_command_writes_every_output(tmp_path, capsys):
     assert summary["samples"] == 3 * 2 * 12 * 4 and summary["partial"] is False
     for name in ("summary.md", "study.toml", "samples.npz", "samples.csv", "max_angles.csv"):
         assert (out / name).is_file(), name
+    with np.load(out / "samples.npz") as npz:
+        status = npz["status"]
+        position = npz["position_mm"]
+    with (out / "samples.csv").open(encoding="utf-8") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == status.size  # one row per solver and sample
+    assert sum(r["status"] == "passed" for r in rows) == np.count_nonzero(status == PASSED)
+    assert sum(r["status"] == "out of view" for r in rows) == np.count_nonzero(status == OUT_OF_VIEW)
+    first = rows[1]  # numerical, first combination, first grid point, t = 20
+    assert [first[k] for k in ("solver", "x_mm", "z_mm", "t_deg")] == ["numerical", "-40", "250", "20"]
+    assert float(first["x"]) == pytest.approx(position[0, 0, 0, 1, 0], abs=1e-4)
     pngs = sorted((out / "heatmaps").glob("*.png"))
     assert len(pngs) == 12 * 2  # per combination and z
     assert cv2.imread(str(pngs[0])) is not None

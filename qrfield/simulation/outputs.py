@@ -29,7 +29,9 @@ from qrfield.simulation.runner import (
     END_NAMES,
     END_NOT_RUN,
     END_OUT_OF_VIEW,
+    FAILED,
     NOT_RUN,
+    OUT_OF_VIEW,
     PASSED,
     StudyResult,
 )
@@ -112,69 +114,59 @@ def write_npz(result: StudyResult, path: Path) -> Path:
     return path
 
 
-STATUS_NAMES = {NOT_RUN: "not run", 0: "out of view", 1: "failed", PASSED: "passed"}
+STATUS_NAMES = {NOT_RUN: "not run", OUT_OF_VIEW: "out of view", FAILED: "failed", PASSED: "passed"}
+
+
+SAMPLE_COLUMNS = (
+    "solver,combination,x_mm,y_mm,z_mm,t_deg,alpha_true,beta_true,gamma_true,status,"
+    "x,y,z,alpha,beta,gamma,converged,iterations,position_error_mm,angle_error_deg"
+)
+
+
+def _column(values: np.ndarray, fmt: str) -> np.ndarray:
+    """Text of a numeric column ("" for NaN), formatted by numpy in one pass."""
+    values = np.asarray(values, dtype=float)
+    text = np.char.mod(fmt, np.nan_to_num(values))
+    return np.where(np.isfinite(values), text, "")
 
 
 def write_samples_csv(result: StudyResult, path: Path) -> Path:
     """One row per solver and done sample (out-of-view samples included, with empty pose fields)."""
     positions = result.grid_positions()
-    with path.open("w", newline="", encoding="utf-8") as fh:
-        w = csv.writer(fh)
-        w.writerow(
-            [
-                "solver",
-                "combination",
-                "x_mm",
-                "y_mm",
-                "z_mm",
-                "t_deg",
-                "alpha_true",
-                "beta_true",
-                "gamma_true",
-                "status",
-                "x",
-                "y",
-                "z",
-                "alpha",
-                "beta",
-                "gamma",
-                "converged",
-                "iterations",
-                "position_error_mm",
-                "angle_error_deg",
-            ]
-        )
+    c_idx, g_idx = np.nonzero(result.done)
+    n_a = result.sweep_deg.size
+    c_all = np.repeat(c_idx, n_a)
+    g_all = np.repeat(g_idx, n_a)
+    a_all = np.tile(np.arange(n_a), c_idx.size)
+    names = np.array([c.name for c in result.combinations])
+    shared = [
+        names[c_all],
+        *(_column(positions[g_all, k], "%.6g") for k in range(3)),
+        _column(result.sweep_deg[a_all], "%.6g"),
+        *(_column(result.truth_angles_deg[c_all, a_all, k], "%.6g") for k in range(3)),
+    ]
+    status_names = np.array([STATUS_NAMES[k] for k in (NOT_RUN, 0, 1, PASSED)])
+    with path.open("w", encoding="utf-8", newline="") as fh:
+        fh.write(SAMPLE_COLUMNS + "\n")
         for s, key in enumerate(result.solvers):
-            for c, combo in enumerate(result.combinations):
-                for g in np.flatnonzero(result.done[c]):
-                    for a, t in enumerate(result.sweep_deg):
-                        st = int(result.status[s, c, g, a])
-                        pose = [*result.position_mm[s, c, g, a], *result.angles_deg[s, c, g, a]]
-                        w.writerow(
-                            [
-                                key,
-                                combo.name,
-                                *_fmt(positions[g]),
-                                f"{t:g}",
-                                *_fmt(result.truth_angles_deg[c, a]),
-                                STATUS_NAMES[st],
-                                *_fmt(pose, 4),
-                                int(result.converged[s, c, g, a]),
-                                int(result.iterations[s, c, g, a]),
-                                *_fmt(
-                                    [
-                                        result.position_error_mm[s, c, g, a],
-                                        result.angle_error_deg[s, c, g, a],
-                                    ],
-                                    4,
-                                ),
-                            ]
-                        )
+            sel = (s, c_all, g_all, a_all)
+            columns = [
+                np.full(c_all.size, key),
+                *shared,
+                status_names[result.status[sel].astype(int) + 1],
+                *(_column(result.position_mm[(*sel, k)], "%.4f") for k in range(3)),
+                *(_column(result.angles_deg[(*sel, k)], "%.4f") for k in range(3)),
+                result.converged[sel].astype(int).astype(str),
+                result.iterations[sel].astype(str),
+                _column(result.position_error_mm[sel], "%.4g"),
+                _column(result.angle_error_deg[sel], "%.4g"),
+            ]
+            rows = columns[0].astype(object)
+            for column in columns[1:]:
+                rows = rows + "," + column.astype(object)
+            if rows.size:
+                fh.write("\n".join(rows.tolist()) + "\n")
     return path
-
-
-def _fmt(values: Any, digits: int = 6) -> list[str]:
-    return ["" if not np.isfinite(v) else f"{float(v):.{digits}g}" for v in values]
 
 
 def write_max_angles_csv(result: StudyResult, path: Path) -> Path:
@@ -190,8 +182,8 @@ def write_max_angles_csv(result: StudyResult, path: Path) -> Path:
                         [
                             key,
                             combo.name,
-                            *_fmt(positions[g]),
-                            *_fmt([best[s, c, g]]),
+                            *(f"{v:g}" for v in positions[g]),
+                            "" if np.isnan(best[s, c, g]) else f"{best[s, c, g]:g}",
                             END_NAMES[int(end[s, c, g])],
                         ]
                     )
