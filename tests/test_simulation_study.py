@@ -29,15 +29,15 @@ def test_default_combinations_are_the_twelve_of_design_md():
 
 def test_default_study_is_valid_and_its_size_is_stated():
     config = load_study()
-    assert config.size() == {"grid_points": 75, "combinations": 12, "angles": 31, "poses": 27900}
+    assert config.size() == {"grid_points": 105, "combinations": 12, "angles": 46, "poses": 57960}
     assert config.solvers == ("numerical", "numerical-parallelogram", "ippe")
     assert (config.criteria.angle_deg, config.criteria.position_mm, config.criteria.n_max) == (2.0, 5.0, 30)
     specs = {s.key: s for s in config.solver_specs()}
     assert specs["numerical"].settings.initial_guess == "seed"
     assert specs["numerical-parallelogram"].settings.initial_guess == "parallelogram"
     assert specs["numerical"].settings.n_max == 30
-    np.testing.assert_allclose(config.sweep_values()[[0, 1, -1]], [0, 3, 90])
-    np.testing.assert_allclose(config.x_values(), [-80, -40, 0, 40, 80])
+    np.testing.assert_allclose(config.sweep_values()[[0, 1, -1]], [0, 2, 90])
+    np.testing.assert_allclose(config.x_values(), [-90, -60, -30, 0, 30, 60, 90])
 
 
 def test_overrides_on_the_command_line():
