@@ -65,6 +65,7 @@ def draw_heatmap(
     limit_deg: float,
     title: str,
     subtitle: str = "",
+    view_ended: list[np.ndarray] | None = None,
 ) -> np.ndarray:
     """A BGR image of one or more (ny, nx) maps of the largest solvable angle (degrees).
 
@@ -76,6 +77,8 @@ def draw_heatmap(
         x_mm, y_mm: grid values, mm (columns and rows).
         limit_deg: top of the colour scale (the sweep limit).
         title, subtitle: text above the panels.
+        view_ended: per panel, (ny, nx) bool: the sweep ended because the card left the view (not by
+            a failure); such cells get a dot in their top-right corner.
     """
     ny, nx = y_mm.size, x_mm.size
     cell = int(np.clip(400 // max(nx, ny), 22, 72))
@@ -85,7 +88,7 @@ def draw_heatmap(
     bar_w, bar_room = 18, 150
     width = left + len(maps) * panel_w + (len(maps) - 1) * gap + 40 + bar_room
     width = max(width, 560)
-    height = top + panel_h + bottom + 28
+    height = top + panel_h + bottom + 48
     img = np.full((height, width, 3), 255, np.uint8)
     _text(img, title, (12, 26), 0.62, BLACK, 1)
     if subtitle:
@@ -120,6 +123,8 @@ def draw_heatmap(
                         1,
                         "center",
                     )
+                    if view_ended is not None and view_ended[p][iy, ix]:
+                        cv2.circle(img, (p1[0] - 6, p0[1] + 6), 3, ink, -1, cv2.LINE_AA)
                 elif k == CELL_NONE:
                     _text(
                         img, "x", (p0[0] + cell // 2, p0[1] + cell // 2 + 4), value_scale, WHITE, 1, "center"
@@ -154,13 +159,17 @@ def draw_heatmap(
         tick += step
     _text(img, "deg", (bx, by0 - 10), 0.45, BLACK, 1)
     # legend
-    ly = height - 14
+    ly = height - 34
     lx = 12
     for colour, label in ((NONE_COLOUR, CELL_NONE + " (x)"), (OUT_COLOUR, CELL_OUT_OF_VIEW)):
         cv2.rectangle(img, (lx, ly - 11), (lx + 14, ly + 1), colour, -1)
         cv2.rectangle(img, (lx, ly - 11), (lx + 14, ly + 1), (90, 90, 90), 1)
         _text(img, label, (lx + 20, ly), 0.42, BLACK, 1)
         lx += 30 + cv2.getTextSize(label, FONT, 0.42, 1)[0][0]
+    if view_ended is not None:
+        ly += 20
+        cv2.circle(img, (19, ly - 5), 3, BLACK, -1, cv2.LINE_AA)
+        _text(img, "the sweep ended when the card left the view (not by a failure)", (32, ly), 0.42)
     return img
 
 

@@ -214,6 +214,9 @@ def write_heatmaps(result: StudyResult, folder: Path) -> list[Path]:
         for iz, z in enumerate(result.z_mm):
             maps = [best[s, c].reshape(nz, ny, nx)[iz] for s in range(len(result.solvers))]
             kind = [kinds[s, c].reshape(nz, ny, nx)[iz] for s in range(len(result.solvers))]
+            by_view = [
+                (end[s, c] == END_OUT_OF_VIEW).reshape(nz, ny, nx)[iz] for s in range(len(result.solvers))
+            ]
             title = f"{combo.name} ({combo.describe()}), z = {z:g} mm: largest solvable angle t (deg)"
             subtitle = (
                 f"{result.camera.name}, L = {cfg.side_mm:g} mm, degradation {cfg.degradation}"
@@ -230,6 +233,7 @@ def write_heatmaps(result: StudyResult, folder: Path) -> list[Path]:
                 cfg.sweep_limit_deg,
                 title,
                 subtitle,
+                view_ended=by_view,
             )
             path = folder / f"{_safe(combo.name)}_z{z:g}.png"
             if not cv2.imwrite(str(path), img):
