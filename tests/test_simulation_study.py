@@ -7,7 +7,7 @@ import pytest
 
 pytest.importorskip("qrfield.solvers", reason="the solvers (issue 3) are not merged yet")
 
-from qrfield.simulation import StudyError, load_study, with_overrides
+from qrfield.simulation import StudyError, config_from_dict, load_study, with_overrides
 from qrfield.simulation.combinations import CombinationError, load_combinations, parse_combinations
 
 
@@ -78,6 +78,23 @@ def test_user_file_needs_only_what_it_changes_and_paths_are_relative_to_it(tmp_p
     config = load_study(tmp_path / "study.toml")
     assert [c.name for c in config.combination_list()] == ["tilt"]
     assert config.side_mm == 30.0 and config.camera == "picam-v2@640x480"
+
+
+def test_written_study_reruns_from_another_folder(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "mine.csv").write_text("name,alpha,beta,gamma\nroll,0,0,1\n", encoding="utf-8")
+    config = load_study(overrides=["combinations=mine.csv"])
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "study.toml").write_text(config.to_toml(), encoding="utf-8")
+    again = load_study(tmp_path / "out" / "study.toml")
+    assert [c.name for c in again.combination_list()] == ["roll"]
+
+
+def test_study_from_a_dict_as_the_app_builds_it():
+    config = config_from_dict({"side_mm": 30, "criteria": {"n_max": 10}, "solvers": ["ippe"]})
+    assert config.side_mm == 30.0 and config.criteria.n_max == 10 and config.solvers == ("ippe",)
+    with pytest.raises(StudyError, match="sid_mm"):
+        config_from_dict({"sid_mm": 30})
 
 
 @pytest.mark.parametrize(

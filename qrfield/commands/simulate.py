@@ -44,6 +44,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import shlex
     import signal
     import sys
     import threading
@@ -102,6 +103,12 @@ def run(args: argparse.Namespace) -> int:
         print(f"{entry['name']:<{width}}" + "".join(f"{percent(entry['coverage'][k]):>26}" for k in keys))
     print(f"{'mean':<{width}}" + "".join(f"{percent(summary['mean_coverage'][k]):>26}" for k in keys))
     print(f"{'seed (thesis)':<{width}}{SEED_COVERAGE_PERCENT:>24.2f} %  (numerical model, MATLAB)")
-    write_outputs(result, out, csv_samples=not args.no_csv, heatmaps=not args.no_heatmaps)
+    command = ["qrfield", "simulate", *([args.study] if args.study else [])]
+    for override in args.overrides:
+        command += ["--set", override]
+    command += ["--out", str(out)]
+    write_outputs(
+        result, out, csv_samples=not args.no_csv, heatmaps=not args.no_heatmaps, command=shlex.join(command)
+    )
     print(f"wrote {out}/ (summary.md, summary.json, samples.npz, max_angles.csv, heatmaps/)", file=sys.stderr)
     return 130 if result.partial else 0

@@ -6,8 +6,16 @@ Entry points: :func:`load_study` (a TOML study plus overrides) -> :class:`StudyC
 """
 
 from qrfield.simulation.combinations import Combination, CombinationError, load_combinations
+from qrfield.simulation.outputs import write_outputs
 from qrfield.simulation.runner import Progress, StudyResult, run_study
-from qrfield.simulation.study import Criteria, StudyConfig, StudyError, load_study, with_overrides
+from qrfield.simulation.study import (
+    Criteria,
+    StudyConfig,
+    StudyError,
+    config_from_dict,
+    load_study,
+    with_overrides,
+)
 
 __all__ = [
     "Combination",
@@ -17,8 +25,10 @@ __all__ = [
     "StudyConfig",
     "StudyError",
     "StudyResult",
+    "config_from_dict",
     "load_combinations",
     "load_study",
     "run_study",
     "with_overrides",
+    "write_outputs",
 ]

@@ -60,15 +60,23 @@ def percent(value: float | None) -> str:
 
 
 def write_outputs(
-    result: StudyResult, out_dir: str | Path, *, csv_samples: bool = True, heatmaps: bool = True
+    result: StudyResult,
+    out_dir: str | Path,
+    *,
+    csv_samples: bool = True,
+    heatmaps: bool = True,
+    command: str = "",
 ) -> list[Path]:
-    """Write every output file into ``out_dir`` (created if needed); returns the paths written."""
+    """Write every output file into ``out_dir`` (created if needed); returns the paths written.
+
+    ``command``, if given, is the command line that made the study (quoted in summary.md).
+    """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     written = [
         _write_text(out / "study.toml", result.config.to_toml()),
         _write_text(out / "summary.json", json.dumps(result.summary(), indent=2) + "\n"),
-        _write_text(out / "summary.md", summary_markdown(result)),
+        _write_text(out / "summary.md", summary_markdown(result, command)),
         write_npz(result, out / "samples.npz"),
         write_max_angles_csv(result, out / "max_angles.csv"),
     ]
@@ -260,7 +268,7 @@ def sweep_end_shares(result: StudyResult) -> dict[str, dict[str, float]]:
     return out
 
 
-def summary_markdown(result: StudyResult) -> str:
+def summary_markdown(result: StudyResult, command: str = "") -> str:
     """summary.md: coverage table, the seed's 77.28 % beside it, size and time."""
     cfg = result.config
     cam = result.camera
@@ -314,6 +322,8 @@ def summary_markdown(result: StudyResult) -> str:
         f"Samples: {summary['samples']} poses ({in_view} in view), each solved by {len(keys)} solvers, "
         f"in {summary['seconds']:.1f} s ({rate:.0f} poses/s).",
     ]
+    if command:
+        lines += ["", f"Command: `{command}`"]
     if result.partial:
         lines.append(
             "**Partial**: the run was stopped; the figures cover the grid points whose sweeps were done."

@@ -18,7 +18,6 @@ point has complete sweeps.
 
 from __future__ import annotations
 
-import math
 import threading
 import time
 from collections.abc import Callable
@@ -376,7 +375,3 @@ def _run_chunk(
             arrays["angle_error_deg"][idx] = ang_err
         out.append({k: v.reshape(g, a, *v.shape[1:]) for k, v in arrays.items()})
     return in_view, out
-
-
-def finite_or_none(value: float) -> float | None:
-    return value if math.isfinite(value) else None

@@ -42,10 +42,10 @@ import numpy as np
 from qrfield.simulation.combinations import DEFAULT_NAME, Combination, load_combinations
 
 DEGRADATIONS = ("none", "round", "noise")
-#: Most values along one grid axis or sweep, and most poses in one study (memory: ~70 bytes per
-#: pose and solver are kept).
+#: Most values along one grid axis or sweep, and most poses in one study (memory: about 70 bytes
+#: per pose and solver are kept, so 2 million poses and 3 solvers take about 420 MB).
 MAX_AXIS_VALUES = 10_000
-MAX_POSES = 5_000_000
+MAX_POSES = 2_000_000
 #: Top-level scalar fields and their kinds; "criteria" and "solver" are tables.
 FIELDS = {
     "camera": "str",
@@ -313,6 +313,20 @@ def _resolve_paths(data: dict[str, Any], folder: Path) -> dict[str, Any]:
     return data
 
 
+def _absolute_paths(values: Mapping[str, Any]) -> dict[str, str]:
+    """combinations and a camera JSON as absolute paths, so that a written study.toml reruns anywhere."""
+    out = {}
+    combos = values["combinations"]
+    if combos != DEFAULT_NAME:
+        out["combinations"] = str(Path(combos).expanduser().resolve())
+    base, at, size = (
+        values["camera"].rpartition("@") if "@" in values["camera"] else (values["camera"], "", "")
+    )
+    if base.endswith(".json"):
+        out["camera"] = str(Path(base).expanduser().resolve()) + (f"@{size}" if at else "")
+    return out
+
+
 def merge(base: dict[str, Any], extra: Mapping[str, Any]) -> dict[str, Any]:
     """``base`` with ``extra`` laid over it; tables merge key by key (solver.KEY tables too)."""
     out = copy.deepcopy(base)
@@ -392,6 +406,7 @@ def build_config(raw: Mapping[str, Any], where: str = "study") -> StudyConfig:
         if name not in raw:
             raise StudyError(f"{where}: field {name!r} is missing")
         values[name] = _validate(name, kind, raw[name], where)
+    values.update(_absolute_paths(values))
     criteria_raw = dict(raw.get("criteria", {}))
     for name in criteria_raw:
         if name not in CRITERIA_FIELDS:
