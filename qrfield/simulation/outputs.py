@@ -289,7 +289,9 @@ def summary_markdown(result: StudyResult, command: str = "") -> str:
         "Coverage = share of in-view samples (grid point, swept angle) that meet the criteria; "
         f"out-of-view samples (a vertex outside the image, the card facing away or seen more than "
         f"{cfg.max_view_angle_deg:g} deg from its normal) are left out of the denominator. "
-        "The mean is over combinations.",
+        "The mean is over combinations. The largest solvable angle (heatmaps/, max_angles.csv) of a grid "
+        "point is the largest t such that every step 0..t met the criteria: its sweep stops at the first "
+        "failure, or when the card leaves the view.",
         "",
         "| combination | " + " | ".join(keys) + " |",
         "|---|" + "---|" * len(keys),
