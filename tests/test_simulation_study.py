@@ -9,6 +9,7 @@ pytest.importorskip("qrfield.solvers", reason="the solvers (issue 3) are not mer
 
 from qrfield.simulation import StudyError, config_from_dict, load_study, with_overrides
 from qrfield.simulation.combinations import CombinationError, load_combinations, parse_combinations
+from qrfield.simulation.study import field_specs
 
 
 def test_default_combinations_are_the_twelve_of_design_md():
@@ -90,6 +91,15 @@ def test_written_study_reruns_from_another_folder(tmp_path, monkeypatch):
     assert [c.name for c in again.combination_list()] == ["roll"]
 
 
+def test_field_specs_carry_units_limits_and_the_shipped_defaults():
+    specs = {s.name: s for s in field_specs()}
+    assert specs["side_mm"].unit == "mm" and specs["side_mm"].default == 50.0
+    assert specs["degradation"].choices == ("none", "round", "noise")
+    assert specs["criteria.n_max"].default == 30 and specs["criteria.angle_deg"].unit == "deg"
+    assert specs["max_view_angle_deg"].maximum == 90.0
+    assert "x_range" not in specs  # ranges are [start, stop, step], not scalar settings
+
+
 def test_study_from_a_dict_as_the_app_builds_it():
     config = config_from_dict({"side_mm": 30, "criteria": {"n_max": 10}, "solvers": ["ippe"]})
     assert config.side_mm == 30.0 and config.criteria.n_max == 10 and config.solvers == ("ippe",)
@@ -108,7 +118,9 @@ def test_study_from_a_dict_as_the_app_builds_it():
         ("z_range = [-100.0, 100.0, 100.0]\n", ["z_range", "front of the camera"]),
         ('degradation = "blur"\n', ["degradation", "none, round, noise"]),
         ("noise_px = 0.5\n", ["noise_px", "degradation"]),
-        ("sweep_limit_deg = 200.0\n", ["sweep_limit_deg"]),
+        ("sweep_limit_deg = 200.0\n", ["sweep_limit_deg", "above the maximum 180"]),
+        ("noise_seed = 1.5\n", ["noise_seed", "whole number"]),
+        ('camera = ""\n', ["camera", "empty"]),
         ('solvers = ["numerical", "epnp"]\n', ["solvers", "epnp"]),
         ('solvers = ["numerical-fancy"]\n', ["numerical-fancy", "initial guess"]),
         ("[solver.numerical]\ntff = 0.5\n", ["solver.numerical.tff", "tf"]),
@@ -116,7 +128,7 @@ def test_study_from_a_dict_as_the_app_builds_it():
         ("[solver.numerical]\nn_max = 10\n", ["solver.numerical.n_max", "criteria.n_max"]),
         ('camera = "no-such-camera"\n', ["camera", "no-such-camera"]),
         ('combinations = "missing.csv"\n', ["combinations", "missing.csv"]),
-        ("side_mm = -5\n", ["side_mm", "positive"]),
+        ("side_mm = -5\n", ["side_mm", "below the minimum"]),
         ("side_mm = \n", ["not valid TOML"]),
     ],
 )
@@ -137,7 +149,7 @@ def test_bad_study_file_names_the_field(tmp_path, text, words):
         ("side_mm", ["FIELD=VALUE"]),
         ("criteria=1", ["criteria.FIELD=VALUE"]),
         ("solver.numerical=1", ["solver.KEY.FIELD"]),
-        ("sweep_step_deg=0", ["sweep_step_deg", "positive"]),
+        ("sweep_step_deg=0", ["sweep_step_deg", "below the minimum"]),
     ],
 )
 def test_bad_override_names_the_field(override, words):

@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from qrfield.settings import SettingError, SettingSpec
 from qrfield.simulation.combinations import DEFAULT_NAME, Combination, load_combinations
 
 DEGRADATIONS = ("none", "round", "noise")
@@ -46,23 +47,63 @@ DEGRADATIONS = ("none", "round", "noise")
 #: per pose and solver are kept, so 2 million poses and 3 solvers take about 420 MB).
 MAX_AXIS_VALUES = 10_000
 MAX_POSES = 2_000_000
-#: Top-level scalar fields and their kinds; "criteria" and "solver" are tables.
-FIELDS = {
-    "camera": "str",
-    "side_mm": "positive",
+#: Every top-level field: a SettingSpec (type, unit, limits, help: validation and the app's widgets),
+#: or "range" ([start, stop, step] in mm) or "list" (solver keys). "criteria" and "solver" are tables.
+#: Defaults live in the shipped study (see :func:`field_specs`).
+FIELDS: dict[str, SettingSpec | str] = {
+    "camera": SettingSpec("camera", str, None, "camera", help="profile NAME[@WxH] or PATH.json[@WxH]"),
+    "side_mm": SettingSpec(
+        "side_mm", float, None, "QR side L", "mm", 0.001, 100_000.0, help="symbol side, quiet zone excluded"
+    ),
     "x_range": "range",
     "y_range": "range",
     "z_range": "range",
-    "combinations": "str",
-    "sweep_limit_deg": "positive",
-    "sweep_step_deg": "positive",
-    "max_view_angle_deg": "positive",
-    "degradation": "str",
-    "noise_px": "nonnegative",
-    "noise_seed": "int",
+    "combinations": SettingSpec(
+        "combinations", str, None, "combinations", help='"default" (the shipped 12) or a CSV file'
+    ),
+    "sweep_limit_deg": SettingSpec(
+        "sweep_limit_deg", float, None, "sweep limit", "deg", 0.001, 180.0, help="largest swept tilt t"
+    ),
+    "sweep_step_deg": SettingSpec(
+        "sweep_step_deg", float, None, "sweep step", "deg", 0.001, 180.0, help="tilt step from 0"
+    ),
+    "max_view_angle_deg": SettingSpec(
+        "max_view_angle_deg",
+        float,
+        None,
+        "largest view angle",
+        "deg",
+        0.001,
+        90.0,
+        help="beyond this angle between the card's normal and the line of sight the card is out of view",
+    ),
+    "degradation": SettingSpec(
+        "degradation",
+        str,
+        None,
+        "corner degradation",
+        choices=DEGRADATIONS,
+        help="none, round (to whole pixels) or noise (Gaussian)",
+    ),
+    "noise_px": SettingSpec(
+        "noise_px", float, None, "noise sigma", "px", 0.0, 100.0, help="per coordinate, degradation = noise"
+    ),
+    "noise_seed": SettingSpec(
+        "noise_seed", int, None, "noise seed", "", 0, 2**32 - 1, help="repeatable noise"
+    ),
     "solvers": "list",
 }
-CRITERIA_FIELDS = {"angle_deg": "positive", "position_mm": "positive", "n_max": "count"}
+CRITERIA_FIELDS: dict[str, SettingSpec] = {
+    "angle_deg": SettingSpec(
+        "angle_deg", float, None, "angle error", "deg", 1e-6, 180.0, help="on each of alpha, beta, gamma (<=)"
+    ),
+    "position_mm": SettingSpec(
+        "position_mm", float, None, "position error", "mm", 1e-6, 1e6, help="Euclidean (strictly below)"
+    ),
+    "n_max": SettingSpec(
+        "n_max", int, None, "n_max", "iterations", 1, 10_000, help="also the numerical solvers' n_max"
+    ),
+}
 TABLES = ("criteria", "solver")
 
 
@@ -432,12 +473,18 @@ def build_config(raw: Mapping[str, Any], where: str = "study") -> StudyConfig:
     return config
 
 
-def _validate(name: str, kind: str, value: Any, where: str) -> Any:
+def _validate(name: str, kind: SettingSpec | str, value: Any, where: str) -> Any:
     label = f"{where}: field {name!r}"
-    if kind == "str":
-        if not isinstance(value, str) or not value.strip():
-            raise StudyError(f"{label} must be text, got {value!r}")
-        return value.strip()
+    if isinstance(kind, SettingSpec):
+        try:
+            value = kind.validate(value)
+        except SettingError as exc:
+            raise StudyError(f"{label}: {str(exc).partition(': ')[2]}") from None
+        if kind.type is str:
+            value = value.strip()
+            if not value:
+                raise StudyError(f"{label} must not be empty")
+        return value
     if kind == "list":
         if isinstance(value, str):
             value = [value]
@@ -461,19 +508,20 @@ def _validate(name: str, kind: str, value: Any, where: str) -> Any:
         if (stop - start) / step + 1 > MAX_AXIS_VALUES:
             raise StudyError(f"{label}: more than {MAX_AXIS_VALUES} values; use a larger step")
         return (start, stop, step)
-    if kind in ("positive", "nonnegative"):
-        if not _is_number(value) or not math.isfinite(float(value)):
-            raise StudyError(f"{label} must be a number, got {value!r}")
-        if (kind == "positive" and float(value) <= 0) or float(value) < 0:
-            raise StudyError(f"{label} must be {'positive' if kind == 'positive' else '>= 0'}, got {value!r}")
-        return float(value)
-    if kind in ("int", "count"):
-        if not _is_number(value) or float(value) != int(value):
-            raise StudyError(f"{label} must be a whole number, got {value!r}")
-        if kind == "count" and int(value) < 1:
-            raise StudyError(f"{label} must be at least 1, got {value!r}")
-        return int(value)
     raise AssertionError(kind)  # pragma: no cover
+
+
+def field_specs() -> list[SettingSpec]:
+    """SettingSpecs of the study's scalar fields and criteria ("criteria.NAME"), with the shipped
+    defaults: for the app's widgets. The ranges (x_range, y_range, z_range: [start, stop, step] mm)
+    and the solver list are not scalar settings and are not included."""
+    raw = _read_toml(default_study_path())
+    out = [replace(spec, default=raw[name]) for name, spec in FIELDS.items() if isinstance(spec, SettingSpec)]
+    out += [
+        replace(spec, name=f"criteria.{name}", default=raw["criteria"][name])
+        for name, spec in CRITERIA_FIELDS.items()
+    ]
+    return out
 
 
 def _is_number(value: Any) -> bool:
@@ -481,10 +529,6 @@ def _is_number(value: Any) -> bool:
 
 
 def _check_consistency(c: StudyConfig, where: str) -> None:
-    if c.degradation not in DEGRADATIONS:
-        raise StudyError(
-            f"{where}: field 'degradation' must be one of {', '.join(DEGRADATIONS)}, got {c.degradation!r}"
-        )
     if c.degradation == "noise" and c.noise_px <= 0:
         raise StudyError(f"{where}: field 'noise_px' must be positive with degradation = noise")
     if c.degradation != "noise" and c.noise_px != 0:
@@ -494,16 +538,10 @@ def _check_consistency(c: StudyConfig, where: str) -> None:
         )
     if c.z_range[0] <= 0:
         raise StudyError(f"{where}: field 'z_range' must lie in front of the camera (start > 0 mm)")
-    if c.sweep_limit_deg > 180:
-        raise StudyError(f"{where}: field 'sweep_limit_deg' must be at most 180, got {c.sweep_limit_deg:g}")
     if c.sweep_step_deg > c.sweep_limit_deg:
         raise StudyError(
             f"{where}: field 'sweep_step_deg' ({c.sweep_step_deg:g}) is above sweep_limit_deg "
             f"({c.sweep_limit_deg:g})"
-        )
-    if c.max_view_angle_deg > 90:
-        raise StudyError(
-            f"{where}: field 'max_view_angle_deg' must be at most 90, got {c.max_view_angle_deg:g}"
         )
     try:
         c.camera_model()
