@@ -242,7 +242,8 @@ def _text(value):
     return str(value).lower() if isinstance(value, bool) else str(value)
 
 
-def test_stop_midway_leaves_a_partial_but_valid_output(tmp_path, monkeypatch):
+@pytest.mark.parametrize("kind", ["event", "callable"])
+def test_stop_midway_leaves_a_partial_but_valid_output(tmp_path, monkeypatch, kind):
     monkeypatch.setattr(runner, "CHUNK_POSES", 8)
     config = _study(tmp_path, "alpha,1,0,0\nbeta,0,1,0\n", "x_range=-40,40,40", "y_range=-30,30,30",
                     "z_range=300", "sweep_limit_deg=30", "sweep_step_deg=10",
@@ -257,7 +258,8 @@ def test_stop_midway_leaves_a_partial_but_valid_output(tmp_path, monkeypatch):
         if len(progress) == 3:
             stop.set()  # as the app's Stop button or Ctrl-C would, between chunks
 
-    result = run_study(config, progress=on_progress, stop=stop, solve_fn=stand_in)
+    stopper = stop if kind == "event" else (lambda: len(progress) >= 3)
+    result = run_study(config, progress=on_progress, stop=stopper, solve_fn=stand_in)
     assert result.partial
     assert 0 < result.done.sum() < result.done.size
     assert result.poses_done == progress[-1].done_poses == 3 * 2 * 4  # 3 chunks of 2 grid points
