@@ -303,42 +303,39 @@ def _refine(
     threshold = 0.5 * (quiet + level_dark)
     below = values < threshold[:, :, None]
     first = np.maximum(np.argmax(below, axis=2), 1)
-    valid = below.any(axis=2) & ~below[:, :, 0] & np.isfinite(quiet) & (quiet - level_dark > 12.0)
+    # (NaN, outside the image, compares False: such profiles are not valid)
+    valid = below.any(axis=2) & ~below[:, :, 0] & (quiet - level_dark > 12.0)
     flat_index = _row_starts(first.shape, values.shape[2]) + first
     v_out = values.reshape(-1)[flat_index - 1]
     v_in = values.reshape(-1)[flat_index]
-    with np.errstate(invalid="ignore", divide="ignore"):
+    with np.errstate(invalid="ignore", divide="ignore"):  # flat or outside profiles: dropped below
         crossing = offsets[first - 1] - (v_out - threshold) / (v_out - v_in) * PROFILE_STEP_PX
-    crossing = np.where(valid, crossing, 0.0)
+        crossing = np.where(valid, crossing, 0.0)
 
-    # Pass 2: the crossing of the half level is pixel-locked (biased by up to 0.1 px by the pixels'
-    # area sampling); the area under the normalised darkness profile around it is not: for a step
-    # at e blurred by any symmetric kernel, the integral of darkness over [c - h, c + h] = e - (c - h).
-    half = np.clip(0.45 * across_px, 1.0, 2.5)[:, None]
-    t = _unit_steps(AREA_SAMPLES) * 2.0 - 1.0
-    window_offsets = crossing[:, :, None] + half[:, :, None] * t[None, None, :]
-    window = base[:, :, None, :] + window_offsets[..., None] * normals[:, None, None, :]
-    seen = _as_seen(sample_bilinear(grey, window), inverted)
-    with np.errstate(invalid="ignore", divide="ignore"):  # profiles without contrast: dropped below
+        # Pass 2: the crossing of the half level is pixel-locked (biased by up to 0.1 px by the
+        # pixels' area sampling); the area under the normalised darkness profile around it is not:
+        # for a step at e blurred by any symmetric kernel, the integral of darkness over
+        # [c - h, c + h] = e - (c - h).
+        half = np.clip(0.45 * across_px, 1.0, 2.5)[:, None]
+        t = _unit_steps(AREA_SAMPLES) * 2.0 - 1.0
+        window_offsets = crossing[:, :, None] + half[:, :, None] * t[None, None, :]
+        window = base[:, :, None, :] + window_offsets[..., None] * normals[:, None, None, :]
+        seen = _as_seen(sample_bilinear(grey, window), inverted)
         darkness = (quiet[:, :, None] - seen) / (quiet - level_dark)[:, :, None]
-        trapezoid = darkness[:, :, 1:-1].sum(axis=2) + 0.5 * (darkness[:, :, 0] + darkness[:, :, -1])
+        inner, outer = darkness[:, :, 0], darkness[:, :, -1]
+        trapezoid = darkness.sum(axis=2) - 0.5 * (inner + outer)
         edge = crossing - half + (2.0 * half / (AREA_SAMPLES - 1)) * trapezoid
-    # Clean steps (fully dark inside and fully light outside the window) take the area estimate.
-    # With small modules (2-3 px) blur keeps the window from saturating: there the half-level
-    # crossing stands in, if the inside is clearly dark. A profile that grazes the corner of a dark
-    # module beside a light boundary module is neither and is dropped.
-    with np.errstate(invalid="ignore"):
-        clean = (
-            np.isfinite(edge)
-            & (np.abs(edge - crossing) < 0.5)
-            & (darkness[:, :, 0] > 1.0 - CLEAN_STEP)
-            & (np.abs(darkness[:, :, -1]) < CLEAN_STEP)
-        )
-        fallback = (
-            (across_px < 3.5)[:, None] & (darkness[:, :, 0] > 0.6) & (np.abs(darkness[:, :, -1]) < 0.25)
-        )
-    edge = np.where(clean, edge, crossing)
-    valid &= clean | fallback
+        # Clean steps (fully dark inside and fully light outside the window) take the area
+        # estimate. With small modules (2-3 px) blur keeps the window from saturating: there the
+        # half-level crossing stands in, if the inside is clearly dark. A profile that grazes the
+        # corner of a dark module beside a light boundary module is neither and is dropped.
+        clean = (np.abs(edge - crossing) < 0.5) & (inner > 1.0 - CLEAN_STEP) & (np.abs(outer) < CLEAN_STEP)
+        if across_px.min() < 3.5:
+            fallback = (across_px < 3.5)[:, None] & (inner > 0.6) & (np.abs(outer) < 0.25)
+            edge = np.where(clean, edge, crossing)
+            valid &= clean | fallback
+        else:
+            valid &= clean
     found = valid.sum(axis=1)
     if found.min() < max(6, k // 5):
         worst = int(np.argmin(found))
