@@ -14,6 +14,7 @@ from pathlib import Path
 from qrfield.camera import CameraModel, resolve_camera
 from qrfield.sources.base import EndOfStream, Frame, FrameSource, Pacer, SourceError
 from qrfield.sources.folder import ImageFolderSource
+from qrfield.sources.latest import LatestFrameReader
 from qrfield.sources.opencv import UsbCameraSource, VideoFileSource
 from qrfield.sources.picamera import PICAMERA2_MISSING, Picamera2Settings, Picamera2Source
 from qrfield.sources.virtual import VirtualBenchSettings, VirtualBenchSource
@@ -25,6 +26,7 @@ __all__ = [
     "Frame",
     "FrameSource",
     "ImageFolderSource",
+    "LatestFrameReader",
     "Pacer",
     "Picamera2Settings",
     "Picamera2Source",
