@@ -77,9 +77,7 @@ class CameraModel:
 
     # ------------------------------------------------------------------ constructors
     @classmethod
-    def from_focal(
-        cls, focal_px: float, width: int, height: int, name: str = "focal-only"
-    ) -> CameraModel:
+    def from_focal(cls, focal_px: float, width: int, height: int, name: str = "focal-only") -> CameraModel:
         """The thesis' minimal model: one focal length (px), principal point at the image centre."""
         return cls(
             fx=focal_px,
@@ -111,30 +109,35 @@ class CameraModel:
         for key in ("width", "height"):
             if values[key] != int(values[key]) or values[key] <= 0:
                 raise CameraModelError(
-                    f"{where}: field '{key}' must be a positive whole number of pixels, "
-                    f"got {values[key]!r}"
+                    f"{where}: field '{key}' must be a positive whole number of pixels, got {values[key]!r}"
                 )
         dist = data.get("dist", [0.0] * 5)
         try:
             dist_arr = np.asarray(dist, dtype=float).reshape(-1)
         except (TypeError, ValueError):
-            raise CameraModelError(
-                f"{where}: field 'dist' must be a list of numbers, got {dist!r}"
-            ) from None
+            raise CameraModelError(f"{where}: field 'dist' must be a list of numbers, got {dist!r}") from None
         if not np.all(np.isfinite(dist_arr)):
             raise CameraModelError(f"{where}: field 'dist' has a non-finite value: {dist!r}")
-        _validate(values["fx"], values["fy"], values["cx"], values["cy"], int(values["width"]), int(values["height"]), where)
+        _validate(
+            values["fx"],
+            values["fy"],
+            values["cx"],
+            values["cy"],
+            int(values["width"]),
+            int(values["height"]),
+            where,
+        )
         return cls(
-                fx=values["fx"],
-                fy=values["fy"],
-                cx=values["cx"],
-                cy=values["cy"],
-                width=int(values["width"]),
-                height=int(values["height"]),
-                dist=dist_arr,
-                name=str(data.get("name", "custom")),
-                notes=str(data.get("notes", "")),
-            )
+            fx=values["fx"],
+            fy=values["fy"],
+            cx=values["cx"],
+            cy=values["cy"],
+            width=int(values["width"]),
+            height=int(values["height"]),
+            dist=dist_arr,
+            name=str(data.get("name", "custom")),
+            notes=str(data.get("notes", "")),
+        )
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> CameraModel:
@@ -151,9 +154,7 @@ class CameraModel:
         try:
             data = json.loads(text)
         except json.JSONDecodeError as exc:
-            raise CameraModelError(
-                f"camera file {path}: not JSON ({exc.msg} at line {exc.lineno})"
-            ) from None
+            raise CameraModelError(f"camera file {path}: not JSON ({exc.msg} at line {exc.lineno})") from None
         if isinstance(data, dict) and "name" not in data:
             data = {**data, "name": path.stem}
         return cls.from_dict(data, where=f"camera file {path}")
@@ -245,7 +246,9 @@ def _validate(fx: float, fy: float, cx: float, cy: float, width: int, height: in
         raise CameraModelError(f"{where}: image size {width}x{height} must be positive")
     for key, value in (("fx", fx), ("fy", fy)):
         if not math.isfinite(value) or value <= 0:
-            raise CameraModelError(f"{where}: field '{key}' must be a positive focal length in pixels, got {value!r}")
+            raise CameraModelError(
+                f"{where}: field '{key}' must be a positive focal length in pixels, got {value!r}"
+            )
     if not (-0.5 <= cx <= width - 0.5):
         raise CameraModelError(
             f"{where}: field 'cx' = {cx!r} puts the principal point outside the {width}-pixel-wide image"

@@ -20,7 +20,11 @@ from qrfield.camera import CameraModelError
 
 def command_names() -> list[str]:
     """Subcommand names: the modules of qrfield.commands, ``_`` spelled ``-``."""
-    return sorted(m.name.replace("_", "-") for m in pkgutil.iter_modules(commands.__path__) if not m.name.startswith("_"))
+    return sorted(
+        m.name.replace("_", "-")
+        for m in pkgutil.iter_modules(commands.__path__)
+        if not m.name.startswith("_")
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:

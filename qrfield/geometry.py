@@ -47,7 +47,7 @@ def rotation_matrix(angles_deg: np.ndarray | list[float] | tuple[float, ...]) ->
     ca, sa = np.cos(a[..., 0]), np.sin(a[..., 0])
     cb, sb = np.cos(a[..., 1]), np.sin(a[..., 1])
     cg, sg = np.cos(a[..., 2]), np.sin(a[..., 2])
-    r = np.empty(a.shape[:-1] + (3, 3))
+    r = np.empty((*a.shape[:-1], 3, 3))
     # Multiplied out by hand so that batches of a million poses cost one pass of numpy.
     r[..., 0, 0] = cb * cg
     r[..., 0, 1] = -cb * sg
@@ -155,7 +155,9 @@ class Pose:
         pos = np.asarray(self.position_mm, dtype=float).reshape(-1)
         ang = np.asarray(self.angles_deg, dtype=float).reshape(-1)
         if pos.shape != (3,) or ang.shape != (3,):
-            raise ValueError(f"a pose needs 3 position values (mm) and 3 angles (deg), got {pos.size} and {ang.size}")
+            raise ValueError(
+                f"a pose needs 3 position values (mm) and 3 angles (deg), got {pos.size} and {ang.size}"
+            )
         if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(ang))):
             raise ValueError("a pose must be finite")
         object.__setattr__(self, "position_mm", pos)
@@ -175,7 +177,9 @@ class Pose:
         """Parse ``X,Y,Z,ALPHA,BETA,GAMMA`` (mm and degrees)."""
         parts = [p for p in text.replace(" ", "").split(",") if p != ""]
         if len(parts) != 6:
-            raise ValueError(f"pose {text!r}: expected 6 comma-separated numbers X,Y,Z,ALPHA,BETA,GAMMA (mm, degrees)")
+            raise ValueError(
+                f"pose {text!r}: expected 6 comma-separated numbers X,Y,Z,ALPHA,BETA,GAMMA (mm, degrees)"
+            )
         try:
             values = [float(p) for p in parts]
         except ValueError:

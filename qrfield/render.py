@@ -100,7 +100,7 @@ def _ideal_pixel_map(camera: CameraModel) -> tuple[np.ndarray, np.ndarray]:
     u, v = np.meshgrid(np.arange(camera.width, dtype=np.float64), np.arange(camera.height, dtype=np.float64))
     pts = np.stack([u.ravel(), v.ravel()], axis=-1).reshape(-1, 1, 2)
     criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-10)
-    ideal = cv2.undistortPointsIter(pts, camera.K, camera.dist, None, camera.K, criteria)
+    ideal = cv2.undistortPoints(pts, camera.K, camera.dist, None, None, camera.K, criteria)
     ideal = ideal.reshape(camera.height, camera.width, 2).astype(np.float32)
     return ideal[..., 0].copy(), ideal[..., 1].copy()
 
@@ -277,7 +277,9 @@ def _draw_card(
     )
     r = pose.rotation
     plane_to_px = camera.K @ np.column_stack([r[:, 0], r[:, 1], pose.position_mm])
-    px_to_roi = np.array([[ss, 0.0, ss * (0.5 - x0) - 0.5], [0.0, ss, ss * (0.5 - y0) - 0.5], [0.0, 0.0, 1.0]])
+    px_to_roi = np.array(
+        [[ss, 0.0, ss * (0.5 - x0) - 0.5], [0.0, ss, ss * (0.5 - y0) - 0.5], [0.0, 0.0, 1.0]]
+    )
     homography = px_to_roi @ plane_to_px @ texel_to_mm
     roi = canvas[y0:y1, x0:x1]
     roi_ss = cv2.resize(roi, ((x1 - x0) * ss, (y1 - y0) * ss), interpolation=cv2.INTER_NEAREST)
@@ -295,7 +297,9 @@ def _draw_card(
         roi[:] = roi_ss
 
 
-def _degrade(image: np.ndarray, noise_sigma: float, blur_px: float, gradient: float, seed: int | None) -> np.ndarray:
+def _degrade(
+    image: np.ndarray, noise_sigma: float, blur_px: float, gradient: float, seed: int | None
+) -> np.ndarray:
     """Blur, then brightness gradient, then Gaussian noise; returns uint8."""
     for name, value in (("noise_sigma", noise_sigma), ("blur_px", blur_px), ("gradient", gradient)):
         if not math.isfinite(value) or value < 0:
@@ -308,6 +312,10 @@ def _degrade(image: np.ndarray, noise_sigma: float, blur_px: float, gradient: fl
     if gradient > 0:
         out *= 1.0 + np.float32(gradient) * _gradient_ramp(image.shape[1], image.shape[0])
     if noise_sigma > 0:
-        rng = np.random.default_rng(seed)
-        out += rng.standard_normal(out.shape, dtype=np.float32) * np.float32(noise_sigma)
+        # OpenCV's generator is 4x faster than numpy's here; it is per thread, so seeding it
+        # makes the image repeatable without touching other threads.
+        cv2.setRNGSeed(int(seed) if seed is not None else int(np.random.SeedSequence().entropy % 2**31))
+        noise = np.empty(out.shape, np.float32)
+        cv2.randn(noise, 0.0, float(noise_sigma))
+        out += noise
     return np.clip(out + 0.5, 0, 255).astype(np.uint8)

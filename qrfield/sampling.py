@@ -1,7 +1,8 @@
 """Seeded random poses in the workspace, for tests, benchmarks and the simulation.
 
-Tilt is the angle between the card's normal and the camera's optical axis; the in-plane rotation
-(about the card's normal) is uniform over the full turn.
+Tilt is the angle between the card's normal and the camera's optical axis (``tilt_from="axis"``,
+the angles' own reference) or the line of sight to the card's centre (``"line_of_sight"``, what a
+detector sees: foreshortening); the in-plane rotation about the normal is uniform over the full turn.
 """
 
 from __future__ import annotations
@@ -16,6 +17,15 @@ def _axis_angle(axis: np.ndarray, angle_rad: float) -> np.ndarray:
     kx, ky, kz = axis / np.linalg.norm(axis)
     k = np.array([[0, -kz, ky], [kz, 0, -kx], [-ky, kx, 0]])
     return np.eye(3) + np.sin(angle_rad) * k + (1 - np.cos(angle_rad)) * (k @ k)
+
+
+def _align_z(direction: np.ndarray) -> np.ndarray:
+    """The smallest rotation taking +Z to ``direction``."""
+    d = direction / np.linalg.norm(direction)
+    axis = np.cross([0.0, 0.0, 1.0], d)
+    if np.linalg.norm(axis) < 1e-12:
+        return np.eye(3)
+    return _axis_angle(axis, float(np.arccos(np.clip(d[2], -1.0, 1.0))))
 
 
 def random_tilted_rotation(rng: np.random.Generator, max_tilt_deg: float) -> np.ndarray:
@@ -34,6 +44,7 @@ def random_visible_poses(
     z_range_mm: tuple[float, float] = (150.0, 800.0),
     max_tilt_deg: float = 50.0,
     margin_px: float = 8.0,
+    tilt_from: str = "axis",
 ) -> list[Pose]:
     """``count`` seeded poses whose four vertices lie at least ``margin_px`` inside the image.
 
@@ -41,6 +52,8 @@ def random_visible_poses(
     """
     from qrfield.render import RenderError, check_view
 
+    if tilt_from not in ("axis", "line_of_sight"):
+        raise ValueError(f"tilt_from must be 'axis' or 'line_of_sight', got {tilt_from!r}")
     rng = np.random.default_rng(seed)
     poses: list[Pose] = []
     attempts = 0
@@ -57,6 +70,8 @@ def random_visible_poses(
         x = rng.uniform(-half_w, half_w) + (camera.width / 2 - 0.5 - camera.cx) * z / camera.fx
         y = rng.uniform(-half_h, half_h) + (camera.height / 2 - 0.5 - camera.cy) * z / camera.fy
         rotation = random_tilted_rotation(rng, max_tilt_deg)
+        if tilt_from == "line_of_sight":
+            rotation = _align_z(np.array([x, y, z])) @ rotation
         pose = Pose(np.array([x, y, z]), angles_from_rotation(rotation))
         try:
             corners = check_view(camera, side_mm, pose)

@@ -65,7 +65,16 @@ class SettingSpec:
         if self.type is bool:
             if isinstance(value, bool):
                 return value
-            if isinstance(value, str) and value.strip().lower() in ("1", "true", "yes", "on", "0", "false", "no", "off"):
+            if isinstance(value, str) and value.strip().lower() in (
+                "1",
+                "true",
+                "yes",
+                "on",
+                "0",
+                "false",
+                "no",
+                "off",
+            ):
                 return value.strip().lower() in ("1", "true", "yes", "on")
             if isinstance(value, int) and value in (0, 1):
                 return bool(value)
@@ -91,9 +100,13 @@ class SettingSpec:
                 number = int(number)
             unit = f" {self.unit}" if self.unit else ""
             if self.minimum is not None and number < self.minimum:
-                raise SettingError(f"setting {name}: {number}{unit} is below the minimum {self.minimum}{unit}")
+                raise SettingError(
+                    f"setting {name}: {number}{unit} is below the minimum {self.minimum}{unit}"
+                )
             if self.maximum is not None and number > self.maximum:
-                raise SettingError(f"setting {name}: {number}{unit} is above the maximum {self.maximum}{unit}")
+                raise SettingError(
+                    f"setting {name}: {number}{unit} is above the maximum {self.maximum}{unit}"
+                )
             return number
         raise SettingError(f"setting {name}: unsupported type {self.type!r}")
 
@@ -139,7 +152,10 @@ def specs(cls_or_instance: Any) -> list[SettingSpec]:
 
 def validated(instance: T) -> T:
     """Check every field of a settings instance; returns it (coerced) or raises SettingError."""
-    changes = {spec.name: spec.validate(getattr(instance, spec.name), where=f"{type(instance).__name__}.") for spec in specs(instance)}
+    changes = {
+        spec.name: spec.validate(getattr(instance, spec.name), where=f"{type(instance).__name__}.")
+        for spec in specs(instance)
+    }
     return dataclasses.replace(instance, **changes)  # type: ignore[type-var]
 
 
@@ -157,8 +173,14 @@ def from_dict(cls: type[T], data: dict[str, Any] | None, *, strict: bool = True)
     known = {spec.name: spec for spec in specs(cls)}
     unknown = sorted(set(data) - set(known))
     if unknown and strict:
-        raise SettingError(f"{cls.__name__}: unknown setting(s) {', '.join(unknown)}; known: {', '.join(known)}")
-    values = {name: known[name].validate(value, where=f"{cls.__name__}.") for name, value in data.items() if name in known}
+        raise SettingError(
+            f"{cls.__name__}: unknown setting(s) {', '.join(unknown)}; known: {', '.join(known)}"
+        )
+    values = {
+        name: known[name].validate(value, where=f"{cls.__name__}.")
+        for name, value in data.items()
+        if name in known
+    }
     return cls(**values)
 
 
@@ -166,7 +188,11 @@ def add_arguments(parser: argparse.ArgumentParser, cls: type, prefix: str = "") 
     """Add one ``--PREFIX-NAME`` option per setting (default None = keep the declared default)."""
     for spec in specs(cls):
         option = "--" + (prefix + spec.name).replace("_", "-")
-        kwargs: dict[str, Any] = {"default": None, "dest": f"{prefix}{spec.name}".replace("-", "_"), "help": spec.describe()}
+        kwargs: dict[str, Any] = {
+            "default": None,
+            "dest": f"{prefix}{spec.name}".replace("-", "_"),
+            "help": spec.describe(),
+        }
         if spec.type is bool:
             kwargs["type"] = lambda text, spec=spec: spec.validate(text)
             kwargs["metavar"] = "true|false"

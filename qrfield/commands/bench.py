@@ -12,7 +12,11 @@ HELP = "run a benchmark (render, solvers, detect, pipeline, serial, ...) and pri
 def _bench_modules() -> dict[str, str]:
     from qrfield import bench
 
-    return {m.name.replace("_", "-"): f"qrfield.bench.{m.name}" for m in pkgutil.iter_modules(bench.__path__) if not m.name.startswith("_")}
+    return {
+        m.name.replace("_", "-"): f"qrfield.bench.{m.name}"
+        for m in pkgutil.iter_modules(bench.__path__)
+        if not m.name.startswith("_")
+    }
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

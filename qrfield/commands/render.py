@@ -13,18 +13,28 @@ HELP = "render a QR card at a known pose through a camera model (test images wit
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_camera_arguments(parser, default="picam-v2@640x480")
-    parser.add_argument("--side-mm", type=float, required=True, metavar="L", help="QR symbol side without quiet zone, mm")
     parser.add_argument(
-        "--pose", required=True, metavar="X,Y,Z,A,B,G",
+        "--side-mm", type=float, required=True, metavar="L", help="QR symbol side without quiet zone, mm"
+    )
+    parser.add_argument(
+        "--pose",
+        required=True,
+        metavar="X,Y,Z,A,B,G",
         help="QR centre in the camera frame (mm) and alpha,beta,gamma (degrees), e.g. 0,0,300,10,20,0",
     )
-    parser.add_argument("--noise", type=float, default=0.0, metavar="SIGMA", help="Gaussian noise, grey levels")
+    parser.add_argument(
+        "--noise", type=float, default=0.0, metavar="SIGMA", help="Gaussian noise, grey levels"
+    )
     parser.add_argument("--blur", type=float, default=0.0, metavar="PX", help="Gaussian blur sigma, pixels")
-    parser.add_argument("--gradient", type=float, default=0.0, help="brightness gradient across the image (0.3 = +-30%%)")
+    parser.add_argument(
+        "--gradient", type=float, default=0.0, help="brightness gradient across the image (0.3 = +-30%%)"
+    )
     parser.add_argument("--seed", type=int, default=None, help="noise seed (repeatable images)")
     parser.add_argument("--text", default="qrfield", help="QR payload (default: qrfield)")
     parser.add_argument("--color", action="store_true", help="write a 3-channel colour image")
-    parser.add_argument("--out", required=True, metavar="FILE", help="image file to write (.png, .jpg, .bmp, ...)")
+    parser.add_argument(
+        "--out", required=True, metavar="FILE", help="image file to write (.png, .jpg, .bmp, ...)"
+    )
     parser.add_argument("--json", action="store_true", help='print {"corners": [[u,v],...], ...} as JSON')
 
 
@@ -38,8 +48,15 @@ def run(args: argparse.Namespace) -> int:
     camera = camera_from_args(args)
     pose = Pose.parse(args.pose)
     view = render_view(
-        camera, args.side_mm, pose, text=args.text, noise_sigma=args.noise, blur_px=args.blur,
-        gradient=args.gradient, seed=args.seed, color=args.color,
+        camera,
+        args.side_mm,
+        pose,
+        text=args.text,
+        noise_sigma=args.noise,
+        blur_px=args.blur,
+        gradient=args.gradient,
+        seed=args.seed,
+        color=args.color,
     )
     try:
         ok = cv2.imwrite(args.out, view.image)
@@ -55,7 +72,10 @@ def run(args: argparse.Namespace) -> int:
                 "image": args.out,
                 "camera": camera.to_dict(),
                 "side_mm": args.side_mm,
-                "pose": {"position_mm": view.pose.position_mm.tolist(), "angles_deg": view.pose.angles_deg.tolist()},
+                "pose": {
+                    "position_mm": view.pose.position_mm.tolist(),
+                    "angles_deg": view.pose.angles_deg.tolist(),
+                },
                 "text": args.text,
             },
             sys.stdout,

@@ -1,0 +1,119 @@
+"""The qrfield command line: subcommand discovery, render, clear errors, no Qt in the core."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import cv2
+import pytest
+
+from qrfield.cli import main
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def _run(*args, env=None):
+    full_env = {**os.environ, "PYTHONPATH": REPO, **(env or {})}
+    return subprocess.run(
+        [sys.executable, "-m", "qrfield", *args], capture_output=True, text=True, env=full_env, timeout=120
+    )
+
+
+def test_help_lists_subcommands():
+    out = _run("--help")
+    assert out.returncode == 0
+    for name in ("render", "bench", "gui"):
+        assert name in out.stdout
+
+
+def test_core_import_pulls_in_no_qt():
+    code = (
+        "import sys, qrfield, qrfield.cli, qrfield.render, qrfield.sampling; qrfield.cli.build_parser(); "
+        "bad = [m for m in sys.modules if m.startswith(('PySide6', 'pyqtgraph', 'shiboken6'))]; "
+        "assert not bad, bad"
+    )
+    subprocess.run(
+        [sys.executable, "-c", code], check=True, env={**os.environ, "PYTHONPATH": REPO}, timeout=120
+    )
+
+
+def test_render_json_corners_by_hand(tmp_path, capsys):
+    out = tmp_path / "view.png"
+    # fx = fy = 500, 640x480: a 60 mm code square-on at 300 mm spans 100 px about (319.5, 239.5).
+    code = main(
+        [
+            "render",
+            "--focal-px",
+            "500",
+            "--size",
+            "640x480",
+            "--side-mm",
+            "60",
+            "--pose",
+            "0,0,300,0,0,0",
+            "--out",
+            str(out),
+            "--json",
+        ]
+    )
+    assert code == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["corners"] == [[269.5, 189.5], [369.5, 189.5], [369.5, 289.5], [269.5, 289.5]]
+    image = cv2.imread(str(out), cv2.IMREAD_UNCHANGED)
+    assert image.shape == (480, 640)
+    assert image[239, 319] in (0, 255)  # the symbol is drawn where the corners say
+
+
+def test_render_out_of_view_is_one_clear_line(tmp_path):
+    out = _run(
+        "render",
+        "--camera",
+        "picam-v2@640x480",
+        "--side-mm",
+        "50",
+        "--pose",
+        "500,0,300,0,0,0",
+        "--out",
+        str(tmp_path / "x.png"),
+    )
+    assert out.returncode == 2
+    assert "out of view" in out.stderr and "Traceback" not in out.stderr
+    assert len(out.stderr.strip().splitlines()) == 1
+
+
+def test_bad_camera_file_is_one_clear_line(tmp_path):
+    bad = tmp_path / "cam.json"
+    bad.write_text('{"width": 640}')
+    out = _run(
+        "render",
+        "--camera",
+        str(bad),
+        "--side-mm",
+        "50",
+        "--pose",
+        "0,0,300,0,0,0",
+        "--out",
+        str(tmp_path / "x.png"),
+    )
+    assert out.returncode == 2 and "missing field" in out.stderr and str(bad) in out.stderr
+
+
+def test_no_display_says_how_to_run_headless():
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY", "QT_QPA_PLATFORM")}
+    env["PYTHONPATH"] = REPO
+    out = subprocess.run(
+        [sys.executable, "-m", "qrfield"], capture_output=True, text=True, env=env, timeout=120
+    )
+    assert out.returncode != 0
+    assert "no display" in out.stderr and "--headless" in out.stderr
+    assert "Traceback" not in out.stderr
+
+
+@pytest.mark.parametrize("name", ["render"])
+def test_bench_commands_run(name):
+    out = _run("bench", name, "--views", "3")
+    assert out.returncode == 0, out.stderr
+    assert "ratio" in out.stdout
