@@ -59,8 +59,10 @@ class PosePanel(QtWidgets.QWidget):
         self.headline = QtWidgets.QLabel("waiting for frames…")
         self.headline.setObjectName("headline")
         self.headline.setStyleSheet("font-size: 15pt; font-weight: bold;")
+        self.headline.setWordWrap(True)
         self.verdict = QtWidgets.QLabel("")
         self.verdict.setObjectName("verdict")
+        self.verdict.setWordWrap(True)
         self._big = QtGui.QFont()
         self._big.setPointSize(22)
         self._big.setBold(True)
@@ -90,7 +92,7 @@ class PosePanel(QtWidgets.QWidget):
                 cell = QtWidgets.QLabel("—")
                 cell.setFont(self._big)
                 cell.setAlignment(QtCore.Qt.AlignmentFlag.AlignRight | QtCore.Qt.AlignmentFlag.AlignVCenter)
-                cell.setMinimumWidth(120)
+                cell.setMinimumWidth(100)
                 cell.setObjectName(f"{name}_{r}")
                 if name == TRUTH:
                     cell.setStyleSheet("color: #888;")
@@ -153,8 +155,8 @@ class PosePanel(QtWidgets.QWidget):
             position_error, angle_errors = pose_errors(pose, result.truth)
             ok = position_error < MAX_POSITION_ERROR_MM and max(angle_errors) <= MAX_ANGLE_ERROR_DEG
             parts.append(
-                f"{name}: Δpos {position_error:.2f} mm, Δangle max {max(angle_errors):.2f}° "
-                + ("✔ within 2°/5 mm" if ok else "✘ outside 2°/5 mm")
+                f"{name}: Δpos {position_error:.2f} mm, Δangle ≤ {max(angle_errors):.2f}° "
+                + ("✔ meets 2°/5 mm" if ok else "✘ fails 2°/5 mm")
             )
         return "vs true pose — " + "; ".join(parts)
 

@@ -42,9 +42,7 @@ class PreviewView(pg.GraphicsLayoutWidget):
         self.view.addItem(self.image_item)
         self.outline = pg.PlotDataItem(pen=pg.mkPen("#00ff66", width=2))
         self.view.addItem(self.outline)
-        self.vertices = pg.ScatterPlotItem(
-            size=10, pen=pg.mkPen("k"), brush=[pg.mkBrush(c) for c in VERTEX_COLOURS]
-        )
+        self.vertices = pg.ScatterPlotItem(size=10, pen=pg.mkPen("k"))
         self.view.addItem(self.vertices)
         self.labels = []
         for i, colour in enumerate(VERTEX_COLOURS):
@@ -95,7 +93,8 @@ class PreviewView(pg.GraphicsLayoutWidget):
         for label, corner in zip(self.labels, corners, strict=True):
             away = corner - centre
             away = away / (np.linalg.norm(away) or 1.0) * 16.0  # labels just outside the code
-            label.setPos(*(corner + away))
+            x, y = corner + away
+            label.setPos(float(x), float(y))  # Python floats: PySide6 mishandles numpy scalars here
             label.setVisible(True)
 
     def show_axes(
