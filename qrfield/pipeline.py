@@ -135,19 +135,22 @@ class FrameResult:
         return out
 
     def summary(self) -> str:
-        """One compact human line: frame, time, status and the first method's pose."""
-        head = f"#{self.index:<5d} t={self.t_ms / 1000:8.3f}s {self.status:<6s}"
-        primary = self.primary
-        if primary is not None and np.all(np.isfinite(primary.position_mm)):
-            x, y, z = primary.position_mm
-            a, b, g = primary.angles_deg
-            head += (
-                f" x={x:8.1f} y={y:8.1f} z={z:8.1f} mm  a={a:7.2f} b={b:7.2f} g={g:7.2f} deg"
-                f"  n={primary.iterations} rep={primary.reprojection_px:.2f}px"
+        """One compact human line: frame, time, status and each method's pose."""
+        line = f"#{self.index:<5d} t={self.t_ms / 1000:8.3f}s {self.status:<6s}"
+        for k, (name, pose) in enumerate(self.poses.items()):
+            if not np.all(np.isfinite(pose.position_mm)):
+                line += f"{' |' if k else ''} {name}: no pose"
+                continue
+            x, y, z = pose.position_mm
+            a, b, g = pose.angles_deg
+            prefix = "" if len(self.poses) == 1 else f"{' |' if k else ''} {name}:"
+            line += (
+                f"{prefix} x={x:7.1f} y={y:7.1f} z={z:7.1f} mm a={a:7.2f} b={b:7.2f} g={g:7.2f} deg"
+                f" n={pose.iterations} rep={pose.reprojection_px:.2f}px"
             )
         if self.reason:
-            head += f"  ({self.reason})"
-        return head + f"  lat={self.latency_ms:.1f}ms"
+            line += f"  ({self.reason})"
+        return line + f"  lat={self.latency_ms:.1f}ms"
 
 
 class Pipeline:
