@@ -35,7 +35,11 @@ def main(args: argparse.Namespace) -> int:
                 path = Path(screenshot)
                 path.parent.mkdir(parents=True, exist_ok=True)
                 if window.grab().save(str(path)):
-                    print(f"qrfield: screenshot {path} ({window.width()}x{window.height()})", file=sys.stderr)
+                    print(
+                        f"qrfield: screenshot {path} ({window.width()}x{window.height()}, "
+                        f"platform {app.platformName()}, {window.frames_shown} frames shown)",
+                        file=sys.stderr,
+                    )
                 else:
                     print(f"qrfield: could not write the screenshot {path}", file=sys.stderr)
             window.close()
