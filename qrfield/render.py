@@ -100,7 +100,10 @@ def _ideal_pixel_map(camera: CameraModel) -> tuple[np.ndarray, np.ndarray]:
     u, v = np.meshgrid(np.arange(camera.width, dtype=np.float64), np.arange(camera.height, dtype=np.float64))
     pts = np.stack([u.ravel(), v.ravel()], axis=-1).reshape(-1, 1, 2)
     criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-10)
-    ideal = cv2.undistortPoints(pts, camera.K, camera.dist, None, None, camera.K, criteria)
+    if hasattr(cv2, "undistortPointsIter"):  # OpenCV 4.x
+        ideal = cv2.undistortPointsIter(pts, camera.K, camera.dist, None, camera.K, criteria)
+    else:  # OpenCV 5 folded the iterative variant into undistortPoints(..., criteria)
+        ideal = cv2.undistortPoints(pts, camera.K, camera.dist, R=None, P=camera.K, criteria=criteria)
     ideal = ideal.reshape(camera.height, camera.width, 2).astype(np.float32)
     return ideal[..., 0].copy(), ideal[..., 1].copy()
 

@@ -1,0 +1,127 @@
+"""``qrfield calibrate``: a camera model from photos of a chessboard.
+
+``--json`` prints one object::
+
+    {"fx", "fy", "cx", "cy": px, "dist": [k1, k2, p1, p2, k3], "rms_px": px,
+     "used": [image path, ...], "skipped": [{"image": path, "reason": text}, ...],
+     "width", "height": px, "per_image": [{"image", "rms_px", "max_px"}, ...],
+     "std_px": {"fx", "fy", "cx", "cy"}, "board": "COLSxROWS", "square_mm": mm,
+     "coverage": [[views per cell], ...] (3 rows x 3 columns of the image),
+     "advice": [hint, ...], "out": path written}
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".pgm", ".ppm")
+
+HELP = "calibrate a camera from chessboard photos and write a camera profile (JSON)"
+DESCRIPTION = (
+    "Find a chessboard in each image (OpenCV, sub-pixel corners), calibrate (cv2.calibrateCamera: "
+    "fx, fy, cx, cy and distortion k1, k2, p1, p2, k3), print the RMS and per-image reprojection "
+    "errors and the images skipped with their reason, and write a camera profile usable wherever a "
+    "camera is named (--camera calib/NAME.json, or --camera NAME from the folder holding calib/)."
+)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "images",
+        nargs="+",
+        metavar="IMAGE",
+        help="photos of the board (10-20 views, spread over the image), or folders of them",
+    )
+    parser.add_argument(
+        "--board",
+        required=True,
+        metavar="COLSxROWS",
+        help="inner corners per row x per column (OpenCV pattern size), "
+        "e.g. 9x6 for a board of 10 x 7 squares",
+    )
+    parser.add_argument("--square-mm", type=float, required=True, metavar="S", help="side of one square, mm")
+    parser.add_argument(
+        "--out", required=True, metavar="FILE.json", help="camera profile to write, e.g. calib/NAME.json"
+    )
+    parser.add_argument("--force", action="store_true", help="overwrite --out if it exists")
+    parser.add_argument("--fix-k3", action="store_true", help="keep k3 = 0 (few views, or a mild lens)")
+    parser.add_argument(
+        "--json",
+        action="store_true",
+        help="print one JSON object: fx, fy, cx, cy (px), dist [k1, k2, p1, p2, k3], rms_px, "
+        "used [paths], skipped [{image, reason}], width, height, per_image [{image, rms_px, max_px}], "
+        "std_px, board, square_mm, coverage (3x3 views per cell), advice, out",
+    )
+
+
+def expand_images(items: list[str]) -> list[str]:
+    """The image paths given, with each folder replaced by its image files (sorted by name)."""
+    paths: list[str] = []
+    for item in items:
+        folder = Path(item)
+        if folder.is_dir():
+            found = sorted(str(p) for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+            if not found:
+                raise ValueError(f"folder {folder} holds no images ({', '.join(IMAGE_SUFFIXES)})")
+            paths.extend(found)
+        else:
+            paths.append(item)
+    return paths
+
+
+def run(args: argparse.Namespace) -> int:
+    from qrfield.calibration import calibrate_images
+    from qrfield.chessboard import Board
+
+    board = Board.parse(args.board, args.square_mm)
+    out = Path(args.out)
+    if out.suffix.lower() != ".json":
+        raise ValueError(f"--out {out}: a camera profile is a .json file")
+    if out.is_dir():
+        raise IsADirectoryError(f"--out {out} is a folder; give a file name such as {out / 'NAME.json'}")
+    if out.exists() and not args.force:
+        raise FileExistsError(f"--out {out} exists; choose another name or add --force to overwrite it")
+    images = expand_images(args.images)
+    result = calibrate_images(images, board, fix_k3=args.fix_k3, name=out.stem)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    result.camera.save(out)
+
+    if args.json:
+        json.dump({**result.to_json(), "out": str(out)}, sys.stdout)
+        print()
+        return 0
+    cam = result.camera
+    print(
+        f"calibrated {cam.width}x{cam.height} from {len(result.views)} of {len(images)} images, "
+        f"board {board.label} inner corners, {board.square_mm:g} mm squares"
+    )
+    print(f"RMS reprojection error: {result.rms_px:.3f} px")
+    width = max(len("image"), *(len(v.label) for v in result.views))
+    print(f"  {'image':<{width}}  RMS px  max px")
+    for v in result.views:
+        print(f"  {v.label:<{width}}  {v.rms_px:6.3f}  {v.max_px:6.3f}")
+    if result.skipped:
+        print(f"skipped {len(result.skipped)}:")
+        for s in result.skipped:
+            print(f"  {s.label}: {s.reason}")
+    sd = result.std_px
+    print(f"fx = {cam.fx:.2f} +- {sd['fx']:.2f} px   fy = {cam.fy:.2f} +- {sd['fy']:.2f} px")
+    print(f"cx = {cam.cx:.2f} +- {sd['cx']:.2f} px   cy = {cam.cy:.2f} +- {sd['cy']:.2f} px")
+    print("dist (k1, k2, p1, p2, k3) = " + ", ".join(f"{d:.5f}" for d in cam.dist))
+    print("coverage (views per cell, 3x3 grid of the image):")
+    for row in result.coverage:
+        print("  " + " ".join(f"{n:3d}" for n in row))
+    for hint in result.advice():
+        print(f"advice: {hint}")
+    print(
+        f"wrote {out}: use --camera {out}"
+        + (
+            f" (or --camera {out.stem} from {out.parent.parent.resolve()})"
+            if out.parent.name == "calib"
+            else ""
+        )
+    )
+    return 0
