@@ -342,3 +342,42 @@ def test_source_specs(tmp_path: Path, video_file: Path, image_folder: Path, came
         make_source("usb:x")
     with pytest.raises(SourceError, match="not one of auto, virtual, picamera2, usb:N"):
         make_source(str(tmp_path / "missing"))
+
+
+class CountingSource(FrameSource):
+    """Frames whose pixel value is their index; fails after ``limit`` frames."""
+
+    name = "counting"
+
+    def __init__(self, limit: int) -> None:
+        super().__init__()
+        self.limit = limit
+
+    def _open_impl(self) -> None:
+        pass
+
+    def _read_impl(self, index: int) -> Frame:
+        if index >= self.limit:
+            raise SourceError("unplugged")
+        time.sleep(0.001)
+        return Frame(np.full((2, 2), index % 256, np.uint8), time.monotonic(), index)
+
+    def _close_impl(self) -> None:
+        pass
+
+
+def test_latest_frame_reader_keeps_only_the_newest_frame_then_reports_the_failure() -> None:
+    from qrfield.sources import LatestFrameReader
+
+    source = CountingSource(limit=50)
+    source.open()
+    reader = LatestFrameReader(source).start()
+    while reader.running:  # let the reader run ahead of a slow consumer
+        time.sleep(0.01)
+    newest = reader.get(timeout=1.0)
+    assert newest.index == 49  # the older unread frames were dropped, not queued
+    assert reader.dropped == 49 and reader.read_count == 50
+    with pytest.raises(SourceError, match="unplugged"):
+        reader.get(timeout=1.0)
+    assert reader.stop()
+    source.close()
