@@ -381,3 +381,19 @@ def test_latest_frame_reader_keeps_only_the_newest_frame_then_reports_the_failur
         reader.get(timeout=1.0)
     assert reader.stop()
     source.close()
+
+
+def test_latest_frame_reader_reads_an_on_request_source_one_frame_ahead_only() -> None:
+    from qrfield.sources import LatestFrameReader
+
+    source = CountingSource(limit=1000)
+    source.live = False
+    source.open()
+    reader = LatestFrameReader(source).start()
+    first = reader.get(timeout=2.0)
+    time.sleep(0.05)  # a slow consumer: a live reader would have read dozens of frames meanwhile
+    second = reader.get(timeout=2.0)
+    assert (first.index, second.index) == (0, 1) and reader.dropped == 0
+    assert reader.read_count <= 3
+    assert reader.stop()
+    source.close()

@@ -49,11 +49,12 @@ def run(args: argparse.Namespace) -> int:
         camera = resolve_camera(spec)
         with VirtualBenchSource(camera, 50.0, bench) as source:
             source.read()  # warm the renderer's caches
-            render_fps = _rate(source.read, args.seconds)
             pipeline = Pipeline(camera, 50.0, methods)
-            results = []
-            headless_fps = _rate(
-                lambda p=pipeline, out=results, s=source: out.append(p.process(s.read())), args.seconds
+            results: list = []
+            render_fps, headless_fps = _interleaved_rates(
+                source.read,
+                lambda p=pipeline, out=results, s=source: out.append(p.process(s.read())),
+                args.seconds,
             )
         ok = sum(r.status == "OK" for r in results)
         detect_ms = float(np.mean([r.detect_ms for r in results]))
@@ -69,19 +70,31 @@ def run(args: argparse.Namespace) -> int:
             f"{gui[0]:>9}{gui[1]:>10}{detect_ms:>10.1f}{solve_ms:>9.2f}{latency_ms:>11.1f}"
             + ("" if ok == len(results) else f"  ({len(results) - ok} of {len(results)} frames not OK)")
         )
-    print("ratio = headless / render-only fps (1.0 would mean detection and solving cost nothing)")
+    print(
+        "ratio = headless / render-only fps, measured in alternating slices (1.0: detection and solving free)"
+    )
+    print("GUI fps = frames the worker processed per s (rendering overlaps processing on its reader thread);")
+    print(
+        "GUI drawn = frames the window drew per s (newer results replace undrawn ones: dropped, not queued)"
+    )
     return 0
 
 
-def _rate(step, seconds: float) -> float:
-    """Calls of ``step`` per second over about ``seconds``."""
-    count, t0 = 0, time.perf_counter()
-    while True:
-        step()
-        count += 1
-        elapsed = time.perf_counter() - t0
-        if elapsed >= seconds:
-            return count / elapsed
+def _interleaved_rates(baseline, step, seconds: float, slice_s: float = 0.25) -> tuple[float, float]:
+    """Calls per second of ``baseline`` and of ``step``, measured in alternating slices of
+    ``slice_s`` for about ``seconds`` each, so that a change in machine load hits both alike."""
+    counts, times = [0, 0], [0.0, 0.0]
+    while min(times) < seconds:
+        for k, call in enumerate((baseline, step)):
+            t0 = time.perf_counter()
+            while True:
+                call()
+                counts[k] += 1
+                elapsed = time.perf_counter() - t0
+                if elapsed >= slice_s:
+                    break
+            times[k] += elapsed
+    return counts[0] / times[0], counts[1] / times[1]
 
 
 def _gui_rates(camera: str, method: str, seconds: float) -> tuple[float, float]:

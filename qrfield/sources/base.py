@@ -81,9 +81,12 @@ class FrameSource(ABC):
         name: short kind name (``virtual``, ``usb:0``, ``video``, ``folder``, ``picamera2``).
         description: one line for humans (what exactly is being read).
         notes: messages worth showing (why ``auto`` chose this source, files skipped, ...).
+        live: frames come whether or not anyone reads them (a camera), so a reader must drain
+            them; False when a frame is made on request (the virtual bench renders it in read()).
     """
 
     name: str = "source"
+    live: bool = True
 
     def __init__(self) -> None:
         self.notes: list[str] = []

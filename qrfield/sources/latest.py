@@ -16,6 +16,8 @@ from qrfield.sources.base import Frame, FrameSource, SourceError
 class LatestFrameReader:
     """Reads an opened source on a daemon thread; :meth:`get` returns the newest unread frame.
 
+    For a source that is not ``live`` (the virtual bench) the reader renders ahead by one frame
+    only: it waits until its frame is taken before reading the next, so no work is thrown away.
     When the source raises (SourceError, EndOfStream or anything else), the reader stops and
     :meth:`get` raises that error (as SourceError) once the frames before it are consumed.
     The reader does not close the source: its owner does, after :meth:`stop`.
@@ -42,6 +44,8 @@ class LatestFrameReader:
             if self._frame is None and self._error is None:
                 self._cond.wait(timeout)
             frame, self._frame = self._frame, None
+            if frame is not None:
+                self._cond.notify_all()  # an on-request source may make the next frame now
             if frame is None and self._error is not None:
                 raise self._error
             return frame
@@ -62,6 +66,9 @@ class LatestFrameReader:
     def _run(self) -> None:
         while True:
             with self._cond:
+                if not self.source.live:
+                    while self._frame is not None and not self._stop:
+                        self._cond.wait()
                 if self._stop:
                     return
             try:

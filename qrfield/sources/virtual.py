@@ -88,6 +88,7 @@ class VirtualBenchSource(FrameSource):
     """Renders the card at the settings' pose; settings may be changed while frames are read."""
 
     name = "virtual"
+    live = False  # a frame is rendered when read(): nothing to drain
 
     def __init__(
         self, camera: CameraModel, side_mm: float, settings: VirtualBenchSettings | None = None
