@@ -219,9 +219,13 @@ class MainWindow(QtWidgets.QMainWindow):
         self.plots.clear_history()
 
     def _on_source_failed(self, message: str) -> None:
+        last = self.worker.latest.take()  # the worker stored it before failing: draw it, then mark it old
+        if last is not None:
+            self._draw(last)
         self.banner.setText(f"{message} — choose a source or press Reopen")
         self.banner_row.show()
         self.status_source.setText(f"source closed: {message}")
+        self.pose_panel.mark_stale("no source: the values shown are the last ones measured")
 
     def _on_note(self, message: str) -> None:
         self.statusBar().showMessage(message, 8000)

@@ -143,6 +143,11 @@ class PosePanel(QtWidgets.QWidget):
                 cell.setText(format_value(float(truth[r]), r))
         self.verdict.setText(self._verdict(result, methods))
 
+    def mark_stale(self, why: str) -> None:
+        """Say that the numbers shown are old (the source stopped)."""
+        self.headline.setText(f"STALE   {why}")
+        self.headline.setStyleSheet("font-size: 15pt; font-weight: bold; color: #888;")
+
     def _verdict(self, result: Any, methods: tuple[str, ...]) -> str:
         if result.truth is None:
             return ""

@@ -140,6 +140,7 @@ def test_a_source_failing_midstream_is_reported_and_can_be_reopened(make_window,
     window = make_window({"source": "virtual"}, source_factory=factory)
     qtbot.waitUntil(lambda: window.banner_row.isVisible(), timeout=WAIT_MS)
     assert str(error) in window.banner.text()
+    assert window.pose_panel.headline.text().startswith("STALE")
     shown = window.frames_shown
     assert shown >= 1 and window.timer.isActive() and window.thread.isRunning()
     qtbot.mouseClick(window.banner_button, qtbot_button_left())
