@@ -149,3 +149,56 @@ def test_no_display_says_how_to_run_headless() -> None:
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and "no display" in lines[0] and "qrfield run --headless" in lines[0]
     assert "PySide6" not in done.stderr
+
+
+FAKE_PICAMERA2 = """
+import json, os
+import numpy as np
+
+class Picamera2:
+    def __init__(self, num=0):
+        self.log = os.environ["FAKE_PICAMERA2_LOG"]
+    def create_video_configuration(self, main):
+        return {"main": main}
+    def configure(self, config):
+        self.size = config["main"]["size"]
+        with open(self.log, "a") as f:
+            f.write(json.dumps({"size": list(self.size)}) + "\\n")
+    def set_controls(self, controls):
+        with open(self.log, "a") as f:
+            f.write(json.dumps({"controls": controls}) + "\\n")
+    def start(self): pass
+    def capture_array(self, stream="main"):
+        return np.full((self.size[1], self.size[0], 3), 200, np.uint8)
+    def capture_metadata(self):
+        return {"ExposureTime": 8000, "AnalogueGain": 1.0}
+    def stop(self): pass
+    def close(self): pass
+"""
+
+
+@needs_pipeline
+def test_picamera2_source_headless_with_a_fake_module(tmp_path: Path) -> None:
+    (tmp_path / "picamera2.py").write_text(FAKE_PICAMERA2)
+    log = tmp_path / "camera.log"
+    done = qrfield(
+        "run", "--source", "picamera2", "--frames", "3", "--json-lines", "--camera", "picam-v2@640x480",
+        "--picamera-width", "320", "--picamera-height", "240", "--picamera-settle-frames", "2",
+        PYTHONPATH=f"{REPO}{os.pathsep}{tmp_path}", FAKE_PICAMERA2_LOG=str(log),
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    lines = [json.loads(line) for line in done.stdout.splitlines()]
+    assert [line["status"] for line in lines] == ["NOQR"] * 3  # a blank grey picture has no code
+    events = [json.loads(line) for line in log.read_text().splitlines()]
+    assert events[0] == {"size": [320, 240]}
+    assert {"controls": {"AeEnable": False, "ExposureTime": 8000, "AnalogueGain": 1.0}} in events
+    assert "exposure locked at 8000 us" in done.stderr
+
+
+def test_picamera2_missing_is_one_clear_line(tmp_path: Path) -> None:
+    (tmp_path / "picamera2.py").write_text("raise ImportError('no libcamera here')\n")
+    done = qrfield("run", "--source", "picamera2", PYTHONPATH=f"{REPO}{os.pathsep}{tmp_path}")
+    assert done.returncode == 1 and "Traceback" not in done.stderr
+    assert (
+        "picamera2 is not installed: on Raspberry Pi OS run sudo apt install python3-picamera2" in done.stderr
+    )

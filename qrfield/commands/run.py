@@ -29,7 +29,7 @@ DEFAULT_SIDE_MM = 50.0
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from qrfield.pipeline import METHOD_CHOICES
     from qrfield.settings import add_arguments as add_setting_arguments
-    from qrfield.sources import SOURCE_HELP, VirtualBenchSettings
+    from qrfield.sources import SOURCE_HELP, Picamera2Settings, VirtualBenchSettings
 
     parser.add_argument(
         "--headless", action="store_true", help="no window (always true for run; accepted for clarity)"
@@ -67,6 +67,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     group = parser.add_argument_group("virtual bench (--source virtual)")
     add_setting_arguments(group, VirtualBenchSettings, prefix="virtual_")
+    group = parser.add_argument_group(
+        "Raspberry Pi camera (--source picamera2; default size: the camera model's)"
+    )
+    add_setting_arguments(group, Picamera2Settings, prefix="picamera_")
 
 
 class StopFlag:
@@ -103,13 +107,20 @@ def _publishers(args: argparse.Namespace) -> list[Callable[[Any], None]]:
 
 def run(args: argparse.Namespace) -> int:
     from qrfield.pipeline import Pipeline, methods_from_choice
-    from qrfield.settings import from_arguments
-    from qrfield.sources import EndOfStream, SourceError, VirtualBenchSettings
+    from qrfield.settings import from_arguments, specs
+    from qrfield.sources import EndOfStream, Picamera2Settings, SourceError, VirtualBenchSettings
 
     if args.frames < 0:
         raise ValueError(f"--frames must be >= 0, got {args.frames}")
     camera, named = _camera(args)
     virtual = from_arguments(VirtualBenchSettings, args, prefix="virtual_")
+    picamera_given = any(
+        getattr(args, f"picamera_{spec.name}") is not None for spec in specs(Picamera2Settings)
+    )
+    base = Picamera2Settings(width=camera.width, height=camera.height)
+    args.picamera = (
+        from_arguments(Picamera2Settings, args, prefix="picamera_", base=base) if picamera_given else None
+    )
     stop = StopFlag()
     previous = stop.install()
     say = _Stderr()
@@ -166,7 +177,13 @@ def _open(args: argparse.Namespace, camera: Any, virtual: Any, say: _Stderr, sto
 
     try:
         source = open_source(
-            args.source, camera=camera, side_mm=args.side_mm, virtual=virtual, loop=args.loop, pace=args.pace
+            args.source,
+            camera=camera,
+            side_mm=args.side_mm,
+            virtual=virtual,
+            picamera=args.picamera,
+            loop=args.loop,
+            pace=args.pace,
         )
     except SourceError as exc:
         say(f"cannot open source: {exc}")
@@ -194,6 +211,7 @@ def _reopen(args: argparse.Namespace, camera: Any, virtual: Any, say: _Stderr, s
                 camera=camera,
                 side_mm=args.side_mm,
                 virtual=virtual,
+                picamera=args.picamera,
                 loop=args.loop,
                 pace=args.pace,
             )
