@@ -10,6 +10,7 @@ from PySide6 import QtCore, QtWidgets
 
 from qrfield.camera import preset_names
 from qrfield.settings import specs
+from qrfield.sources import Picamera2Settings
 from ui.config import AppSettings
 from ui.settings_form import SettingsForm, set_widget_value, widget_for, widget_value
 
@@ -27,9 +28,11 @@ class SourceControls(QtWidgets.QWidget):
     changed = QtCore.Signal()
     openRequested = QtCore.Signal()
 
-    def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
+    def __init__(self, picamera: Any = None, parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__(parent)
-        layout = QtWidgets.QFormLayout(self)
+        outer = QtWidgets.QVBoxLayout(self)
+        layout = QtWidgets.QFormLayout()
+        outer.addLayout(layout)
         self.combo = QtWidgets.QComboBox()
         self.combo.setEditable(True)
         self.combo.addItems(list(SOURCE_CHOICES))
@@ -47,9 +50,13 @@ class SourceControls(QtWidgets.QWidget):
         self.open_button = QtWidgets.QPushButton("Open / reopen source")
         self.open_button.setObjectName("open_source")
         layout.addRow(self.open_button)
-        self.description = QtWidgets.QLabel("")
-        self.description.setWordWrap(True)
-        layout.addRow(self.description)
+        box = QtWidgets.QGroupBox("Raspberry Pi camera (picamera2)")
+        box_layout = QtWidgets.QVBoxLayout(box)
+        self.picamera = SettingsForm(Picamera2Settings, picamera)
+        box_layout.addWidget(self.picamera)
+        outer.addWidget(box)
+        outer.addStretch(1)
+        self.picamera.changed.connect(lambda *_: self.changed.emit())
         file_button.clicked.connect(self._choose_file)
         folder_button.clicked.connect(self._choose_folder)
         self.open_button.clicked.connect(self.openRequested)

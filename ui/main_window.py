@@ -17,7 +17,7 @@ from PySide6 import QtCore, QtGui, QtWidgets
 
 from qrfield.camera import CameraModel, CameraModelError, resolve_camera
 from qrfield.pipeline import methods_from_choice
-from qrfield.sources import VirtualBenchSettings
+from qrfield.sources import Picamera2Settings, VirtualBenchSettings
 from ui.config import AppSettings, ConfigStore
 from ui.controls import CameraControls, SolverControls, SourceControls, app_settings_from, show_app_settings
 from ui.plots import PosePlots
@@ -83,14 +83,14 @@ class MainWindow(QtWidgets.QMainWindow):
         self.banner_row = banner_row
         banner_row.hide()
 
-        self.source_controls = SourceControls()
+        self.source_controls = SourceControls(store.group("picamera", Picamera2Settings))
         self.solver_controls = SolverControls(classes, {n: store.group(n, c) for n, c in classes.items()})
         self.camera_controls = CameraControls()
         self.virtual_form = SettingsForm(VirtualBenchSettings, store.group("virtual", VirtualBenchSettings))
         show_app_settings(self.app_settings, self.source_controls, self.solver_controls, self.camera_controls)
 
         tabs = QtWidgets.QTabWidget()
-        tabs.addTab(self.source_controls, "Source")
+        tabs.addTab(_scrolled(self.source_controls), "Source")
         tabs.addTab(_scrolled(self.solver_controls), "Solver")
         tabs.addTab(self.camera_controls, "Camera")
         tabs.addTab(_scrolled(self.virtual_form), "Virtual bench")
@@ -184,6 +184,7 @@ class MainWindow(QtWidgets.QMainWindow):
             virtual=self.virtual_form.value(),
             select_text=app.select_text,
             loop=app.loop,
+            picamera=self.source_controls.picamera.value(),
         )
 
     def _apply(self) -> None:
@@ -284,6 +285,7 @@ class MainWindow(QtWidgets.QMainWindow):
     def save_settings(self) -> None:
         self.store.set_group("app", self.app_settings)
         self.store.set_group("virtual", self.virtual_form.value())
+        self.store.set_group("picamera", self.source_controls.picamera.value())
         for name, value in self.solver_controls.settings().items():
             self.store.set_group(name, value)
         self.store.set_group("detector", self.detector_settings)

@@ -26,6 +26,7 @@ from qrfield.sources import (
     Frame,
     FrameSource,
     LatestFrameReader,
+    Picamera2Settings,
     SourceError,
     VirtualBenchSettings,
     VirtualBenchSource,
@@ -46,12 +47,18 @@ class RunConfig:
     virtual: VirtualBenchSettings = field(default_factory=VirtualBenchSettings)
     select_text: str = ""
     loop: bool = True
+    picamera: Picamera2Settings | None = None
 
     def source_key(self) -> tuple[Any, ...]:
         """What requires reopening the source when it changes."""
         bench = (self.camera, self.side_mm) if self.source in ("virtual", "auto") else ()
-        size = (self.camera.size,) if self.source.startswith("usb") or self.source == "picamera2" else ()
-        return (self.source, self.loop, *bench, *size)
+        size = (
+            (self.camera.size,)
+            if self.source.startswith("usb") or self.source in ("picamera2", "auto")
+            else ()
+        )
+        pi = (self.picamera,) if self.source in ("picamera2", "auto") else ()
+        return (self.source, self.loop, *bench, *size, *pi)
 
 
 class LatestBox:
@@ -186,6 +193,7 @@ class PipelineWorker(QtCore.QObject):
                 camera=config.camera,
                 side_mm=config.side_mm,
                 virtual=config.virtual,
+                picamera=config.picamera,
                 loop=config.loop,
                 pace=True,
             )
