@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import re
 from typing import Any
 
 from PySide6 import QtCore, QtWidgets
@@ -48,6 +49,9 @@ def widget_for(spec: SettingSpec) -> QtWidgets.QWidget:
             widget.setSuffix(f" {spec.unit}")
     else:
         widget = QtWidgets.QLineEdit()
+    zero = re.search(r"\(0 = ([^)]+)\)", spec.help)
+    if zero and spec.minimum == 0 and isinstance(widget, (QtWidgets.QSpinBox, QtWidgets.QDoubleSpinBox)):
+        widget.setSpecialValueText(zero.group(1))  # e.g. exposure 0 shows "automatic"
     widget.setToolTip(tip)
     widget.setObjectName(spec.name)
     set_widget_value(widget, spec, spec.default)

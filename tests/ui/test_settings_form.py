@@ -33,6 +33,8 @@ def test_each_setting_type_gets_its_widget(qtbot) -> None:
     text = widget_for(spec_of(VirtualBenchSettings, "text"))
     assert isinstance(text, QtWidgets.QLineEdit) and text.text() == "qrfield"
     assert "grey levels" in widget_for(spec_of(VirtualBenchSettings, "noise_sigma")).toolTip()
+    wobble = widget_for(spec_of(VirtualBenchSettings, "wobble_deg"))  # help: "... (0 = still)"
+    assert wobble.specialValueText() == "still" and wobble.text() == "still"
 
 
 def test_form_emits_validated_settings(qtbot) -> None:
