@@ -29,7 +29,7 @@ from ui.worker import PipelineWorker, Processed, RunConfig, start_worker, stop_w
 #: Redraw period of the GUI timer, ms (40 Hz, above the usual camera rate); plots redraw at most
 #: every PLOT_PERIOD_S seconds.
 REDRAW_MS = 25
-PLOT_PERIOD_S = 0.1
+PLOT_PERIOD_S = 0.2
 
 
 def solver_settings_classes() -> dict[str, type]:
