@@ -1,0 +1,117 @@
+"""``qrfield solve``: the pose of a QR code from its four corner pixels."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+
+from qrfield.camera import add_camera_arguments
+
+HELP = "compute a QR code's position (mm) and orientation (degrees) from its four corner pixels"
+DESCRIPTION = (
+    "Compute the pose of one QR code of known side from its corners V1..V4 (top-left, top-right, "
+    "bottom-right, bottom-left of the code, clockwise on screen) with the thesis' numerical model, "
+    "OpenCV's IPPE, or both. Positions are the code's centre in the camera frame (mm, +X right, "
+    "+Y down, +Z forward); angles alpha, beta, gamma (degrees) with R = Rx(alpha) Ry(beta) Rz(gamma)."
+)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from qrfield.settings import add_arguments as add_setting_arguments
+    from qrfield.solvers.ippe import IppeSettings
+    from qrfield.solvers.numerical import NumericalSettings
+
+    parser.add_argument(
+        "--corners",
+        required=True,
+        metavar='"U1,V1 U2,V2 U3,V3 U4,V4"',
+        help="pixels of V1..V4 (OpenCV convention: the top-left pixel's centre is 0,0)",
+    )
+    add_camera_arguments(parser)
+    parser.add_argument(
+        "--side-mm", type=float, required=True, metavar="L", help="QR symbol side without quiet zone, mm"
+    )
+    parser.add_argument(
+        "--method", choices=("numerical", "ippe", "both"), default="both", help="solver (default: both)"
+    )
+    parser.add_argument("--json", action="store_true", help="print a JSON list, one object per method")
+    group = parser.add_argument_group("numerical model settings")
+    add_setting_arguments(group, NumericalSettings)  # type: ignore[arg-type]
+    group = parser.add_argument_group("IPPE settings")
+    add_setting_arguments(group, IppeSettings)  # type: ignore[arg-type]
+
+
+def parse_corners(text: str) -> list[list[float]]:
+    """``"u1,v1 u2,v2 u3,v3 u4,v4"`` -> [[u1, v1], ...]; ValueError saying what is malformed."""
+    pairs = text.replace(";", " ").split()
+    if len(pairs) != 4:
+        raise ValueError(
+            f"--corners needs 4 pixel pairs 'u,v' separated by spaces (V1 V2 V3 V4), "
+            f"got {len(pairs)}: {text!r}"
+        )
+    out = []
+    for i, pair in enumerate(pairs, start=1):
+        parts = pair.split(",")
+        try:
+            if len(parts) != 2:
+                raise ValueError
+            out.append([float(parts[0]), float(parts[1])])
+        except ValueError:
+            raise ValueError(f"--corners: V{i} {pair!r} is not a pair of numbers u,v") from None
+    return out
+
+
+def _fmt(value: float | None, digits: int) -> str:
+    return "-" if value is None or not math.isfinite(value) else f"{value:.{digits}f}"
+
+
+def format_table(results: list) -> str:  # type: ignore[type-arg]
+    """A human-readable table of PoseResults: one row per result (and one per mirror candidate)."""
+    header = (
+        f"{'method':<18}{'x mm':>9}{'y mm':>9}{'z mm':>9}{'alpha':>9}{'beta':>9}{'gamma':>9}"
+        f"{'conv':>6}{'iter':>6}{'reproj px':>11}{'resid mm':>10}{'ambig':>8}"
+    )
+    lines = [header, "-" * len(header)]
+    notes = []
+    for r in results:
+        rows = [(r.method, r)]
+        if r.alternative is not None:
+            rows.append((f"  {r.method} mirror", r.alternative))
+        for label, p in rows:
+            x, y, z = p.position_mm
+            a, b, g = p.angles_deg
+            amb = r.ambiguity if p is r else None
+            lines.append(
+                f"{label:<18}{_fmt(x, 1):>9}{_fmt(y, 1):>9}{_fmt(z, 1):>9}{_fmt(a, 2):>9}{_fmt(b, 2):>9}"
+                f"{_fmt(g, 2):>9}{'yes' if p.converged else 'no':>6}{p.iterations:>6}"
+                f"{_fmt(p.reprojection_px, 4):>11}{_fmt(p.residual_mm, 4):>10}{_fmt(amb, 3):>8}"
+            )
+            if p.reason:
+                notes.append(f"{label.strip()}: {p.reason}")
+    lines.append("angles in degrees: R = Rx(alpha) Ry(beta) Rz(gamma); position = QR centre, camera frame")
+    lines.extend(notes)
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    from qrfield.camera import camera_from_args
+    from qrfield.settings import from_arguments
+    from qrfield.solvers import IppeSettings, NumericalSettings, solve
+
+    camera = camera_from_args(args)
+    corners = parse_corners(args.corners)
+    methods = ("numerical", "ippe") if args.method == "both" else (args.method,)
+    settings = {
+        "numerical": from_arguments(NumericalSettings, args),
+        "ippe": from_arguments(IppeSettings, args),
+    }
+    results = [solve(corners, camera, args.side_mm, method, settings[method]) for method in methods]
+    if args.json:
+        json.dump([r.to_json_dict() for r in results], sys.stdout, allow_nan=False)
+        print()
+    else:
+        print(f"camera {camera.name} ({camera.width}x{camera.height}), QR side {args.side_mm:g} mm")
+        print(format_table(results))
+    return 0 if all(r.converged for r in results) else 1

@@ -1,0 +1,204 @@
+"""Closed-form square pose by OpenCV's IPPE_SQUARE, both candidates kept, refined, ranked.
+
+cv2.solvePnPGeneric with SOLVEPNP_IPPE_SQUARE returns the two poses of the planar ambiguity
+(Collins and Bartoli 2014) for the object points of :func:`qrfield.geometry.ippe_object_points`
+(V1..V4 in OpenCV's frame: +Y up, +Z towards the camera); both are refined (LM or VVS) and
+converted to the marker frame of DESIGN.md with :func:`qrfield.geometry.rotation_from_ippe`. The
+one with the smaller reprojection error is the answer, the other its ``alternative``, and
+``ambiguity`` = best error / second error (near 1: the image cannot tell the two apart). When
+refining the second candidate slides it onto the answer (it is then no local minimum of its own),
+the alternative is IPPE's unrefined closed-form mirror, so that the two always differ.
+Corners are undistorted first (exactly, by iteration) when the camera has distortion, so the
+solver works on ideal pinhole pixels; reprojection errors are measured on the corners as given.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from qrfield.camera import CameraModel
+from qrfield.geometry import ippe_object_points, rotation_from_ippe
+from qrfield.settings import setting, validated
+from qrfield.solvers.floats import angles_single, reprojection_single
+from qrfield.solvers.rays import normalised_single, undistort
+from qrfield.solvers.result import BatchResult, PoseResult, SolverError
+
+REFINERS = ("lm", "vvs", "none")
+#: Card normals closer than this (degrees) mean the two candidates are one pose.
+SAME_NORMAL_DEG = 0.01
+
+
+@dataclass(frozen=True)
+class IppeSettings:
+    """Settings of the IPPE solver."""
+
+    refine: str = setting(
+        "lm",
+        label="refinement",
+        choices=REFINERS,
+        help="refine both IPPE candidates by reprojection error: lm (cv2.solvePnPRefineLM), "
+        "vvs (cv2.solvePnPRefineVVS) or none",
+    )
+
+
+@functools.lru_cache(maxsize=16)
+def checked_settings(settings: IppeSettings | None) -> IppeSettings:
+    if settings is None:
+        return IppeSettings()
+    if not isinstance(settings, IppeSettings):
+        raise SolverError(f"method 'ippe' takes IppeSettings, got {type(settings).__name__}")
+    return validated(settings)
+
+
+@functools.lru_cache(maxsize=16)
+def _object_points(side: float) -> np.ndarray:
+    return np.ascontiguousarray(ippe_object_points(side).reshape(4, 1, 3))
+
+
+def _ideal_pixels(corners: np.ndarray, camera: CameraModel) -> np.ndarray:
+    pts = np.ascontiguousarray(corners.reshape(4, 1, 2))
+    if camera.has_distortion:
+        pts = undistort(pts, camera, pixels=True)
+    return pts
+
+
+class _Candidate:
+    """One IPPE pose in the marker frame of DESIGN.md, as Python floats (cheap on 4 points)."""
+
+    __slots__ = ("error", "position", "residual", "rows", "vertices")
+
+    def __init__(
+        self,
+        rvec: np.ndarray,
+        tvec: np.ndarray,
+        side: float,
+        camera: CameraModel,
+        flat: list[float],
+        rays: list[tuple[float, float, float]],
+    ) -> None:
+        import cv2
+
+        # OpenCV's IPPE frame has +Y up and +Z towards the camera: convert to DESIGN.md's marker frame.
+        self.rows = rotation_from_ippe(cv2.Rodrigues(rvec)[0]).tolist()
+        (a, b, _), (d, e, _), (g, h, _) = self.rows
+        self.position = tvec.reshape(3).tolist()
+        self.error = reprojection_single(self.rows, self.position, side, camera, flat)
+        half = side / 2.0
+        tx, ty, tz = self.position
+        self.vertices = []
+        residual = 0.0
+        corners = ((-half, -half), (half, -half), (half, half), (-half, half))
+        for (qx, qy), (rx, ry, rz) in zip(corners, rays, strict=True):
+            vx = a * qx + b * qy + tx
+            vy = d * qx + e * qy + ty
+            vz = g * qx + h * qy + tz
+            self.vertices.append([vx, vy, vz])
+            # Distance of the vertex from the line of sight through its (undistorted) corner.
+            along = vx * rx + vy * ry + vz * rz
+            ox, oy, oz = vx - along * rx, vy - along * ry, vz - along * rz
+            residual = max(residual, math.sqrt(ox * ox + oy * oy + oz * oz))
+        self.residual = residual
+
+    def result(self, corners: np.ndarray) -> PoseResult:
+        return PoseResult(
+            method="ippe",
+            position_mm=np.array(self.position),
+            angles_deg=np.array(angles_single(self.rows)),
+            rotation=np.array(self.rows),
+            vertices_mm=np.array(self.vertices),
+            converged=True,
+            iterations=0,
+            residual_mm=self.residual,
+            reprojection_px=self.error,
+            reason="",
+            corners_px=corners,
+        )
+
+
+def _unit_rays(x: list[float], y: list[float]) -> list[tuple[float, float, float]]:
+    """Unit vectors along the lines of sight of normalised image points."""
+    out = []
+    for xi, yi in zip(x, y, strict=True):
+        norm = math.sqrt(xi * xi + yi * yi + 1.0)
+        out.append((xi / norm, yi / norm, 1.0 / norm))
+    return out
+
+
+def _same_normal(a: _Candidate, b: _Candidate) -> bool:
+    """True when two candidates put the card normal within SAME_NORMAL_DEG of each other."""
+    dot = a.rows[0][2] * b.rows[0][2] + a.rows[1][2] * b.rows[1][2] + a.rows[2][2] * b.rows[2][2]
+    return dot > math.cos(math.radians(SAME_NORMAL_DEG))
+
+
+def solve_ippe(
+    corners: np.ndarray, flat: list[float], camera: CameraModel, side: float, settings: IppeSettings | None
+) -> PoseResult:
+    """One pose by IPPE_SQUARE from checked corners (see :func:`qrfield.solvers.solve`); never raises."""
+    import cv2  # lazily: the CLI imports this module for its settings
+
+    s = checked_settings(settings)
+    obj = _object_points(side)
+    pts = _ideal_pixels(corners, camera)
+    k = camera.K
+    try:
+        count, rvecs, tvecs, _ = cv2.solvePnPGeneric(obj, pts, k, None, flags=cv2.SOLVEPNP_IPPE_SQUARE)
+    except cv2.error as exc:
+        return PoseResult.failed("ippe", corners, f"OpenCV IPPE_SQUARE failed: {exc.err}")
+    if count < 1:
+        return PoseResult.failed("ippe", corners, "OpenCV IPPE_SQUARE returned no pose")
+    rays = _unit_rays(*normalised_single(corners, flat, camera))
+    candidates = []
+    for raw_rvec, raw_tvec in zip(rvecs[:count], tvecs[:count], strict=True):
+        rvec, tvec = raw_rvec.copy(), raw_tvec.copy()
+        try:
+            if s.refine == "lm":
+                rvec, tvec = cv2.solvePnPRefineLM(obj, pts, k, None, rvec, tvec)
+            elif s.refine == "vvs":
+                rvec, tvec = cv2.solvePnPRefineVVS(obj, pts, k, None, rvec, tvec)
+        except cv2.error:
+            pass  # keep the unrefined closed-form candidate
+        if np.all(np.isfinite(rvec)) and np.all(np.isfinite(tvec)):
+            candidates.append((_Candidate(rvec, tvec, side, camera, flat, rays), raw_rvec, raw_tvec))
+    if not candidates:
+        return PoseResult.failed("ippe", corners, "OpenCV IPPE_SQUARE returned no finite pose")
+    candidates.sort(key=lambda c: c[0].error)
+    first = candidates[0][0]
+    if len(candidates) < 2:
+        return first.result(corners)
+    second = candidates[1][0]
+    if _same_normal(first, second):
+        # Refining the mirror slid it onto the answer (it is no local minimum of its own): keep
+        # IPPE's closed-form mirror, so that the ambiguity compares two different poses.
+        second = _Candidate(candidates[1][1], candidates[1][2], side, camera, flat, rays)
+    ambiguity = first.error / second.error if second.error > 0.0 else 1.0
+    return replace(first.result(corners), alternative=second.result(corners), ambiguity=ambiguity)
+
+
+def solve_ippe_batch(
+    corners: np.ndarray, valid: np.ndarray, camera: CameraModel, side: float, settings: IppeSettings | None
+) -> BatchResult:
+    """N poses by IPPE (a loop over :func:`solve_ippe`; no vectorised IPPE in OpenCV)."""
+    count = corners.shape[0]
+    out = {
+        "position_mm": np.full((count, 3), np.nan),
+        "angles_deg": np.full((count, 3), np.nan),
+        "rotation": np.full((count, 3, 3), np.nan),
+        "residual_mm": np.full(count, np.nan),
+        "reprojection_px": np.full(count, np.nan),
+    }
+    converged = np.zeros(count, bool)
+    for i in np.flatnonzero(valid):
+        r = solve_ippe(corners[i], corners[i].ravel().tolist(), camera, side, settings)
+        converged[i] = r.converged
+        out["position_mm"][i] = r.position_mm
+        out["angles_deg"][i] = r.angles_deg
+        out["rotation"][i] = r.rotation
+        out["residual_mm"][i] = r.residual_mm
+        out["reprojection_px"][i] = r.reprojection_px
+    return BatchResult(
+        method="ippe", converged=converged, iterations=np.zeros(count, int), valid=valid.copy(), **out
+    )

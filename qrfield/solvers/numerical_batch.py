@@ -1,0 +1,221 @@
+"""The numerical model on N corner sets at once, vectorised in numpy (see :mod:`.numerical`).
+
+Row by row the same arithmetic as the single path (the shared :mod:`.kernel`), so depths and
+iteration counts are bit-identical; angles and reprojection errors agree to float rounding.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from qrfield.camera import CameraModel
+from qrfield.geometry import angles_from_rotation, marker_vertices, project_points
+from qrfield.solvers import kernel
+from qrfield.solvers.numerical import (
+    CONVERGED,
+    DIVERGED,
+    INVALID,
+    N_MAX,
+    SINGULAR,
+    STALL_MM,
+    STALLED,
+    Z_FLOOR_MM,
+    NumericalSettings,
+    checked_settings,
+)
+from qrfield.solvers.rays import normalised_batch
+from qrfield.solvers.result import BatchResult
+
+
+def _initial_batch(
+    x: list[np.ndarray], y: list[np.ndarray], lengths: list[float], side: float, s: NumericalSettings
+) -> list[np.ndarray]:
+    z0 = side / kernel.mean_side(x, y, np.sqrt)
+    z0 = np.minimum(np.maximum(z0, s.z_min_mm), s.z_max_mm)
+    z = [z0.copy() for _ in range(4)]
+    if s.initial_guess != "parallelogram":
+        return z
+    z_rel, det = kernel.parallelogram_depths(x, y, np.sqrt)
+    ok = det != 0.0
+    safe = np.where(ok, det, 1.0)
+    z_rel = [v / safe for v in z_rel]
+    for v in z_rel:
+        ok &= (v > 0.0) & np.isfinite(v)
+    if not ok.any():
+        return z
+    idx = np.flatnonzero(ok)
+    sub = [v[idx] for v in z_rel]
+    scale = kernel.scale_to_side(sub, [v[idx] for v in x], [v[idx] for v in y], lengths, np.sqrt)
+    zs = [scale * v for v in sub]
+    good = np.ones(idx.size, bool)
+    for v in zs:
+        good &= (v > 0.0) & np.isfinite(v)
+    for k in range(4):
+        z[k][idx[good]] = zs[k][good]
+    return z
+
+
+#: Rows solved per pass: small enough that numpy's temporaries stay in the CPU cache.
+BATCH_CHUNK = 16384
+
+
+def solve_numerical_batch(
+    corners: np.ndarray,
+    valid: np.ndarray,
+    camera: CameraModel,
+    side: float,
+    settings: NumericalSettings | None,
+) -> BatchResult:
+    """N poses by the numerical model at once; rows identical to :func:`solve_numerical` (no mirror)."""
+    s = checked_settings(settings)
+    if corners.shape[0] <= BATCH_CHUNK:
+        return _solve_chunk(corners, valid, camera, side, s)
+    parts = [
+        _solve_chunk(corners[i : i + BATCH_CHUNK], valid[i : i + BATCH_CHUNK], camera, side, s)
+        for i in range(0, corners.shape[0], BATCH_CHUNK)
+    ]
+    return BatchResult(
+        method="numerical",
+        **{
+            name: np.concatenate([getattr(p, name) for p in parts])
+            for name in (
+                "position_mm",
+                "angles_deg",
+                "rotation",
+                "converged",
+                "iterations",
+                "residual_mm",
+                "reprojection_px",
+                "valid",
+            )
+        },
+    )
+
+
+def _solve_chunk(
+    corners: np.ndarray, valid: np.ndarray, camera: CameraModel, side: float, s: NumericalSettings
+) -> BatchResult:
+    count = corners.shape[0]
+    lengths = kernel.lengths_for(side)
+    xn, yn = normalised_batch(np.where(valid[:, None, None], corners, 0.0), camera)
+    x_all = [xn[:, k].copy() for k in range(4)]
+    y_all = [yn[:, k].copy() for k in range(4)]
+    z_out = np.full((count, 4), np.nan)
+    n_out = np.zeros(count, dtype=int)
+    status = np.full(count, INVALID, dtype=int)
+    worst_out = np.full(count, np.nan)
+
+    idx = np.flatnonzero(valid)
+    x = [v[idx] for v in x_all]
+    y = [v[idx] for v in y_all]
+    z = _initial_batch(x, y, lengths, side, s)
+    tf, tol = s.tf, s.tolerance_mm
+    early = s.stop == "seed"
+
+    def finish(mask: np.ndarray, code: int, n: int, worst: np.ndarray) -> None:
+        if not mask.any():
+            return
+        rows = idx[mask]
+        z_out[rows] = np.stack([v[mask] for v in z], axis=1)
+        n_out[rows] = n
+        status[rows] = code
+        worst_out[rows] = worst[mask]
+
+    with np.errstate(all="ignore"):
+        for n in range(s.n_max + 1):
+            if idx.size == 0:
+                break
+            diff, diag, off, grad = kernel.gn_system(z, x, y, lengths, np.sqrt)
+            worst = np.abs(diff[0])
+            for k in range(1, 6):
+                worst = np.maximum(worst, np.abs(diff[k]))
+            done = np.zeros(idx.size, bool)
+            if early:
+                conv = worst < tol
+                finish(conv, CONVERGED, n, worst)
+                done |= conv
+            bad = ~done & ~np.isfinite(worst)
+            finish(bad, DIVERGED, n, worst)
+            done |= bad
+            if n == s.n_max:
+                finish(~done, N_MAX, n, worst)
+                break
+            dz, singular = kernel.solve4(diag, off, grad, np.maximum)
+            sing = ~done & singular
+            finish(sing, SINGULAR, n, worst)
+            done |= sing
+            step = [tf * v for v in dz]
+            biggest = np.maximum(
+                np.maximum(np.abs(step[0]), np.abs(step[1])), np.maximum(np.abs(step[2]), np.abs(step[3]))
+            )
+            stall = ~done & (biggest < STALL_MM)
+            finish(stall & (worst < tol), CONVERGED, n, worst)
+            finish(stall & ~(worst < tol), STALLED, n, worst)
+            done |= stall
+            keep = ~done
+            if not keep.all():
+                idx = idx[keep]
+                x = [v[keep] for v in x]
+                y = [v[keep] for v in y]
+                z = [v[keep] for v in z]
+                step = [v[keep] for v in step]
+            z = [np.maximum(z[k] - step[k], Z_FLOOR_MM) for k in range(4)]
+
+    return _batch_result(z_out, n_out, status, worst_out, x_all, y_all, corners, valid, camera, side)
+
+
+def _batch_result(
+    z_out: np.ndarray,
+    n_out: np.ndarray,
+    status: np.ndarray,
+    worst: np.ndarray,
+    x_all: list[np.ndarray],
+    y_all: list[np.ndarray],
+    corners: np.ndarray,
+    valid: np.ndarray,
+    camera: CameraModel,
+    side: float,
+) -> BatchResult:
+    count = z_out.shape[0]
+    has_pose = np.isin(status, (CONVERGED, N_MAX, STALLED)) & np.all(np.isfinite(z_out), axis=1)
+    rotation = np.full((count, 3, 3), np.nan)
+    position = np.full((count, 3), np.nan)
+    angles = np.full((count, 3), np.nan)
+    reproj = np.full(count, np.nan)
+    idx = np.flatnonzero(has_pose)
+    if idx.size:
+        z = [z_out[idx, k] for k in range(4)]
+        rows, centre = kernel.pose_from_vertices(
+            z, [v[idx] for v in x_all], [v[idx] for v in y_all], np.sqrt, np.maximum
+        )
+        rot = np.empty((idx.size, 3, 3))
+        for i in range(3):
+            for j in range(3):
+                rot[:, i, j] = rows[i][j]
+        pos = np.stack(centre, axis=1)
+        rotation[idx] = rot
+        position[idx] = pos
+        angles[idx] = angles_from_rotation(rot)
+        q = marker_vertices(side)
+        model = (
+            pos[:, None, :]
+            + rot[:, None, :, 0] * q[None, :, 0, None]
+            + rot[:, None, :, 1] * q[None, :, 1, None]
+        )
+        with np.errstate(all="ignore"):
+            projected = project_points(model, camera)
+            err = np.sqrt(np.sum((projected - corners[idx]) ** 2, axis=(1, 2)) / 4.0)
+        err[np.any(model[..., 2] <= 0.0, axis=1)] = np.inf
+        reproj[idx] = err
+    worst = np.where(has_pose | (status != INVALID), worst, np.nan)
+    return BatchResult(
+        method="numerical",
+        position_mm=position,
+        angles_deg=angles,
+        rotation=rotation,
+        converged=status == CONVERGED,
+        iterations=n_out,
+        residual_mm=worst,
+        reprojection_px=reproj,
+        valid=valid.copy(),
+    )

@@ -1,0 +1,44 @@
+"""Seeded workspace cases for the solver tests: exact corners from known poses (independent truth)."""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+from qrfield.camera import CameraModel, resolve_camera
+from qrfield.geometry import angle_difference
+from qrfield.sampling import random_visible_poses
+
+SIDE_MM = 50.0
+#: A lens with visible barrel distortion (k1, k2, p1, p2, k3), typical of a wide Pi camera.
+DISTORTED = CameraModel(
+    fx=530.0,
+    fy=528.0,
+    cx=322.0,
+    cy=236.5,
+    width=640,
+    height=480,
+    dist=np.array([-0.28, 0.09, 0.0012, -0.0008, -0.012]),
+    name="test-distorted",
+)
+
+
+@functools.lru_cache(maxsize=8)
+def cases(count: int, seed: int, camera_name: str = "picam-v2@640x480", max_tilt_deg: float = 60.0):
+    """(camera, poses, corners (N, 4, 2), positions (N, 3), angles (N, 3)) over z 150-800 mm."""
+    camera = DISTORTED if camera_name == DISTORTED.name else resolve_camera(camera_name)
+    poses = random_visible_poses(
+        camera, SIDE_MM, count, seed=seed, z_range_mm=(150.0, 800.0), max_tilt_deg=max_tilt_deg
+    )
+    corners = np.array([p.corners_px(camera, SIDE_MM) for p in poses])
+    positions = np.array([p.position_mm for p in poses])
+    angles = np.array([p.angles_deg for p in poses])
+    return camera, poses, corners, positions, angles
+
+
+def errors(position_mm, angles_deg, true_position_mm, true_angles_deg) -> tuple[np.ndarray, np.ndarray]:
+    """Euclidean position error (mm) and largest wrapped angle error (degrees), per row."""
+    pos = np.linalg.norm(np.asarray(position_mm) - true_position_mm, axis=-1)
+    ang = np.max(np.abs(angle_difference(np.asarray(angles_deg), true_angles_deg)), axis=-1)
+    return pos, ang
