@@ -197,16 +197,17 @@ class Pipeline:
         self.select_text = select_text
         self.t0 = t0
         self._own_tracker = tracker is None
-        if tracker is None or solve is None or select is None:
-            from qrfield import detect, solvers
+        if tracker is None or select is None:
+            from qrfield import detect
 
             tracker = (
                 tracker
                 if tracker is not None
                 else detect.Tracker(detector_settings or detect.DetectorSettings())
             )
-            solve = solve or solvers.solve
             select = select or detect.select_code
+        if solve is None:
+            from qrfield.solvers import solve
         self._tracker = tracker
         self._detector_settings = detector_settings
         self._solve = solve

@@ -183,3 +183,30 @@ def test_virtual_bench_end_to_end_meets_the_seed_criteria(seed_pose: Pose, camer
         assert np.allclose(result.detection.corners_px, seed_pose.corners_px(camera_vga, 50.0), atol=1.5)
         for method in METHODS:
             assert within_seed_criteria(result.pose_of(method), seed_pose), (method, result.poses[method])
+
+
+class ExactCornersTracker:
+    """Reports the renderer's exact vertex pixels of each frame (the truth), as a perfect detector would."""
+
+    def __init__(self, camera, side_mm: float) -> None:
+        self.camera, self.side_mm, self.truth = camera, side_mm, None
+
+    def update(self, image: np.ndarray) -> list[Any]:
+        return [FakeDetection(self.truth.corners_px(self.camera, self.side_mm))]
+
+
+def test_real_solvers_through_the_pipeline_recover_the_rendered_pose(camera_vga) -> None:
+    pytest.importorskip("qrfield.solvers", reason="the solvers branch is not merged yet")
+    tracker = ExactCornersTracker(camera_vga, 50.0)
+    pipeline = Pipeline(camera_vga, 50.0, METHODS, tracker=tracker, select=first_with_text)
+    settings = VirtualBenchSettings(fps=0.0, wobble_deg=10.0, wobble_mm=30.0, wobble_period_s=1.0)
+    with VirtualBenchSource(camera_vga, 50.0, settings) as source:
+        for _ in range(5):
+            frame = source.read()
+            tracker.truth = frame.truth
+            result = pipeline.process(frame)
+            assert result.status == OK, result.reason
+            for method in METHODS:
+                pose = result.pose_of(method)
+                assert np.allclose(pose.position_mm, frame.truth.position_mm, atol=1e-3), method
+                assert np.allclose(angle_difference(pose.angles_deg, frame.truth.angles_deg), 0.0, atol=1e-3)
