@@ -90,7 +90,13 @@ class SolverControls(QtWidgets.QWidget):
 
     changed = QtCore.Signal()
 
-    def __init__(self, settings_classes: dict[str, type], values: dict[str, Any], parent=None) -> None:
+    def __init__(
+        self,
+        settings_classes: dict[str, type],
+        values: dict[str, Any],
+        detector: tuple[type, Any] | None = None,
+        parent=None,
+    ) -> None:
         super().__init__(parent)
         layout = QtWidgets.QVBoxLayout(self)
         form = QtWidgets.QFormLayout()
@@ -100,6 +106,14 @@ class SolverControls(QtWidgets.QWidget):
         form.addRow(_spec("select_text").label, self.select_text)
         layout.addLayout(form)
         self.forms: dict[str, SettingsForm] = {}
+        self.detector: SettingsForm | None = None
+        if detector is not None:
+            box = QtWidgets.QGroupBox("detector settings")
+            box_layout = QtWidgets.QVBoxLayout(box)
+            self.detector = SettingsForm(*detector)
+            box_layout.addWidget(self.detector)
+            layout.addWidget(box)
+            self.detector.changed.connect(lambda *_: self.changed.emit())
         for name, cls in settings_classes.items():
             box = QtWidgets.QGroupBox(f"{name} settings")
             box_layout = QtWidgets.QVBoxLayout(box)

@@ -62,8 +62,7 @@ class MainWindow(QtWidgets.QMainWindow):
             store.group("app", AppSettings), **{k: v for k, v in (overrides or {}).items() if v is not None}
         )
         classes = solver_settings_classes()
-        self._detector_cls = detector_settings_class()
-        self.detector_settings = store.group("detector", self._detector_cls)
+        detector_cls = detector_settings_class()
         self.camera_model: CameraModel | None = None
 
         # ----- widgets
@@ -84,14 +83,18 @@ class MainWindow(QtWidgets.QMainWindow):
         banner_row.hide()
 
         self.source_controls = SourceControls(store.group("picamera", Picamera2Settings))
-        self.solver_controls = SolverControls(classes, {n: store.group(n, c) for n, c in classes.items()})
+        self.solver_controls = SolverControls(
+            classes,
+            {n: store.group(n, c) for n, c in classes.items()},
+            detector=(detector_cls, store.group("detector", detector_cls)),
+        )
         self.camera_controls = CameraControls()
         self.virtual_form = SettingsForm(VirtualBenchSettings, store.group("virtual", VirtualBenchSettings))
         show_app_settings(self.app_settings, self.source_controls, self.solver_controls, self.camera_controls)
 
         tabs = QtWidgets.QTabWidget()
         tabs.addTab(_scrolled(self.source_controls), "Source")
-        tabs.addTab(_scrolled(self.solver_controls), "Solver")
+        tabs.addTab(_scrolled(self.solver_controls), "Detect && solve")
         tabs.addTab(self.camera_controls, "Camera")
         tabs.addTab(_scrolled(self.virtual_form), "Virtual bench")
         self.tabs = tabs
@@ -180,7 +183,7 @@ class MainWindow(QtWidgets.QMainWindow):
             side_mm=app.side_mm,
             methods=self.methods(),
             solver_settings=self.solver_controls.settings(),
-            detector_settings=self.detector_settings,
+            detector_settings=self.solver_controls.detector.value(),
             virtual=self.virtual_form.value(),
             select_text=app.select_text,
             loop=app.loop,
@@ -288,7 +291,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.store.set_group("picamera", self.source_controls.picamera.value())
         for name, value in self.solver_controls.settings().items():
             self.store.set_group(name, value)
-        self.store.set_group("detector", self.detector_settings)
+        self.store.set_group("detector", self.solver_controls.detector.value())
         self.store.set_value("window", bytes(self.saveGeometry().toBase64()).decode())
         try:
             self.store.save()
