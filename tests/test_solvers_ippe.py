@@ -174,3 +174,23 @@ def test_rendered_view_through_a_distorted_lens():
         r = solve(view.corners_px, DISTORTED, SIDE_MM, method)
         pos_err, ang_err = errors(r.position_mm, r.angles_deg, view.pose.position_mm, view.pose.angles_deg)
         assert r.converged and pos_err < 1e-6 and ang_err < 1e-6
+
+
+@pytest.mark.parametrize("position", [(0.0, 0.0, 300.0), (40.0, -25.0, 450.0)])
+def test_exactly_square_on_card_is_not_flipped(position):
+    # OpenCV 5.0's IPPE_SQUARE degenerates here (both candidates flipped 180 degrees, 70 px error);
+    # the answer must still be the pose the corners were made from, worked out by hand:
+    # f = 500 px, L = 60 mm -> the code spans 100 px at 300 mm, centred on the principal point.
+    from qrfield.camera import CameraModel
+    from qrfield.geometry import Pose
+    from qrfield.solvers import solve
+
+    camera = CameraModel.from_focal(500.0, 640, 480)
+    corners = Pose(position, [0.0, 0.0, 0.0]).corners_px(camera, 60.0)
+    if position == (0.0, 0.0, 300.0):
+        assert corners.tolist() == [[269.5, 189.5], [369.5, 189.5], [369.5, 289.5], [269.5, 289.5]]
+    result = solve(corners, camera, 60.0, method="ippe")
+    assert result.converged
+    np.testing.assert_allclose(result.position_mm, position, atol=1e-6)
+    np.testing.assert_allclose(result.angles_deg, [0.0, 0.0, 0.0], atol=1e-6)
+    assert result.reprojection_px < 1e-6

@@ -10,6 +10,13 @@ refining the second candidate slides it onto the answer (it is then no local min
 the alternative is IPPE's unrefined closed-form mirror, so that the two always differ.
 Corners are undistorted first (exactly, by iteration) when the camera has distortion, so the
 solver works on ideal pinhole pixels; reprojection errors are measured on the corners as given.
+
+A candidate behind the camera or facing away from it is no pose of a visible card and is dropped.
+OpenCV 5.0's IPPE degenerates for an exactly square-on view (the card's plane parallel to the
+image, e.g. corners (269.5,189.5) (369.5,189.5) (369.5,289.5) (269.5,289.5) at f = 500 px): both of
+its candidates come back flipped by 180 degrees with a 70 px reprojection error, and refining them
+runs off to a pose 33 m behind the camera. When no candidate is left, the refinement starts from
+the numerical model's closed-form parallelogram pose instead (exact for exact corners).
 """
 
 from __future__ import annotations
@@ -21,7 +28,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from qrfield.camera import CameraModel
-from qrfield.geometry import ippe_object_points, rotation_from_ippe
+from qrfield.geometry import ippe_object_points, rotation_from_ippe, rotation_to_ippe
 from qrfield.settings import setting, validated
 from qrfield.solvers.floats import angles_single, reprojection_single
 from qrfield.solvers.rays import normalised_single, undistort
@@ -103,6 +110,11 @@ class _Candidate:
             residual = max(residual, math.sqrt(ox * ox + oy * oy + oz * oz))
         self.residual = residual
 
+    def visible(self) -> bool:
+        """In front of the camera with its printed face turned towards it."""
+        facing = sum(self.rows[k][2] * self.position[k] for k in range(3)) > 0.0
+        return facing and all(v[2] > 0.0 for v in self.vertices) and math.isfinite(self.error)
+
     def result(self, corners: np.ndarray) -> PoseResult:
         return PoseResult(
             method="ippe",
@@ -151,20 +163,16 @@ def solve_ippe(
     if count < 1:
         return PoseResult.failed("ippe", corners, "OpenCV IPPE_SQUARE returned no pose")
     rays = _unit_rays(*normalised_single(corners, flat, camera))
-    candidates = []
-    for raw_rvec, raw_tvec in zip(rvecs[:count], tvecs[:count], strict=True):
-        rvec, tvec = raw_rvec.copy(), raw_tvec.copy()
-        try:
-            if s.refine == "lm":
-                rvec, tvec = cv2.solvePnPRefineLM(obj, pts, k, None, rvec, tvec)
-            elif s.refine == "vvs":
-                rvec, tvec = cv2.solvePnPRefineVVS(obj, pts, k, None, rvec, tvec)
-        except cv2.error:
-            pass  # keep the unrefined closed-form candidate
-        if np.all(np.isfinite(rvec)) and np.all(np.isfinite(tvec)):
-            candidates.append((_Candidate(rvec, tvec, side, camera, flat, rays), raw_rvec, raw_tvec))
+    starts = list(zip(rvecs[:count], tvecs[:count], strict=True))
+    candidates = _refined_candidates(starts, obj, pts, k, s, side, camera, flat, rays)
     if not candidates:
-        return PoseResult.failed("ippe", corners, "OpenCV IPPE_SQUARE returned no finite pose")
+        start = _closed_form_start(corners, camera, side)
+        if start is not None:
+            candidates = _refined_candidates([start], obj, pts, k, s, side, camera, flat, rays)
+    if not candidates:
+        return PoseResult.failed(
+            "ippe", corners, "OpenCV IPPE_SQUARE found no pose in front of the camera facing it"
+        )
     candidates.sort(key=lambda c: c[0].error)
     first = candidates[0][0]
     if len(candidates) < 2:
@@ -176,6 +184,42 @@ def solve_ippe(
         second = _Candidate(candidates[1][1], candidates[1][2], side, camera, flat, rays)
     ambiguity = first.error / second.error if second.error > 0.0 else 1.0
     return replace(first.result(corners), alternative=second.result(corners), ambiguity=ambiguity)
+
+
+def _refined_candidates(starts, obj, pts, k, s: IppeSettings, side, camera, flat, rays) -> list:
+    """Refine each (rvec, tvec) start; keep the visible ones as (candidate, raw rvec, raw tvec)."""
+    import cv2
+
+    out = []
+    for raw_rvec, raw_tvec in starts:
+        rvec, tvec = raw_rvec.copy(), raw_tvec.copy()
+        try:
+            if s.refine == "lm":
+                rvec, tvec = cv2.solvePnPRefineLM(obj, pts, k, None, rvec, tvec)
+            elif s.refine == "vvs":
+                rvec, tvec = cv2.solvePnPRefineVVS(obj, pts, k, None, rvec, tvec)
+        except cv2.error:
+            pass  # keep the unrefined closed-form candidate
+        if np.all(np.isfinite(rvec)) and np.all(np.isfinite(tvec)):
+            candidate = _Candidate(rvec, tvec, side, camera, flat, rays)
+            if candidate.visible():
+                out.append((candidate, raw_rvec, raw_tvec))
+    return out
+
+
+def _closed_form_start(corners: np.ndarray, camera: CameraModel, side: float):
+    """(rvec, tvec) in OpenCV's IPPE frame from the numerical model's parallelogram closed form."""
+    import cv2
+
+    from qrfield.solvers.numerical import NumericalSettings, solve_numerical
+
+    closed = solve_numerical(
+        corners, corners.ravel().tolist(), camera, side, NumericalSettings(n_max=1, mirror=False)
+    )
+    if not np.all(np.isfinite(closed.rotation)):
+        return None
+    rvec = cv2.Rodrigues(rotation_to_ippe(closed.rotation))[0]
+    return rvec, closed.position_mm.reshape(3, 1).copy()
 
 
 def solve_ippe_batch(

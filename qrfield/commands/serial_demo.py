@@ -1,0 +1,77 @@
+"""``qrfield serial-demo PORT``: stream a synthetic moving pose to a port, without camera or app.
+
+For whoever writes the gripper controller: the controller sees exactly the frames the app would
+send (through the same :class:`SerialLink`: rate limit, newest-wins, reconnect, STALE), from a
+smooth made-up path (the card swaying 300-500 mm in front of the camera), with one second of NOQR
+every ``--noqr-every`` seconds so the controller's "no pose" branch gets exercised too.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import signal
+import sys
+import time
+
+HELP = "stream a synthetic moving pose to a serial port (test a controller without camera or app)"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "port", metavar="PORT", help="device path (/dev/ttyUSB0, COM3, a pty) or URL (loop://)"
+    )
+    parser.add_argument("--fps", type=float, default=30.0, help="poses produced per second (default 30)")
+    parser.add_argument("--seconds", type=float, default=None, metavar="S", help="stop after S seconds")
+    parser.add_argument(
+        "--noqr-every", type=float, default=10.0, metavar="S", help="1 s of NOQR every S s; 0 never"
+    )
+    parser.add_argument("--baud", type=int, default=115200, help="baud rate, 8N1 (default 115200)")
+    parser.add_argument(
+        "--max-rate", type=float, default=30.0, metavar="HZ", help="the link's rate cap (default 30)"
+    )
+
+
+def demo_pose(t_s: float) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """The synthetic path at time t_s: position (mm, camera frame) and angles (degrees)."""
+    position = (60.0 * math.sin(0.5 * t_s), 40.0 * math.sin(0.3 * t_s), 400.0 + 100.0 * math.sin(0.2 * t_s))
+    angles = (15.0 * math.sin(0.4 * t_s), 20.0 * math.sin(0.25 * t_s), 30.0 * math.sin(0.15 * t_s))
+    return position, angles
+
+
+def run(args: argparse.Namespace) -> int:
+    from qrfield.serial_link import SerialLink, SerialLinkSettings
+    from qrfield.settings import validated
+
+    if not args.fps > 0:
+        raise ValueError(f"--fps must be positive, got {args.fps}")
+    settings = validated(SerialLinkSettings(port=args.port, baud=args.baud, max_rate_hz=args.max_rate))
+
+    def on_sigterm(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, on_sigterm)
+    link = SerialLink(settings, on_status=lambda s: print(s.summary(), file=sys.stderr, flush=True))
+    start = time.monotonic()
+    next_report = start + 1.0
+    try:
+        link.start()
+        frame = 0
+        while args.seconds is None or time.monotonic() - start < args.seconds:
+            t_s = frame / args.fps
+            noqr = args.noqr_every > 0 and (t_s % args.noqr_every) >= args.noqr_every - 1.0
+            if noqr:
+                link.publish(t_s * 1000.0, None, None, "NOQR")
+            else:
+                link.publish(t_s * 1000.0, *demo_pose(t_s), "OK")
+            frame += 1
+            if time.monotonic() >= next_report:
+                print(link.status().summary(), file=sys.stderr, flush=True)
+                next_report += 1.0
+            time.sleep(max(0.0, start + frame / args.fps - time.monotonic()))
+    except KeyboardInterrupt:
+        pass
+    finally:
+        link.close()
+        signal.signal(signal.SIGTERM, previous)
+    return 0

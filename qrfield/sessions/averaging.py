@@ -1,0 +1,239 @@
+"""Average N frames of pose results into one session row and judge it against the ground truth.
+
+Input frames are PoseResult-like: objects with attributes, or dicts with keys, ``position_mm``
+(3, mm, camera frame), ``angles_deg`` (3: alpha, beta, gamma in degrees), ``converged`` (bool)
+and optionally ``iterations`` and ``reprojection_px``; ``None`` stands for a frame in which no
+code was found. Every frame counts in ``n_frames``; only converged frames with a finite pose
+enter the means (``n_converged``).
+
+Means: position arithmetic (mm); each angle the circular mean atan2(mean sin, mean cos), so
+179 and -179 average to 180, not 0. Standard deviations: sample (ddof = 1) over the converged
+frames, angles measured as wrapped differences from their circular mean; NaN below two frames.
+Angles are averaged one by one (not as rotations): fine for the small spreads of a still card.
+Errors: err_pos = |mean position - truth| (Euclidean, mm); err_alpha/beta/gamma = mean minus
+truth, wrapped to (-180, 180] (signed, degrees).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from qrfield.geometry import angle_difference, wrap_degrees
+from qrfield.sessions.criteria import AcceptanceCriteria
+from qrfield.sessions.groundtruth import GroundTruth
+
+
+def _get(frame: Any, key: str, default: Any = None) -> Any:
+    if isinstance(frame, Mapping):
+        return frame.get(key, default)
+    return getattr(frame, key, default)
+
+
+def circular_mean_deg(angles_deg: Sequence[float] | np.ndarray) -> float:
+    """Circular mean of angles in degrees, wrapped to (-180, 180]; NaN for none (or a spread that cancels)."""
+    a = np.radians(np.asarray(angles_deg, dtype=float).reshape(-1))
+    if a.size == 0:
+        return math.nan
+    s, c = float(np.mean(np.sin(a))), float(np.mean(np.cos(a)))
+    if math.hypot(s, c) < 1e-12:
+        return math.nan  # e.g. 0 and 180: no meaningful mean direction
+    return float(wrap_degrees(math.degrees(math.atan2(s, c))))
+
+
+@dataclass(frozen=True)
+class AveragedPose:
+    """What N frames measured (mm and degrees; NaN where no converged frame)."""
+
+    n_frames: int
+    n_converged: int
+    position_mm: np.ndarray
+    angles_deg: np.ndarray
+    std_position_mm: np.ndarray
+    std_angles_deg: np.ndarray
+    mean_iterations: float
+    mean_reprojection_px: float
+
+    @property
+    def has_pose(self) -> bool:
+        return self.n_converged > 0 and bool(np.all(np.isfinite(self.position_mm)))
+
+
+def pose_of(frame: Any, method: str = "") -> Any:
+    """The PoseResult-like part of a frame: a pipeline FrameResult (it has ``poses``, method name ->
+    PoseResult) gives the result of ``method`` (or its first method when ``method`` is empty);
+    anything else is taken as it is (None = no code in the frame)."""
+    poses = frame.get("poses") if isinstance(frame, Mapping) else getattr(frame, "poses", None)
+    if isinstance(poses, Mapping):
+        if method:
+            return poses.get(method)
+        return next(iter(poses.values()), None)
+    return frame
+
+
+def average_frames(frames: Iterable[Any], method: str = "") -> AveragedPose:
+    """Means and standard deviations of the converged frames (see the module doc).
+
+    ``method`` picks the solver's result out of pipeline frames (see :func:`pose_of`).
+    """
+    positions: list[np.ndarray] = []
+    angles: list[np.ndarray] = []
+    iterations: list[float] = []
+    reprojections: list[float] = []
+    n_frames = 0
+    for index, item in enumerate(frames):
+        n_frames += 1
+        frame = pose_of(item, method)
+        if frame is None or not bool(_get(frame, "converged", False)):
+            continue
+        pos = np.asarray(_get(frame, "position_mm"), dtype=float).reshape(-1)
+        ang = np.asarray(_get(frame, "angles_deg"), dtype=float).reshape(-1)
+        if pos.shape != (3,) or ang.shape != (3,):
+            raise ValueError(
+                f"frame {index}: position_mm needs 3 values (mm) and angles_deg 3 (deg), "
+                f"got {pos.size} and {ang.size}"
+            )
+        if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(ang))):
+            continue  # converged but without a usable pose: not averaged
+        positions.append(pos)
+        angles.append(ang)
+        it = _get(frame, "iterations")
+        if it is not None and math.isfinite(float(it)):
+            iterations.append(float(it))
+        rp = _get(frame, "reprojection_px")
+        if rp is not None and math.isfinite(float(rp)):
+            reprojections.append(float(rp))
+    n = len(positions)
+    nan3 = np.full(3, np.nan)
+    if n == 0:
+        return AveragedPose(n_frames, 0, nan3, nan3.copy(), nan3.copy(), nan3.copy(), math.nan, math.nan)
+    pos_arr = np.array(positions)
+    ang_arr = np.array(angles)
+    mean_pos = pos_arr.mean(axis=0)
+    mean_ang = np.array([circular_mean_deg(ang_arr[:, k]) for k in range(3)])
+    if n >= 2:
+        std_pos = pos_arr.std(axis=0, ddof=1)
+        dev = angle_difference(ang_arr, mean_ang[None, :])
+        std_ang = np.sqrt(np.sum(dev**2, axis=0) / (n - 1))
+    else:
+        std_pos, std_ang = nan3.copy(), nan3.copy()
+    return AveragedPose(
+        n_frames=n_frames,
+        n_converged=n,
+        position_mm=mean_pos,
+        angles_deg=mean_ang,
+        std_position_mm=std_pos,
+        std_angles_deg=std_ang,
+        mean_iterations=float(np.mean(iterations)) if iterations else math.nan,
+        mean_reprojection_px=float(np.mean(reprojections)) if reprojections else math.nan,
+    )
+
+
+@dataclass(frozen=True)
+class Judgement:
+    """Errors of a measured pose against its ground truth, and the verdict."""
+
+    err_pos_mm: float
+    err_angles_deg: np.ndarray
+    passed: bool
+    reason: str
+
+
+def judge(
+    position_mm: Sequence[float] | np.ndarray,
+    angles_deg: Sequence[float] | np.ndarray,
+    truth: GroundTruth,
+    criteria: AcceptanceCriteria | None = None,
+    *,
+    has_pose: bool = True,
+) -> Judgement:
+    """Errors (mm; signed wrapped degrees, measured minus truth) and pass by the criteria."""
+    criteria = criteria or AcceptanceCriteria()
+    pos = np.asarray(position_mm, dtype=float).reshape(-1)
+    ang = np.asarray(angles_deg, dtype=float).reshape(-1)
+    if pos.shape != (3,) or ang.shape != (3,):
+        raise ValueError(f"position (3, mm) and angles (3, deg) expected, got {pos.size} and {ang.size}")
+    if not has_pose or not (np.all(np.isfinite(pos)) and np.all(np.isfinite(ang))):
+        return Judgement(math.nan, np.full(3, np.nan), False, "no converged frame")
+    err_pos = float(np.linalg.norm(pos - np.asarray(truth.position_mm)))
+    err_ang = np.asarray(angle_difference(ang, np.asarray(truth.angles_deg)), dtype=float)
+    passed = criteria.passes(err_pos, err_ang)
+    reasons = []
+    if not err_pos < criteria.max_position_error_mm:
+        reasons.append(f"position error {err_pos:.2f} mm >= {criteria.max_position_error_mm:g} mm")
+    for name, err in zip(("alpha", "beta", "gamma"), err_ang, strict=True):
+        if abs(err) > criteria.max_angle_error_deg:
+            reasons.append(f"{name} error {err:+.2f} deg beyond {criteria.max_angle_error_deg:g} deg")
+    return Judgement(err_pos, err_ang, passed, "; ".join(reasons))
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """One row's content before it is numbered and logged: the truth, the average and the verdict."""
+
+    truth: GroundTruth
+    average: AveragedPose
+    judgement: Judgement
+    method: str = ""
+    note: str = ""
+
+
+def measure(
+    frames: Iterable[Any],
+    truth: GroundTruth,
+    criteria: AcceptanceCriteria | None = None,
+    *,
+    method: str = "",
+    note: str = "",
+) -> Measurement:
+    """Average ``frames`` and judge the mean against ``truth`` (pass needs >= 1 converged frame)."""
+    average = average_frames(frames, method)
+    judgement = judge(average.position_mm, average.angles_deg, truth, criteria, has_pose=average.has_pose)
+    return Measurement(truth, average, judgement, method=method, note=note)
+
+
+@dataclass
+class FrameCollector:
+    """Collects the next N frames for 'Log row' (the GUI feeds it and shows ``progress``).
+
+    ``add`` takes a frame: a pipeline FrameResult, a PoseResult-like object or dict, or None for
+    a frame without a code; it returns True once N frames are in; further frames are ignored.
+    ``method`` names the solver whose results are averaged (default: a FrameResult's first method).
+    ``measurement(truth)`` averages and judges.
+    """
+
+    frames_wanted: int
+    method: str = ""
+    frames: list[Any] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        if int(self.frames_wanted) < 1:
+            raise ValueError(f"frames per row must be at least 1, got {self.frames_wanted!r}")
+        self.frames_wanted = int(self.frames_wanted)
+
+    def add(self, frame: Any) -> bool:
+        if len(self.frames) < self.frames_wanted:
+            self.frames.append(frame)
+        return self.done
+
+    @property
+    def done(self) -> bool:
+        return len(self.frames) >= self.frames_wanted
+
+    @property
+    def progress(self) -> tuple[int, int]:
+        """(frames collected, frames wanted)."""
+        return len(self.frames), self.frames_wanted
+
+    def measurement(
+        self,
+        truth: GroundTruth,
+        criteria: AcceptanceCriteria | None = None,
+        *,
+        note: str = "",
+    ) -> Measurement:
+        return measure(self.frames, truth, criteria, method=self.method, note=note)

@@ -1,0 +1,63 @@
+"""Settings of experiment sessions: the acceptance criteria and how many frames make one row.
+
+The criteria are the seed's (DESIGN.md): each of alpha, beta, gamma within 2 degrees of the ground
+truth (inclusive) and the position within 5 mm (Euclidean, strict), with at least one converged
+frame. They are settings so that a study can tighten or loosen them; the values used are saved in
+every session's ``session.json``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from qrfield.settings import setting
+
+
+@dataclass(frozen=True)
+class AcceptanceCriteria:
+    """When a measured pose counts as a pass against its ground truth."""
+
+    max_angle_error_deg: float = setting(
+        2.0,
+        label="largest angle error",
+        unit="deg",
+        minimum=0.0,
+        maximum=180.0,
+        help="pass needs |error| <= this on each of alpha, beta, gamma (seed: 2 degrees)",
+    )
+    max_position_error_mm: float = setting(
+        5.0,
+        label="largest position error",
+        unit="mm",
+        minimum=0.0,
+        maximum=10000.0,
+        help="pass needs the Euclidean position error < this (seed: 5 mm)",
+    )
+
+    def passes(self, err_pos_mm: float, err_angles_deg: np.ndarray | list[float]) -> bool:
+        """True when the errors (mm; alpha, beta, gamma in degrees) meet the criteria.
+
+        NaN errors (no pose) never pass.
+        """
+        angles = np.abs(np.asarray(err_angles_deg, dtype=float).reshape(-1))
+        if angles.shape != (3,):
+            raise ValueError(f"three angle errors (alpha, beta, gamma, deg) expected, got {angles.size}")
+        if not np.isfinite(err_pos_mm) or not np.all(np.isfinite(angles)):
+            return False
+        return bool(err_pos_mm < self.max_position_error_mm and np.all(angles <= self.max_angle_error_deg))
+
+
+@dataclass(frozen=True)
+class SessionSettings:
+    """How the app logs one row."""
+
+    frames_per_row: int = setting(
+        10,
+        label="frames per row",
+        unit="frames",
+        minimum=1,
+        maximum=1000,
+        help="'Log row' averages this many consecutive frames into one row",
+    )

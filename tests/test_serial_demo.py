@@ -1,0 +1,54 @@
+"""``qrfield serial-demo`` streams its synthetic path to a pty; frames checked by the independent parser."""
+
+from __future__ import annotations
+
+import os
+import threading
+
+import numpy as np
+import pytest
+from serial_truth import parse_frame_line, split_lines
+
+from qrfield.cli import main
+from qrfield.commands.serial_demo import demo_pose
+
+pytestmark = pytest.mark.timeout(30)
+
+
+def test_serial_demo_streams_ok_then_noqr_frames_to_a_pty(capsys):
+    master, slave = os.openpty()
+    received = bytearray()
+
+    def read() -> None:
+        while True:
+            try:
+                data = os.read(master, 4096)
+            except OSError:
+                return
+            if not data:
+                return
+            received.extend(data)
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    try:
+        # 1 s at 40 poses/s; NOQR when t mod 1.5 s >= 0.5 s, i.e. from t = 0.5 s on.
+        args = ["serial-demo", os.ttyname(slave), "--seconds", "1", "--fps", "40", "--max-rate", "100"]
+        assert main([*args, "--noqr-every", "1.5"]) == 0
+    finally:
+        os.close(slave)
+        os.close(master)
+        reader.join(5)
+    frames = [parse_frame_line(line) for line in split_lines(bytes(received))]
+    assert len(frames) >= 10
+    assert [f["seq"] for f in frames] == list(range(len(frames)))
+    for f in frames:
+        if f["t_ms"] < 500:
+            position, angles = demo_pose(f["t_ms"] / 1000.0)
+            assert f["status"] == "OK"
+            assert np.all(np.abs(np.array(f["pose"][:3]) - position) <= 0.05 + 1e-9)
+            assert np.all(np.abs(np.array(f["pose"][3:]) - angles) <= 0.005 + 1e-9)
+        else:
+            assert f["status"] in ("NOQR", "STALE") and f["pose"] is None
+    assert {f["status"] for f in frames} >= {"OK", "NOQR"}
+    assert "closed" in capsys.readouterr().err

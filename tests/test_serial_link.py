@@ -1,0 +1,404 @@
+"""The serial link over its simulated twins (loop://, a pty with a reader in another process) and fakes.
+
+Every frame on the wire is checked with tests/serial_truth.py, a parser that shares no code with
+the link. Nothing here measures speed; waits are bounded polls, and every test has a timeout.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import queue
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from serial_truth import parse_frame_line, split_lines
+
+from qrfield.serial_link import (
+    CLOSED,
+    CONNECTED,
+    DISCONNECTED,
+    LOOP_URL,
+    FrameError,
+    SerialLink,
+    SerialLinkSettings,
+    list_ports,
+    open_pyserial,
+)
+
+pytestmark = pytest.mark.timeout(30)
+
+READER = r"""
+import os, sys
+fd = int(sys.argv[1])
+out = sys.stdout.buffer
+while True:
+    try:
+        data = os.read(fd, 4096)
+    except OSError:
+        break
+    if not data:
+        break
+    out.write(data)
+    out.flush()
+"""
+
+
+def wait_until(predicate, timeout: float = 5.0, what: str = "condition") -> None:
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out waiting for {what}")
+        time.sleep(0.01)
+
+
+class PtyTwin:
+    """A pty pair whose slave is reached through a symlink we control; the master is read by a
+    separate Python process that copies raw bytes to its stdout (collected by a thread here)."""
+
+    def __init__(self, link_path: Path) -> None:
+        self.path = link_path
+        self.data = bytearray()
+        self._lock = threading.Lock()
+        self.master, self.slave = os.openpty()  # keep the slave open so the master never reads EIO early
+        tmp = link_path.with_suffix(".new")
+        os.symlink(os.ttyname(self.slave), tmp)
+        os.replace(tmp, link_path)  # atomically repoint the path the link opens
+        self.proc = subprocess.Popen(
+            [sys.executable, "-c", READER, str(self.master)], pass_fds=(self.master,), stdout=subprocess.PIPE
+        )
+        self._thread = threading.Thread(target=self._collect, daemon=True)
+        self._thread.start()
+
+    def _collect(self) -> None:
+        assert self.proc.stdout is not None
+        while chunk := self.proc.stdout.read1(4096):
+            with self._lock:
+                self.data += chunk
+
+    def received(self) -> bytes:
+        with self._lock:
+            return bytes(self.data)
+
+    def vanish(self) -> None:
+        """Unplug: the reader process ends and every master fd is closed."""
+        self.proc.kill()
+        self.proc.wait(5)
+        for fd in (self.master, self.slave):
+            with contextlib.suppress(OSError):
+                os.close(fd)
+        self._thread.join(5)
+
+
+class LoopTap:
+    """pyserial's loop:// port, whose bytes read back by the link are also kept raw for the test."""
+
+    def __init__(self) -> None:
+        self.data = bytearray()
+        self._lock = threading.Lock()
+
+    def opener(self, settings):
+        port = open_pyserial(settings)
+        tap = self
+
+        class Tapped:
+            def write(self, data):
+                return port.write(data)
+
+            def read(self, size=1):
+                data = port.read(size)
+                with tap._lock:
+                    tap.data += data
+                return data
+
+            def close(self):
+                port.close()
+
+        return Tapped()
+
+    def received(self) -> bytes:
+        with self._lock:
+            return bytes(self.data)
+
+
+@pytest.fixture(params=["loop", "pty"])
+def twin(request, tmp_path):
+    """(settings kwargs, link kwargs, received() -> raw bytes) for each simulated serial port."""
+    if request.param == "loop":
+        tap = LoopTap()
+        yield {"port": LOOP_URL}, {"opener": tap.opener}, tap.received
+    else:
+        pty = PtyTwin(tmp_path / "ttyQRF")
+        yield {"port": str(pty.path)}, {}, pty.received
+        pty.vanish()
+
+
+def frames_of(received) -> list[dict]:
+    return [parse_frame_line(line) for line in split_lines(received())]
+
+
+def poses(n: int, seed: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(n):
+        position = rng.uniform([-300, -300, 100], [300, 300, 2000])
+        angles = np.array([rng.uniform(-180, 180), rng.uniform(-90, 90), rng.uniform(-180, 180)])
+        out.append((position, angles))
+    return out
+
+
+def test_contract_frames_arrive_in_order_with_values_as_sent(twin):
+    port_kwargs, link_kwargs, received = twin
+    settings = SerialLinkSettings(**port_kwargs, max_rate_hz=500, stale_after_s=0)
+    sent = {}
+    with SerialLink(settings, **link_kwargs) as link:
+        assert link.wait_for_state(CONNECTED, 5), link.status()
+        for i, (position, angles) in enumerate(poses(40, seed=3)):
+            t_ms = 1000 + 7 * i
+            sent[t_ms] = (position, angles)
+            assert link.publish(t_ms, position, angles, "OK")
+            time.sleep(0.004)
+        link.publish(2000, None, None, "NOQR")
+        wait_until(lambda: any(f["t_ms"] == 2000 for f in frames_of(received)), what="the last frame")
+        wait_until(lambda: link.status().frames_sent == len(frames_of(received)), what="the count")
+        status = link.status()
+    frames = frames_of(received)
+    assert [f["seq"] for f in frames] == list(range(len(frames)))  # in order, none lost on the line
+    assert [f["t_ms"] for f in frames] == sorted(f["t_ms"] for f in frames)
+    assert frames[-1]["status"] == "NOQR" and frames[-1]["pose"] is None
+    for f in frames[:-1]:
+        position, angles = sent[f["t_ms"]]
+        assert f["status"] == "OK"
+        assert np.all(np.abs(np.array(f["pose"][:3]) - position) <= 0.05 + 1e-9)  # mm, 1 decimal
+        assert np.all(np.abs(np.array(f["pose"][3:]) - angles) <= 0.005 + 1e-9)  # degrees, 2 decimals
+    # Every published pose is accounted for: written, or superseded by a newer one.
+    assert status.frames_sent == len(frames) and status.frames_sent + status.frames_dropped == 41
+    assert status.errors == 0 and link.status().state == CLOSED
+
+
+def test_seq_wraps_after_65535(twin):
+    port_kwargs, link_kwargs, received = twin
+    settings = SerialLinkSettings(**port_kwargs, max_rate_hz=1000, stale_after_s=0)
+    with SerialLink(settings, first_seq=65534, **link_kwargs) as link:
+        assert link.wait_for_state(CONNECTED, 5)
+        for i in range(3):
+            link.publish(i, None, None, "NOQR")
+            wait_until(lambda i=i: len(frames_of(received)) == i + 1, what=f"frame {i}")
+    assert [f["seq"] for f in frames_of(received)] == [65534, 65535, 0]
+
+
+def test_stale_repeats_the_last_frame_when_nothing_new_arrives(twin):
+    port_kwargs, link_kwargs, received = twin
+    settings = SerialLinkSettings(**port_kwargs, max_rate_hz=100, stale_after_s=0.05)
+    with SerialLink(settings, **link_kwargs) as link:
+        assert link.wait_for_state(CONNECTED, 5)
+        link.publish(77, (10.0, -20.0, 300.0), (1.0, 2.0, 3.0), "OK")
+        wait_until(lambda: len(frames_of(received)) >= 3, what="two STALE frames")
+    first, stale1, stale2 = frames_of(received)[:3]
+    assert first["status"] == "OK" and stale1["status"] == "STALE" and stale2["status"] == "STALE"
+    assert stale1["t_ms"] == stale2["t_ms"] == 77 and stale1["pose"] == first["pose"] == [
+        10,
+        -20,
+        300,
+        1,
+        2,
+        3,
+    ]
+    assert [first["seq"], stale1["seq"], stale2["seq"]] == [0, 1, 2]
+
+
+def test_pty_vanishes_mid_stream_frame_loop_goes_on_and_stream_resumes_at_same_path(tmp_path):
+    path = tmp_path / "ttyQRF"
+    first = PtyTwin(path)
+    states = []
+    settings = SerialLinkSettings(port=str(path), max_rate_hz=200, reconnect_interval_s=0.05, stale_after_s=0)
+    link = SerialLink(settings, on_status=lambda s: states.append(s.state)).start()
+    try:
+        assert link.wait_for_state(CONNECTED, 5)
+        t = 0
+        while len(frames_of(first.received)) < 5:
+            link.publish(t, (1.0, 2.0, 300.0 + t), (0, 0, 0))
+            t += 1
+            time.sleep(0.005)
+        first.vanish()  # the USB adapter is pulled
+        # The frame loop keeps going: every publish returns at once while the port is gone.
+        while link.status().state != DISCONNECTED:
+            assert link.publish(t, (1.0, 2.0, 300.0 + t), (0, 0, 0))
+            t += 1
+            time.sleep(0.005)
+            assert t < 2000, "the link never noticed the port vanished"
+        for _ in range(20):
+            assert link.publish(t, (1.0, 2.0, 300.0 + t), (0, 0, 0))
+            t += 1
+        assert link.status().state == DISCONNECTED and "ttyQRF" in link.status().last_error
+        second = PtyTwin(path)  # a new pty (another /dev/pts number) behind the same path
+        try:
+            assert link.wait_for_state(CONNECTED, 5), link.status()
+            resumed_from = t
+            while not any(f["t_ms"] >= resumed_from for f in frames_of(second.received)):
+                link.publish(t, (1.0, 2.0, 300.0 + t), (0, 0, 0))
+                t += 1
+                time.sleep(0.005)
+                assert t < resumed_from + 2000, "streaming did not resume"
+            frames = frames_of(second.received)
+            assert all(f["pose"][2] == pytest.approx(300.0 + f["t_ms"]) for f in frames)
+            seqs = [f["seq"] for f in frames]
+            assert seqs == list(range(seqs[0], seqs[0] + len(seqs)))
+            assert link.status().reconnects == 1
+        finally:
+            link.close()
+            second.vanish()
+    finally:
+        link.close()
+    changes = [s for i, s in enumerate(states) if i == 0 or s != states[i - 1]]  # errors notify too
+    assert changes[:3] == [CONNECTED, DISCONNECTED, CONNECTED] and changes[-1] == CLOSED
+
+
+class SlowPort:
+    """A port whose write takes a while (a slow line); records what was written."""
+
+    def __init__(self, write_s: float) -> None:
+        self.write_s = write_s
+        self.written: list[bytes] = []
+        self.times: list[float] = []
+        self.writing = threading.Event()
+        self.release = threading.Event()
+
+    def write(self, data: bytes) -> int:
+        self.writing.set()
+        if self.write_s < 0:
+            self.release.wait(10)  # blocked until the test releases it
+        else:
+            time.sleep(self.write_s)
+        self.written.append(bytes(data))
+        self.times.append(time.monotonic())
+        return len(data)
+
+    def read(self, size: int = 1) -> bytes:
+        return b""
+
+    def close(self) -> None:
+        self.release.set()
+
+
+def test_newest_pose_wins_under_a_slow_port_and_the_queue_stays_bounded():
+    port = SlowPort(write_s=-1)
+    settings = SerialLinkSettings(port="fake", max_rate_hz=1000, stale_after_s=0)
+    with SerialLink(settings, opener=lambda s: port) as link:
+        link.publish(0, (0.0, 0.0, 100.0), (0, 0, 0))
+        assert port.writing.wait(5)  # frame 0 is stuck in write()
+        for i in range(1, 50):
+            assert link.publish(i, (float(i), 0.0, 100.0), (0, 0, 0))  # returns although the port is stuck
+            assert link.status().pending <= 1
+        port.writing.clear()
+        port.release.set()
+        wait_until(lambda: len(port.written) >= 2, what="the second write")
+        status = link.status()
+    second = parse_frame_line(port.written[1])
+    assert second["t_ms"] == 49 and second["pose"][0] == 49.0 and second["seq"] == 1
+    assert status.frames_dropped == 48 and status.pending == 0
+
+
+def test_rate_limit_caps_frames_per_second_and_the_newest_pose_goes_last():
+    port = SlowPort(write_s=0)
+    settings = SerialLinkSettings(port="fake", max_rate_hz=20, stale_after_s=0)
+    with SerialLink(settings, opener=lambda s: port) as link:
+        start = time.monotonic()
+        published = 0
+        while time.monotonic() - start < 0.5:  # a frame loop far faster than 20 Hz
+            link.publish(published, (float(published), 0.0, 100.0), (0, 0, 0))
+            published += 1
+            time.sleep(0.001)
+        end = time.monotonic()
+        # Every published pose is accounted for once the last one is written: sent or superseded.
+        wait_until(
+            lambda: link.status().frames_sent + link.status().frames_dropped == published,
+            what="the last pose written",
+        )
+        status = link.status()
+    # The link takes a pose at most once per 1/20 s, and none before `start`, so by `end` at most
+    # (end - start) * 20 + 1 frames can have been written (scheduling delays only lower the count).
+    in_window = sum(1 for t in port.times if t <= end)
+    assert 2 <= in_window <= (end - start) * 20 + 1
+    last = parse_frame_line(port.written[-1])
+    assert last["t_ms"] == published - 1  # the newest pose is never lost, only superseded ones
+    assert status.pending == 0 and status.frames_dropped > 0 and status.frames_sent == len(port.written)
+
+
+def test_non_finite_pose_goes_out_as_noconv_with_the_reason_recorded():
+    port = SlowPort(write_s=0)
+    sent = []
+    settings = SerialLinkSettings(port="fake", stale_after_s=0)
+    with SerialLink(settings, opener=lambda s: port, on_sent=lambda b, dt: sent.append(b)) as link:
+        assert link.publish(5.4, (1.0, float("nan"), 3.0), (0, 0, 0), "OK")  # no exception in the frame loop
+        wait_until(lambda: link.status().frames_sent == 1, what="the frame")
+        status = link.status()
+    frame = parse_frame_line(port.written[0])
+    assert (frame["status"], frame["pose"], frame["t_ms"]) == ("NOCONV", None, 5)
+    assert status.errors == 1 and "finite" in status.last_error and "t_ms=5.4" in status.last_error
+    assert sent == port.written
+    assert status.last_sent == port.written[0].decode().rstrip()
+
+
+def test_publish_rejects_misuse_and_returns_false_once_closed():
+    link = SerialLink(SerialLinkSettings(), opener=lambda s: SlowPort(0))
+    with pytest.raises(FrameError, match="shape"):
+        link.publish(0, (1, 2), (0, 0, 0))
+    with pytest.raises(ValueError, match="t_ms"):
+        link.publish(float("nan"), (1, 2, 3), (0, 0, 0))
+    with pytest.raises(FrameError, match="give both"):
+        link.publish(0, (1, 2, 3), None)
+    with pytest.raises(ValueError, match="status must be one of"):
+        link.publish(0, None, None, "LOST")
+    link.close()
+    assert link.status().state == CLOSED
+    assert link.publish(0, (1, 2, 3), (0, 0, 0)) is False
+
+
+def test_settings_are_validated_and_ports_listed():
+    with pytest.raises(ValueError, match="baud"):
+        SerialLink(SerialLinkSettings(baud=10))
+    with pytest.raises(ValueError, match="max_rate_hz"):
+        SerialLink(SerialLinkSettings(max_rate_hz=0))
+    assert list_ports()[-1].device == LOOP_URL
+
+
+def test_missing_port_reports_disconnected_and_keeps_trying(tmp_path):
+    path = tmp_path / "ttyNone"
+    settings = SerialLinkSettings(port=str(path), reconnect_interval_s=0.05)
+    with SerialLink(settings) as link:
+        assert link.wait_for_state(DISCONNECTED, 5)
+        wait_until(lambda: link.status().errors >= 3, what="repeated attempts")
+        assert "cannot open" in link.status().last_error and str(path) in link.status().last_error
+        assert link.status().summary().startswith(f"serial {path}: disconnected, 0 sent")
+        assert link.publish(0, None, None, "NOQR")
+        pty = PtyTwin(path)
+        try:
+            assert link.wait_for_state(CONNECTED, 5)
+            wait_until(lambda: len(frames_of(pty.received)) >= 1, what="the pending frame")
+            assert frames_of(pty.received)[0]["status"] == "NOQR"
+        finally:
+            link.close()
+            pty.vanish()
+
+
+def test_receive_callback_gets_controller_commands_over_loop():
+    from qrfield.serial_link import ControllerCommand, encode_command
+
+    got: queue.Queue = queue.Queue()
+    holder = {}
+
+    def opener(settings):
+        holder["port"] = open_pyserial(settings)
+        return holder["port"]
+
+    with SerialLink(SerialLinkSettings(stale_after_s=0), on_receive=got.put, opener=opener) as link:
+        assert link.wait_for_state(CONNECTED, 5)
+        holder["port"].write(b"noise" + encode_command("QRC", "RATE", "10"))  # loop:// reads it back
+        assert got.get(timeout=5) == ControllerCommand("QRC", ("RATE", "10"))
+        wait_until(lambda: link.status().received.get("garbage_bytes") == 5, what="garbage count")

@@ -1,0 +1,98 @@
+"""``qrfield serial-monitor`` on the slave end of a pty, fed hand-made bytes through the master."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.timeout(30)
+REPO = Path(__file__).resolve().parent.parent
+
+GOOD_NOQR = b"$QRF,7,100,,,,,,,NOQR*6D\r\n"  # checksum worked out by hand in test_serial_frames.py
+GOOD_OK = b"$QRF,1,2,0.0,0.0,0.0,0.00,0.00,0.00,OK*5E\r\n"  # idem
+BAD_CS = b"$QRF,8,100,,,,,,,NOQR*00\r\n"
+COMMAND = b"$QRC,RATE,10*43\r\n"  # idem
+
+
+def start_monitor(*args: str) -> subprocess.Popen:
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    cmd = [sys.executable, "-m", "qrfield", "serial-monitor", *args]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, cwd=REPO)
+    assert proc.stderr is not None
+    banner = proc.stderr.readline().decode()  # the monitor has the port open once it says so
+    assert "listening on" in banner, banner + proc.stderr.read().decode()
+    return proc
+
+
+@pytest.fixture
+def pty_pair():
+    master, slave = os.openpty()
+    yield master, os.ttyname(slave)
+    for fd in (master, slave):
+        os.close(fd)
+
+
+def test_monitor_prints_frames_and_counts_problems_as_json(pty_pair):
+    master, slave_name = pty_pair
+    proc = start_monitor(slave_name, "--json", "--count", "3")
+    os.write(master, b"junk!" + GOOD_NOQR + BAD_CS + b"$QRF,9,1" + GOOD_OK + COMMAND)
+    out, err = proc.communicate(timeout=15)
+    assert proc.returncode == 0, err.decode()
+    lines = [json.loads(line) for line in out.decode().splitlines()]
+    assert lines == [
+        {"type": "frame", "seq": 7, "t_ms": 100, "status": "NOQR", "position_mm": None, "angles_deg": None},
+        {
+            "type": "frame",
+            "seq": 1,
+            "t_ms": 2,
+            "status": "OK",
+            "position_mm": [0.0, 0.0, 0.0],
+            "angles_deg": [0.0, 0.0, 0.0],
+        },
+        {"type": "command", "talker": "QRC", "fields": ["RATE", "10"]},
+    ]
+    summary = err.decode()
+    assert "frames 2" in summary and "bad checksums 1" in summary and "truncated 1" in summary
+    assert "garbage bytes 5" in summary and "seq gaps 1" in summary  # 7 -> 1 is not 7 + 1
+
+
+def test_monitor_text_output_and_clean_exit_on_ctrl_c(pty_pair):
+    master, slave_name = pty_pair
+    proc = start_monitor(slave_name)
+    # The README's example line; its checksum 57 is worked out by hand there.
+    os.write(master, b"$QRF,42,1234,12.5,-3.0,250.0,1.25,-0.50,90.00,OK*57\r\n")
+    assert proc.stdout is not None
+    line = proc.stdout.readline().decode()
+    expected = "seq=42 t=1234 ms x=12.5 y=-3.0 z=250.0 mm alpha=1.25 beta=-0.50 gamma=90.00 deg OK"
+    assert line.split() == expected.split()
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=15)
+    assert proc.returncode == 0 and "interrupted; frames 1" in err.decode()
+
+
+def test_monitor_stops_cleanly_on_sigterm(pty_pair):
+    proc = start_monitor(pty_pair[1])
+    proc.terminate()
+    _, err = proc.communicate(timeout=15)
+    assert proc.returncode == 0 and "interrupted; frames 0" in err.decode()
+
+
+def test_monitor_says_clearly_when_the_port_cannot_be_opened(tmp_path):
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    missing = tmp_path / "ttyGone"
+    result = subprocess.run(
+        [sys.executable, "-m", "qrfield", "serial-monitor", str(missing)],
+        capture_output=True,
+        env=env,
+        cwd=REPO,
+        timeout=15,
+    )
+    assert result.returncode == 2
+    assert f"cannot open serial port {missing}" in result.stderr.decode()
+    assert "Traceback" not in result.stderr.decode()
