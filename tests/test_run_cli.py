@@ -202,3 +202,49 @@ def test_picamera2_missing_is_one_clear_line(tmp_path: Path) -> None:
     assert (
         "picamera2 is not installed: on Raspberry Pi OS run sudo apt install python3-picamera2" in done.stderr
     )
+
+
+def xor_checksum(body: str) -> str:
+    """DESIGN.md: XOR of every byte between '$' and '*', two uppercase hex digits."""
+    value = 0
+    for byte in body.encode("ascii"):
+        value ^= byte
+    return f"{value:02X}"
+
+
+@needs_pipeline
+def test_serial_link_sends_each_pose_as_a_qrf_line(tmp_path: Path) -> None:
+    master, slave = os.openpty()
+    os.set_blocking(master, False)
+    try:
+        done = qrfield(
+            "run", "--source", "virtual", "--frames", "6", "--json-lines", "--virtual-fps", "10",
+            "--serial", os.ttyname(slave), "--serial-max-rate-hz", "1000", "--serial-stale-after-s", "0",
+        )  # fmt: skip
+        received = b""
+        while True:
+            try:
+                chunk = os.read(master, 65536)
+            except BlockingIOError:
+                break
+            if not chunk:
+                break
+            received += chunk
+    finally:
+        os.close(master)
+        os.close(slave)
+    assert done.returncode == 0, done.stderr
+    poses = {line["t_ms"]: line for line in map(json.loads, done.stdout.splitlines())}
+    frames = [f for f in received.decode("ascii").split("\r\n") if f]
+    assert len(frames) >= 3, (frames, done.stderr)
+    for frame in frames:
+        body, checksum = frame[1:].split("*")
+        assert frame[0] == "$" and checksum == xor_checksum(body)
+        fields = body.split(",")
+        assert fields[0] == "QRF" and fields[-1] == "OK"
+        line = poses[int(fields[2])]  # t_ms ties each frame to the JSON line of the same capture
+        x, y, z, a, b, g = map(float, fields[3:9])
+        assert np.allclose([x, y, z], line["position_mm"], atol=0.051)
+        assert np.allclose([a, b, g], line["angles_deg"], atol=0.0051)
+    assert [int(f.split(",")[1]) for f in frames] == list(range(len(frames)))  # seq counts up from 0
+    assert "frames sent" in done.stderr

@@ -10,11 +10,11 @@ No Qt is imported, ever.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import signal
 import sys
 import time
-from collections.abc import Callable
 from typing import Any
 
 from qrfield.camera import add_camera_arguments
@@ -28,6 +28,7 @@ DEFAULT_SIDE_MM = 50.0
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from qrfield.pipeline import METHOD_CHOICES
+    from qrfield.serial_link import SerialLinkSettings
     from qrfield.settings import add_arguments as add_setting_arguments
     from qrfield.sources import SOURCE_HELP, Picamera2Settings, VirtualBenchSettings
 
@@ -67,6 +68,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     group = parser.add_argument_group("virtual bench (--source virtual)")
     add_setting_arguments(group, VirtualBenchSettings, prefix="virtual_")
+    group = parser.add_argument_group("serial link to the gripper controller ($QRF frames, DESIGN.md)")
+    group.add_argument(
+        "--serial",
+        metavar="PORT",
+        default=None,
+        help="also send each frame's pose as a $QRF line to PORT (/dev/ttyUSB0, COM3, loop://)",
+    )
+    add_setting_arguments(group, SerialLinkSettings, prefix="serial_")
     group = parser.add_argument_group(
         "Raspberry Pi camera (--source picamera2; default size: the camera model's)"
     )
@@ -100,9 +109,39 @@ def _camera(args: argparse.Namespace) -> Any:
     return resolve_camera(DEFAULT_CAMERA), False
 
 
-def _publishers(args: argparse.Namespace) -> list[Callable[[Any], None]]:
-    """Where each frame's result goes besides stdout. (Hook: the serial link, when it exists.)"""
-    return []
+#: Pipeline status -> serial frame status (DESIGN.md knows OK, NOQR, NOCONV, STALE): an ERROR
+#: frame has no pose, which the controller must treat like a pose that did not converge.
+SERIAL_STATUS = {"OK": "OK", "NOQR": "NOQR", "NOCONV": "NOCONV", "ERROR": "NOCONV"}
+
+
+def _serial_link(args: argparse.Namespace, say: Any) -> Any:
+    """The started SerialLink when --serial or --serial-port was given, else None."""
+    from qrfield.serial_link import SerialLink, SerialLinkSettings
+    from qrfield.settings import from_arguments
+
+    port = args.serial or args.serial_port
+    if not port:
+        return None
+    settings = from_arguments(SerialLinkSettings, args, prefix="serial_")
+    settings = dataclasses.replace(settings, port=port)
+
+    def on_status(status: Any) -> None:
+        if status.last_error:
+            say(f"serial {status.port}: {status.state}: {status.last_error}")
+
+    link = SerialLink(settings, on_status=on_status).start()
+    say(f"serial: sending $QRF frames to {port} at {settings.baud} baud, at most {settings.max_rate_hz:g}/s")
+    return link
+
+
+def _publish(link: Any, result: Any) -> None:
+    """Hand one frame's pose to the serial link (the link never blocks the frame loop)."""
+    status = SERIAL_STATUS.get(result.status, "NOCONV")
+    pose = result.primary if status == "OK" else None
+    if pose is None:
+        link.publish(result.t_ms, None, None, "NOQR" if status == "NOQR" else "NOCONV")
+    else:
+        link.publish(result.t_ms, pose.position_mm, pose.angles_deg, "OK")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -124,7 +163,7 @@ def run(args: argparse.Namespace) -> int:
     stop = StopFlag()
     previous = stop.install()
     say = _Stderr()
-    publishers = _publishers(args)
+    link = _serial_link(args, say)
     source = None
     count = 0
     try:
@@ -154,8 +193,8 @@ def run(args: argparse.Namespace) -> int:
                 continue
             result = pipeline.process(frame)
             emit(result)
-            for publish in publishers:
-                publish(result)
+            if link is not None:
+                _publish(link, result)
             count += 1
             say.notes(source)
     except BrokenPipeError:
@@ -165,6 +204,10 @@ def run(args: argparse.Namespace) -> int:
     finally:
         if source is not None:
             source.close()
+        if link is not None:
+            link.close()
+            sent = link.status()
+            say(f"serial: {sent.frames_sent} frames sent, {sent.frames_dropped} replaced by newer ones")
         for sig, handler in previous.items():
             signal.signal(sig, handler)
     ending = f"stopped by {stop.signal_name}" if stop else "done"
