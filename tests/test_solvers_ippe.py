@@ -194,3 +194,23 @@ def test_exactly_square_on_card_is_not_flipped(position):
     np.testing.assert_allclose(result.position_mm, position, atol=1e-6)
     np.testing.assert_allclose(result.angles_deg, [0.0, 0.0, 0.0], atol=1e-6)
     assert result.reprojection_px < 1e-6
+
+
+@pytest.mark.parametrize(
+    "angles",
+    [[0, 22, 0], [0, -35, 0], [30, 0, 0], [0, 0, 35], [0, 0, 180], [0, 0, 90], [20, 0, 180], [0, 40, -90]],
+)
+def test_poses_set_up_on_purpose_are_exact(angles):
+    # Single-axis tilts and in-plane turns are where OpenCV 5.0's IPPE converts a 180-degree
+    # rotation through sin(pi) and returns a wrong pose (e.g. beta = 22 alone: 3.3 px, 8 deg off).
+    from qrfield.camera import resolve_camera
+    from qrfield.geometry import Pose, angle_difference
+    from qrfield.solvers import solve
+
+    camera = resolve_camera("picam-v2@640x480")
+    for position in ([-30.0, -60.0, 300.0], [0.0, 0.0, 250.0], [45.0, 20.0, 500.0]):
+        pose = Pose(position, angles)
+        result = solve(pose.corners_px(camera, 50.0), camera, 50.0, method="ippe")
+        assert result.converged
+        np.testing.assert_allclose(result.position_mm, position, atol=1e-6)
+        assert np.abs(angle_difference(result.angles_deg, pose.angles_deg)).max() < 1e-6

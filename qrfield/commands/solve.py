@@ -9,12 +9,13 @@ import sys
 
 from qrfield.camera import add_camera_arguments
 
-HELP = "compute a QR code's position (mm) and orientation (degrees) from its four corner pixels"
+HELP = "compute a QR code's position (mm) and orientation (degrees) from images or its four corner pixels"
 DESCRIPTION = (
-    "Compute the pose of one QR code of known side from its corners V1..V4 (top-left, top-right, "
-    "bottom-right, bottom-left of the code, clockwise on screen) with the thesis' numerical model, "
-    "OpenCV's IPPE, or both. Positions are the code's centre in the camera frame (mm, +X right, "
-    "+Y down, +Z forward); angles alpha, beta, gamma (degrees) with R = Rx(alpha) Ry(beta) Rz(gamma)."
+    "Compute the pose of one QR code of known side, found in each IMAGE (detected, sub-pixel corners) "
+    "or given by --corners V1..V4 (top-left, top-right, bottom-right, bottom-left of the code, clockwise "
+    "on screen), with the thesis' numerical model, OpenCV's IPPE, or both. Positions are the code's "
+    "centre in the camera frame (mm, +X right, +Y down, +Z forward); angles alpha, beta, gamma "
+    "(degrees) with R = Rx(alpha) Ry(beta) Rz(gamma)."
 )
 
 
@@ -24,8 +25,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from qrfield.solvers.numerical import NumericalSettings
 
     parser.add_argument(
+        "images",
+        nargs="*",
+        metavar="IMAGE",
+        help="image files to detect the code in and solve (instead of --corners)",
+    )
+    parser.add_argument(
         "--corners",
-        required=True,
         metavar='"U1,V1 U2,V2 U3,V3 U4,V4"',
         help="pixels of V1..V4 (OpenCV convention: the top-left pixel's centre is 0,0)",
     )
@@ -36,7 +42,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--method", choices=("numerical", "ippe", "both"), default="both", help="solver (default: both)"
     )
-    parser.add_argument("--json", action="store_true", help="print a JSON list, one object per method")
+    parser.add_argument(
+        "--json",
+        action="store_true",
+        help="print a JSON list, one object per method (with IMAGE: per image, code and method, each with "
+        '"image", "text" and "status"; "corners": null where no code was found)',
+    )
+    parser.add_argument(
+        "--all-codes",
+        action="store_true",
+        help="with IMAGE: solve every code found, not only the one selected "
+        "(--detect-select-text, or the largest)",
+    )
+    from qrfield.detect import DetectorSettings
+
+    group = parser.add_argument_group("detection settings (with IMAGE)")
+    add_setting_arguments(group, DetectorSettings, prefix="detect-")  # type: ignore[arg-type]
     group = parser.add_argument_group("numerical model settings")
     add_setting_arguments(group, NumericalSettings)  # type: ignore[arg-type]
     group = parser.add_argument_group("IPPE settings")
@@ -100,13 +121,19 @@ def run(args: argparse.Namespace) -> int:
     from qrfield.settings import from_arguments
     from qrfield.solvers import IppeSettings, NumericalSettings, solve
 
+    if bool(args.images) == bool(args.corners):
+        raise ValueError("give either IMAGE files or --corners (one of them)")
     camera = camera_from_args(args)
-    corners = parse_corners(args.corners)
     methods = ("numerical", "ippe") if args.method == "both" else (args.method,)
     settings = {
         "numerical": from_arguments(NumericalSettings, args),
         "ippe": from_arguments(IppeSettings, args),
     }
+    if args.images:
+        from qrfield.commands._solve_images import solve_images
+
+        return solve_images(args, camera, methods, settings)
+    corners = parse_corners(args.corners)
     results = [solve(corners, camera, args.side_mm, method, settings[method]) for method in methods]
     if args.json:
         json.dump([r.to_json_dict() for r in results], sys.stdout, allow_nan=False)

@@ -12,11 +12,14 @@ Corners are undistorted first (exactly, by iteration) when the camera has distor
 solver works on ideal pinhole pixels; reprojection errors are measured on the corners as given.
 
 A candidate behind the camera or facing away from it is no pose of a visible card and is dropped.
-OpenCV 5.0's IPPE degenerates for an exactly square-on view (the card's plane parallel to the
-image, e.g. corners (269.5,189.5) (369.5,189.5) (369.5,289.5) (269.5,289.5) at f = 500 px): both of
-its candidates come back flipped by 180 degrees with a 70 px reprojection error, and refining them
-runs off to a pose 33 m behind the camera. When no candidate is left, the refinement starts from
-the numerical model's closed-form parallelogram pose instead (exact for exact corners).
+OpenCV 5.0's IPPE returns wrong poses whenever a candidate's rotation in its frame is a turn of
+exactly 180 degrees (its rotation-vector conversion divides by sin(pi)). Because OpenCV's frame is
+ours turned 180 degrees about X, that is the case for the poses people set up on purpose: a card
+square-on (both candidates flipped, 70 px error; refined, 33 m behind the camera), tilted about one
+axis only (beta alone: 3.3 px error, 8 degrees off, and LM refinement stays there) or turned in
+its plane only. So the numerical model's closed-form parallelogram pose (exact for exact corners)
+is a third start: refined and kept whenever it reprojects better than IPPE's best refined
+candidate, which costs one pure-Python closed form per solve and one extra refinement only then.
 """
 
 from __future__ import annotations
@@ -50,6 +53,14 @@ class IppeSettings:
         help="refine both IPPE candidates by reprojection error: lm (cv2.solvePnPRefineLM), "
         "vvs (cv2.solvePnPRefineVVS) or none",
     )
+
+
+@functools.cache
+def _closed_form_settings():
+    """The closed-form start: the parallelogram guess and one update, no mirror search."""
+    from qrfield.solvers.numerical import NumericalSettings
+
+    return NumericalSettings(n_max=1, mirror=False, initial_guess="parallelogram")
 
 
 @functools.lru_cache(maxsize=16)
@@ -165,10 +176,13 @@ def solve_ippe(
     rays = _unit_rays(*normalised_single(corners, flat, camera))
     starts = list(zip(rvecs[:count], tvecs[:count], strict=True))
     candidates = _refined_candidates(starts, obj, pts, k, s, side, camera, flat, rays)
-    if not candidates:
-        start = _closed_form_start(corners, camera, side)
-        if start is not None:
-            candidates = _refined_candidates([start], obj, pts, k, s, side, camera, flat, rays)
+    closed = _closed_form(corners, camera, side)
+    best_error = min((c[0].error for c in candidates), default=math.inf)
+    if closed is not None and closed.reprojection_px < best_error:
+        start = (cv2.Rodrigues(rotation_to_ippe(closed.rotation))[0], closed.position_mm.reshape(3, 1).copy())
+        extra = _refined_candidates([start], obj, pts, k, s, side, camera, flat, rays)
+        # It replaces the IPPE candidate on the same side of the ambiguity, keeping the other as mirror.
+        candidates = extra + [c for c in candidates if not (extra and _same_normal(c[0], extra[0][0]))]
     if not candidates:
         return PoseResult.failed(
             "ippe", corners, "OpenCV IPPE_SQUARE found no pose in front of the camera facing it"
@@ -207,19 +221,14 @@ def _refined_candidates(starts, obj, pts, k, s: IppeSettings, side, camera, flat
     return out
 
 
-def _closed_form_start(corners: np.ndarray, camera: CameraModel, side: float):
-    """(rvec, tvec) in OpenCV's IPPE frame from the numerical model's parallelogram closed form."""
-    import cv2
+def _closed_form(corners: np.ndarray, camera: CameraModel, side: float) -> PoseResult | None:
+    """The numerical model's closed-form parallelogram pose (one update), or None if unusable."""
+    from qrfield.solvers.numerical import solve_numerical
 
-    from qrfield.solvers.numerical import NumericalSettings, solve_numerical
-
-    closed = solve_numerical(
-        corners, corners.ravel().tolist(), camera, side, NumericalSettings(n_max=1, mirror=False)
-    )
-    if not np.all(np.isfinite(closed.rotation)):
+    closed = solve_numerical(corners, corners.ravel().tolist(), camera, side, _closed_form_settings())
+    if not (np.all(np.isfinite(closed.rotation)) and math.isfinite(closed.reprojection_px)):
         return None
-    rvec = cv2.Rodrigues(rotation_to_ippe(closed.rotation))[0]
-    return rvec, closed.position_mm.reshape(3, 1).copy()
+    return closed
 
 
 def solve_ippe_batch(

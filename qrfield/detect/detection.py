@@ -1,0 +1,139 @@
+"""What a detector reports for one QR code, and the detector's settings."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from qrfield.settings import setting
+
+
+@dataclass(frozen=True)
+class Detection:
+    """One QR code found in an image.
+
+    Attributes:
+        corners_px: (4, 2) float pixels of V1..V4 (DESIGN.md: V1 the outer corner of the top-left
+            finder pattern, V2 top-right, V3 bottom-right (no finder pattern), V4 bottom-left, following
+            the code when it is rotated); OpenCV pixel convention (top-left pixel centre = (0, 0)).
+        text: the decoded payload, or None when it could not be read.
+        quality: 0..1. For refined corners: the share of the symbol's fixed modules (finder
+            patterns, separators, timing patterns, first ring of the quiet zone) that show the
+            expected colour at these corners (about 0.5 for corners that are not on a code, near 1
+            for a good detection). Unrefined corners (the backend's, about 1 px off and V3 sometimes
+            several px) get half of that, so quality >= 0.85 means sub-pixel corners that check out.
+        corner_quality: (4,) px, per corner the RMS distance of the sub-pixel edge points to the two
+            fitted sides that meet there (smaller is better; about 0.01-0.05 px on a clean view);
+            NaN when not refined.
+        backend: which backend found the code ("zxing", "zxing-x2", "opencv-aruco", "opencv"), or
+            "track" when the tracker re-found it by refinement alone.
+        refined: True when the corners are the sub-pixel fit, False when they are the backend's.
+        modules: modules per side of the symbol (21 for version 1).
+    """
+
+    corners_px: np.ndarray
+    text: str | None
+    quality: float
+    corner_quality: np.ndarray
+    backend: str
+    refined: bool
+    modules: int = 0
+
+    def __post_init__(self) -> None:
+        corners = np.array(self.corners_px, dtype=np.float64)
+        if corners.shape != (4, 2):
+            raise ValueError(f"Detection.corners_px must have shape (4, 2) (V1..V4, px), got {corners.shape}")
+        cq = np.array(self.corner_quality, dtype=np.float64).reshape(-1)
+        if cq.shape != (4,):
+            raise ValueError(f"Detection.corner_quality must have 4 values (px per corner), got {cq.shape}")
+        corners.setflags(write=False)
+        cq.setflags(write=False)
+        object.__setattr__(self, "corners_px", corners)
+        object.__setattr__(self, "corner_quality", cq)
+
+    @property
+    def area_px(self) -> float:
+        """Area of the quadrilateral V1..V4 in square pixels (shoelace)."""
+        x, y = self.corners_px[:, 0], self.corners_px[:, 1]
+        return 0.5 * abs(float(x @ np.roll(y, -1) - y @ np.roll(x, -1)))
+
+    def to_json_dict(self) -> dict[str, Any]:
+        """JSON-ready dict: corners as [[u, v], ...] V1..V4 in px, NaN written as null."""
+
+        def num(value: float) -> float | None:
+            return None if not math.isfinite(value) else round(float(value), 4)
+
+        return {
+            "corners": [[num(u), num(v)] for u, v in self.corners_px],
+            "text": self.text,
+            "quality": num(self.quality),
+            "corner_quality_px": [num(q) for q in self.corner_quality],
+            "backend": self.backend,
+            "refined": self.refined,
+            "modules": self.modules,
+        }
+
+
+@dataclass(frozen=True)
+class DetectorSettings:
+    """Settings of QR detection, refinement, tracking and selection (see qrfield.settings)."""
+
+    backends: str = setting(
+        "zxing,zxing-x2,finders",
+        label="detector backends",
+        help="comma-separated, tried in order until one finds a code: zxing, zxing-x2 (zxing on the "
+        "image upscaled 2x, for small codes), finders (finder patterns by contours, for strong "
+        "perspective), opencv-aruco, opencv",
+    )
+    refine: bool = setting(
+        True, label="sub-pixel refinement", help="fit the symbol's outer edges for sub-pixel corners"
+    )
+    search_px: float = setting(
+        2.5,
+        label="refinement search window",
+        unit="px",
+        minimum=0.5,
+        maximum=10.0,
+        help="how far the true edges may lie from the backend's corners",
+    )
+    min_quality: float = setting(
+        0.85,
+        label="minimum quality",
+        minimum=0.0,
+        maximum=1.0,
+        help="share of the fixed QR modules (finders, timing, quiet zone) that must check out at the "
+        "corners; below it a code is dropped",
+    )
+    require_text: bool = setting(
+        True, label="require decoded text", help="drop codes whose text could not be read (safer corners)"
+    )
+    select_text: str = setting(
+        "",
+        label="code text to follow",
+        help="with several codes in view, use the one with this text (none if absent); empty = the largest",
+    )
+    track: bool = setting(
+        True,
+        label="track between frames",
+        help="in video, search around the last corners before the whole frame",
+    )
+    redetect_frames: int = setting(
+        30,
+        label="full-frame check every",
+        unit="frames",
+        minimum=0,
+        maximum=100000,
+        help="while tracking, a full-frame detection every this many frames picks up codes that came "
+        "into view (0 = only when a tracked code is lost)",
+    )
+    track_margin_px: float = setting(
+        24.0,
+        label="tracking search margin",
+        unit="px",
+        minimum=0.0,
+        maximum=1000.0,
+        help="how far beyond the last corners the tracker looks (plus a quarter of the code's size)",
+    )

@@ -1,0 +1,83 @@
+"""Tracking a moving rendered code; losing it when it leaves, finding it again when it returns."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from qrfield.detect import Tracker
+from qrfield.geometry import Pose
+from qrfield.render import render_view
+
+SIDE_MM = 80.0
+
+
+def _frame(camera, i: int, x_mm: float):
+    pose = Pose([x_mm, 0.3 * x_mm - 10.0, 400.0 + 2.0 * i], [5.0 + 0.5 * i, -10.0, 20.0 + 1.5 * i])
+    return render_view(camera, SIDE_MM, pose, noise_sigma=2.0, blur_px=0.6, seed=i)
+
+
+def test_tracker_follows_loses_and_recovers(camera_vga):
+    tracker = Tracker()
+    modes = []
+    for i in range(12):
+        view = _frame(camera_vga, i, -60.0 + 8.0 * i)
+        detections = tracker.update(view.image)
+        assert len(detections) == 1, f"frame {i}: {len(detections)} codes"
+        assert detections[0].text == view.text
+        assert np.abs(detections[0].corners_px - view.corners_px).max() < 0.3
+        modes.append(tracker.last_mode)
+    assert modes[0] == "full"
+    assert all(m in ("refined", "roi") for m in modes[1:])
+
+    blank = np.full((camera_vga.height, camera_vga.width), 110, np.uint8)
+    for _ in range(2):
+        assert tracker.update(blank) == []
+        assert tracker.last_mode == "full"
+
+    view = _frame(camera_vga, 3, 30.0)
+    (back,) = tracker.update(view.image)
+    assert tracker.last_mode == "full"
+    assert np.abs(back.corners_px - view.corners_px).max() < 0.3
+
+
+def test_tracker_does_not_follow_a_jump_by_refinement_alone(camera_vga):
+    # A jump far beyond the search window: the ROI or full-frame step must find it, with true corners.
+    tracker = Tracker()
+    first = _frame(camera_vga, 0, -80.0)
+    tracker.update(first.image)
+    jumped = _frame(camera_vga, 1, 70.0)
+    (d,) = tracker.update(jumped.image)
+    assert tracker.last_mode == "full"
+    assert np.abs(d.corners_px - jumped.corners_px).max() < 0.3
+
+
+def test_tracking_off_always_detects_full_frame(camera_vga):
+    from qrfield.detect import DetectorSettings
+
+    tracker = Tracker(DetectorSettings(track=False))
+    for i in range(3):
+        tracker.update(_frame(camera_vga, i, 4.0 * i).image)
+        assert tracker.last_mode == "full"
+
+
+def test_a_code_coming_into_view_is_picked_up_by_the_periodic_full_look(camera_vga):
+    from qrfield.detect import DetectorSettings
+
+    first = render_view(
+        camera_vga, 60.0, Pose([-90.0, 0.0, 450.0], [0.0, 10.0, 5.0]), text="alpha", noise_sigma=2.0, seed=1
+    )
+    both = render_view(
+        camera_vga,
+        60.0,
+        Pose([60.0, 10.0, 350.0], [-10.0, 0.0, -20.0]),
+        text="bravo",
+        background=first.image,
+        noise_sigma=2.0,
+        seed=2,
+    )
+    tracker = Tracker(DetectorSettings(redetect_frames=5))
+    assert [d.text for d in tracker.update(first.image)] == ["alpha"]
+    texts = [sorted(d.text for d in tracker.update(both.image)) for _ in range(6)]
+    assert texts[:3] == [["alpha"]] * 3  # tracked by refinement: "bravo" not looked for yet
+    assert texts[-1] == ["alpha", "bravo"]
+    assert tracker.last_mode == "refined"  # both tracked now

@@ -1,0 +1,101 @@
+"""Heatmap pixels, the progress bar, and the ``qrfield simulate`` command end to end."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+
+import cv2
+import numpy as np
+import pytest
+
+pytest.importorskip("qrfield.solvers", reason="the solvers (issue 3) are not merged yet")
+
+from qrfield.cli import main
+from qrfield.simulation import heatmap
+from qrfield.simulation.progress import TerminalProgress
+from qrfield.simulation.runner import OUT_OF_VIEW, PASSED, Progress
+
+
+def test_heatmap_cells_carry_the_viridis_colour_of_their_angle():
+    values = np.array([[0.0, 45.0, 90.0], [np.nan, np.nan, 30.0]])
+    kinds = np.array([["", "", ""], [heatmap.CELL_OUT_OF_VIEW, heatmap.CELL_NONE, ""]], dtype=object)
+    x, y = np.array([-50.0, 0.0, 50.0]), np.array([-20.0, 20.0])
+    img = heatmap.draw_heatmap([values], [kinds], ["numerical"], x, y, 90.0, "title", "subtitle")
+    assert img.ndim == 3 and img.dtype == np.uint8
+    # Locate the panel from its drawn frame: the first row of grey frame pixels below the title.
+    cell = int(np.clip(400 // 3, 22, 72))
+    left, top = 78, 92
+    for iy in range(2):
+        for ix in range(3):
+            pixel = img[top + iy * cell + 3, left + ix * cell + 3]  # a cell corner, away from its label
+            if kinds[iy, ix] == "":
+                grey = np.uint8(round(values[iy, ix] / 90.0 * 255))
+                expected = cv2.applyColorMap(np.array([[grey]], np.uint8), cv2.COLORMAP_VIRIDIS)[0, 0]
+            elif kinds[iy, ix] == heatmap.CELL_OUT_OF_VIEW:
+                expected = heatmap.OUT_COLOUR
+            else:
+                expected = heatmap.NONE_COLOUR
+            np.testing.assert_array_equal(pixel, expected, err_msg=f"cell {iy}, {ix}")
+
+
+def test_progress_bar_prints_share_and_rate_to_a_log():
+    stream = io.StringIO()
+    bar = TerminalProgress(stream=stream)
+    for done in (0, 50, 100, 150, 200):
+        bar(Progress(done, 200, "alpha", seconds=done / 100 + 0.01))
+    bar.finish()
+    lines = stream.getvalue().splitlines()
+    assert 3 <= len(lines) <= 5  # one line per tenth when not a terminal
+    assert "100.0 %" in lines[-1] and "200/200 poses" in lines[-1] and "poses/s" in lines[-1]
+
+
+def test_simulate_command_writes_every_output(tmp_path, capsys):
+    out = tmp_path / "run"
+    code = main(
+        [
+            "simulate", "--quiet", "--out", str(out),
+            "--set", "x_range=-40,40,40", "--set", "y_range=0", "--set", "z_range=250,350,100",
+            "--set", "sweep_limit_deg=60", "--set", "sweep_step_deg=20",
+            "--set", "solvers=numerical,numerical-parallelogram",
+        ]
+    )  # fmt: skip
+    assert code == 0
+    printed = capsys.readouterr()
+    assert "77.28" in printed.out and "mean" in printed.out
+    assert "poses/s" in printed.err
+    summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
+    assert summary["samples"] == 3 * 2 * 12 * 4 and summary["partial"] is False
+    for name in ("summary.md", "study.toml", "samples.npz", "samples.csv", "max_angles.csv"):
+        assert (out / name).is_file(), name
+    with np.load(out / "samples.npz") as npz:
+        status = npz["status"]
+        position = npz["position_mm"]
+    with (out / "samples.csv").open(encoding="utf-8") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == status.size  # one row per solver and sample
+    assert sum(r["status"] == "passed" for r in rows) == np.count_nonzero(status == PASSED)
+    assert sum(r["status"] == "out of view" for r in rows) == np.count_nonzero(status == OUT_OF_VIEW)
+    first = rows[1]  # numerical, first combination, first grid point, t = 20
+    assert [first[k] for k in ("solver", "x_mm", "z_mm", "t_deg")] == ["numerical", "-40", "250", "20"]
+    assert float(first["x"]) == pytest.approx(position[0, 0, 0, 1, 0], abs=1e-4)
+    pngs = sorted((out / "heatmaps").glob("*.png"))
+    assert len(pngs) == 12 * 2  # per combination and z
+    assert cv2.imread(str(pngs[0])) is not None
+    # The written study reruns the same study.
+    assert main(["simulate", str(out / "study.toml"), "--show"]) == 0
+    assert "x_range = [-40.0, 40.0, 40.0]" in capsys.readouterr().out
+    # A non-empty output folder is refused unless --force.
+    assert main(["simulate", "--quiet", "--out", str(out), "--set", "z_range=300"]) == 2
+    assert "not empty" in capsys.readouterr().err
+
+
+def test_simulate_command_names_the_bad_field(tmp_path, capsys):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[criteria]\nangle_degs = 1\n", encoding="utf-8")
+    assert main(["simulate", str(bad), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "criteria.angle_degs" in err and "angle_deg" in err and "Traceback" not in err
+    assert main(["simulate", "--set", "z_range=400,200,100", "--show"]) == 2
+    assert "z_range" in capsys.readouterr().err
