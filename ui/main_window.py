@@ -274,6 +274,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.preview.show_info(
             f"{result.status}  {self._rates[0]:.1f} fps  latency {result.latency_ms:.0f} ms  "
             f"(detect {result.detect_ms:.0f}, solve {result.solve_ms:.1f})  #{result.index}"
+            + (f"  {item.frames_behind} behind" if item.frames_behind else "")
         )
         self.pose_panel.show_result(result, self.methods())
         t = item.frame.t_capture - self._t0

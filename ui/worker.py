@@ -91,6 +91,9 @@ class Processed:
     frame: Frame
     result: FrameResult
     t_done: float
+    #: frames the source delivered after this one by the time its result was ready (0 = it is the
+    #: newest frame; a live camera's preview lags by this many frames)
+    frames_behind: int = 0
 
 
 class PipelineWorker(QtCore.QObject):
@@ -224,7 +227,8 @@ class PipelineWorker(QtCore.QObject):
             return
         result = self._pipeline.process(frame)
         self.frames_processed += 1
-        if self.latest.put(Processed(frame, result, time.monotonic())):
+        behind = max(0, self._reader.read_count - 1 - frame.index)
+        if self.latest.put(Processed(frame, result, time.monotonic(), behind)):
             self.resultReady.emit()
 
     def _forward_notes(self) -> None:
