@@ -172,8 +172,6 @@ def within_seed_criteria(measured: Pose, truth: Pose) -> bool:
     "seed_pose", [Pose([10, -5, 300], [15, -20, 10]), Pose([-40, 30, 450], [-25, 10, 120])]
 )
 def test_virtual_bench_end_to_end_meets_the_seed_criteria(seed_pose: Pose, camera_vga) -> None:
-    pytest.importorskip("qrfield.solvers", reason="the solvers branch is not merged yet")
-    pytest.importorskip("qrfield.detect", reason="the detect branch is not merged yet")
     settings = VirtualBenchSettings(fps=0.0).with_pose(seed_pose)
     pipeline = Pipeline(camera_vga, 50.0, METHODS)
     with VirtualBenchSource(camera_vga, 50.0, settings) as source:
@@ -196,7 +194,6 @@ class ExactCornersTracker:
 
 
 def test_real_solvers_through_the_pipeline_recover_the_rendered_pose(camera_vga) -> None:
-    pytest.importorskip("qrfield.solvers", reason="the solvers branch is not merged yet")
     tracker = ExactCornersTracker(camera_vga, 50.0)
     pipeline = Pipeline(camera_vga, 50.0, METHODS, tracker=tracker, select=first_with_text)
     settings = VirtualBenchSettings(fps=0.0, wobble_deg=10.0, wobble_mm=30.0, wobble_period_s=1.0)

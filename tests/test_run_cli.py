@@ -19,12 +19,6 @@ from qrfield.geometry import Pose, angle_difference
 from qrfield.render import render_view
 
 REPO = Path(__file__).resolve().parent.parent
-needs_pipeline = pytest.mark.skipif(
-    any(
-        __import__("importlib").util.find_spec(name) is None for name in ("qrfield.solvers", "qrfield.detect")
-    ),
-    reason="the solvers and detect branches are not merged yet",
-)
 
 
 def env(**extra: str) -> dict[str, str]:
@@ -49,7 +43,6 @@ def within_seed_criteria(position, angles, truth: Pose) -> bool:
     return bool(position_ok and np.all(np.abs(angle_difference(np.asarray(angles), truth.angles_deg)) <= 2.0))
 
 
-@needs_pipeline
 def test_json_lines_on_the_virtual_bench_match_its_true_pose() -> None:
     truth = Pose([30.0, -20.0, 400.0], [-12.0, 18.0, 40.0])
     args = ["--virtual-fps", "0", "--virtual-x-mm", "30", "--virtual-y-mm", "-20", "--virtual-z-mm", "400"]
@@ -71,7 +64,6 @@ def test_json_lines_on_the_virtual_bench_match_its_true_pose() -> None:
     assert "done after 4 frames" in done.stderr
 
 
-@needs_pipeline
 def test_headless_run_imports_no_qt() -> None:
     code = (
         "import sys\n"
@@ -88,7 +80,6 @@ def test_headless_run_imports_no_qt() -> None:
     assert len(done.stdout.splitlines()) == 2 and " OK " in done.stdout.splitlines()[0]
 
 
-@needs_pipeline
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_signals_stop_the_stream_cleanly(sig: signal.Signals) -> None:
     process = subprocess.Popen(
@@ -115,7 +106,6 @@ def test_signals_stop_the_stream_cleanly(sig: signal.Signals) -> None:
         json.loads(line)
 
 
-@needs_pipeline
 def test_folder_source_runs_to_its_end(tmp_path: Path, camera_vga) -> None:
     pose = Pose([0.0, 10.0, 300.0], [5.0, -15.0, 90.0])
     for i in range(3):
@@ -136,7 +126,6 @@ def test_folder_source_runs_to_its_end(tmp_path: Path, camera_vga) -> None:
     assert "skipped 3.png" in done.stderr and "end after 5 files" in done.stderr
 
 
-@needs_pipeline
 def test_unopenable_source_is_one_clear_error(tmp_path: Path) -> None:
     done = qrfield("run", "--source", str(tmp_path / "missing.avi"))
     assert done.returncode == 1
@@ -177,7 +166,6 @@ class Picamera2:
 """
 
 
-@needs_pipeline
 def test_picamera2_source_headless_with_a_fake_module(tmp_path: Path) -> None:
     (tmp_path / "picamera2.py").write_text(FAKE_PICAMERA2)
     log = tmp_path / "camera.log"
@@ -212,7 +200,6 @@ def xor_checksum(body: str) -> str:
     return f"{value:02X}"
 
 
-@needs_pipeline
 def test_serial_link_sends_each_pose_as_a_qrf_line(tmp_path: Path) -> None:
     master, slave = os.openpty()
     os.set_blocking(master, False)

@@ -9,9 +9,6 @@ import cv2
 import numpy as np
 import pytest
 
-pytest.importorskip("qrfield.solvers", reason="the solvers branch is not merged yet")
-pytest.importorskip("qrfield.detect", reason="the detect branch is not merged yet")
-
 from qrfield.geometry import Pose, angle_difference
 from qrfield.render import render_view
 from qrfield.sources import Frame, FrameSource, SourceError, VirtualBenchSettings, open_source

@@ -14,7 +14,6 @@ from qrfield.render import render_view
 from qrfield.sources import Frame, FrameSource
 from ui.worker import PipelineWorker, RunConfig, start_worker, stop_worker
 
-pytest.importorskip("qrfield.detect", reason="the detect branch is not merged yet")
 pytestmark = pytest.mark.gui
 
 
