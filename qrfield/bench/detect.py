@@ -57,28 +57,12 @@ def _shared_data(path: Path | None) -> Path | None:
 
 def _solvers() -> list[tuple[str, Any]]:
     """(name, function(corners, camera, side_mm)) of the pose steps timed with the pipeline: the
-    solvers' default IPPE, and IPPE without its iterative refinement (the closed form alone)."""
-    try:
-        from qrfield.solvers import IppeSettings, solve
-    except ImportError:
-        import cv2
-        import numpy as np
+    default of qrfield.solvers.solve (the numerical model, with its mirror search) and IPPE."""
+    from qrfield.solvers import solve
 
-        def stand_in(corners, camera, side):
-            h = side / 2.0
-            obj = np.array([[-h, h, 0], [h, h, 0], [h, -h, 0], [-h, -h, 0]], dtype=np.float64)
-            return cv2.solvePnP(
-                obj, corners.reshape(4, 1, 2), camera.K, camera.dist, flags=cv2.SOLVEPNP_IPPE_SQUARE
-            )
-
-        return [("cv2.solvePnP IPPE_SQUARE (stand-in: qrfield.solvers not on this branch)", stand_in)]
-    closed_form = IppeSettings(refine="none")
     return [
-        ("qrfield.solvers.solve(ippe), default settings", lambda c, cam, side: solve(c, cam, side, "ippe")),
-        (
-            "qrfield.solvers.solve(ippe, refine=none)",
-            lambda c, cam, side: solve(c, cam, side, "ippe", closed_form),
-        ),
+        ("qrfield.solvers.solve, default (numerical)", lambda c, cam, side: solve(c, cam, side)),
+        ("qrfield.solvers.solve(ippe), LM-refined", lambda c, cam, side: solve(c, cam, side, "ippe")),
     ]
 
 
