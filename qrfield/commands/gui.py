@@ -10,16 +10,37 @@ HELP = "open the bench app window (the default when no subcommand is given)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from qrfield.sources import SOURCE_HELP
+
     parser.add_argument(
-        "--source",
-        default="auto",
-        help="camera source: auto (picamera2, then USB, then the virtual bench), virtual, picamera2, "
-        "usb:INDEX, a video file or a folder of images",
+        "--source", default=None, help=SOURCE_HELP + " (default: the last one used, else auto)"
     )
     parser.add_argument(
         "--camera", default=None, metavar="CAM", help="camera profile NAME[@WxH] or PATH.json"
     )
     parser.add_argument("--side-mm", type=float, default=None, metavar="L", help="QR symbol side, mm")
+    parser.add_argument(
+        "--method", choices=("numerical", "ippe", "both"), default=None, help="pose method(s)"
+    )
+    parser.add_argument(
+        "--config-dir",
+        default=None,
+        metavar="DIR",
+        help="where the app keeps its settings (default $QRFIELD_CONFIG_DIR or ~/.config/qrfield)",
+    )
+    parser.add_argument(
+        "--quit-after",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="close the window after SECONDS (smoke tests)",
+    )
+    parser.add_argument(
+        "--screenshot",
+        default=None,
+        metavar="FILE",
+        help="with --quit-after: save the window as an image first",
+    )
 
 
 def display_available() -> bool:

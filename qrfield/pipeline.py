@@ -1,0 +1,295 @@
+"""The per-frame measurement pipeline: detect the code, select it, solve its pose, time it.
+
+One :class:`Pipeline` serves one stream (the headless runner and the app's worker thread each
+own one). :meth:`Pipeline.process` never raises for a frame: whatever goes wrong becomes the
+result's ``status`` and ``reason``, so a frame loop keeps running.
+
+Statuses (those of the serial frame, DESIGN.md, plus ERROR):
+    OK      the first chosen method converged: a pose is given;
+    NOQR    no code found (or none with the selected text);
+    NOCONV  a code was found but the first chosen method did not converge (its reason says why);
+    ERROR   anything else (the camera model does not fit the frame, a solver raised): see reason.
+
+Timing: ``t_ms`` is the frame's capture time in ms since the stream started (the first frame
+processed, or the ``t0`` given); ``latency_ms`` runs from capture to the finished result.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from qrfield.camera import CameraModel, CameraModelError
+from qrfield.geometry import Pose
+from qrfield.sources.base import Frame
+
+#: The pose methods a pipeline can run (DESIGN.md: the thesis' model and OpenCV IPPE).
+METHODS = ("numerical", "ippe")
+#: --method values: one method, or both side by side (the first listed gives the status).
+METHOD_CHOICES = ("numerical", "ippe", "both")
+
+OK, NOQR, NOCONV, ERROR = "OK", "NOQR", "NOCONV", "ERROR"
+STATUSES = (OK, NOQR, NOCONV, ERROR)
+
+#: Keys of a pose result's JSON (those of ``qrfield solve --json``), null when there is no pose.
+POSE_JSON_KEYS = (
+    "method",
+    "position_mm",
+    "angles_deg",
+    "converged",
+    "iterations",
+    "reprojection_px",
+    "corners",
+    "reason",
+    "ambiguity",
+    "residual_mm",
+)
+
+
+def methods_from_choice(choice: str) -> tuple[str, ...]:
+    """("numerical",), ("ippe",) or both for ``--method numerical|ippe|both``; ValueError otherwise."""
+    if choice == "both":
+        return METHODS
+    if choice in METHODS:
+        return (choice,)
+    raise ValueError(f"method {choice!r} is not one of {', '.join(METHOD_CHOICES)}")
+
+
+@dataclass
+class FrameResult:
+    """What the pipeline made of one frame.
+
+    Attributes:
+        index: the frame's index in its stream.
+        t_ms: capture time in ms since the stream started.
+        status: one of STATUSES; reason: why, when not OK ("" when OK).
+        detection: the selected code (qrfield.detect.Detection: corners_px (4, 2) V1..V4, text, ...)
+            or None.
+        detections: every code found in the frame.
+        poses: method name -> qrfield.solvers.PoseResult, in the order the methods were asked.
+        truth: the true pose for the virtual bench, else None.
+        latency_ms: capture to finished result; detect_ms, solve_ms: time spent in each step.
+        label: the frame's label (file name, ...).
+        camera: the camera model used for this frame (scaled to the frame's size).
+    """
+
+    index: int
+    t_ms: int
+    status: str
+    reason: str = ""
+    detection: Any = None
+    detections: list[Any] = field(default_factory=list)
+    poses: dict[str, Any] = field(default_factory=dict)
+    truth: Pose | None = None
+    latency_ms: float = math.nan
+    detect_ms: float = 0.0
+    solve_ms: float = 0.0
+    label: str = ""
+    camera: CameraModel | None = None
+
+    @property
+    def primary(self) -> Any:
+        """The first method's PoseResult, or None."""
+        return next(iter(self.poses.values()), None)
+
+    def pose_of(self, method: str) -> Pose | None:
+        """The converged pose of ``method`` as a Pose (mm, degrees), else None."""
+        result = self.poses.get(method)
+        if result is None or not result.converged or not np.all(np.isfinite(result.position_mm)):
+            return None
+        return Pose(result.position_mm, result.angles_deg)
+
+    def to_json_dict(self) -> dict[str, Any]:
+        """One JSON line of ``qrfield run --json-lines``: the keys of ``qrfield solve --json``
+        (of the first method; null when there is no pose) plus t_ms, status, reason, frame, text,
+        latency_ms; ``methods`` (every method's result) when more than one ran; ``truth`` on the
+        virtual bench."""
+        primary = self.primary
+        out: dict[str, Any] = dict.fromkeys(POSE_JSON_KEYS)
+        if primary is not None:
+            out.update(primary.to_json_dict())
+        elif self.detection is not None:
+            out["corners"] = [[float(u), float(v)] for u, v in self.detection.corners_px]
+        out.update(
+            t_ms=self.t_ms,
+            status=self.status,
+            reason=self.reason,
+            frame=self.index,
+            text=None if self.detection is None else self.detection.text,
+            latency_ms=None if not math.isfinite(self.latency_ms) else round(self.latency_ms, 3),
+        )
+        if len(self.poses) > 1:
+            out["methods"] = {name: result.to_json_dict() for name, result in self.poses.items()}
+        if self.truth is not None:
+            out["truth"] = {
+                "position_mm": [float(v) for v in self.truth.position_mm],
+                "angles_deg": [float(v) for v in self.truth.angles_deg],
+            }
+        if self.label:
+            out["label"] = self.label
+        return out
+
+    def summary(self) -> str:
+        """One compact human line: frame, time, status and each method's pose."""
+        line = f"#{self.index:<5d} t={self.t_ms / 1000:8.3f}s {self.status:<6s}"
+        for k, (name, pose) in enumerate(self.poses.items()):
+            if not np.all(np.isfinite(pose.position_mm)):
+                line += f"{' |' if k else ''} {name}: no pose"
+                continue
+            x, y, z = pose.position_mm
+            a, b, g = pose.angles_deg
+            prefix = "" if len(self.poses) == 1 else f"{' |' if k else ''} {name}:"
+            line += (
+                f"{prefix} x={x:7.1f} y={y:7.1f} z={z:7.1f} mm a={a:7.2f} b={b:7.2f} g={g:7.2f} deg"
+                f" n={pose.iterations} rep={pose.reprojection_px:.2f}px"
+            )
+        if self.reason:
+            line += f"  ({self.reason})"
+        return line + f"  lat={self.latency_ms:.1f}ms"
+
+
+class Pipeline:
+    """Detect, select and solve, frame after frame, for one stream.
+
+    Args:
+        camera: the camera model (rescaled automatically when frames come at another resolution
+            of the same aspect ratio).
+        side_mm: the QR symbol's side L, mm.
+        methods: pose methods to run, a subset of METHODS in order; the first gives the status.
+        solver_settings: method -> its settings dataclass (NumericalSettings, IppeSettings).
+        detector_settings: qrfield.detect.DetectorSettings (None = defaults).
+        select_text: only a code with this payload counts ("" = any; see qrfield.detect.select_code).
+        t0: stream start, time.monotonic() s (None = the first frame's capture time).
+        tracker, solve, select: replace qrfield.detect.Tracker(settings), qrfield.solvers.solve
+            and qrfield.detect.select_code (tests, other detectors).
+    """
+
+    def __init__(
+        self,
+        camera: CameraModel,
+        side_mm: float,
+        methods: Sequence[str] = ("numerical",),
+        *,
+        solver_settings: dict[str, Any] | None = None,
+        detector_settings: Any = None,
+        select_text: str = "",
+        t0: float | None = None,
+        tracker: Any = None,
+        solve: Callable[..., Any] | None = None,
+        select: Callable[..., Any] | None = None,
+    ) -> None:
+        if not isinstance(camera, CameraModel):
+            raise TypeError(f"camera must be a CameraModel, got {type(camera).__name__}")
+        if not math.isfinite(side_mm) or side_mm <= 0:
+            raise ValueError(f"QR side must be a positive length in mm, got {side_mm!r}")
+        methods = tuple(methods)
+        if not methods or any(m not in METHODS for m in methods) or len(set(methods)) != len(methods):
+            raise ValueError(f"methods must be distinct names from {', '.join(METHODS)}, got {methods!r}")
+        self.camera = camera
+        self.side_mm = float(side_mm)
+        self.methods = methods
+        self.solver_settings = dict(solver_settings or {})
+        self.select_text = select_text
+        self.t0 = t0
+        self._own_tracker = tracker is None
+        if tracker is None or select is None:
+            from qrfield import detect
+
+            tracker = (
+                tracker
+                if tracker is not None
+                else detect.Tracker(detector_settings or detect.DetectorSettings())
+            )
+            select = select or detect.select_code
+        if solve is None:
+            from qrfield.solvers import solve
+        self._tracker = tracker
+        self._detector_settings = detector_settings
+        self._solve = solve
+        self._select = select
+        self._scaled: dict[tuple[int, int], CameraModel | str] = {}
+
+    def camera_for(self, size: tuple[int, int]) -> CameraModel:
+        """The camera model at ``size`` (width, height); CameraModelError if the aspect differs."""
+        if size == self.camera.size:
+            return self.camera
+        cached = self._scaled.get(size)
+        if cached is None:
+            try:
+                cached = self.camera.scaled(*size)
+            except CameraModelError as exc:
+                cached = str(exc)
+            self._scaled[size] = cached
+        if isinstance(cached, str):
+            raise CameraModelError(cached)
+        return cached
+
+    def process(self, frame: Frame) -> FrameResult:
+        """Detect, select and solve one frame; never raises (problems become status and reason)."""
+        if self.t0 is None:
+            self.t0 = frame.t_capture
+        t_ms = max(0, round((frame.t_capture - self.t0) * 1000.0))
+        result = FrameResult(frame.index, t_ms, NOQR, truth=frame.truth, label=frame.label)
+        try:
+            self._process(frame, result)
+        except Exception as exc:  # never raise per frame: a broken frame is a status, not a crash
+            result.status, result.reason = ERROR, f"{type(exc).__name__}: {exc}"
+        result.latency_ms = (time.monotonic() - frame.t_capture) * 1000.0
+        return result
+
+    def _process(self, frame: Frame, result: FrameResult) -> None:
+        try:
+            camera = self.camera_for(frame.size)
+        except CameraModelError as exc:
+            result.status, result.reason = ERROR, f"camera model does not fit the frame: {exc}"
+            return
+        result.camera = camera
+        t = time.perf_counter()
+        result.detections = list(self._tracker.update(frame.image))
+        result.detection = self._select(result.detections, self.select_text)
+        result.detect_ms = (time.perf_counter() - t) * 1000.0
+        if result.detection is None:
+            found = len(result.detections)
+            result.reason = (
+                "no QR code found"
+                if not found
+                else f"{found} code(s) found, none with the text {self.select_text!r}"
+            )
+            return
+        t = time.perf_counter()
+        errors = []
+        for method in self.methods:
+            try:
+                result.poses[method] = self._solve(
+                    result.detection.corners_px,
+                    camera,
+                    self.side_mm,
+                    method=method,
+                    settings=self.solver_settings.get(method),
+                )
+            except Exception as exc:  # one method failing must not hide the other's answer
+                errors.append(f"{method}: {type(exc).__name__}: {exc}")
+        result.solve_ms = (time.perf_counter() - t) * 1000.0
+        primary = result.poses.get(self.methods[0])
+        if primary is None:
+            result.status, result.reason = ERROR, "; ".join(errors)
+        elif primary.converged:
+            result.status, result.reason = OK, "; ".join(errors)
+        else:
+            result.status, result.reason = NOCONV, primary.reason or f"{primary.method} did not converge"
+
+    def reset(self, t0: float | None = None) -> None:
+        """Start a new stream: the clock restarts and the tracker forgets the last code."""
+        self.t0 = t0
+        reset = getattr(self._tracker, "reset", None)
+        if callable(reset):
+            reset()
+        elif self._own_tracker:
+            from qrfield import detect
+
+            self._tracker = detect.Tracker(self._detector_settings or detect.DetectorSettings())

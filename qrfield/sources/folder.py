@@ -1,0 +1,87 @@
+"""A folder of still images, read in sorted file-name order (unreadable files reported and skipped)."""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from pathlib import Path
+
+import cv2
+
+from qrfield.sources.base import EndOfStream, Frame, FrameSource, Pacer, SourceError
+
+#: File name endings treated as images (case-insensitive).
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".pgm", ".ppm")
+
+log = logging.getLogger(__name__)
+
+
+class ImageFolderSource(FrameSource):
+    """Every image file of a folder (not its sub-folders), sorted by name.
+
+    Files that OpenCV cannot read are skipped; each is reported once in ``notes`` and ``skipped``
+    and logged as a warning. When no file is readable the source raises SourceError.
+
+    Args:
+        path: the folder.
+        loop: start again at the first image at the end instead of raising EndOfStream.
+        fps: deliver at most this many images per second (0 = as fast as read).
+    """
+
+    name = "folder"
+
+    def __init__(self, path: str | os.PathLike[str], loop: bool = False, fps: float = 0.0) -> None:
+        super().__init__()
+        self.path = Path(path)
+        self.loop = loop
+        self.files: list[Path] = []
+        self.skipped: list[Path] = []
+        self._pacer = Pacer(fps)
+        self._position = 0
+
+    @property
+    def description(self) -> str:
+        return f"folder {self.path} ({len(self.files)} images)" + (" (looping)" if self.loop else "")
+
+    def _open_impl(self) -> None:
+        if not self.path.is_dir():
+            raise SourceError(f"image folder {self.path}: no such folder")
+        self.files = sorted(
+            p for p in self.path.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES
+        )
+        if not self.files:
+            raise SourceError(f"image folder {self.path}: no image files ({', '.join(IMAGE_SUFFIXES)})")
+        self._position = 0
+        self.skipped = []
+
+    def _read_impl(self, index: int) -> Frame:
+        self._pacer.wait()
+        tried = 0
+        while tried < len(self.files):
+            if self._position >= len(self.files):
+                if not self.loop:
+                    raise EndOfStream(f"image folder {self.path}: end after {len(self.files)} files")
+                self._position = 0
+            path = self.files[self._position]
+            self._position += 1
+            tried += 1
+            if path in self.skipped:
+                continue
+            # ANYCOLOR keeps grey images grey; without ANYDEPTH, 16-bit files come back as 8-bit.
+            image = cv2.imread(str(path), cv2.IMREAD_ANYCOLOR)
+            if image is None:
+                self.skipped.append(path)
+                message = f"skipped {path.name}: OpenCV cannot read it as an image"
+                self.notes.append(message)
+                log.warning("%s: %s", self.path, message)
+                continue
+            return Frame(image, time.monotonic(), index, label=path.name)
+        if len(self.skipped) == len(self.files):
+            raise SourceError(
+                f"image folder {self.path}: none of its {len(self.files)} image files is readable"
+            )
+        raise EndOfStream(f"image folder {self.path}: end after {len(self.files)} files")
+
+    def _close_impl(self) -> None:
+        pass

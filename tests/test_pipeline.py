@@ -1,0 +1,209 @@
+"""The per-frame pipeline: statuses, timing, JSON, never raising; then end to end on the virtual bench
+(the real detector and solvers against the bench's true pose, the seed's criteria)."""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pytest
+
+from qrfield.camera import resolve_camera
+from qrfield.geometry import Pose, angle_difference
+from qrfield.pipeline import ERROR, METHODS, NOCONV, NOQR, OK, POSE_JSON_KEYS, Pipeline, methods_from_choice
+from qrfield.sources import Frame, VirtualBenchSettings, VirtualBenchSource
+
+
+@dataclass
+class FakeDetection:
+    corners_px: np.ndarray
+    text: str = "qrfield"
+
+
+@dataclass
+class FakeResult:
+    """Just enough of qrfield.solvers.PoseResult for the pipeline's plumbing."""
+
+    method: str
+    converged: bool = True
+    reason: str = ""
+    position_mm: np.ndarray = field(default_factory=lambda: np.array([1.0, 2.0, 300.0]))
+    angles_deg: np.ndarray = field(default_factory=lambda: np.array([1.0, 2.0, 3.0]))
+    iterations: int = 4
+    reprojection_px: float = 0.1
+
+    def to_json_dict(self) -> dict[str, Any]:
+        return {"method": self.method, "position_mm": list(self.position_mm), "converged": self.converged}
+
+
+class FakeTracker:
+    def __init__(self, detections: list[Any] | Exception) -> None:
+        self.detections = detections
+        self.images: list[np.ndarray] = []
+
+    def update(self, image: np.ndarray) -> list[Any]:
+        self.images.append(image)
+        if isinstance(self.detections, Exception):
+            raise self.detections
+        return self.detections
+
+
+def first_with_text(detections: list[Any], select_text: str = "") -> Any:
+    return next((d for d in detections if not select_text or d.text == select_text), None)
+
+
+CORNERS = np.array([[300.0, 200.0], [340.0, 200.0], [340.0, 240.0], [300.0, 240.0]])
+
+
+def make_pipeline(detections, solve, methods=("numerical",), **kwargs) -> Pipeline:
+    camera = resolve_camera("picam-v2@640x480")
+    return Pipeline(
+        camera, 50.0, methods, tracker=FakeTracker(detections), solve=solve, select=first_with_text, **kwargs
+    )
+
+
+def frame(index: int = 0, t: float = 100.0, size: tuple[int, int] = (640, 480)) -> Frame:
+    return Frame(np.zeros(size[::-1], np.uint8), t, index)
+
+
+def ok_solve(corners, camera, side_mm, method, settings=None) -> FakeResult:
+    return FakeResult(method)
+
+
+def test_no_code_is_noqr_with_null_pose_fields() -> None:
+    result = make_pipeline([], ok_solve).process(frame())
+    assert result.status == NOQR and result.reason == "no QR code found" and result.poses == {}
+    data = json.loads(json.dumps(result.to_json_dict()))
+    assert set(POSE_JSON_KEYS) <= set(data) and data["position_mm"] is None and data["angles_deg"] is None
+    assert data["status"] == "NOQR" and data["t_ms"] == 0
+
+
+def test_select_text_that_matches_nothing_is_noqr() -> None:
+    pipeline = make_pipeline([FakeDetection(CORNERS, "other")], ok_solve, select_text="gripper")
+    result = pipeline.process(frame())
+    assert result.status == NOQR and "none with the text 'gripper'" in result.reason
+
+
+def test_ok_frame_runs_every_method_in_order_and_times_from_the_first_frame() -> None:
+    calls = []
+
+    def solve(corners, camera, side_mm, method, settings=None):
+        calls.append((method, settings, side_mm))
+        assert np.array_equal(corners, CORNERS)
+        return FakeResult(method)
+
+    settings = {"ippe": "ippe-settings"}
+    pipeline = make_pipeline(
+        [FakeDetection(CORNERS)], solve, methods=("ippe", "numerical"), solver_settings=settings
+    )
+    first = pipeline.process(frame(0, t=100.0))
+    second = pipeline.process(frame(1, t=100.25))
+    assert first.status == second.status == OK
+    assert calls[:2] == [("ippe", "ippe-settings", 50.0), ("numerical", None, 50.0)]
+    assert (first.t_ms, second.t_ms) == (0, 250)
+    data = second.to_json_dict()
+    assert data["method"] == "ippe" and list(data["methods"]) == ["ippe", "numerical"]
+    assert data["text"] == "qrfield" and data["frame"] == 1
+
+
+def test_primary_not_converged_is_noconv_with_its_reason() -> None:
+    def solve(corners, camera, side_mm, method, settings=None):
+        return FakeResult(method, converged=method == "ippe", reason="n_max reached")
+
+    result = make_pipeline([FakeDetection(CORNERS)], solve, methods=METHODS).process(frame())
+    assert result.status == NOCONV and result.reason == "n_max reached"
+    assert result.pose_of("ippe") is not None and result.pose_of("numerical") is None
+
+
+def test_a_raising_solver_or_detector_is_a_status_never_an_exception() -> None:
+    def solve(corners, camera, side_mm, method, settings=None):
+        if method == "numerical":
+            raise ValueError("corners are collinear")
+        return FakeResult(method)
+
+    result = make_pipeline([FakeDetection(CORNERS)], solve, methods=METHODS).process(frame())
+    assert result.status == ERROR and "numerical: ValueError: corners are collinear" in result.reason
+    assert list(result.poses) == ["ippe"]  # the other method's answer is kept
+    broken = make_pipeline(RuntimeError("decoder crashed"), ok_solve).process(frame())
+    assert broken.status == ERROR and broken.reason == "RuntimeError: decoder crashed"
+    assert math.isfinite(broken.latency_ms)
+
+
+def test_camera_is_rescaled_to_the_frame_or_reported_when_it_cannot_be() -> None:
+    seen = []
+
+    def solve(corners, camera, side_mm, method, settings=None):
+        seen.append(camera)
+        return FakeResult(method)
+
+    pipeline = make_pipeline([FakeDetection(CORNERS)], solve)
+    assert pipeline.process(frame(size=(1280, 960))).status == OK
+    base = resolve_camera("picam-v2@640x480")
+    assert seen[0].size == (1280, 960) and seen[0].fx == pytest.approx(2 * base.fx)
+    assert seen[0].cx == pytest.approx((base.cx + 0.5) * 2 - 0.5)
+    wrong = pipeline.process(frame(size=(1280, 720)))
+    assert wrong.status == ERROR and "camera model does not fit" in wrong.reason
+
+
+def test_method_choices() -> None:
+    assert methods_from_choice("both") == ("numerical", "ippe")
+    assert methods_from_choice("ippe") == ("ippe",)
+    with pytest.raises(ValueError, match="not one of numerical, ippe, both"):
+        methods_from_choice("pnp")
+    with pytest.raises(ValueError, match="distinct names"):
+        Pipeline(
+            resolve_camera("picam-v2@640x480"), 50.0, ("ippe", "ippe"), tracker=1, solve=ok_solve, select=1
+        )
+
+
+# ------------------------------------------------------------------ end to end with the real modules
+
+
+def within_seed_criteria(measured: Pose, truth: Pose) -> bool:
+    """DESIGN.md: each angle within 2 degrees, position within 5 mm (Euclidean)."""
+    angles_ok = np.all(np.abs(angle_difference(measured.angles_deg, truth.angles_deg)) <= 2.0)
+    return bool(angles_ok and np.linalg.norm(measured.position_mm - truth.position_mm) < 5.0)
+
+
+@pytest.mark.parametrize(
+    "seed_pose", [Pose([10, -5, 300], [15, -20, 10]), Pose([-40, 30, 450], [-25, 10, 120])]
+)
+def test_virtual_bench_end_to_end_meets_the_seed_criteria(seed_pose: Pose, camera_vga) -> None:
+    settings = VirtualBenchSettings(fps=0.0).with_pose(seed_pose)
+    pipeline = Pipeline(camera_vga, 50.0, METHODS)
+    with VirtualBenchSource(camera_vga, 50.0, settings) as source:
+        results = [pipeline.process(source.read()) for _ in range(3)]
+    for result in results:
+        assert result.status == OK, result.reason
+        assert np.allclose(result.detection.corners_px, seed_pose.corners_px(camera_vga, 50.0), atol=1.5)
+        for method in METHODS:
+            assert within_seed_criteria(result.pose_of(method), seed_pose), (method, result.poses[method])
+
+
+class ExactCornersTracker:
+    """Reports the renderer's exact vertex pixels of each frame (the truth), as a perfect detector would."""
+
+    def __init__(self, camera, side_mm: float) -> None:
+        self.camera, self.side_mm, self.truth = camera, side_mm, None
+
+    def update(self, image: np.ndarray) -> list[Any]:
+        return [FakeDetection(self.truth.corners_px(self.camera, self.side_mm))]
+
+
+def test_real_solvers_through_the_pipeline_recover_the_rendered_pose(camera_vga) -> None:
+    tracker = ExactCornersTracker(camera_vga, 50.0)
+    pipeline = Pipeline(camera_vga, 50.0, METHODS, tracker=tracker, select=first_with_text)
+    settings = VirtualBenchSettings(fps=0.0, wobble_deg=10.0, wobble_mm=30.0, wobble_period_s=1.0)
+    with VirtualBenchSource(camera_vga, 50.0, settings) as source:
+        for _ in range(5):
+            frame = source.read()
+            tracker.truth = frame.truth
+            result = pipeline.process(frame)
+            assert result.status == OK, result.reason
+            for method in METHODS:
+                pose = result.pose_of(method)
+                assert np.allclose(pose.position_mm, frame.truth.position_mm, atol=1e-3), method
+                assert np.allclose(angle_difference(pose.angles_deg, frame.truth.angles_deg), 0.0, atol=1e-3)

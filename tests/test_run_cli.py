@@ -1,0 +1,237 @@
+"""``qrfield run --headless``: one pose per frame, no Qt imported, clean stop on SIGINT/SIGTERM;
+and ``qrfield`` without a display says how to run headless."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from qrfield.geometry import Pose, angle_difference
+from qrfield.render import render_view
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def env(**extra: str) -> dict[str, str]:
+    out = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY", "QT_QPA_PLATFORM")}
+    out["PYTHONPATH"] = str(REPO)
+    out.update(extra)
+    return out
+
+
+def qrfield(*args: str, timeout: float = 60, **extra: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "qrfield", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env=env(**extra),
+    )
+
+
+def within_seed_criteria(position, angles, truth: Pose) -> bool:
+    position_ok = np.linalg.norm(np.asarray(position) - truth.position_mm) < 5.0
+    return bool(position_ok and np.all(np.abs(angle_difference(np.asarray(angles), truth.angles_deg)) <= 2.0))
+
+
+def test_json_lines_on_the_virtual_bench_match_its_true_pose() -> None:
+    truth = Pose([30.0, -20.0, 400.0], [-12.0, 18.0, 40.0])
+    args = ["--virtual-fps", "0", "--virtual-x-mm", "30", "--virtual-y-mm", "-20", "--virtual-z-mm", "400"]
+    args += ["--virtual-alpha-deg", "-12", "--virtual-beta-deg", "18", "--virtual-gamma-deg", "40"]
+    done = qrfield(
+        "run", "--headless", "--source", "virtual", "--frames", "4", "--json-lines", "--method", "both", *args
+    )
+    assert done.returncode == 0, done.stderr
+    lines = [json.loads(line) for line in done.stdout.splitlines()]
+    assert len(lines) == 4
+    keys = {"method", "position_mm", "angles_deg", "converged", "iterations", "reprojection_px", "corners"}
+    for i, line in enumerate(lines):
+        assert keys | {"t_ms", "status"} <= set(line)
+        assert line["status"] == "OK" and line["frame"] == i and isinstance(line["t_ms"], int)
+        assert line["method"] == "numerical" and set(line["methods"]) == {"numerical", "ippe"}
+        for result in line["methods"].values():
+            assert within_seed_criteria(result["position_mm"], result["angles_deg"], truth)
+    assert lines[0]["t_ms"] == 0 and [x["t_ms"] for x in lines] == sorted(x["t_ms"] for x in lines)
+    assert "done after 4 frames" in done.stderr
+
+
+def test_headless_run_imports_no_qt() -> None:
+    code = (
+        "import sys\n"
+        "from qrfield.cli import main\n"
+        "rc = main(['run', '--headless', '--source', 'virtual', '--frames', '2', '--virtual-fps', '0'])\n"
+        "qt_roots = ('PySide6', 'shiboken6', 'pyqtgraph', 'ui')\n"
+        "qt = sorted(m for m in sys.modules if m.split('.')[0] in qt_roots)\n"
+        "print('QT-MODULES', qt, file=sys.stderr)\n"
+        "sys.exit(rc)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, env=env())
+    assert done.returncode == 0, done.stderr
+    assert "QT-MODULES []" in done.stderr
+    assert len(done.stdout.splitlines()) == 2 and " OK " in done.stdout.splitlines()[0]
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_signals_stop_the_stream_cleanly(sig: signal.Signals) -> None:
+    process = subprocess.Popen(
+        [sys.executable, "-m", "qrfield", "run", "--headless", "--source", "virtual", "--json-lines"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env(),
+    )
+    try:
+        first = {}
+        reader = threading.Thread(target=lambda: first.setdefault("line", process.stdout.readline()))
+        reader.start()
+        reader.join(60)
+        assert json.loads(first["line"])["status"] == "OK"  # it is streaming
+        process.send_signal(sig)
+        out, err = process.communicate(timeout=30)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert process.returncode == 0, err
+    assert f"stopped by {sig.name} after" in err and "Traceback" not in err
+    for line in out.splitlines():  # every line written is whole JSON
+        json.loads(line)
+
+
+def test_folder_source_runs_to_its_end(tmp_path: Path, camera_vga) -> None:
+    pose = Pose([0.0, 10.0, 300.0], [5.0, -15.0, 90.0])
+    for i in range(3):
+        cv2.imwrite(
+            str(tmp_path / f"{i}.png"), render_view(camera_vga, 50.0, pose, noise_sigma=1.0, seed=i).image
+        )
+    (tmp_path / "3.png").write_bytes(b"broken")
+    (tmp_path / "4.png").write_bytes(cv2.imencode(".png", np.full((480, 640), 128, np.uint8))[1].tobytes())
+    done = qrfield(
+        "run", "--source", str(tmp_path), "--json-lines", "--method", "ippe", "--camera", "picam-v2@640x480"
+    )
+    assert done.returncode == 0, done.stderr
+    lines = [json.loads(line) for line in done.stdout.splitlines()]
+    assert [line["status"] for line in lines] == ["OK", "OK", "OK", "NOQR"]
+    assert [line["label"] for line in lines] == ["0.png", "1.png", "2.png", "4.png"]
+    assert all(within_seed_criteria(x["position_mm"], x["angles_deg"], pose) for x in lines[:3])
+    assert lines[3]["position_mm"] is None and lines[3]["reason"] == "no QR code found"
+    assert "skipped 3.png" in done.stderr and "end after 5 files" in done.stderr
+
+
+def test_unopenable_source_is_one_clear_error(tmp_path: Path) -> None:
+    done = qrfield("run", "--source", str(tmp_path / "missing.avi"))
+    assert done.returncode == 1
+    assert "cannot open source" in done.stderr and "Traceback" not in done.stderr
+
+
+def test_no_display_says_how_to_run_headless() -> None:
+    done = qrfield(timeout=30)
+    assert done.returncode == 3
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "no display" in lines[0] and "qrfield run --headless" in lines[0]
+    assert "PySide6" not in done.stderr
+
+
+FAKE_PICAMERA2 = """
+import json, os
+import numpy as np
+
+class Picamera2:
+    def __init__(self, num=0):
+        self.log = os.environ["FAKE_PICAMERA2_LOG"]
+    def create_video_configuration(self, main):
+        return {"main": main}
+    def configure(self, config):
+        self.size = config["main"]["size"]
+        with open(self.log, "a") as f:
+            f.write(json.dumps({"size": list(self.size)}) + "\\n")
+    def set_controls(self, controls):
+        with open(self.log, "a") as f:
+            f.write(json.dumps({"controls": controls}) + "\\n")
+    def start(self): pass
+    def capture_array(self, stream="main"):
+        return np.full((self.size[1], self.size[0], 3), 200, np.uint8)
+    def capture_metadata(self):
+        return {"ExposureTime": 8000, "AnalogueGain": 1.0}
+    def stop(self): pass
+    def close(self): pass
+"""
+
+
+def test_picamera2_source_headless_with_a_fake_module(tmp_path: Path) -> None:
+    (tmp_path / "picamera2.py").write_text(FAKE_PICAMERA2)
+    log = tmp_path / "camera.log"
+    done = qrfield(
+        "run", "--source", "picamera2", "--frames", "3", "--json-lines", "--camera", "picam-v2@640x480",
+        "--picamera-width", "320", "--picamera-height", "240", "--picamera-settle-frames", "2",
+        PYTHONPATH=f"{REPO}{os.pathsep}{tmp_path}", FAKE_PICAMERA2_LOG=str(log),
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    lines = [json.loads(line) for line in done.stdout.splitlines()]
+    assert [line["status"] for line in lines] == ["NOQR"] * 3  # a blank grey picture has no code
+    events = [json.loads(line) for line in log.read_text().splitlines()]
+    assert events[0] == {"size": [320, 240]}
+    assert {"controls": {"AeEnable": False, "ExposureTime": 8000, "AnalogueGain": 1.0}} in events
+    assert "exposure locked at 8000 us" in done.stderr
+
+
+def test_picamera2_missing_is_one_clear_line(tmp_path: Path) -> None:
+    (tmp_path / "picamera2.py").write_text("raise ImportError('no libcamera here')\n")
+    done = qrfield("run", "--source", "picamera2", PYTHONPATH=f"{REPO}{os.pathsep}{tmp_path}")
+    assert done.returncode == 1 and "Traceback" not in done.stderr
+    assert (
+        "picamera2 is not installed: on Raspberry Pi OS run sudo apt install python3-picamera2" in done.stderr
+    )
+
+
+def xor_checksum(body: str) -> str:
+    """DESIGN.md: XOR of every byte between '$' and '*', two uppercase hex digits."""
+    value = 0
+    for byte in body.encode("ascii"):
+        value ^= byte
+    return f"{value:02X}"
+
+
+def test_serial_link_sends_each_pose_as_a_qrf_line(tmp_path: Path) -> None:
+    master, slave = os.openpty()
+    os.set_blocking(master, False)
+    try:
+        done = qrfield(
+            "run", "--source", "virtual", "--frames", "6", "--json-lines", "--virtual-fps", "10",
+            "--serial", os.ttyname(slave), "--serial-max-rate-hz", "1000", "--serial-stale-after-s", "0",
+        )  # fmt: skip
+        received = b""
+        while True:
+            try:
+                chunk = os.read(master, 65536)
+            except BlockingIOError:
+                break
+            if not chunk:
+                break
+            received += chunk
+    finally:
+        os.close(master)
+        os.close(slave)
+    assert done.returncode == 0, done.stderr
+    poses = {line["t_ms"]: line for line in map(json.loads, done.stdout.splitlines())}
+    frames = [f for f in received.decode("ascii").split("\r\n") if f]
+    assert len(frames) >= 3, (frames, done.stderr)
+    for frame in frames:
+        body, checksum = frame[1:].split("*")
+        assert frame[0] == "$" and checksum == xor_checksum(body)
+        fields = body.split(",")
+        assert fields[0] == "QRF" and fields[-1] == "OK"
+        line = poses[int(fields[2])]  # t_ms ties each frame to the JSON line of the same capture
+        x, y, z, a, b, g = map(float, fields[3:9])
+        assert np.allclose([x, y, z], line["position_mm"], atol=0.051)
+        assert np.allclose([a, b, g], line["angles_deg"], atol=0.0051)
+    assert [int(f.split(",")[1]) for f in frames] == list(range(len(frames)))  # seq counts up from 0
+    assert "frames sent" in done.stderr

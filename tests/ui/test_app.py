@@ -1,0 +1,219 @@
+"""The bench app, offscreen with pytest-qt: live pose on the virtual bench against its true pose,
+switching solver and source, a source failing mid-stream, a screenshot, settings persistence."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from qrfield.geometry import Pose, angle_difference
+from qrfield.render import render_view
+from qrfield.sources import Frame, FrameSource, SourceError, VirtualBenchSettings, open_source
+from ui.config import ConfigStore
+from ui.main_window import MainWindow
+
+pytestmark = pytest.mark.gui
+WAIT_MS = 15000
+
+
+def meets_seed_criteria(values: np.ndarray, truth: Pose) -> bool:
+    """Displayed x, y, z (mm), alpha, beta, gamma (deg) within 5 mm and 2 degrees of the truth."""
+    if not np.all(np.isfinite(values)):
+        return False
+    position_ok = np.linalg.norm(values[:3] - truth.position_mm) < 5.0
+    return bool(position_ok and np.all(np.abs(angle_difference(values[3:], truth.angles_deg)) <= 2.0))
+
+
+@pytest.fixture
+def make_window(qtbot, tmp_path: Path):
+    windows: list[MainWindow] = []
+
+    def make(overrides: dict | None = None, **kwargs) -> MainWindow:
+        window = MainWindow(ConfigStore(tmp_path / "config"), overrides, **kwargs)
+        qtbot.addWidget(window)
+        window.show()
+        windows.append(window)
+        return window
+
+    yield make
+    for window in windows:
+        window.shutdown()
+
+
+def test_app_shows_the_virtual_bench_true_pose(make_window, qtbot, camera_vga) -> None:
+    window = make_window(
+        {"source": "virtual", "method": "both", "camera": "picam-v2@640x480", "side_mm": 50.0}
+    )
+    truth = window.virtual_form.value().pose  # the pose the bench was told to render
+
+    def panel_shows_truth() -> None:
+        for method in ("numerical", "ippe"):
+            assert meets_seed_criteria(window.pose_panel.displayed(method), truth), method
+        assert np.allclose(
+            window.pose_panel.displayed("true"), np.r_[truth.position_mm, truth.angles_deg], atol=0.01
+        )
+
+    qtbot.waitUntil(panel_shows_truth, timeout=WAIT_MS)
+    # The preview marks V1..V4 where the renderer put them.
+    xs, ys = window.preview.vertices.getData()
+    assert np.allclose(np.c_[xs, ys], truth.corners_px(camera_vga, 50.0), atol=2.0)
+    assert [label.toPlainText() for label in window.preview.labels] == ["V1", "V2", "V3", "V4"]
+    assert window.thread.isRunning() and window.worker.source is not None
+
+
+def test_switching_solver_changes_what_is_solved(make_window, qtbot) -> None:
+    window = make_window({"source": "virtual", "method": "both"})
+    qtbot.waitUntil(
+        lambda: window.last is not None and set(window.last.result.poses) == {"numerical", "ippe"},
+        timeout=WAIT_MS,
+    )
+    for choice in ("ippe", "numerical"):
+        window.set_method(choice)
+        qtbot.waitUntil(
+            lambda c=choice: window.last is not None and tuple(window.last.result.poses) == (c,),
+            timeout=WAIT_MS,
+        )
+        truth = window.virtual_form.value().pose
+        qtbot.waitUntil(
+            lambda c=choice, t=truth: meets_seed_criteria(window.pose_panel.displayed(c), t), timeout=WAIT_MS
+        )
+    assert window.app_settings.method == "numerical"
+
+
+def test_switching_source_to_a_folder(make_window, qtbot, tmp_path: Path, camera_vga) -> None:
+    pose = Pose([-20.0, 15.0, 350.0], [-10.0, 25.0, -30.0])
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    for i in range(3):
+        cv2.imwrite(
+            str(folder / f"img{i}.png"), render_view(camera_vga, 50.0, pose, noise_sigma=2.0, seed=i).image
+        )
+    window = make_window({"source": "virtual", "method": "ippe"})
+    qtbot.waitUntil(lambda: window.last is not None and window.last.result.truth is not None, timeout=WAIT_MS)
+    window.set_source(str(folder))
+    qtbot.waitUntil(
+        lambda: window.last is not None and window.last.result.label.startswith("img"), timeout=WAIT_MS
+    )
+    assert "folder" in window.status_source.text()
+    qtbot.waitUntil(lambda: meets_seed_criteria(window.pose_panel.displayed("ippe"), pose), timeout=WAIT_MS)
+    assert np.all(np.isnan(window.pose_panel.displayed("true")))  # no truth column for real sources
+
+
+class FlakySource(FrameSource):
+    """The virtual bench for a few frames, then it fails like an unplugged camera."""
+
+    name = "flaky"
+
+    def __init__(self, inner: FrameSource, frames_before_failure: int, error: Exception) -> None:
+        super().__init__()
+        self.inner, self.left, self.error = inner, frames_before_failure, error
+
+    def _open_impl(self) -> None:
+        self.inner.open()
+
+    def _read_impl(self, index: int) -> Frame:
+        if self.left <= 0:
+            raise self.error
+        self.left -= 1
+        return self.inner.read()
+
+    def _close_impl(self) -> None:
+        self.inner.close()
+
+
+@pytest.mark.parametrize("error", [SourceError("camera unplugged"), RuntimeError("driver crashed")])
+def test_a_source_failing_midstream_is_reported_and_can_be_reopened(make_window, qtbot, error) -> None:
+    opened: list[FlakySource] = []
+
+    def factory(spec: str, **kwargs) -> FrameSource:
+        source = FlakySource(open_source("virtual", **kwargs), 5, error)
+        opened.append(source)
+        source.open()
+        return source
+
+    window = make_window({"source": "virtual"}, source_factory=factory)
+    qtbot.waitUntil(lambda: window.banner_row.isVisible(), timeout=WAIT_MS)
+    assert str(error) in window.banner.text()
+    assert window.pose_panel.headline.text().startswith("STALE")
+    shown = window.frames_shown
+    assert shown >= 1 and window.timer.isActive() and window.thread.isRunning()
+    qtbot.mouseClick(window.banner_button, qtbot_button_left())
+    qtbot.waitUntil(lambda: len(opened) == 2 and window.frames_shown > shown, timeout=WAIT_MS)
+    assert not opened[0].is_open  # the failed source was closed
+    qtbot.waitUntil(lambda: window.banner_row.isVisible(), timeout=WAIT_MS)  # and the new one fails too
+
+
+def test_a_source_that_cannot_open_is_reported(make_window, qtbot, tmp_path: Path) -> None:
+    window = make_window({"source": str(tmp_path / "no-such-video.avi")})
+    qtbot.waitUntil(lambda: window.banner_row.isVisible(), timeout=WAIT_MS)
+    assert "no such file" in window.banner.text() or "not one of" in window.banner.text()
+    window.set_source("virtual")
+    qtbot.waitUntil(lambda: not window.banner_row.isVisible() and window.last is not None, timeout=WAIT_MS)
+
+
+def test_window_screenshot_is_not_blank(make_window, qtbot, tmp_path: Path) -> None:
+    window = make_window({"source": "virtual", "method": "both"})
+    qtbot.waitUntil(lambda: window.frames_shown >= 5, timeout=WAIT_MS)
+    path = tmp_path / "window.png"
+    assert window.grab().save(str(path))
+    image = cv2.imread(str(path))
+    assert image is not None and image.shape[:2] == (window.height(), window.width())
+    assert image.std() > 20  # text, preview and plots, not an empty grey
+    # The preview area shows the camera image: its pixels vary like the rendered card's.
+    preview = window.preview.grab().toImage()
+    assert (
+        preview.width() > 100
+        and len({preview.pixel(x, preview.height() // 2) for x in range(0, preview.width(), 7)}) > 5
+    )
+
+
+def test_settings_persist_across_two_app_instances(make_window, qtbot, tmp_path: Path) -> None:
+    first = make_window({"source": "virtual"})
+    first.camera_controls.side_mm.setValue(42.0)
+    first.set_method("ippe")
+    first.virtual_form.widgets["z_mm"].setValue(420.0)
+    numerical = first.solver_controls.forms["numerical"]
+    int_spec = next(spec for spec in numerical.specs if spec.type is int)  # e.g. n_max
+    new_int = int(int_spec.default) + 1
+    numerical.widgets[int_spec.name].setValue(new_int)
+    # The change reaches the worker's pipeline, not only the form.
+    qtbot.waitUntil(
+        lambda: getattr(first.worker._config.solver_settings["numerical"], int_spec.name) == new_int,
+        timeout=WAIT_MS,
+    )
+    first.shutdown()
+    saved = (tmp_path / "config" / "app.json").read_text()
+    assert '"side_mm": 42.0' in saved
+    second = make_window()
+    assert second.app_settings.side_mm == 42.0 and second.app_settings.method == "ippe"
+    assert second.app_settings.source == "virtual"
+    assert second.virtual_form.value().z_mm == 420.0
+    assert second.camera_controls.side_mm.value() == 42.0
+    assert getattr(second.solver_controls.settings()["numerical"], int_spec.name) == new_int
+    qtbot.waitUntil(lambda: second.last is not None and second.last.result.truth is not None, timeout=WAIT_MS)
+    assert second.last.result.truth.position_mm[2] == pytest.approx(420.0)
+
+
+def test_close_stops_the_worker_and_closes_the_source(make_window, qtbot) -> None:
+    window = make_window({"source": "virtual"})
+    qtbot.waitUntil(lambda: window.worker.source is not None, timeout=WAIT_MS)
+    source = window.worker.source
+    window.close()
+    assert window.thread.isFinished() and not source.is_open and window.worker.source is None
+
+
+def test_virtual_bench_controls_move_the_true_pose(make_window, qtbot) -> None:
+    window = make_window({"source": "virtual", "method": "ippe"})
+    window.virtual_form.widgets["gamma_deg"].setValue(-60.0)
+    target = VirtualBenchSettings().with_pose(Pose([10.0, -5.0, 300.0], [15.0, -20.0, -60.0])).pose
+    qtbot.waitUntil(lambda: meets_seed_criteria(window.pose_panel.displayed("ippe"), target), timeout=WAIT_MS)
+    assert window.pose_panel.displayed("true")[5] == pytest.approx(-60.0)
+
+
+def qtbot_button_left():
+    from PySide6 import QtCore
+
+    return QtCore.Qt.MouseButton.LeftButton

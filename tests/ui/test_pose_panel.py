@@ -1,0 +1,63 @@
+"""The pose panel: large values per method, the true pose, solver status and the flip warning."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from qrfield.geometry import Pose
+from qrfield.pipeline import FrameResult
+from ui.pose_panel import PosePanel, solver_status_text
+
+pytestmark = pytest.mark.gui
+
+
+def pose_result(method: str, position, angles, ambiguity=None, converged=True, reason=""):
+    return SimpleNamespace(
+        method=method,
+        position_mm=np.array(position, float),
+        angles_deg=np.array(angles, float),
+        converged=converged,
+        iterations=5 if method == "numerical" else 0,
+        reprojection_px=0.12,
+        ambiguity=ambiguity,
+        reason=reason,
+    )
+
+
+def test_panel_shows_each_method_the_truth_and_the_verdict(qtbot) -> None:
+    panel = PosePanel()
+    qtbot.addWidget(panel)
+    truth = Pose([10.0, -5.0, 300.0], [15.0, -20.0, 10.0])
+    result = FrameResult(
+        3,
+        100,
+        "OK",
+        detection=SimpleNamespace(text="qrfield", corners_px=np.zeros((4, 2))),
+        poses={
+            "numerical": pose_result("numerical", [10.4, -5.2, 301.0], [15.5, -19.0, 10.2]),
+            "ippe": pose_result("ippe", [12.0, -5.0, 309.0], [18.0, -20.0, 10.0], ambiguity=0.93),
+        },
+        truth=truth,
+    )
+    panel.show_result(result, ("numerical", "ippe"))
+    assert np.allclose(panel.displayed("numerical"), [10.4, -5.2, 301.0, 15.5, -19.0, 10.2])
+    assert np.allclose(panel.displayed("true"), [10.0, -5.0, 300.0, 15.0, -20.0, 10.0])
+    verdict = panel.verdict.text()
+    assert "numerical: Δpos 1.10 mm, Δangle ≤ 1.00°" in verdict and "✔ meets" in verdict  # sqrt(1.2) = 1.095
+    assert "ippe: Δpos 9.22 mm, Δangle ≤ 3.00°" in verdict and "✘ fails" in verdict  # sqrt(85) = 9.220
+    assert "flip risk" in panel.findChild(type(panel.headline), "status_ippe").text()
+    assert "flip risk" not in panel.findChild(type(panel.headline), "status_numerical").text()
+
+
+def test_solver_status_lines() -> None:
+    text, warn = solver_status_text(pose_result("numerical", [0, 0, 1], [0, 0, 0], ambiguity=0.2))
+    assert text == "converged, n = 5, reproj 0.12 px" and not warn
+    text, warn = solver_status_text(
+        pose_result("numerical", [np.nan] * 3, [np.nan] * 3, converged=False, reason="n_max reached")
+    )
+    assert text.startswith("NOT converged") and text.endswith("n_max reached") and warn
+    text, warn = solver_status_text(pose_result("ippe", [0, 0, 1], [0, 0, 0], ambiguity=1.4))
+    assert "ambiguity 1.40" in text and warn

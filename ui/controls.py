@@ -1,0 +1,201 @@
+"""The control tabs: source, solver, camera and QR side, virtual bench. Each emits ``changed``
+when the user edits it; the main window turns the values into a worker configuration."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+from PySide6 import QtCore, QtWidgets
+
+from qrfield.camera import preset_names
+from qrfield.settings import specs
+from qrfield.sources import Picamera2Settings
+from ui.config import AppSettings
+from ui.settings_form import SettingsForm, set_widget_value, widget_for, widget_value
+
+SOURCE_CHOICES = ("auto", "virtual", "picamera2", "usb:0", "usb:1")
+PRESET_SIZES = ("640x480", "1280x960", "1280x720", "1920x1080")
+
+
+def _spec(name: str) -> Any:
+    return next(s for s in specs(AppSettings) if s.name == name)
+
+
+class SourceControls(QtWidgets.QWidget):
+    """Source chooser (list, file, folder), loop option and the open/reopen button."""
+
+    changed = QtCore.Signal()
+    openRequested = QtCore.Signal()
+
+    def __init__(self, picamera: Any = None, parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__(parent)
+        outer = QtWidgets.QVBoxLayout(self)
+        layout = QtWidgets.QFormLayout()
+        outer.addLayout(layout)
+        self.combo = QtWidgets.QComboBox()
+        self.combo.setEditable(True)
+        self.combo.addItems(list(SOURCE_CHOICES))
+        self.combo.setToolTip(_spec("source").describe())
+        self.combo.setObjectName("source")
+        row = QtWidgets.QHBoxLayout()
+        row.addWidget(self.combo, 1)
+        file_button = QtWidgets.QPushButton("Video file…")
+        folder_button = QtWidgets.QPushButton("Folder…")
+        row.addWidget(file_button)
+        row.addWidget(folder_button)
+        layout.addRow("source", row)
+        self.loop = widget_for(_spec("loop"))
+        layout.addRow(_spec("loop").label, self.loop)
+        self.open_button = QtWidgets.QPushButton("Open / reopen source")
+        self.open_button.setObjectName("open_source")
+        layout.addRow(self.open_button)
+        box = QtWidgets.QGroupBox("Raspberry Pi camera (picamera2)")
+        box_layout = QtWidgets.QVBoxLayout(box)
+        self.picamera = SettingsForm(Picamera2Settings, picamera)
+        box_layout.addWidget(self.picamera)
+        outer.addWidget(box)
+        outer.addStretch(1)
+        self.picamera.changed.connect(lambda *_: self.changed.emit())
+        file_button.clicked.connect(self._choose_file)
+        folder_button.clicked.connect(self._choose_folder)
+        self.open_button.clicked.connect(self.openRequested)
+        self.combo.activated.connect(lambda *_: self.openRequested.emit())
+        self.loop.toggled.connect(lambda *_: self.changed.emit())
+
+    def source(self) -> str:
+        return self.combo.currentText().strip() or "auto"
+
+    def set_source(self, spec: str) -> None:
+        with QtCore.QSignalBlocker(self.combo):
+            self.combo.setCurrentText(spec)
+
+    def _choose_file(self) -> None:
+        path, _ = QtWidgets.QFileDialog.getOpenFileName(
+            self, "Video file", "", "Video (*.avi *.mp4 *.mkv *.mov);;All (*)"
+        )
+        if path:
+            self.set_source(path)
+            self.openRequested.emit()
+
+    def _choose_folder(self) -> None:
+        path = QtWidgets.QFileDialog.getExistingDirectory(self, "Folder of images")
+        if path:
+            self.set_source(path)
+            self.openRequested.emit()
+
+
+class SolverControls(QtWidgets.QWidget):
+    """Method choice and each method's settings (forms generated from their declarations)."""
+
+    changed = QtCore.Signal()
+
+    def __init__(
+        self,
+        settings_classes: dict[str, type],
+        values: dict[str, Any],
+        detector: tuple[type, Any] | None = None,
+        parent=None,
+    ) -> None:
+        super().__init__(parent)
+        layout = QtWidgets.QVBoxLayout(self)
+        form = QtWidgets.QFormLayout()
+        self.method = widget_for(_spec("method"))
+        form.addRow(_spec("method").label, self.method)
+        self.select_text = widget_for(_spec("select_text"))
+        form.addRow(_spec("select_text").label, self.select_text)
+        layout.addLayout(form)
+        self.forms: dict[str, SettingsForm] = {}
+        self.detector: SettingsForm | None = None
+        if detector is not None:
+            box = QtWidgets.QGroupBox("detector settings")
+            box_layout = QtWidgets.QVBoxLayout(box)
+            self.detector = SettingsForm(*detector)
+            box_layout.addWidget(self.detector)
+            layout.addWidget(box)
+            self.detector.changed.connect(lambda *_: self.changed.emit())
+        for name, cls in settings_classes.items():
+            box = QtWidgets.QGroupBox(f"{name} settings")
+            box_layout = QtWidgets.QVBoxLayout(box)
+            self.forms[name] = SettingsForm(cls, values.get(name))
+            box_layout.addWidget(self.forms[name])
+            layout.addWidget(box)
+            self.forms[name].changed.connect(lambda *_: self.changed.emit())
+        layout.addStretch(1)
+        self.method.currentTextChanged.connect(lambda *_: self.changed.emit())
+        self.select_text.editingFinished.connect(self.changed.emit)
+
+    def settings(self) -> dict[str, Any]:
+        return {name: form.value() for name, form in self.forms.items()}
+
+
+class CameraControls(QtWidgets.QWidget):
+    """Camera model (preset[@size] or a JSON file), QR side and the plot window."""
+
+    changed = QtCore.Signal()
+
+    def __init__(self, parent=None) -> None:
+        super().__init__(parent)
+        layout = QtWidgets.QFormLayout(self)
+        self.camera = QtWidgets.QComboBox()
+        self.camera.setEditable(True)
+        self.camera.setObjectName("camera")
+        for name in preset_names():
+            self.camera.addItems([f"{name}@{size}" for size in PRESET_SIZES])
+        self.camera.setToolTip(_spec("camera").describe())
+        row = QtWidgets.QHBoxLayout()
+        row.addWidget(self.camera, 1)
+        browse = QtWidgets.QPushButton("File…")
+        row.addWidget(browse)
+        layout.addRow(_spec("camera").label, row)
+        self.camera_info = QtWidgets.QLabel("")
+        self.camera_info.setWordWrap(True)
+        layout.addRow(self.camera_info)
+        self.side_mm = widget_for(_spec("side_mm"))
+        layout.addRow(_spec("side_mm").label, self.side_mm)
+        self.plot_window_s = widget_for(_spec("plot_window_s"))
+        layout.addRow(_spec("plot_window_s").label, self.plot_window_s)
+        browse.clicked.connect(self._choose_file)
+        self.camera.activated.connect(lambda *_: self.changed.emit())
+        self.camera.lineEdit().editingFinished.connect(self.changed.emit)
+        self.side_mm.valueChanged.connect(lambda *_: self.changed.emit())
+        self.plot_window_s.valueChanged.connect(lambda *_: self.changed.emit())
+
+    def _choose_file(self) -> None:
+        path, _ = QtWidgets.QFileDialog.getOpenFileName(
+            self, "Camera model", "", "Camera JSON (*.json);;All (*)"
+        )
+        if path:
+            with QtCore.QSignalBlocker(self.camera):
+                self.camera.setCurrentText(path)
+            self.changed.emit()
+
+
+def app_settings_from(
+    base: AppSettings, source: SourceControls, solver: SolverControls, camera: CameraControls
+) -> AppSettings:
+    """The AppSettings the controls show."""
+    return dataclasses.replace(
+        base,
+        source=source.source(),
+        loop=widget_value(source.loop),
+        method=widget_value(solver.method),
+        select_text=widget_value(solver.select_text),
+        camera=camera.camera.currentText().strip(),
+        side_mm=widget_value(camera.side_mm),
+        plot_window_s=widget_value(camera.plot_window_s),
+    )
+
+
+def show_app_settings(
+    app: AppSettings, source: SourceControls, solver: SolverControls, camera: CameraControls
+) -> None:
+    """Put ``app`` into the controls without emitting their change signals."""
+    source.set_source(app.source)
+    set_widget_value(source.loop, _spec("loop"), app.loop)
+    set_widget_value(solver.method, _spec("method"), app.method)
+    set_widget_value(solver.select_text, _spec("select_text"), app.select_text)
+    with QtCore.QSignalBlocker(camera.camera):
+        camera.camera.setCurrentText(app.camera)
+    set_widget_value(camera.side_mm, _spec("side_mm"), app.side_mm)
+    set_widget_value(camera.plot_window_s, _spec("plot_window_s"), app.plot_window_s)

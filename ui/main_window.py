@@ -1,0 +1,325 @@
+"""The bench app's main window: preview, pose panel, live plots, and the control tabs.
+
+The window never touches the camera: a :class:`~ui.worker.PipelineWorker` on its own QThread
+captures and processes; the window takes the newest result on a QTimer (older unread results are
+dropped, never queued) and redraws. Every change of a control becomes a new worker configuration
+and is saved to the config file when the window closes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from typing import Any
+
+import numpy as np
+from PySide6 import QtCore, QtGui, QtWidgets
+
+from qrfield.camera import CameraModel, CameraModelError, resolve_camera
+from qrfield.pipeline import methods_from_choice
+from qrfield.sources import Picamera2Settings, VirtualBenchSettings
+from ui.config import AppSettings, ConfigStore
+from ui.controls import CameraControls, SolverControls, SourceControls, app_settings_from, show_app_settings
+from ui.plots import PosePlots
+from ui.pose_panel import PosePanel
+from ui.preview import PreviewView
+from ui.settings_form import SettingsForm
+from ui.worker import PipelineWorker, Processed, RunConfig, start_worker, stop_worker
+
+#: Redraw period of the GUI timer, ms (40 Hz, above the usual camera rate); plots redraw at most
+#: every PLOT_PERIOD_S seconds.
+REDRAW_MS = 25
+PLOT_PERIOD_S = 0.2
+
+
+def solver_settings_classes() -> dict[str, type]:
+    """Each pose method's settings dataclass (declared with qrfield.settings by the solvers)."""
+    from qrfield.solvers import IppeSettings, NumericalSettings
+
+    return {"numerical": NumericalSettings, "ippe": IppeSettings}
+
+
+def detector_settings_class() -> type:
+    from qrfield.detect import DetectorSettings
+
+    return DetectorSettings
+
+
+class MainWindow(QtWidgets.QMainWindow):
+    """The bench app. ``overrides`` (from the command line) replace saved AppSettings fields."""
+
+    def __init__(
+        self,
+        store: ConfigStore,
+        overrides: dict[str, Any] | None = None,
+        *,
+        source_factory: Any = None,
+    ) -> None:
+        super().__init__()
+        self.setWindowTitle("qrfield — bench")
+        self.store = store
+        self.app_settings: AppSettings = dataclasses.replace(
+            store.group("app", AppSettings), **{k: v for k, v in (overrides or {}).items() if v is not None}
+        )
+        classes = solver_settings_classes()
+        detector_cls = detector_settings_class()
+        self.camera_model: CameraModel | None = None
+
+        # ----- widgets
+        self.preview = PreviewView()
+        self.plots = PosePlots(self.app_settings.plot_window_s)
+        self.pose_panel = PosePanel()
+        self.banner = QtWidgets.QLabel("")
+        self.banner.setObjectName("banner")
+        self.banner.setWordWrap(True)
+        self.banner.setStyleSheet("background: #a01818; color: white; padding: 6px; font-weight: bold;")
+        self.banner_button = QtWidgets.QPushButton("Reopen source")
+        banner_row = QtWidgets.QWidget()
+        banner_layout = QtWidgets.QHBoxLayout(banner_row)
+        banner_layout.setContentsMargins(0, 0, 0, 0)
+        banner_layout.addWidget(self.banner, 1)
+        banner_layout.addWidget(self.banner_button)
+        self.banner_row = banner_row
+        banner_row.hide()
+
+        self.source_controls = SourceControls(store.group("picamera", Picamera2Settings))
+        self.solver_controls = SolverControls(
+            classes,
+            {n: store.group(n, c) for n, c in classes.items()},
+            detector=(detector_cls, store.group("detector", detector_cls)),
+        )
+        self.camera_controls = CameraControls()
+        self.virtual_form = SettingsForm(VirtualBenchSettings, store.group("virtual", VirtualBenchSettings))
+        show_app_settings(self.app_settings, self.source_controls, self.solver_controls, self.camera_controls)
+
+        tabs = QtWidgets.QTabWidget()
+        tabs.addTab(_scrolled(self.source_controls), "Source")
+        tabs.addTab(_scrolled(self.solver_controls), "Detect && solve")
+        tabs.addTab(self.camera_controls, "Camera")
+        tabs.addTab(_scrolled(self.virtual_form), "Virtual bench")
+        self.tabs = tabs
+
+        left = QtWidgets.QSplitter(QtCore.Qt.Orientation.Vertical)
+        top = QtWidgets.QWidget()
+        top_layout = QtWidgets.QVBoxLayout(top)
+        top_layout.setContentsMargins(0, 0, 0, 0)
+        top_layout.addWidget(banner_row)
+        top_layout.addWidget(self.preview, 1)
+        left.addWidget(top)
+        left.addWidget(self.plots)
+        left.setSizes([520, 280])
+        right = QtWidgets.QWidget()
+        right_layout = QtWidgets.QVBoxLayout(right)
+        right_layout.addWidget(self.pose_panel)
+        right_layout.addWidget(tabs, 1)
+        splitter = QtWidgets.QSplitter(QtCore.Qt.Orientation.Horizontal)
+        splitter.addWidget(left)
+        splitter.addWidget(right)
+        splitter.setSizes([820, 480])
+        splitter.setStretchFactor(0, 3)
+        splitter.setStretchFactor(1, 2)
+        self.setCentralWidget(splitter)
+        self.status_source = QtWidgets.QLabel("")
+        self.status_rate = QtWidgets.QLabel("")
+        self.statusBar().addWidget(self.status_source, 1)
+        self.statusBar().addPermanentWidget(self.status_rate)
+        self.resize(1300, 820)
+        geometry = store.value("window")
+        if isinstance(geometry, str):
+            self.restoreGeometry(QtCore.QByteArray.fromBase64(geometry.encode()))
+
+        # ----- worker
+        config = self._run_config()
+        self.worker = PipelineWorker(config, source_factory=source_factory)
+        self.worker.resultReady.connect(self._on_result_ready)
+        self.worker.sourceOpened.connect(self._on_source_opened)
+        self.worker.sourceFailed.connect(self._on_source_failed)
+        self.worker.sourceNote.connect(self._on_note)
+        self.thread = start_worker(self.worker)
+        self._closed = False
+
+        # ----- wiring
+        self.source_controls.openRequested.connect(self._open_source)
+        self.source_controls.changed.connect(self._apply)
+        self.solver_controls.changed.connect(self._apply)
+        self.camera_controls.changed.connect(self._apply)
+        self.virtual_form.changed.connect(self._apply)
+        self.banner_button.clicked.connect(self._open_source)
+        for problem in store.problems:
+            self._on_note(problem)
+
+        self.last: Processed | None = None
+        self.frames_shown = 0
+        self._dirty = False
+        self._t0 = time.monotonic()
+        self._last_plot = 0.0
+        self._rate_t = time.monotonic()
+        self._rate_counts = (0, 0)
+        self._rates = (0.0, 0.0)
+        self.timer = QtCore.QTimer(self)
+        self.timer.timeout.connect(self._redraw)
+        self.timer.start(REDRAW_MS)
+
+    # ---------------------------------------------------------------- configuration
+    def methods(self) -> tuple[str, ...]:
+        return methods_from_choice(self.app_settings.method)
+
+    def _run_config(self) -> RunConfig:
+        app = self.app_settings
+        try:
+            self.camera_model = resolve_camera(app.camera)
+            self.camera_controls.camera_info.setText(
+                f"{self.camera_model.width}x{self.camera_model.height} px, fx {self.camera_model.fx:.1f}, "
+                f"fy {self.camera_model.fy:.1f}, cx {self.camera_model.cx:.1f}, cy {self.camera_model.cy:.1f}"
+            )
+        except CameraModelError as exc:
+            self._on_note(f"camera model: {exc}")
+            self.camera_controls.camera_info.setText(f"⚠ {exc}")
+            if self.camera_model is None:
+                self.camera_model = resolve_camera(AppSettings().camera)
+        return RunConfig(
+            source=app.source,
+            camera=self.camera_model,
+            side_mm=app.side_mm,
+            methods=self.methods(),
+            solver_settings=self.solver_controls.settings(),
+            detector_settings=self.solver_controls.detector.value(),
+            virtual=self.virtual_form.value(),
+            select_text=app.select_text,
+            loop=app.loop,
+            picamera=self.source_controls.picamera.value(),
+        )
+
+    def _apply(self) -> None:
+        """Controls changed: new settings for the worker, plots and panel."""
+        self.app_settings = app_settings_from(
+            self.app_settings, self.source_controls, self.solver_controls, self.camera_controls
+        )
+        self.plots.set_window(self.app_settings.plot_window_s)
+        self.worker.configure(self._run_config())
+
+    def _open_source(self) -> None:
+        """Open the chosen source (again), e.g. after a failure."""
+        self._apply()
+        self.banner_row.hide()
+        self.worker.reopen()
+
+    def set_source(self, spec: str) -> None:
+        """Switch to another source (as choosing it in the Source tab does)."""
+        self.source_controls.set_source(spec)
+        self._open_source()
+
+    def set_method(self, choice: str) -> None:
+        """Switch method: numerical, ippe or both (as the Solver tab does)."""
+        self.solver_controls.method.setCurrentText(choice)
+
+    # ---------------------------------------------------------------- worker signals
+    def _on_result_ready(self) -> None:
+        self._dirty = True
+
+    def _on_source_opened(self, description: str) -> None:
+        self.banner_row.hide()
+        self.status_source.setText(f"source: {description}")
+        self.plots.clear_history()
+
+    def _on_source_failed(self, message: str) -> None:
+        last = self.worker.latest.take()  # the worker stored it before failing: draw it, then mark it old
+        if last is not None:
+            self._draw(last)
+        self.banner.setText(f"{message} — choose a source or press Reopen")
+        self.banner_row.show()
+        self.status_source.setText(f"source closed: {message}")
+        self.pose_panel.mark_stale("no source: the values shown are the last ones measured")
+
+    def _on_note(self, message: str) -> None:
+        self.statusBar().showMessage(message, 8000)
+
+    # ---------------------------------------------------------------- drawing
+    def _redraw(self) -> None:
+        item: Processed | None = self.worker.latest.take()
+        now = time.monotonic()
+        if item is not None:
+            self._draw(item)
+        if now - self._last_plot >= PLOT_PERIOD_S:
+            self._last_plot = now
+            self.plots.redraw(now - self._t0)
+        if now - self._rate_t >= 1.0:
+            processed, shown = self.worker.frames_processed, self.frames_shown
+            dt = now - self._rate_t
+            self._rates = ((processed - self._rate_counts[0]) / dt, (shown - self._rate_counts[1]) / dt)
+            self._rate_counts, self._rate_t = (processed, shown), now
+            self.status_rate.setText(
+                f"processed {self._rates[0]:.1f} fps, shown {self._rates[1]:.1f} fps, "
+                f"dropped {self.worker.latest.dropped}"
+            )
+
+    def _draw(self, item: Processed) -> None:
+        self.last = item
+        self.frames_shown += 1
+        frame, result = item.frame, item.result
+        methods = tuple(result.poses) or self.methods()
+        self.preview.show_frame(frame.image)
+        self.preview.show_corners(None if result.detection is None else result.detection.corners_px)
+        camera = result.camera or self.camera_model
+        for k in range(2):
+            pose = result.poses.get(methods[k]) if k < len(methods) else None
+            drawable = pose is not None and pose.converged and np.all(np.isfinite(pose.rotation))
+            self.preview.show_axes(
+                k,
+                pose.rotation if drawable else None,
+                None if pose is None else pose.position_mm,
+                result_side(self),
+                camera,
+            )
+        self.preview.show_info(
+            f"{result.status}  {self._rates[0]:.1f} fps  latency {result.latency_ms:.0f} ms  "
+            f"(detect {result.detect_ms:.0f}, solve {result.solve_ms:.1f})  #{result.index}"
+            + (f"  {item.frames_behind} behind" if item.frames_behind else "")
+        )
+        self.pose_panel.show_result(result, self.methods())
+        t = item.frame.t_capture - self._t0
+        for name in self.methods():
+            pose = result.poses.get(name)
+            values = None if pose is None else np.concatenate([pose.position_mm, pose.angles_deg])
+            self.plots.add(name, t, values)
+        if result.truth is not None:
+            self.plots.add("true", t, np.concatenate([result.truth.position_mm, result.truth.angles_deg]))
+
+    # ---------------------------------------------------------------- shutdown
+    def save_settings(self) -> None:
+        self.store.set_group("app", self.app_settings)
+        self.store.set_group("virtual", self.virtual_form.value())
+        self.store.set_group("picamera", self.source_controls.picamera.value())
+        for name, value in self.solver_controls.settings().items():
+            self.store.set_group(name, value)
+        self.store.set_group("detector", self.solver_controls.detector.value())
+        self.store.set_value("window", bytes(self.saveGeometry().toBase64()).decode())
+        try:
+            self.store.save()
+        except OSError as exc:
+            self._on_note(f"settings not saved: {exc}")
+
+    def shutdown(self) -> None:
+        """Save settings, stop the worker (it closes the source) and join its thread. Idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        self.timer.stop()
+        self.save_settings()
+        stop_worker(self.worker, self.thread)
+
+    def closeEvent(self, event: QtGui.QCloseEvent) -> None:
+        self.shutdown()
+        super().closeEvent(event)
+
+
+def result_side(window: MainWindow) -> float:
+    """Length of the drawn pose axes: one QR side, mm."""
+    return window.app_settings.side_mm
+
+
+def _scrolled(widget: QtWidgets.QWidget) -> QtWidgets.QScrollArea:
+    area = QtWidgets.QScrollArea()
+    area.setWidget(widget)
+    area.setWidgetResizable(True)
+    return area
