@@ -17,12 +17,14 @@ from PySide6 import QtCore, QtGui, QtWidgets
 
 from qrfield.camera import CameraModel, CameraModelError, resolve_camera
 from qrfield.pipeline import methods_from_choice
+from qrfield.serial_link import SerialLinkSettings
 from qrfield.sources import Picamera2Settings, VirtualBenchSettings
 from ui.config import AppSettings, ConfigStore
 from ui.controls import CameraControls, SolverControls, SourceControls, app_settings_from, show_app_settings
 from ui.plots import PosePlots
 from ui.pose_panel import PosePanel
 from ui.preview import PreviewView
+from ui.serial_panel import SerialPanel
 from ui.settings_form import SettingsForm
 from ui.worker import PipelineWorker, Processed, RunConfig, start_worker, stop_worker
 
@@ -97,6 +99,8 @@ class MainWindow(QtWidgets.QMainWindow):
         tabs.addTab(_scrolled(self.solver_controls), "Detect && solve")
         tabs.addTab(self.camera_controls, "Camera")
         tabs.addTab(_scrolled(self.virtual_form), "Virtual bench")
+        self.serial_panel = SerialPanel(store.group("serial", SerialLinkSettings))
+        tabs.addTab(_scrolled(self.serial_panel), "Serial")
         self.tabs = tabs
 
         left = QtWidgets.QSplitter(QtCore.Qt.Orientation.Vertical)
@@ -135,6 +139,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.worker.sourceOpened.connect(self._on_source_opened)
         self.worker.sourceFailed.connect(self._on_source_failed)
         self.worker.sourceNote.connect(self._on_note)
+        self.worker.result_sinks = (self.serial_panel.publisher,)  # every result, on the worker thread
         self.thread = start_worker(self.worker)
         self._closed = False
 
@@ -240,6 +245,7 @@ class MainWindow(QtWidgets.QMainWindow):
         now = time.monotonic()
         if item is not None:
             self._draw(item)
+        self.serial_panel.refresh()
         if now - self._last_plot >= PLOT_PERIOD_S:
             self._last_plot = now
             self.plots.redraw(now - self._t0)
@@ -293,6 +299,7 @@ class MainWindow(QtWidgets.QMainWindow):
         for name, value in self.solver_controls.settings().items():
             self.store.set_group(name, value)
         self.store.set_group("detector", self.solver_controls.detector.value())
+        self.store.set_group("serial", self.serial_panel.saved_settings())
         self.store.set_value("window", bytes(self.saveGeometry().toBase64()).decode())
         try:
             self.store.save()
@@ -307,6 +314,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.timer.stop()
         self.save_settings()
         stop_worker(self.worker, self.thread)
+        self.serial_panel.shutdown()
 
     def closeEvent(self, event: QtGui.QCloseEvent) -> None:
         self.shutdown()
