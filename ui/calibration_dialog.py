@@ -13,6 +13,7 @@ makes it the app's camera model.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import threading
 from collections.abc import Callable
@@ -153,7 +154,8 @@ class BoardFinder(QtCore.QObject):
                     self._job = None
                 self.done += 1
             if preview is not None:
-                self.previewReady.emit(preview)
+                with contextlib.suppress(RuntimeError):  # the dialog was deleted meanwhile
+                    self.previewReady.emit(preview)
 
 
 class CalibrationDialog(QtWidgets.QDialog):
@@ -251,7 +253,7 @@ class CalibrationDialog(QtWidgets.QDialog):
         self.results = QtWidgets.QPlainTextEdit()
         self.results.setObjectName("results")
         self.results.setReadOnly(True)
-        self.results.setMinimumHeight(150)
+        self.results.setMinimumHeight(120)
         self.path_label = QtWidgets.QLabel("")
         self.path_label.setWordWrap(True)
         self.save_button = QtWidgets.QPushButton("Save")
@@ -283,7 +285,7 @@ class CalibrationDialog(QtWidgets.QDialog):
         layout = QtWidgets.QHBoxLayout(self)
         layout.addLayout(left, 3)
         layout.addLayout(right, 2)
-        self.resize(1100, 760)
+        self.resize(1100, 820)
 
         # ----- wiring
         self.finder.previewReady.connect(self._on_preview)
@@ -511,7 +513,8 @@ class CalibrationDialog(QtWidgets.QDialog):
                 outcome = f"calibration failed: {exc}"
             except Exception as exc:  # never let the thread die silently
                 outcome = f"calibration failed: {type(exc).__name__}: {exc}"
-            self.computed.emit(outcome)
+            with contextlib.suppress(RuntimeError):  # the dialog was deleted meanwhile
+                self.computed.emit(outcome)
 
         threading.Thread(target=work, name="calibrate", daemon=True).start()
 

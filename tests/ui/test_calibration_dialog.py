@@ -186,3 +186,23 @@ def test_live_preview_finds_the_board_in_the_apps_frames(make_window, qtbot) -> 
         lambda: dialog.current is not None and dialog.current.board.label == "7x5", timeout=WAIT_MS
     )
     assert not dialog.capture_button.isEnabled() and "not found" in dialog.found_label.text()
+
+
+def test_dialog_settings_persist_with_the_app_config(qtbot, tmp_path: Path) -> None:
+    store_dir = tmp_path / "config"
+    window = MainWindow(ConfigStore(store_dir), {"source": "virtual"})
+    qtbot.addWidget(window)
+    dialog = window.open_calibration()
+    for name, text in (("board", "7x5"), ("name", "left-cam")):
+        dialog.form.widgets[name].setText(text)
+        dialog.form.widgets[name].editingFinished.emit()
+    dialog.form.widgets["square_mm"].setValue(30.0)
+    window.shutdown()
+    again = MainWindow(ConfigStore(store_dir), {"source": "virtual"})
+    qtbot.addWidget(again)
+    try:
+        settings = again.open_calibration().settings()
+        assert (settings.board, settings.square_mm, settings.name) == ("7x5", 30.0, "left-cam")
+        assert again.calibration_dialog.board() == Board(7, 5, 30.0)
+    finally:
+        again.shutdown()
