@@ -220,7 +220,7 @@ class CalibrationDialog(QtWidgets.QDialog):
 
         self.views = QtWidgets.QListWidget()
         self.views.setObjectName("views")
-        self.views.setMaximumHeight(130)
+        self.views.setMaximumHeight(110)
         self.remove_button = QtWidgets.QPushButton("Remove view")
         self.clear_button = QtWidgets.QPushButton("Clear views")
         views_row = QtWidgets.QHBoxLayout()
@@ -253,7 +253,7 @@ class CalibrationDialog(QtWidgets.QDialog):
         self.results = QtWidgets.QPlainTextEdit()
         self.results.setObjectName("results")
         self.results.setReadOnly(True)
-        self.results.setMinimumHeight(120)
+        self.results.setMinimumHeight(100)
         self.path_label = QtWidgets.QLabel("")
         self.path_label.setWordWrap(True)
         self.save_button = QtWidgets.QPushButton("Save")
@@ -342,7 +342,7 @@ class CalibrationDialog(QtWidgets.QDialog):
         return Path.cwd() / "calib" / f"{name}.json"
 
     def _update_path(self) -> None:
-        self.path_label.setText(f"saves to {self.save_path()}")
+        self.path_label.setText(f"saves to {_shown_path(self.save_path())}")
 
     # ---------------------------------------------------------------- frames in
     def on_frame(self, image: np.ndarray) -> None:
@@ -556,7 +556,7 @@ class CalibrationDialog(QtWidgets.QDialog):
             return None
         path = self.save_path()
         if path.exists() and not self.confirm_overwrite(path):
-            self.note.setText(f"not saved: {path} exists")
+            self.note.setText(f"not saved: {_shown_path(path)} exists")
             return None
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
@@ -565,7 +565,7 @@ class CalibrationDialog(QtWidgets.QDialog):
             self.note.setText(f"⚠ not saved: {exc}")
             return None
         self.saved_path = path
-        self.note.setText(f"saved {path}")
+        self.note.setText(f"saved {_shown_path(path)}")
         return path
 
     def use(self) -> None:
@@ -574,7 +574,7 @@ class CalibrationDialog(QtWidgets.QDialog):
         if path is None:
             return
         self.cameraChosen.emit(str(path))
-        self.note.setText(f"the app now uses {path}")
+        self.note.setText(f"the app now uses {_shown_path(path)}")
 
     # ---------------------------------------------------------------- shutdown
     def shutdown(self) -> None:
@@ -588,6 +588,14 @@ class CalibrationDialog(QtWidgets.QDialog):
     def closeEvent(self, event: QtGui.QCloseEvent) -> None:
         self.current = None
         super().closeEvent(event)
+
+
+def _shown_path(path: Path) -> str:
+    """``path`` relative to the working directory when it lies below it (shorter to read)."""
+    try:
+        return str(path.relative_to(Path.cwd()))
+    except ValueError:
+        return str(path)
 
 
 def describe(result: CalibrationResult) -> str:
