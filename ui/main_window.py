@@ -24,6 +24,8 @@ from ui.plots import PosePlots
 from ui.pose_panel import PosePanel
 from ui.preview import PreviewView
 from ui.settings_form import SettingsForm
+from ui.simulation_tab import CONFIG_KEY as SIMULATION_KEY
+from ui.simulation_tab import SimulationTab
 from ui.worker import PipelineWorker, Processed, RunConfig, start_worker, stop_worker
 
 #: Redraw period of the GUI timer, ms (40 Hz, above the usual camera rate); plots redraw at most
@@ -97,6 +99,9 @@ class MainWindow(QtWidgets.QMainWindow):
         tabs.addTab(_scrolled(self.solver_controls), "Detect && solve")
         tabs.addTab(self.camera_controls, "Camera")
         tabs.addTab(_scrolled(self.virtual_form), "Virtual bench")
+        app = self.app_settings
+        self.simulation_tab = SimulationTab(app.camera, app.side_mm, store.value(SIMULATION_KEY))
+        tabs.addTab(self.simulation_tab, "Simulation")
         self.tabs = tabs
 
         left = QtWidgets.QSplitter(QtCore.Qt.Orientation.Vertical)
@@ -145,7 +150,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.camera_controls.changed.connect(self._apply)
         self.virtual_form.changed.connect(self._apply)
         self.banner_button.clicked.connect(self._open_source)
-        for problem in store.problems:
+        for problem in [*store.problems, *self.simulation_tab.problems]:
             self._on_note(problem)
 
         self.last: Processed | None = None
@@ -196,6 +201,7 @@ class MainWindow(QtWidgets.QMainWindow):
             self.app_settings, self.source_controls, self.solver_controls, self.camera_controls
         )
         self.plots.set_window(self.app_settings.plot_window_s)
+        self.simulation_tab.set_app_camera(self.app_settings.camera, self.app_settings.side_mm)
         self.worker.configure(self._run_config())
 
     def _open_source(self) -> None:
@@ -293,6 +299,7 @@ class MainWindow(QtWidgets.QMainWindow):
         for name, value in self.solver_controls.settings().items():
             self.store.set_group(name, value)
         self.store.set_group("detector", self.solver_controls.detector.value())
+        self.store.set_value(SIMULATION_KEY, self.simulation_tab.settings())
         self.store.set_value("window", bytes(self.saveGeometry().toBase64()).decode())
         try:
             self.store.save()
@@ -306,6 +313,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self._closed = True
         self.timer.stop()
         self.save_settings()
+        self.simulation_tab.shutdown()
         stop_worker(self.worker, self.thread)
 
     def closeEvent(self, event: QtGui.QCloseEvent) -> None:
