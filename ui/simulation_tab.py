@@ -599,7 +599,7 @@ class SimulationTab(QtWidgets.QWidget):
         self.table.resizeColumnsToContents()
         header_h = self.table.horizontalHeader().height()
         rows_h = sum(self.table.rowHeight(r) for r in range(len(rows)))
-        self.table.setMinimumHeight(min(header_h + rows_h + 2 * self.table.frameWidth() + 18, 420))
+        self.table.setMinimumHeight(min(header_h + rows_h + 2 * self.table.frameWidth() + 18, 280))
 
         heatmap_paths = [p for p in paths if p.parent.name == "heatmaps"]
         self._heatmaps: dict[tuple[int, int], Path] = {}
