@@ -2,7 +2,8 @@
 
 The file is ``<config dir>/app.json`` where the config dir is ``$QRFIELD_CONFIG_DIR`` or
 ``~/.config/qrfield``. Its sections: ``app`` (:class:`AppSettings`), ``virtual`` (the virtual
-bench), one per pose method (the solvers' settings), ``detector``, and ``window`` (geometry).
+bench), one per pose method (the solvers' settings), ``detector``, ``simulation`` (the simulation
+tab's study form, see ui/simulation_tab.py), and ``window`` (geometry).
 Unknown keys are ignored and bad values fall back to their defaults with a note, so a damaged or
 older file never stops the app.
 """

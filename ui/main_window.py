@@ -27,6 +27,8 @@ from ui.pose_panel import PosePanel
 from ui.preview import PreviewView
 from ui.serial_panel import SerialPanel
 from ui.settings_form import SettingsForm
+from ui.simulation_tab import CONFIG_KEY as SIMULATION_KEY
+from ui.simulation_tab import SimulationTab
 from ui.worker import PipelineWorker, Processed, RunConfig, start_worker, stop_worker
 
 #: Redraw period of the GUI timer, ms (40 Hz, above the usual camera rate); plots redraw at most
@@ -110,6 +112,9 @@ class MainWindow(QtWidgets.QMainWindow):
         self.camera_controls.layout().addRow(self.calibrate_button)
         self.calibrate_button.clicked.connect(self.open_calibration)
         tabs.addTab(_scrolled(self.serial_panel), "Serial")
+        app = self.app_settings
+        self.simulation_tab = SimulationTab(app.camera, app.side_mm, store.value(SIMULATION_KEY))
+        tabs.addTab(self.simulation_tab, "Simulation")
         self.tabs = tabs
 
         left = QtWidgets.QSplitter(QtCore.Qt.Orientation.Vertical)
@@ -159,7 +164,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.camera_controls.changed.connect(self._apply)
         self.virtual_form.changed.connect(self._apply)
         self.banner_button.clicked.connect(self._open_source)
-        for problem in store.problems:
+        for problem in [*store.problems, *self.simulation_tab.problems]:
             self._on_note(problem)
 
         self.last: Processed | None = None
@@ -210,6 +215,7 @@ class MainWindow(QtWidgets.QMainWindow):
             self.app_settings, self.source_controls, self.solver_controls, self.camera_controls
         )
         self.plots.set_window(self.app_settings.plot_window_s)
+        self.simulation_tab.set_app_camera(self.app_settings.camera, self.app_settings.side_mm)
         self.worker.configure(self._run_config())
 
     def _open_source(self) -> None:
@@ -329,6 +335,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.store.set_group("serial", self.serial_panel.saved_settings())
         if self.calibration_dialog is not None:
             self.store.set_group("calibration", self.calibration_dialog.settings())
+        self.store.set_value(SIMULATION_KEY, self.simulation_tab.settings())
         self.store.set_value("window", bytes(self.saveGeometry().toBase64()).decode())
         try:
             self.store.save()
@@ -342,6 +349,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self._closed = True
         self.timer.stop()
         self.save_settings()
+        self.simulation_tab.shutdown()
         stop_worker(self.worker, self.thread)
         self.serial_panel.shutdown()
         if self.calibration_dialog is not None:

@@ -5,6 +5,12 @@ is detected and solved, and one line per frame goes to stdout (JSON lines with
 ``--json-lines``, else a compact human line). Notes and errors go to stderr. SIGINT (Ctrl-C) and
 SIGTERM stop it cleanly after the current frame: the source is closed and the exit code is 0.
 No Qt is imported, ever.
+
+A live camera (USB, picamera2: ``source.live``) is read on its own thread that keeps only the
+newest frame (:class:`qrfield.sources.LatestFrameReader`), so a slow frame loop never falls behind
+the camera's buffer: frames that arrive while one is processed are dropped, and their count is in
+the final summary on stderr. A video file, an image folder and the virtual bench are read frame by
+frame, none dropped (so ``--frames N`` on a file is repeatable).
 """
 
 from __future__ import annotations
@@ -151,6 +157,7 @@ def run(args: argparse.Namespace) -> int:
     say = _Stderr()
     link = _serial_link(args, say)
     source = None
+    frames: FrameFeed | None = None
     count = 0
     try:
         source = _open(args, camera, virtual, say, stop)
@@ -162,20 +169,24 @@ def run(args: argparse.Namespace) -> int:
             camera, args.side_mm, methods_from_choice(args.method), select_text=args.select_text
         )
         emit = _json_line if args.json_lines else _human_line
+        frames = FrameFeed(source, stop)
         while not stop and (args.frames == 0 or count < args.frames):
             try:
-                frame = source.read()
+                frame = frames.read()
+                if frame is None:  # stopped by a signal while waiting for a live frame
+                    break
             except EndOfStream as exc:
                 say(str(exc))
                 break
             except SourceError as exc:
                 say(f"source failed: {exc}")
-                source.close()
+                frames.close()
                 if args.retry_s <= 0:
                     return 1
                 source = _reopen(args, camera, virtual, say, stop)
                 if source is None:
                     break
+                frames = FrameFeed(source, stop, dropped_before=frames.dropped)
                 continue
             result = pipeline.process(frame)
             emit(result)
@@ -188,6 +199,8 @@ def run(args: argparse.Namespace) -> int:
         sys.stdout = None  # type: ignore[assignment]
         return 0
     finally:
+        if frames is not None:
+            frames.close()
         if source is not None:
             source.close()
         if link is not None:
@@ -197,8 +210,57 @@ def run(args: argparse.Namespace) -> int:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
     ending = f"stopped by {stop.signal_name}" if stop else "done"
-    say(f"{ending} after {count} frames")
+    if frames is not None and frames.latest_only:
+        say(
+            f"{ending} after {count} frames; {frames.dropped} newer camera frames arrived while one was "
+            "processed and were dropped (only the latest frame is kept)"
+        )
+    else:
+        say(f"{ending} after {count} frames")
     return 0
+
+
+class FrameFeed:
+    """The frames of one opened source for the frame loop.
+
+    A live source (a camera that delivers frames whether or not they are read) is read by a
+    :class:`~qrfield.sources.LatestFrameReader` thread, and :meth:`read` returns the newest frame
+    (``dropped`` counts the ones skipped); any other source is read directly, every frame in turn.
+    ``dropped_before`` carries the count over a reopened source.
+    """
+
+    #: How often (s) a wait for a live frame looks at the stop flag.
+    POLL_S = 0.1
+
+    def __init__(self, source: Any, stop: Any, dropped_before: int = 0) -> None:
+        from qrfield.sources import LatestFrameReader
+
+        self.source = source
+        self.stop = stop
+        self.latest_only = bool(source.live)
+        self._dropped_before = dropped_before
+        self.reader = LatestFrameReader(source).start() if self.latest_only else None
+
+    @property
+    def dropped(self) -> int:
+        return self._dropped_before + (self.reader.dropped if self.reader is not None else 0)
+
+    def read(self) -> Any:
+        """The next frame to process (the newest, for a live source); None when a stop signal came
+        while waiting. Raises the source's SourceError / EndOfStream."""
+        if self.reader is None:
+            return self.source.read()
+        while not self.stop:
+            frame = self.reader.get(timeout=self.POLL_S)
+            if frame is not None:
+                return frame
+        return None
+
+    def close(self) -> None:
+        """Stop the reader thread (if any) and close the source; safe to call twice."""
+        if self.reader is not None:
+            self.reader.stop()
+        self.source.close()
 
 
 def _open(args: argparse.Namespace, camera: Any, virtual: Any, say: _Stderr, stop: StopFlag) -> Any:

@@ -30,6 +30,7 @@ class ImageFolderSource(FrameSource):
     """
 
     name = "folder"
+    live = False  # an image is loaded when read(): every image in turn, none dropped
 
     def __init__(self, path: str | os.PathLike[str], loop: bool = False, fps: float = 0.0) -> None:
         super().__init__()

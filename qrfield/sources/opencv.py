@@ -88,6 +88,7 @@ class VideoFileSource(FrameSource):
     """
 
     name = "video"
+    live = False  # a frame is decoded when read(): every frame in turn, none dropped
 
     def __init__(self, path: str | os.PathLike[str], loop: bool = False, pace: bool = False) -> None:
         super().__init__()

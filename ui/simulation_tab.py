@@ -1,0 +1,682 @@
+"""The app's simulation tab: run a (small) simulation study in the background and show its results.
+
+The study is the one of ``qrfield simulate`` (:mod:`qrfield.simulation`): every field is edited in
+a form (the scalar fields' widgets come from :func:`qrfield.simulation.study.field_specs`; the
+ranges and the solver list are text, read by the study's own parser) and validated by the study
+itself, whose error is shown next to the field it names; Run is disabled while any field is bad.
+The camera model and QR side follow the app's (editable when "use the app's camera" is off).
+
+Run starts :func:`qrfield.simulation.run_study` on a plain worker thread that reports by Qt signal
+(progress, then the result); the GUI thread never computes. Stop sets the run's stop event: the
+grid points done are kept and shown as a partial result. When the run ends the worker writes the
+study's output folder (:func:`qrfield.simulation.write_outputs`: summary, samples, heatmap PNGs),
+and the tab shows the coverage table (per combination and solver, the mean, the seed's 77.28 %
+beside it) and the heatmap of the largest solvable angle for a chosen combination and z.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import re
+import tempfile
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from PySide6 import QtCore, QtGui, QtWidgets
+
+from qrfield.settings import SettingSpec
+from qrfield.simulation import Progress, StudyConfig, StudyError, StudyResult, config_from_dict, run_study
+from qrfield.simulation.outputs import SEED_COVERAGE_PERCENT, write_outputs
+from qrfield.simulation.study import field_specs, parse_override
+from ui.settings_form import set_widget_value, widget_for, widget_value
+
+#: The study the tab starts with ("Small study"): 5 x 3 x 2 grid points x 12 combinations x 13
+#: swept angles (0..60 deg, 5 deg steps) = 4680 poses, each solved by the shipped study's solvers
+#: (numerical, numerical-parallelogram, ippe); about 3 s on a 2-core machine.
+SMALL_STUDY: dict[str, Any] = {
+    "x_range": [-80.0, 80.0, 40.0],
+    "y_range": [-40.0, 40.0, 40.0],
+    "z_range": [250.0, 400.0, 150.0],
+    "sweep_limit_deg": 60.0,
+    "sweep_step_deg": 5.0,
+}
+RANGE_FIELDS = ("x_range", "y_range", "z_range")
+#: Fields edited as text and read with the study's override parser.
+TEXT_FIELDS = (*RANGE_FIELDS, "solvers")
+#: The order of the form's rows.
+FIELD_ORDER = (
+    "camera",
+    "side_mm",
+    "x_range",
+    "y_range",
+    "z_range",
+    "combinations",
+    "sweep_limit_deg",
+    "sweep_step_deg",
+    "max_view_angle_deg",
+    "degradation",
+    "noise_px",
+    "noise_seed",
+    "solvers",
+    "criteria.angle_deg",
+    "criteria.position_mm",
+    "criteria.n_max",
+)
+TEXT_LABELS = {
+    "x_range": ("x range", "QR centre x in the camera frame: start, stop, step in mm (stop included)"),
+    "y_range": ("y range", "QR centre y in the camera frame: start, stop, step in mm (stop included)"),
+    "z_range": ("z range", "QR centre z (distance along the optical axis): start, stop, step in mm"),
+    "solvers": (
+        "solvers",
+        "comma-separated: numerical, numerical-<guess> (e.g. numerical-parallelogram), ippe",
+    ),
+}
+#: Section of the app's config file (ui/config.py ConfigStore) holding this tab's settings.
+CONFIG_KEY = "simulation"
+ERROR_STYLE = "color: #b00020;"
+
+
+def range_text(values: Any) -> str:
+    """[start, stop, step] as the form shows it: "200, 400, 100"."""
+    if isinstance(values, (list, tuple)):
+        return ", ".join(f"{float(v):g}" for v in values)
+    return str(values)
+
+
+def percent_text(value: float | None) -> str:
+    return "n/a" if value is None else f"{100.0 * value:.2f} %"
+
+
+def default_output_base() -> Path:
+    return Path(tempfile.gettempdir()) / "qrfield-simulation"
+
+
+@dataclass
+class RunOutcome:
+    """What a finished (or stopped) run hands to the GUI thread."""
+
+    result: StudyResult | None
+    out_dir: Path
+    paths: list[Path] = field(default_factory=list)
+    error: str = ""
+
+
+class StudyRun(QtCore.QObject):
+    """One run of a study on a plain daemon thread; reports by Qt signal (queued to the GUI thread).
+
+    ``progressed(Progress)`` after every chunk; ``done(RunOutcome)`` once, after the outputs are
+    written (also after a stop: the result is then partial; or with ``error`` set).
+    """
+
+    progressed = QtCore.Signal(object)
+    done = QtCore.Signal(object)
+
+    def __init__(self, config: StudyConfig, out_dir: Path) -> None:
+        super().__init__()
+        self.config = config
+        self.out_dir = out_dir
+        self.stop_event = threading.Event()
+        self.thread = threading.Thread(target=self._run, name="simulation study", daemon=True)
+
+    def start(self) -> None:
+        self.thread.start()
+
+    def stop(self) -> None:
+        self.stop_event.set()
+
+    def _emit(self, signal: Any, value: Any) -> None:
+        with contextlib.suppress(RuntimeError):  # the tab was deleted during the run: nobody to tell
+            signal.emit(value)
+
+    def _run(self) -> None:
+        try:
+            result = run_study(
+                self.config, progress=lambda p: self._emit(self.progressed, p), stop=self.stop_event
+            )
+        except Exception as exc:  # report, never crash the app
+            self._emit(self.done, RunOutcome(None, self.out_dir, error=f"{type(exc).__name__}: {exc}"))
+            return
+        outcome = RunOutcome(result, self.out_dir)
+        try:
+            outcome.paths = write_outputs(result, self.out_dir, command="qrfield app, simulation tab")
+        except Exception as exc:
+            outcome.error = f"outputs not written to {self.out_dir}: {type(exc).__name__}: {exc}"
+        self._emit(self.done, outcome)
+
+
+class ImageView(QtWidgets.QWidget):
+    """Shows a pixmap scaled to the widget's width, keeping its aspect ratio."""
+
+    def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.pixmap = QtGui.QPixmap()
+        size = QtWidgets.QSizePolicy.Policy
+        policy = QtWidgets.QSizePolicy(size.Ignored, size.Preferred)
+        policy.setHeightForWidth(True)
+        self.setSizePolicy(policy)
+
+    def set_pixmap(self, pixmap: QtGui.QPixmap) -> None:
+        self.pixmap = pixmap
+        self.updateGeometry()
+        self.update()
+
+    def hasHeightForWidth(self) -> bool:
+        return True
+
+    def heightForWidth(self, width: int) -> int:
+        if self.pixmap.isNull():
+            return 40
+        return round(width * self.pixmap.height() / self.pixmap.width())
+
+    def sizeHint(self) -> QtCore.QSize:
+        return QtCore.QSize(400, self.heightForWidth(400))
+
+    def paintEvent(self, _event: QtGui.QPaintEvent) -> None:
+        if self.pixmap.isNull():
+            return
+        painter = QtGui.QPainter(self)
+        painter.setRenderHint(QtGui.QPainter.RenderHint.SmoothPixmapTransform)
+        scaled = self.pixmap.size().scaled(self.size(), QtCore.Qt.AspectRatioMode.KeepAspectRatio)
+        painter.drawPixmap(QtCore.QRect(QtCore.QPoint(0, 0), scaled), self.pixmap)
+        painter.end()
+
+
+class SimulationTab(QtWidgets.QWidget):
+    """The simulation tab. ``app_camera`` / ``app_side_mm``: the app's current camera model
+    (NAME[@WxH] or PATH.json[@WxH]) and QR side (mm); see :meth:`set_app_camera`.
+
+    Signals: ``progressed(Progress)``; ``finished(StudyResult | None)`` once a run has ended and
+    its results are shown (None when it failed; the reason is in the status line).
+    """
+
+    progressed = QtCore.Signal(object)
+    finished = QtCore.Signal(object)
+
+    def __init__(
+        self,
+        app_camera: str,
+        app_side_mm: float,
+        saved: dict[str, Any] | None = None,
+        parent: QtWidgets.QWidget | None = None,
+    ) -> None:
+        super().__init__(parent)
+        self.app_camera = app_camera
+        self.app_side_mm = float(app_side_mm)
+        self.config: StudyConfig | None = None
+        self.result: StudyResult | None = None
+        self.outcome: RunOutcome | None = None
+        self.run: StudyRun | None = None
+        self.problems: list[str] = []
+        specs = {spec.name: spec for spec in field_specs()}
+        self.specs: dict[str, SettingSpec] = specs
+
+        # ----- the study form
+        self.widgets: dict[str, QtWidgets.QWidget] = {}
+        self.errors: dict[str, QtWidgets.QLabel] = {}
+        form = QtWidgets.QFormLayout()
+        form.setFieldGrowthPolicy(QtWidgets.QFormLayout.FieldGrowthPolicy.AllNonFixedFieldsGrow)
+        self.follow_app = QtWidgets.QCheckBox("use the app's camera model and QR side")
+        self.follow_app.setChecked(True)
+        form.addRow(self.follow_app)
+        for name in FIELD_ORDER:
+            if name in TEXT_FIELDS:
+                label, tip = TEXT_LABELS[name]
+                widget: QtWidgets.QWidget = QtWidgets.QLineEdit()
+                widget.setToolTip(tip)
+                widget.setObjectName(name)
+                widget.textChanged.connect(self._validate)
+            else:
+                spec = specs[name]
+                label = spec.label
+                widget = widget_for(spec)
+                for signal_name in ("toggled", "currentTextChanged", "valueChanged", "textChanged"):
+                    signal = getattr(widget, signal_name, None)
+                    if signal is not None:
+                        signal.connect(self._validate)
+                        break
+            error = QtWidgets.QLabel("")
+            error.setObjectName(f"error:{name}")
+            error.setWordWrap(True)
+            error.setStyleSheet(ERROR_STYLE)
+            error.hide()
+            cell = QtWidgets.QWidget()
+            cell_layout = QtWidgets.QVBoxLayout(cell)
+            cell_layout.setContentsMargins(0, 0, 0, 0)
+            cell_layout.setSpacing(1)
+            cell_layout.addWidget(widget)
+            cell_layout.addWidget(error)
+            row_label = QtWidgets.QLabel(label)
+            row_label.setToolTip(widget.toolTip())
+            form.addRow(row_label, cell)
+            self.widgets[name] = widget
+            self.errors[name] = error
+        self.general_error = QtWidgets.QLabel("")
+        self.general_error.setWordWrap(True)
+        self.general_error.setStyleSheet(ERROR_STYLE)
+        self.general_error.hide()
+        form.addRow(self.general_error)
+        self.output_dir = QtWidgets.QLineEdit()
+        self.output_dir.setPlaceholderText(f"(each run in a new folder under {default_output_base()})")
+        self.output_dir.setToolTip("each run writes its outputs into a new sim-<time> folder inside this one")
+        browse = QtWidgets.QPushButton("…")
+        browse.setFixedWidth(32)
+        browse.clicked.connect(self._browse_output)
+        out_row = QtWidgets.QHBoxLayout()
+        out_row.addWidget(self.output_dir, 1)
+        out_row.addWidget(browse)
+        form.addRow("output folder", out_row)
+
+        self.small_button = QtWidgets.QPushButton("Small study")
+        self.small_button.setToolTip("5 x 3 x 2 grid, 12 combinations, sweep 0..60 deg step 5: a few seconds")
+        self.default_button = QtWidgets.QPushButton("Default study")
+        self.default_button.setToolTip("the shipped study of qrfield simulate (study-default.toml)")
+        presets = QtWidgets.QHBoxLayout()
+        presets.addWidget(QtWidgets.QLabel("presets:"))
+        presets.addWidget(self.small_button)
+        presets.addWidget(self.default_button)
+        presets.addStretch(1)
+        study_page = QtWidgets.QWidget()
+        study_layout = QtWidgets.QVBoxLayout(study_page)
+        study_layout.addLayout(presets)
+        study_layout.addLayout(form)
+        study_layout.addStretch(1)
+
+        # ----- results
+        self.table = QtWidgets.QTableWidget(0, 0)
+        self.table.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
+        self.table.verticalHeader().setDefaultSectionSize(20)
+        self.table.setMinimumHeight(200)
+        self.combo_choice = QtWidgets.QComboBox()
+        self.z_choice = QtWidgets.QComboBox()
+        choose = QtWidgets.QHBoxLayout()
+        choose.addWidget(QtWidgets.QLabel("combination"))
+        choose.addWidget(self.combo_choice, 1)
+        choose.addWidget(QtWidgets.QLabel("z"))
+        choose.addWidget(self.z_choice)
+        self.heatmap = ImageView()
+        self.heatmap_path = QtWidgets.QLabel("")
+        self.heatmap_path.setWordWrap(True)
+        self.heatmap_path.setTextInteractionFlags(QtCore.Qt.TextInteractionFlag.TextSelectableByMouse)
+        self.output_label = QtWidgets.QLabel("no run yet")
+        self.output_label.setWordWrap(True)
+        self.output_label.setTextInteractionFlags(QtCore.Qt.TextInteractionFlag.TextSelectableByMouse)
+        self.full_size_button = QtWidgets.QPushButton("Full size…")
+        self.full_size_button.setToolTip("the heatmap at its own size, in a window of its own")
+        self.full_size_button.setEnabled(False)
+        self.open_button = QtWidgets.QPushButton("Open output folder")
+        self.open_button.setEnabled(False)
+        results_page = QtWidgets.QWidget()
+        results_layout = QtWidgets.QVBoxLayout(results_page)
+        results_layout.addWidget(QtWidgets.QLabel("Coverage: share of in-view samples meeting the criteria"))
+        results_layout.addWidget(self.table)
+        results_layout.addWidget(QtWidgets.QLabel("Largest solvable angle (deg) over the x-y grid"))
+        results_layout.addLayout(choose)
+        results_layout.addWidget(self.heatmap)
+        results_layout.addWidget(self.heatmap_path)
+        results_layout.addWidget(self.full_size_button)
+        results_layout.addWidget(self.output_label)
+        results_layout.addWidget(self.open_button)
+        results_layout.addStretch(1)
+
+        self.pages = QtWidgets.QTabWidget()
+        self.pages.addTab(_scrolled(study_page), "Study")
+        self.pages.addTab(_scrolled(results_page), "Results")
+
+        # ----- run controls
+        self.run_button = QtWidgets.QPushButton("Run")
+        self.stop_button = QtWidgets.QPushButton("Stop")
+        self.stop_button.setEnabled(False)
+        self.progress = QtWidgets.QProgressBar()
+        self.progress.setRange(0, 1000)
+        self.progress.setValue(0)
+        self.progress.setFormat("%p %")
+        self.size_label = QtWidgets.QLabel("")
+        self.size_label.setWordWrap(True)
+        self.status = QtWidgets.QLabel("")
+        self.status.setWordWrap(True)
+        controls = QtWidgets.QHBoxLayout()
+        controls.addWidget(self.run_button)
+        controls.addWidget(self.stop_button)
+        controls.addWidget(self.progress, 1)
+        layout = QtWidgets.QVBoxLayout(self)
+        layout.addLayout(controls)
+        layout.addWidget(self.status)
+        layout.addWidget(self.size_label)
+        layout.addWidget(self.pages, 1)
+
+        # ----- wiring
+        self.run_button.clicked.connect(self.start)
+        self.stop_button.clicked.connect(self.stop)
+        self.small_button.clicked.connect(lambda: self.apply_preset(SMALL_STUDY))
+        self.default_button.clicked.connect(lambda: self.apply_preset({}))
+        self.follow_app.toggled.connect(self._follow_toggled)
+        self.combo_choice.currentIndexChanged.connect(self._show_heatmap)
+        self.z_choice.currentIndexChanged.connect(self._show_heatmap)
+        self.open_button.clicked.connect(self._open_output)
+        self.full_size_button.clicked.connect(self.show_full_size)
+
+        self.apply_preset(SMALL_STUDY)
+        if saved:
+            self.restore(saved)
+        self._follow_toggled(self.follow_app.isChecked())
+
+    # ---------------------------------------------------------------- the form
+    def raw_study(self) -> dict[str, Any]:
+        """The form as a study dict (the TOML's shape), ranges and solvers read by the study's parser."""
+        raw: dict[str, Any] = {}
+        criteria: dict[str, Any] = {}
+        for name, widget in self.widgets.items():
+            if name in TEXT_FIELDS:
+                assert isinstance(widget, QtWidgets.QLineEdit)
+                value = parse_override(f"{name}={widget.text()}")[name]
+            else:
+                value = widget_value(widget)
+            if name.startswith("criteria."):
+                criteria[name.partition(".")[2]] = value
+            else:
+                raw[name] = value
+        raw["criteria"] = criteria
+        return raw
+
+    def form_texts(self) -> dict[str, Any]:
+        """The form as saved in the config: widget values (range and solver fields as their text)."""
+        return {
+            name: (widget.text() if isinstance(widget, QtWidgets.QLineEdit) else widget_value(widget))
+            for name, widget in self.widgets.items()
+        }
+
+    def show_study(self, config: StudyConfig, keep_camera: bool = True) -> None:
+        """Fill the form from ``config`` (the camera and side stay as they are with ``keep_camera``)."""
+        for name in self.widgets:
+            if keep_camera and name in ("camera", "side_mm"):
+                continue
+            if name.startswith("criteria."):
+                value: Any = getattr(config.criteria, name.partition(".")[2])
+            else:
+                value = getattr(config, name)
+            self._set_field(name, value)
+        self._validate()
+
+    def apply_preset(self, fields: dict[str, Any]) -> None:
+        """The shipped study with ``fields`` over it (SMALL_STUDY, or {} for the shipped default)."""
+        self.show_study(config_from_dict(fields))
+
+    def _set_field(self, name: str, value: Any) -> None:
+        widget = self.widgets[name]
+        blocker = QtCore.QSignalBlocker(widget)
+        if name in RANGE_FIELDS:
+            widget.setText(range_text(value))  # type: ignore[attr-defined]
+        elif name == "solvers":
+            widget.setText(", ".join(value) if isinstance(value, (list, tuple)) else str(value))  # type: ignore[attr-defined]
+        else:
+            set_widget_value(widget, self.specs[name], value)
+        del blocker
+
+    def set_app_camera(self, camera: str, side_mm: float) -> None:
+        """The app's camera model and QR side changed; the form follows them unless unticked."""
+        self.app_camera, self.app_side_mm = camera, float(side_mm)
+        if self.follow_app.isChecked():
+            self._set_field("camera", camera)
+            self._set_field("side_mm", self.app_side_mm)
+            self._validate()
+
+    def _follow_toggled(self, follow: bool) -> None:
+        for name in ("camera", "side_mm"):
+            self.widgets[name].setEnabled(not follow)
+        if follow:
+            self.set_app_camera(self.app_camera, self.app_side_mm)
+
+    def _validate(self, *_: object) -> None:
+        """Check the form with the study's own validation; show its error next to the field it names."""
+        for label in (*self.errors.values(), self.general_error):
+            label.hide()
+        try:
+            self.config = config_from_dict(self.raw_study())
+        except StudyError as exc:
+            self.config = None
+            message = str(exc).removeprefix("study: ")
+            self._show_error(message)
+            self.size_label.setText("")
+        else:
+            size = self.config.size()
+            self.size_label.setText(
+                f"Size: {self.config.describe_size()}"
+                + (" (the shipped default study: about 20-40 s here)" if size["poses"] > 20_000 else "")
+            )
+        self._update_buttons()
+
+    def _show_error(self, message: str) -> None:
+        match = re.search(r"field '([\w.\-]+)'", message)
+        name = match[1] if match else ""
+        if name.startswith("solver."):
+            name = "solvers"
+        label = self.errors.get(name, self.general_error)
+        label.setText(message)
+        label.show()
+
+    def error_text(self, name: str) -> str:
+        """The error shown next to field ``name`` ("" when none)."""
+        label = self.errors[name]
+        return label.text() if not label.isHidden() else ""
+
+    def _update_buttons(self) -> None:
+        running = self.run is not None
+        self.run_button.setEnabled(self.config is not None and not running)
+        self.stop_button.setEnabled(running)
+        for button in (self.small_button, self.default_button):
+            button.setEnabled(not running)
+
+    def _browse_output(self) -> None:
+        folder = QtWidgets.QFileDialog.getExistingDirectory(self, "Output folder", self.output_dir.text())
+        if folder:
+            self.output_dir.setText(folder)
+
+    # ---------------------------------------------------------------- persistence
+    def settings(self) -> dict[str, Any]:
+        """The tab's settings for the app's config file (section ``simulation``)."""
+        return {
+            "study": self.form_texts(),
+            "follow_app_camera": self.follow_app.isChecked(),
+            "output_dir": self.output_dir.text(),
+        }
+
+    def restore(self, saved: dict[str, Any]) -> None:
+        """Show saved settings; a value that cannot be shown is skipped and noted in ``problems``."""
+        if not isinstance(saved, dict):
+            self.problems.append(f"{CONFIG_KEY}: settings are not a table; defaults used")
+            return
+        study = saved.get("study", {})
+        for name, value in (study if isinstance(study, dict) else {}).items():
+            if name not in self.widgets:
+                continue
+            try:
+                if name in TEXT_FIELDS and not isinstance(value, str):
+                    raise TypeError(f"expected text, got {value!r}")
+                self._set_field(name, value)
+            except (TypeError, ValueError) as exc:
+                self.problems.append(f"{CONFIG_KEY}: {name}: {exc}; default used")
+        self.follow_app.setChecked(bool(saved.get("follow_app_camera", True)))
+        if isinstance(saved.get("output_dir"), str):
+            self.output_dir.setText(saved["output_dir"])
+        self._validate()
+
+    # ---------------------------------------------------------------- running
+    def output_folder(self) -> Path:
+        """A new folder for one run's outputs: sim-<YYYYmmdd-HHMMSS>-XXXX under the output folder."""
+        text = self.output_dir.text().strip()
+        base = Path(text).expanduser() if text else default_output_base()
+        base.mkdir(parents=True, exist_ok=True)
+        return Path(tempfile.mkdtemp(prefix=f"sim-{time.strftime('%Y%m%d-%H%M%S')}-", dir=base))
+
+    def start(self) -> None:
+        """Run the form's study on a worker thread (Run button)."""
+        if self.run is not None or self.config is None:
+            return
+        try:
+            out_dir = self.output_folder()
+        except OSError as exc:
+            self.status.setText(f"⚠ cannot create the output folder: {exc}")
+            return
+        self.run = StudyRun(self.config, out_dir)
+        self.run.progressed.connect(self._on_progress)
+        self.run.done.connect(self._on_done)
+        self.progress.setValue(0)
+        self.status.setText(f"running: {self.config.size()['poses']} poses …")
+        self._update_buttons()
+        self.run.start()
+
+    def stop(self) -> None:
+        """Ask the run to stop after its current chunk; what is done is kept (Stop button)."""
+        if self.run is not None:
+            self.run.stop()
+            self.status.setText("stopping after the current chunk …")
+            self.stop_button.setEnabled(False)
+
+    def _on_progress(self, p: Progress) -> None:
+        self.progress.setValue(round(1000 * p.fraction))
+        self.status.setText(
+            f"running: {p.done_poses} / {p.total_poses} poses, {p.poses_per_second:.0f} poses/s, "
+            f"{p.seconds:.1f} s; combination {p.combination}"
+        )
+        self.progressed.emit(p)
+
+    def _on_done(self, outcome: RunOutcome) -> None:
+        self.run = None
+        self.outcome = outcome
+        self.result = outcome.result
+        self._update_buttons()
+        result = outcome.result
+        if result is None:
+            self.status.setText(f"⚠ the study failed: {outcome.error}")
+            self.finished.emit(None)
+            return
+        total = result.done.size * result.sweep_deg.size
+        rate = result.poses_done / result.seconds if result.seconds > 0 else 0.0
+        if result.partial:
+            text = (
+                f"PARTIAL (stopped): {result.poses_done} of {total} poses in {result.seconds:.1f} s "
+                f"({rate:.0f} poses/s); the figures cover the grid points done"
+            )
+        else:
+            self.progress.setValue(1000)
+            text = f"done: {result.poses_done} poses in {result.seconds:.1f} s ({rate:.0f} poses/s)"
+        if outcome.error:
+            text += f"\n⚠ {outcome.error}"
+        self.status.setText(text)
+        self.show_result(result, outcome.paths, outcome.out_dir)
+        self.pages.setCurrentIndex(1)
+        self.finished.emit(result)
+
+    # ---------------------------------------------------------------- results
+    def show_result(self, result: StudyResult, paths: list[Path], out_dir: Path) -> None:
+        """Fill the coverage table and the heatmap choices."""
+        solvers = list(result.solvers)
+        rows = [c.name for c in result.combinations] + ["mean"]
+        self.table.clear()
+        self.table.setRowCount(len(rows))
+        self.table.setColumnCount(len(solvers) + 1)
+        seed_header = "seed (Teoh 2022)"
+        self.table.setHorizontalHeaderLabels([*solvers, seed_header])
+        self.table.setVerticalHeaderLabels(rows)
+        for c, combo in enumerate(result.combinations):
+            self.table.verticalHeaderItem(c).setToolTip(combo.describe())
+            for s, key in enumerate(solvers):
+                self.table.setItem(c, s, _cell(percent_text(result.coverage(key, c))))
+        mean_row = len(rows) - 1
+        bold = QtGui.QFont()
+        bold.setBold(True)
+        for s, key in enumerate(solvers):
+            item = _cell(percent_text(result.mean_coverage(key)))
+            item.setFont(bold)
+            self.table.setItem(mean_row, s, item)
+        seed = _cell(f"{SEED_COVERAGE_PERCENT:.2f} %")
+        seed.setToolTip("the thesis' mean coverage (MATLAB, numerical model), for comparison")
+        seed.setFont(bold)
+        self.table.setItem(mean_row, len(solvers), seed)
+        self.table.resizeColumnsToContents()
+        header_h = self.table.horizontalHeader().height()
+        rows_h = sum(self.table.rowHeight(r) for r in range(len(rows)))
+        self.table.setMinimumHeight(min(header_h + rows_h + 2 * self.table.frameWidth() + 18, 280))
+
+        heatmap_paths = [p for p in paths if p.parent.name == "heatmaps"]
+        self._heatmaps: dict[tuple[int, int], Path] = {}
+        k = 0
+        for c in range(len(result.combinations)):
+            if not result.done[c].any():
+                continue
+            for iz, z in enumerate(result.z_mm):
+                if k < len(heatmap_paths) and heatmap_paths[k].name.endswith(f"_z{z:g}.png"):
+                    self._heatmaps[(c, iz)] = heatmap_paths[k]
+                k += 1
+        blockers = [QtCore.QSignalBlocker(self.combo_choice), QtCore.QSignalBlocker(self.z_choice)]
+        self.combo_choice.clear()
+        for c, combo in enumerate(result.combinations):
+            if result.done[c].any():
+                self.combo_choice.addItem(f"{combo.name} ({combo.describe()})", c)
+        self.z_choice.clear()
+        for iz, z in enumerate(result.z_mm):
+            self.z_choice.addItem(f"{z:g} mm", iz)
+        del blockers
+        self.output_label.setText(f"output folder: {out_dir}")
+        self.open_button.setEnabled(out_dir.is_dir())
+        self._show_heatmap()
+
+    def heatmap_shown(self) -> Path | None:
+        """The PNG shown now (None when none)."""
+        return getattr(self, "_shown_path", None)
+
+    def _show_heatmap(self, *_: object) -> None:
+        c, iz = self.combo_choice.currentData(), self.z_choice.currentData()
+        path = getattr(self, "_heatmaps", {}).get((c, iz))
+        self._shown_path = path
+        if path is None:
+            self.heatmap.set_pixmap(QtGui.QPixmap())
+            self.heatmap_path.setText("no heatmap for this choice")
+            self.full_size_button.setEnabled(False)
+            return
+        self.heatmap.set_pixmap(QtGui.QPixmap(str(path)))
+        self.heatmap_path.setText(str(path))
+        self.full_size_button.setEnabled(True)
+
+    def show_full_size(self) -> None:
+        """The heatmap shown, at its own size in a scrollable window of its own."""
+        if self.heatmap.pixmap.isNull():
+            return
+        dialog = QtWidgets.QDialog(self)
+        dialog.setWindowTitle(f"qrfield — {self.heatmap_path.text()}")
+        dialog.setAttribute(QtCore.Qt.WidgetAttribute.WA_DeleteOnClose)
+        label = QtWidgets.QLabel()
+        label.setPixmap(self.heatmap.pixmap)
+        area = QtWidgets.QScrollArea()
+        area.setWidget(label)
+        QtWidgets.QVBoxLayout(dialog).addWidget(area)
+        size = self.heatmap.pixmap.size()
+        dialog.resize(min(size.width() + 40, 1400), min(size.height() + 40, 900))
+        dialog.show()
+
+    def _open_output(self) -> None:
+        if self.outcome is not None:
+            QtGui.QDesktopServices.openUrl(QtCore.QUrl.fromLocalFile(str(self.outcome.out_dir)))
+
+    def shutdown(self, timeout_s: float = 5.0) -> None:
+        """Stop a running study and wait up to ``timeout_s`` for its thread (the app is closing)."""
+        run = self.run
+        if run is not None:
+            run.stop()
+            run.thread.join(timeout_s)
+
+
+def _cell(text: str) -> QtWidgets.QTableWidgetItem:
+    item = QtWidgets.QTableWidgetItem(text)
+    item.setTextAlignment(QtCore.Qt.AlignmentFlag.AlignRight | QtCore.Qt.AlignmentFlag.AlignVCenter)
+    return item
+
+
+def _scrolled(widget: QtWidgets.QWidget) -> QtWidgets.QScrollArea:
+    area = QtWidgets.QScrollArea()
+    area.setWidget(widget)
+    area.setWidgetResizable(True)
+    return area
