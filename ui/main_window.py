@@ -18,11 +18,13 @@ from PySide6 import QtCore, QtGui, QtWidgets
 from qrfield.camera import CameraModel, CameraModelError, resolve_camera
 from qrfield.pipeline import methods_from_choice
 from qrfield.sources import Picamera2Settings, VirtualBenchSettings
+from ui.analysis_tab import AnalysisTab
 from ui.config import AppSettings, ConfigStore
 from ui.controls import CameraControls, SolverControls, SourceControls, app_settings_from, show_app_settings
 from ui.plots import PosePlots
 from ui.pose_panel import PosePanel
 from ui.preview import PreviewView
+from ui.sessions_panel import BenchContext, SessionPanel
 from ui.settings_form import SettingsForm
 from ui.worker import PipelineWorker, Processed, RunConfig, start_worker, stop_worker
 
@@ -97,6 +99,12 @@ class MainWindow(QtWidgets.QMainWindow):
         tabs.addTab(_scrolled(self.solver_controls), "Detect && solve")
         tabs.addTab(self.camera_controls, "Camera")
         tabs.addTab(_scrolled(self.virtual_form), "Virtual bench")
+        self.session_panel = SessionPanel(store, self._session_context)
+        self.analysis_tab = AnalysisTab(self.session_panel.root)
+        self.session_panel.set_default_solver(self.methods())
+        self.session_panel.sessionChanged.connect(lambda s: self.analysis_tab.set_current(s and s.path))
+        tabs.addTab(_scrolled(self.session_panel), "Session")
+        tabs.addTab(_scrolled(self.analysis_tab), "Analysis")
         self.tabs = tabs
 
         left = QtWidgets.QSplitter(QtCore.Qt.Orientation.Vertical)
@@ -197,6 +205,7 @@ class MainWindow(QtWidgets.QMainWindow):
         )
         self.plots.set_window(self.app_settings.plot_window_s)
         self.worker.configure(self._run_config())
+        self.session_panel.refresh_state()
 
     def _open_source(self) -> None:
         """Open the chosen source (again), e.g. after a failure."""
@@ -212,6 +221,13 @@ class MainWindow(QtWidgets.QMainWindow):
     def set_method(self, choice: str) -> None:
         """Switch method: numerical, ippe or both (as the Solver tab does)."""
         self.solver_controls.method.setCurrentText(choice)
+
+    def _session_context(self) -> BenchContext:
+        """What a new session records and each row is checked against (the Session tab)."""
+        assert self.camera_model is not None
+        return BenchContext(
+            self.camera_model, self.app_settings.side_mm, self.methods(), self.solver_controls.settings()
+        )
 
     # ---------------------------------------------------------------- worker signals
     def _on_result_ready(self) -> None:
@@ -284,6 +300,7 @@ class MainWindow(QtWidgets.QMainWindow):
             self.plots.add(name, t, values)
         if result.truth is not None:
             self.plots.add("true", t, np.concatenate([result.truth.position_mm, result.truth.angles_deg]))
+        self.session_panel.on_processed(item)
 
     # ---------------------------------------------------------------- shutdown
     def save_settings(self) -> None:
@@ -293,6 +310,7 @@ class MainWindow(QtWidgets.QMainWindow):
         for name, value in self.solver_controls.settings().items():
             self.store.set_group(name, value)
         self.store.set_group("detector", self.solver_controls.detector.value())
+        self.session_panel.save_settings(self.store)
         self.store.set_value("window", bytes(self.saveGeometry().toBase64()).decode())
         try:
             self.store.save()
@@ -307,8 +325,13 @@ class MainWindow(QtWidgets.QMainWindow):
         self.timer.stop()
         self.save_settings()
         stop_worker(self.worker, self.thread)
+        self.session_panel.shutdown()
+        self.analysis_tab.shutdown()
 
     def closeEvent(self, event: QtGui.QCloseEvent) -> None:
+        if not self._closed and not self.session_panel.confirm_close():
+            event.ignore()  # rows not written yet: the operator chose to keep the app open
+            return
         self.shutdown()
         super().closeEvent(event)
 
