@@ -34,6 +34,33 @@ def _num(value: float | None) -> str:
     return "-" if value is None else f"{value:.2f}"
 
 
+class ScaledImage(QtWidgets.QLabel):
+    """Shows a picture scaled to the label's width (aspect kept); ``image`` is the full-size one."""
+
+    def __init__(self, text: str = "") -> None:
+        super().__init__(text)
+        self.image: QtGui.QPixmap | None = None
+        self.setAlignment(QtCore.Qt.AlignmentFlag.AlignCenter)
+        self.setSizePolicy(QtWidgets.QSizePolicy.Policy.Ignored, QtWidgets.QSizePolicy.Policy.Fixed)
+        self.setMinimumHeight(60)
+
+    def set_image(self, pixmap: QtGui.QPixmap) -> None:
+        self.image = pixmap
+        self._fit()
+
+    def resizeEvent(self, event: QtGui.QResizeEvent) -> None:
+        super().resizeEvent(event)
+        self._fit()
+
+    def _fit(self) -> None:
+        if self.image is None or self.image.isNull():
+            return
+        width = max(100, min(self.width(), self.image.width()))
+        scaled = self.image.scaledToWidth(width, QtCore.Qt.TransformationMode.SmoothTransformation)
+        self.setPixmap(scaled)
+        self.setFixedHeight(scaled.height())
+
+
 class _Runner(QtCore.QObject):
     """Runs analyze() on a plain thread; reports by signal (queued into the GUI thread)."""
 
@@ -111,13 +138,12 @@ class AnalysisTab(QtWidgets.QWidget):
         )
         self.table.verticalHeader().hide()
         self.table.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
-        self.plots: list[QtWidgets.QLabel] = []
+        self.table.setMaximumHeight(160)
+        self.plots: list[ScaledImage] = []
         plots = QtWidgets.QVBoxLayout()
         for name in ("errors against tilt", "measured against truth"):
-            label = QtWidgets.QLabel(f"({name}: not drawn yet)")
+            label = ScaledImage(f"({name}: not drawn yet)")
             label.setObjectName(name.replace(" ", "_"))
-            label.setAlignment(QtCore.Qt.AlignmentFlag.AlignCenter)
-            label.setMinimumHeight(120)
             self.plots.append(label)
             plots.addWidget(label)
         layout = QtWidgets.QVBoxLayout(self)
@@ -219,8 +245,7 @@ class AnalysisTab(QtWidgets.QWidget):
             if pixmap.isNull():
                 label.setText(f"cannot show {path}")
             else:
-                smooth = QtCore.Qt.TransformationMode.SmoothTransformation
-                label.setPixmap(pixmap.scaledToWidth(min(720, pixmap.width()), smooth))
+                label.set_image(pixmap)
             label.setToolTip(path)
         self.analysisDone.emit(result)
 

@@ -64,11 +64,11 @@ class GroundTruthForm(QtWidgets.QWidget):
             edit.textChanged.connect(lambda _text, n=name: self._check(n))
             edit.textEdited.connect(self._typed)
             self.edits[name] = edit
-            grid.addWidget(QtWidgets.QLabel(label), row, 0)
-            grid.addWidget(edit, row, 1)
-            grid.addWidget(QtWidgets.QLabel(unit), row, 2)
+            grid.addWidget(QtWidgets.QLabel(label), 2 * row, 0)
+            grid.addWidget(edit, 2 * row, 1)
+            grid.addWidget(QtWidgets.QLabel(unit), 2 * row, 2)
             self.messages[name] = self._message_label(name)
-            grid.addWidget(self.messages[name], row, 3)
+            grid.addWidget(self.messages[name], 2 * row + 1, 1, 1, 3)  # under its field
         self.combo = QtWidgets.QComboBox()
         self.combo.setObjectName("gt_combo")
         self.combo.setToolTip(HELP["combo"])
@@ -80,11 +80,12 @@ class GroundTruthForm(QtWidgets.QWidget):
             self.combo.setEditable(True)
             self.combo.lineEdit().setPlaceholderText("combination name")
         self.combo.currentTextChanged.connect(lambda _text: self._check("combo"))
-        row = len(POSE_FIELDS)
+        row = 2 * len(POSE_FIELDS)
         grid.addWidget(QtWidgets.QLabel("combination"), row, 0)
-        grid.addWidget(self.combo, row, 1, 1, 2)
+        grid.addWidget(self.combo, row, 1, 1, 3)
         self.messages["combo"] = self._message_label("combo")
-        grid.addWidget(self.messages["combo"], row, 3)
+        grid.addWidget(self.messages["combo"], row + 1, 1, 1, 3)
+        row += 1
         self.note = QtWidgets.QLineEdit()
         self.note.setObjectName("gt_note")
         self.note.setPlaceholderText("optional, one line")
@@ -94,6 +95,8 @@ class GroundTruthForm(QtWidgets.QWidget):
         self.follow_box.setObjectName("follow_bench")
         self.follow_box.setChecked(True)
         self.follow_box.setEnabled(False)  # until a frame with a true pose arrives
+        self.follow_box.toggled.connect(self._follow_toggled)
+        self._bench_pose: tuple[Sequence[float], Sequence[float]] | None = None
         grid.addWidget(self.follow_box, row + 2, 0, 1, 4)
         grid.setColumnStretch(3, 1)
         order = [*self.edits.values(), self.combo, self.note]
@@ -111,6 +114,7 @@ class GroundTruthForm(QtWidgets.QWidget):
         label.setObjectName(f"gt_{name}_message")
         label.setStyleSheet("color: #c0392b;")
         label.setWordWrap(True)
+        label.hide()
         return label
 
     # ---------------------------------------------------------------- values
@@ -140,12 +144,17 @@ class GroundTruthForm(QtWidgets.QWidget):
 
     def follow(self, position_mm: Sequence[float], angles_deg: Sequence[float]) -> None:
         """A frame's true pose (virtual bench): enable the box, and fill the pose fields if it is ticked."""
+        self._bench_pose = (position_mm, angles_deg)
         if not self.follow_box.isEnabled():
             self.follow_box.setEnabled(True)
         if self.follow_box.isChecked():
             values = truth_fields(position_mm, angles_deg)
             values.pop("combo")
             self.set_fields(values)
+
+    def _follow_toggled(self, on: bool) -> None:
+        if on and self._bench_pose is not None:
+            self.follow(*self._bench_pose)  # at once, not at the next frame
 
     # ---------------------------------------------------------------- validation
     def _typed(self, _text: str) -> None:
@@ -162,11 +171,13 @@ class GroundTruthForm(QtWidgets.QWidget):
             widget.setStyleSheet(BAD_STYLE)
             widget.setToolTip(f"{name}: {message}")
             self.messages[name].setText(message)
+            self.messages[name].show()
         else:
             self.errors.pop(name, None)
             widget.setStyleSheet("")
             widget.setToolTip(HELP[name])
             self.messages[name].setText("")
+            self.messages[name].hide()
         valid = not self.errors
         if valid != self._valid:
             self._valid = valid

@@ -146,9 +146,11 @@ class SessionPanel(QtWidgets.QWidget):
         resume_row.addWidget(self.resume_combo, 1)
         resume_row.addWidget(self.resume_button)
         resume_row.addWidget(open_button)
-        resume_layout.addWidget(
-            QtWidgets.QLabel("Resuming continues the numbering after the last row; rows are never rewritten.")
+        resume_note = QtWidgets.QLabel(
+            "Resuming continues the numbering after the last row; rows already logged are never rewritten."
         )
+        resume_note.setWordWrap(True)
+        resume_layout.addWidget(resume_note)
         resume_layout.addStretch(1)
         self.manage = QtWidgets.QTabWidget()
         self.manage.setObjectName("session_manage")

@@ -5,6 +5,7 @@ a bad field blocking the row, undo, resume in a new window, analysis, a failed w
 from __future__ import annotations
 
 import csv
+import dataclasses
 import errno
 import math
 from pathlib import Path
@@ -191,6 +192,22 @@ def test_a_bad_field_blocks_the_row_with_its_message(make_window, qtbot) -> None
     z.selectAll()
     qtbot.keyClicks(z, "300")
     assert panel.log_button.isEnabled() and panel.form.messages["z"].text() == "" and z.styleSheet() == ""
+
+    # The session measures with "numerical": with only IPPE running a row cannot be logged.
+    window.set_method("ippe")
+    assert not panel.log_button.isEnabled() and "numerical" in panel.why.text()
+    window.set_method("both")
+    assert panel.log_button.isEnabled()
+
+    # Cancel while collecting: nothing is written, and the next row is still row 1.
+    panel.session.info = dataclasses.replace(panel.session.info, frames_per_row=1000)
+    qtbot.mouseClick(panel.log_button, LEFT)
+    qtbot.waitUntil(lambda: panel.progress.value() >= 1, timeout=WAIT_MS)
+    assert panel.collecting and not panel.log_button.isEnabled() and not panel.form.isEnabled()
+    qtbot.mouseClick(panel.cancel_button, LEFT)
+    assert not panel.collecting and panel.form.isEnabled()
+    assert rows_csv(panel.session.path)[1] == [] and "nothing logged" in panel.status.text()
+    panel.session.info = dataclasses.replace(panel.session.info, frames_per_row=FRAMES)
     log_by_enter(qtbot, panel, 1)
 
 
@@ -215,8 +232,11 @@ def test_undo_resume_and_analysis(make_window, qtbot, tmp_path: Path, monkeypatc
     assert [r["row"] for r in rows] == ["1", "2", "3", ""] and rows[-1]["withdraws"] == "3"
     assert "(withdrawn)" in panel.table.cell_text(2, "pass")
     window.shutdown()
+    with open(session_dir / "rows.csv", "ab") as f:
+        f.write(b"4,2026-11-23T00:00:00+00:00,alph")  # a crash in the middle of a line
 
     second = make_window()
+    assert second.session_panel.row_settings.value().frames_per_row == FRAMES  # saved with the app
     panel2 = second.session_panel
     panel2.manage.setCurrentIndex(1)
     assert panel2.resume_combo.currentData() == str(session_dir)
@@ -225,6 +245,7 @@ def test_undo_resume_and_analysis(make_window, qtbot, tmp_path: Path, monkeypatc
     assert panel2.table.model().rowCount() == 3
     assert "(withdrawn)" in panel2.table.cell_text(2, "pass") and panel2.table.cell_text(1, "pass") == "fail"
     assert "next row 4" in panel2.count.text()
+    assert panel2.warnings.isVisible() and "unfinished line" in panel2.warnings.text()
     qtbot.waitUntil(lambda: panel2.form.follow_box.isEnabled(), timeout=WAIT_MS)
     type_truth(qtbot, panel2, texts)
     log_by_enter(qtbot, panel2, 4)  # the numbering continues after the withdrawn row
