@@ -230,6 +230,7 @@ class SessionPanel(QtWidgets.QWidget):
         self.retry_button.clicked.connect(self.retry)
         self.export_button.clicked.connect(self.export_pending)
         self.folder_form.changed.connect(lambda *_: self.refresh_folders())
+        self.manage.currentChanged.connect(lambda _index: self.refresh_folders())
         self.refresh_folders()
         self._update_state()
 

@@ -115,9 +115,9 @@ def type_truth(qtbot, panel, texts: dict[str, str], combo: str = COMBO) -> None:
     assert form.combo.currentText() == combo
 
 
-def log_by_enter(qtbot, panel, row: int) -> None:
+def log_by_enter(qtbot, panel, row: int, widget: QtWidgets.QWidget | None = None) -> None:
     with qtbot.waitSignal(panel.rowLogged, timeout=WAIT_MS) as blocker:
-        qtbot.keyClick(panel.form.edits["gamma"], QtCore.Qt.Key.Key_Return)
+        qtbot.keyClick(widget or panel.form.edits["gamma"], QtCore.Qt.Key.Key_Return)
     assert blocker.args == [row]
 
 
@@ -248,7 +248,7 @@ def test_undo_resume_and_analysis(make_window, qtbot, tmp_path: Path, monkeypatc
     assert panel2.warnings.isVisible() and "unfinished line" in panel2.warnings.text()
     qtbot.waitUntil(lambda: panel2.form.follow_box.isEnabled(), timeout=WAIT_MS)
     type_truth(qtbot, panel2, texts)
-    log_by_enter(qtbot, panel2, 4)  # the numbering continues after the withdrawn row
+    log_by_enter(qtbot, panel2, 4, panel2.form.combo)  # numbering continues after the withdrawn row
 
     # The pass rate by hand from rows.csv: measurement rows not withdrawn.
     _header, rows = rows_csv(session_dir)
@@ -315,3 +315,16 @@ def test_a_failed_write_stays_pending_until_retried_or_saved(make_window, qtbot,
     with open(saved, newline="", encoding="utf-8") as f:
         lines = list(csv.DictReader(f))
     assert [r["row"] for r in lines] == ["2"] and lines[0]["pass"] == "1"
+
+
+def test_analysis_of_a_folder_that_is_no_session_says_why(qtbot, tmp_path: Path) -> None:
+    from ui.analysis_tab import AnalysisTab
+
+    tab = AnalysisTab(lambda: tmp_path)
+    qtbot.addWidget(tab)
+    (tmp_path / "not-a-session").mkdir()
+    tab.choice.setEditText(str(tmp_path / "not-a-session"))
+    qtbot.mouseClick(tab.run_button, LEFT)
+    qtbot.waitUntil(lambda: tab.run_button.isEnabled(), timeout=WAIT_MS)
+    assert "failed" in tab.state.text() and "session.json" in tab.state.text() and tab.result is None
+    tab.shutdown()
