@@ -130,6 +130,11 @@ class GroundTruthForm(QtWidgets.QWidget):
         return truth
 
     @property
+    def following(self) -> bool:
+        """True while the pose fields show the virtual bench's true pose ("follow the bench" ticked)."""
+        return self.follow_box.isEnabled() and self.follow_box.isChecked()
+
+    @property
     def valid(self) -> bool:
         return self._valid
 

@@ -4,7 +4,9 @@ A thin layer over :mod:`qrfield.sessions`. "Log row" collects the next N results
 (:meth:`SessionPanel.on_processed`, fed from the main window's redraw: the same results the
 preview shows, no second camera path; only frames captured after the press count), averages
 them with a :class:`~qrfield.sessions.FrameCollector` for the session's solver and calls
-:meth:`Session.log` on the GUI thread (one append and fsync per row). The status says "logged
+:meth:`Session.log` on the GUI thread (one append and fsync per row). When the form follows the
+virtual bench, the row's ground truth is the bench's mean true pose over the frames collected
+(a wobbling bench moves while the row is measured). The status says "logged
 row K" only when ``log`` returned "logged"; a row that could not be written stays in the
 session's pending queue and a red banner offers Retry and "Save pending elsewhere…".
 
@@ -20,6 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from PySide6 import QtCore, QtWidgets
 
 from qrfield.camera import CameraModel
@@ -31,6 +34,7 @@ from qrfield.sessions import (
     Session,
     SessionError,
     SessionSettings,
+    circular_mean_deg,
     known_combinations,
     session_folders,
 )
@@ -60,6 +64,31 @@ def sessions_root(settings: SessionFolderSettings) -> Path:
     return Path(text).expanduser() if text else Path.home() / "qrfield-sessions"
 
 
+def bench_mean_truth(frames: list[Any], combo: str, method: str) -> GroundTruth | None:
+    """The mean true pose of the virtual bench (FrameResult.truth: mm and degrees; angles by circular
+    mean) over the collected frames that the row's mean is made of (those where ``method``
+    converged; all of them if none did), so that a wobbling bench is compared with where it was
+    while the row was measured, not where it was when "Log row" was pressed. None if a frame has
+    no truth (not the virtual bench)."""
+    if not frames or any(getattr(f, "truth", None) is None for f in frames):
+        return None
+    averaged = [f for f in frames if _converged(f.poses.get(method))]
+    truths = [f.truth for f in averaged or frames]
+    position = np.mean([t.position_mm for t in truths], axis=0)
+    angles = np.array([t.angles_deg for t in truths], dtype=float)
+    alpha, beta, gamma = (circular_mean_deg(angles[:, k]) for k in range(3))
+    return GroundTruth(*(float(v) for v in position), alpha, beta, gamma, combo)
+
+
+def _converged(pose: Any) -> bool:
+    """The test average_frames applies: converged with a finite position and angles."""
+    return (
+        pose is not None
+        and bool(pose.converged)
+        and bool(np.all(np.isfinite(pose.position_mm)) and np.all(np.isfinite(pose.angles_deg)))
+    )
+
+
 @dataclass(frozen=True)
 class BenchContext:
     """What the window measures with now (recorded in a new session, checked before each row)."""
@@ -84,6 +113,7 @@ class SessionPanel(QtWidgets.QWidget):
         self._collector: FrameCollector | None = None
         self._truth: GroundTruth | None = None
         self._note = ""
+        self._following = False
         self._t_press = 0.0
 
         # ----- session: current, new, resume
@@ -409,6 +439,7 @@ class SessionPanel(QtWidgets.QWidget):
         assert self.session is not None
         self._truth = self.form.truth()
         self._note = self.form.note.text()
+        self._following = self.form.following
         self._collector = FrameCollector(self.session.info.frames_per_row, method=self.session.info.solver)
         self._t_press = time.monotonic()
         self.progress.setRange(0, self._collector.frames_wanted)
@@ -448,7 +479,10 @@ class SessionPanel(QtWidgets.QWidget):
     def _finish_row(self, collector: FrameCollector) -> None:
         assert self.session is not None and self._truth is not None
         self._collector = None
-        measurement = collector.measurement(self._truth, self.session.info.criteria, note=self._note)
+        truth = self._truth
+        if self._following:
+            truth = bench_mean_truth(collector.frames, truth.combo, collector.method) or truth
+        measurement = collector.measurement(truth, self.session.info.criteria, note=self._note)
         outcome = self.session.log(measurement)
         verdict = "pass" if measurement.judgement.passed else f"fail ({measurement.judgement.reason})"
         self._after(outcome, f"logged row {outcome.row}: {verdict}")

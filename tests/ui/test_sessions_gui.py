@@ -328,3 +328,22 @@ def test_analysis_of_a_folder_that_is_no_session_says_why(qtbot, tmp_path: Path)
     qtbot.waitUntil(lambda: tab.run_button.isEnabled(), timeout=WAIT_MS)
     assert "failed" in tab.state.text() and "session.json" in tab.state.text() and tab.result is None
     tab.shutdown()
+
+
+def test_a_row_on_a_wobbling_bench_compares_with_its_mean_true_pose(make_window, qtbot) -> None:
+    window = make_window()
+    window.virtual_form.widgets["wobble_period_s"].setValue(0.5)
+    window.virtual_form.widgets["wobble_deg"].setValue(20.0)  # alpha and beta swing by +-20 degrees
+    panel = window.session_panel
+    panel.row_settings.widgets["frames_per_row"].setValue(10)
+    panel.name_edit.setText("wobble")
+    qtbot.mouseClick(panel.create_button, LEFT)
+    qtbot.waitUntil(lambda: panel.form.follow_box.isEnabled(), timeout=WAIT_MS)
+    assert panel.form.follow_box.isChecked()  # on by default on the virtual bench
+    qtbot.keyClicks(panel.form.combo, COMBO)
+    log_by_enter(qtbot, panel, 1, panel.form.combo)
+    row = rows_csv(panel.session.path)[1][0]
+    # Over a whole 0.5 s swing, the truth at the press and the mean over the frames differ by
+    # degrees; the row passes only if it is compared with where the card was while measured.
+    assert row["pass"] == "1", {k: row[k] for k in DESIGN_COLUMNS}
+    assert 15.0 - 20.0 <= float(row["gt_alpha"]) <= 15.0 + 20.0 and float(row["gt_gamma"]) == 10.0
