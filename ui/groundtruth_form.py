@@ -40,6 +40,28 @@ HELP = {
 }
 
 
+class WrappedLabel(QtWidgets.QLabel):
+    """A word-wrapped label that asks for the height its text needs at its current width (a grid
+    cell otherwise gives a wrapped label the height of its unwrapped width and cuts lines off)."""
+
+    def __init__(self, text: str = "") -> None:
+        super().__init__(text)
+        self.setWordWrap(True)
+
+    def resizeEvent(self, event: QtGui.QResizeEvent) -> None:
+        super().resizeEvent(event)
+        self._fit()
+
+    def setText(self, text: str) -> None:
+        super().setText(text)
+        self._fit()
+
+    def _fit(self) -> None:
+        needed = self.heightForWidth(self.width()) if self.text() else 0
+        if needed > 0 and needed != self.minimumHeight():
+            self.setMinimumHeight(needed)
+
+
 class GroundTruthForm(QtWidgets.QWidget):
     """The hand-measured pose of the next row. ``combinations``: allowed names, or None (free text)."""
 
@@ -110,10 +132,9 @@ class GroundTruthForm(QtWidgets.QWidget):
 
     @staticmethod
     def _message_label(name: str) -> QtWidgets.QLabel:
-        label = QtWidgets.QLabel("")
+        label = WrappedLabel("")
         label.setObjectName(f"gt_{name}_message")
         label.setStyleSheet("color: #c0392b;")
-        label.setWordWrap(True)
         label.hide()
         return label
 

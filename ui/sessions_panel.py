@@ -123,6 +123,7 @@ class SessionPanel(QtWidgets.QWidget):
         self.title.setWordWrap(True)
         self.count = QtWidgets.QLabel("")
         self.count.setObjectName("session_count")
+        self.count.setWordWrap(True)
         self.warnings = QtWidgets.QLabel("")
         self.warnings.setObjectName("session_warnings")
         self.warnings.setWordWrap(True)
