@@ -75,7 +75,13 @@ __all__ = [
     "encode_frame",
     "list_ports",
     "open_pyserial",
+    "publish_result",
 ]
+
+
+#: Pipeline status (qrfield.pipeline) -> serial frame status (DESIGN.md knows OK, NOQR, NOCONV, STALE):
+#: an ERROR frame has no pose, which the controller must treat like a pose that did not converge.
+PIPELINE_TO_SERIAL_STATUS = {"OK": "OK", "NOQR": "NOQR", "NOCONV": "NOCONV", "ERROR": "NOCONV"}
 
 
 @dataclass(frozen=True)
@@ -519,3 +525,19 @@ class SerialLink:
                     self._on_receive(item)
                 except Exception as exc:
                     self._error(f"receive callback failed: {exc!r}", notify=False)
+
+
+def publish_result(link: SerialLink, result: object) -> bool:
+    """Hand one pipeline result (:class:`qrfield.pipeline.FrameResult`) to ``link``; never blocks.
+
+    Maps the pipeline's status with :data:`PIPELINE_TO_SERIAL_STATUS` (ERROR and unknown statuses go
+    out as NOCONV, pose fields empty); an OK frame carries its first method's position (mm) and angles
+    (degrees). Shared by ``qrfield run --serial`` and the app's serial panel. Returns what
+    :meth:`SerialLink.publish` returns (False once the link is closed).
+    """
+    status = PIPELINE_TO_SERIAL_STATUS.get(getattr(result, "status", ""), "NOCONV")
+    pose = getattr(result, "primary", None) if status == "OK" else None
+    t_ms = getattr(result, "t_ms", None)
+    if pose is None:
+        return link.publish(t_ms, None, None, "NOQR" if status == "NOQR" else "NOCONV")
+    return link.publish(t_ms, pose.position_mm, pose.angles_deg, "OK")

@@ -17,13 +17,16 @@ from PySide6 import QtCore, QtGui, QtWidgets
 
 from qrfield.camera import CameraModel, CameraModelError, resolve_camera
 from qrfield.pipeline import methods_from_choice
+from qrfield.serial_link import SerialLinkSettings
 from qrfield.sources import Picamera2Settings, VirtualBenchSettings
 from ui.analysis_tab import AnalysisTab
+from ui.calibration_dialog import CalibrationDialog, CalibrationDialogSettings
 from ui.config import AppSettings, ConfigStore
 from ui.controls import CameraControls, SolverControls, SourceControls, app_settings_from, show_app_settings
 from ui.plots import PosePlots
 from ui.pose_panel import PosePanel
 from ui.preview import PreviewView
+from ui.serial_panel import SerialPanel
 from ui.sessions_panel import BenchContext, SessionPanel
 from ui.settings_form import SettingsForm
 from ui.worker import PipelineWorker, Processed, RunConfig, start_worker, stop_worker
@@ -49,6 +52,9 @@ def detector_settings_class() -> type:
 
 class MainWindow(QtWidgets.QMainWindow):
     """The bench app. ``overrides`` (from the command line) replace saved AppSettings fields."""
+
+    #: Each frame drawn (its image, grey or BGR uint8), for the calibration dialog's preview.
+    frameDrawn = QtCore.Signal(object)
 
     def __init__(
         self,
@@ -99,6 +105,13 @@ class MainWindow(QtWidgets.QMainWindow):
         tabs.addTab(_scrolled(self.solver_controls), "Detect && solve")
         tabs.addTab(self.camera_controls, "Camera")
         tabs.addTab(_scrolled(self.virtual_form), "Virtual bench")
+        self.serial_panel = SerialPanel(store.group("serial", SerialLinkSettings))
+        self.calibration_dialog: CalibrationDialog | None = None
+        self.calibrate_button = QtWidgets.QPushButton("Calibrate camera…")
+        self.calibrate_button.setObjectName("calibrate")
+        self.camera_controls.layout().addRow(self.calibrate_button)
+        self.calibrate_button.clicked.connect(self.open_calibration)
+        tabs.addTab(_scrolled(self.serial_panel), "Serial")
         self.session_panel = SessionPanel(store, self._session_context)
         self.analysis_tab = AnalysisTab(self.session_panel.root)
         self.session_panel.set_default_solver(self.methods())
@@ -143,6 +156,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.worker.sourceOpened.connect(self._on_source_opened)
         self.worker.sourceFailed.connect(self._on_source_failed)
         self.worker.sourceNote.connect(self._on_note)
+        self.worker.result_sinks = (self.serial_panel.publisher,)  # every result, on the worker thread
         self.thread = start_worker(self.worker)
         self._closed = False
 
@@ -222,6 +236,23 @@ class MainWindow(QtWidgets.QMainWindow):
         """Switch method: numerical, ippe or both (as the Solver tab does)."""
         self.solver_controls.method.setCurrentText(choice)
 
+    def open_calibration(self) -> CalibrationDialog:
+        """Show the calibration dialog (made once; it previews the frames this window draws)."""
+        if self.calibration_dialog is None:
+            settings = self.store.group("calibration", CalibrationDialogSettings)
+            self.calibration_dialog = CalibrationDialog(lambda: self.camera_model, settings, self)
+            self.frameDrawn.connect(self.calibration_dialog.on_frame)
+            self.calibration_dialog.cameraChosen.connect(self.use_camera)
+        self.calibration_dialog.show()
+        self.calibration_dialog.raise_()
+        return self.calibration_dialog
+
+    def use_camera(self, spec: str) -> None:
+        """Make ``spec`` (preset or JSON path) the camera model, as choosing it in the Camera tab does."""
+        with QtCore.QSignalBlocker(self.camera_controls.camera):
+            self.camera_controls.camera.setCurrentText(spec)
+        self._apply()
+
     def _session_context(self) -> BenchContext:
         """What a new session records and each row is checked against (the Session tab)."""
         assert self.camera_model is not None
@@ -256,6 +287,7 @@ class MainWindow(QtWidgets.QMainWindow):
         now = time.monotonic()
         if item is not None:
             self._draw(item)
+        self.serial_panel.refresh()
         if now - self._last_plot >= PLOT_PERIOD_S:
             self._last_plot = now
             self.plots.redraw(now - self._t0)
@@ -275,6 +307,7 @@ class MainWindow(QtWidgets.QMainWindow):
         frame, result = item.frame, item.result
         methods = tuple(result.poses) or self.methods()
         self.preview.show_frame(frame.image)
+        self.frameDrawn.emit(frame.image)
         self.preview.show_corners(None if result.detection is None else result.detection.corners_px)
         camera = result.camera or self.camera_model
         for k in range(2):
@@ -310,6 +343,9 @@ class MainWindow(QtWidgets.QMainWindow):
         for name, value in self.solver_controls.settings().items():
             self.store.set_group(name, value)
         self.store.set_group("detector", self.solver_controls.detector.value())
+        self.store.set_group("serial", self.serial_panel.saved_settings())
+        if self.calibration_dialog is not None:
+            self.store.set_group("calibration", self.calibration_dialog.settings())
         self.session_panel.save_settings(self.store)
         self.store.set_value("window", bytes(self.saveGeometry().toBase64()).decode())
         try:
@@ -325,6 +361,9 @@ class MainWindow(QtWidgets.QMainWindow):
         self.timer.stop()
         self.save_settings()
         stop_worker(self.worker, self.thread)
+        self.serial_panel.shutdown()
+        if self.calibration_dialog is not None:
+            self.calibration_dialog.shutdown()
         self.session_panel.shutdown()
         self.analysis_tab.shutdown()
 

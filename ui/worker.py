@@ -123,6 +123,9 @@ class PipelineWorker(QtCore.QObject):
         self._pipeline: Pipeline | None = None
         self._notes_seen = 0
         self.frames_processed = 0
+        #: Called on the worker thread with every FrameResult (e.g. the serial panel's publisher);
+        #: each must return at once and never touch widgets. Replace the tuple, never mutate it.
+        self.result_sinks: tuple[Any, ...] = ()
 
     # ---------------------------------------------------------------- called from the GUI thread
     def configure(self, config: RunConfig) -> None:
@@ -227,6 +230,11 @@ class PipelineWorker(QtCore.QObject):
             return
         result = self._pipeline.process(frame)
         self.frames_processed += 1
+        for sink in self.result_sinks:
+            try:
+                sink(result)
+            except Exception as exc:  # a faulty sink must not stop the measurements
+                self.sourceNote.emit(f"result sink failed: {exc!r}")
         behind = max(0, self._reader.read_count - 1 - frame.index)
         if self.latest.put(Processed(frame, result, time.monotonic(), behind)):
             self.resultReady.emit()

@@ -109,11 +109,6 @@ def _camera(args: argparse.Namespace) -> Any:
     return resolve_camera(DEFAULT_CAMERA), False
 
 
-#: Pipeline status -> serial frame status (DESIGN.md knows OK, NOQR, NOCONV, STALE): an ERROR
-#: frame has no pose, which the controller must treat like a pose that did not converge.
-SERIAL_STATUS = {"OK": "OK", "NOQR": "NOQR", "NOCONV": "NOCONV", "ERROR": "NOCONV"}
-
-
 def _serial_link(args: argparse.Namespace, say: Any) -> Any:
     """The started SerialLink when --serial or --serial-port was given, else None."""
     from qrfield.serial_link import SerialLink, SerialLinkSettings
@@ -134,18 +129,9 @@ def _serial_link(args: argparse.Namespace, say: Any) -> Any:
     return link
 
 
-def _publish(link: Any, result: Any) -> None:
-    """Hand one frame's pose to the serial link (the link never blocks the frame loop)."""
-    status = SERIAL_STATUS.get(result.status, "NOCONV")
-    pose = result.primary if status == "OK" else None
-    if pose is None:
-        link.publish(result.t_ms, None, None, "NOQR" if status == "NOQR" else "NOCONV")
-    else:
-        link.publish(result.t_ms, pose.position_mm, pose.angles_deg, "OK")
-
-
 def run(args: argparse.Namespace) -> int:
     from qrfield.pipeline import Pipeline, methods_from_choice
+    from qrfield.serial_link import publish_result
     from qrfield.settings import from_arguments, specs
     from qrfield.sources import EndOfStream, Picamera2Settings, SourceError, VirtualBenchSettings
 
@@ -194,7 +180,7 @@ def run(args: argparse.Namespace) -> int:
             result = pipeline.process(frame)
             emit(result)
             if link is not None:
-                _publish(link, result)
+                publish_result(link, result)
             count += 1
             say.notes(source)
     except BrokenPipeError:

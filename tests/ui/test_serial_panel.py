@@ -1,0 +1,237 @@
+"""The app's serial panel, offscreen with pytest-qt, driven by clicks and typing: the virtual bench's
+true pose arrives over a pty pair (read at the other end here) and over loop://, checked with
+tests/serial_truth.py (a parser that shares no code with the link); Disconnect stops the frames; a
+pty that vanishes shows "disconnected" while the app keeps measuring; settings persist; a screenshot."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PySide6 import QtCore
+from serial_truth import parse_frame_line, split_lines
+
+from qrfield.geometry import Pose, angle_difference
+from qrfield.serial_link import CLOSED, CONNECTED, DISCONNECTED, SerialLinkSettings
+from ui.config import ConfigStore
+from ui.main_window import MainWindow
+from ui.serial_panel import STATE_COLOURS, SerialPanel
+
+pytestmark = pytest.mark.gui
+WAIT_MS = 15000
+
+
+class Pty:
+    """A pty pair; the link opens ``path`` (a symlink to the slave), the test reads the master."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.master, self.slave = os.openpty()
+        os.set_blocking(self.master, False)
+        tmp = path.with_suffix(".new")
+        os.symlink(os.ttyname(self.slave), tmp)
+        os.replace(tmp, path)
+        self.data = bytearray()
+
+    def drain(self) -> bytes:
+        """Everything written to the slave so far (non-blocking)."""
+        while True:
+            try:
+                chunk = os.read(self.master, 65536)
+            except (BlockingIOError, OSError):
+                break
+            if not chunk:
+                break
+            self.data += chunk
+        return bytes(self.data)
+
+    def frames(self) -> list[dict]:
+        return [parse_frame_line(line) for line in split_lines(self.drain())]
+
+    def vanish(self) -> None:
+        """The USB adapter is pulled: both ends closed."""
+        for fd in (self.master, self.slave):
+            with contextlib.suppress(OSError):
+                os.close(fd)
+
+
+def meets_seed_criteria(values: list[float], truth: Pose) -> bool:
+    """x, y, z (mm) within 5 mm and alpha, beta, gamma within 2 degrees of the truth."""
+    v = np.asarray(values, dtype=float)
+    position_ok = np.linalg.norm(v[:3] - truth.position_mm) < 5.0
+    return bool(position_ok and np.all(np.abs(angle_difference(v[3:], truth.angles_deg)) <= 2.0))
+
+
+@pytest.fixture
+def make_window(qtbot, tmp_path: Path):
+    windows: list[MainWindow] = []
+
+    def make(overrides: dict | None = None) -> MainWindow:
+        window = MainWindow(ConfigStore(tmp_path / "config"), overrides)
+        qtbot.addWidget(window)
+        window.show()
+        windows.append(window)
+        return window
+
+    yield make
+    for window in windows:
+        window.shutdown()
+
+
+def type_port(qtbot, panel: SerialPanel, port: str) -> None:
+    edit = panel.port.lineEdit()
+    edit.selectAll()
+    qtbot.keyClick(edit, QtCore.Qt.Key.Key_Delete)
+    qtbot.keyClicks(edit, port)
+
+
+def click(qtbot, button) -> None:
+    qtbot.mouseClick(button, QtCore.Qt.MouseButton.LeftButton)
+
+
+def test_bench_pose_streams_over_a_pty_and_disconnect_stops_it(make_window, qtbot, tmp_path: Path) -> None:
+    window = make_window({"source": "virtual", "method": "both"})
+    panel = window.serial_panel
+    window.tabs.setCurrentIndex(window.tabs.count() - 1)
+    truth = window.virtual_form.value().pose
+    pty = Pty(tmp_path / "ttyQRF")
+    try:
+        type_port(qtbot, panel, str(pty.path))
+        click(qtbot, panel.connect_button)
+        assert panel.connect_button.text() == "Disconnect" and not panel.port.isEnabled()
+        qtbot.waitUntil(lambda: panel.shown_state() == CONNECTED, timeout=WAIT_MS)
+        qtbot.waitUntil(lambda: sum(f["status"] == "OK" for f in pty.frames()) >= 8, timeout=WAIT_MS)
+        frames = pty.frames()
+        ok = [f for f in frames if f["status"] == "OK"]
+        assert all(meets_seed_criteria(f["pose"], truth) for f in ok), ok[:3]
+        seqs = [f["seq"] for f in frames]
+        assert seqs == list(range(seqs[0], seqs[0] + len(seqs)))  # in order, none lost on the wire
+        assert all(f["status"] in ("OK", "NOQR", "NOCONV", "STALE") for f in frames)
+        # The counters shown are the link's, and the last line shown is one that went out.
+        qtbot.waitUntil(
+            lambda: int(panel.counter_labels["frames_sent"].text()) >= len(frames), timeout=WAIT_MS
+        )
+        qtbot.waitUntil(
+            lambda: (
+                panel.last_sent.text() != "" and (panel.last_sent.text() + "\r\n") in pty.drain().decode()
+            ),
+            timeout=WAIT_MS,
+        )
+        assert panel.state_label.text().startswith("connected")
+        assert STATE_COLOURS[CONNECTED] in panel.state_label.styleSheet()
+
+        click(qtbot, panel.connect_button)  # Disconnect
+        assert panel.connect_button.text() == "Connect" and panel.port.isEnabled()
+        assert panel.shown_state() == CLOSED and STATE_COLOURS[CLOSED] in panel.state_label.styleSheet()
+        panel.join_closers()
+        assert panel.status().state == CLOSED
+        count = len(split_lines(pty.drain()))
+        processed = window.worker.frames_processed
+        qtbot.waitUntil(lambda: window.worker.frames_processed >= processed + 10, timeout=WAIT_MS)
+        assert len(split_lines(pty.drain())) == count, "frames kept coming after Disconnect"
+    finally:
+        pty.vanish()
+
+
+def test_vanished_port_shows_disconnected_app_goes_on_and_resumes(make_window, qtbot, tmp_path: Path) -> None:
+    window = make_window({"source": "virtual", "method": "numerical"})
+    panel = window.serial_panel
+    path = tmp_path / "ttyQRF"
+    first = Pty(path)
+    second = None
+    try:
+        type_port(qtbot, panel, str(path))
+        reconnect = panel.fields["reconnect_interval_s"]
+        reconnect.lineEdit().selectAll()
+        qtbot.keyClicks(reconnect.lineEdit(), "0.05")
+        qtbot.keyClick(reconnect.lineEdit(), QtCore.Qt.Key.Key_Return)
+        assert panel.settings().reconnect_interval_s == pytest.approx(0.05)
+        click(qtbot, panel.connect_button)
+        qtbot.waitUntil(lambda: len(first.frames()) >= 3, timeout=WAIT_MS)
+        first.vanish()  # unplugged mid-stream
+        qtbot.waitUntil(lambda: panel.shown_state() == DISCONNECTED, timeout=WAIT_MS)
+        assert STATE_COLOURS[DISCONNECTED] in panel.state_label.styleSheet()
+        assert "ttyQRF" in panel.last_error.text() and int(panel.counter_labels["errors"].text()) >= 1
+        # The app keeps measuring and drawing meanwhile.
+        processed, shown = window.worker.frames_processed, window.frames_shown
+        qtbot.waitUntil(
+            lambda: window.worker.frames_processed > processed + 5 and window.frames_shown > shown,
+            timeout=WAIT_MS,
+        )
+        assert panel.shown_state() == DISCONNECTED
+        second = Pty(path)  # plugged in again (another pty behind the same path)
+        qtbot.waitUntil(lambda: panel.shown_state() == CONNECTED, timeout=WAIT_MS)
+        qtbot.waitUntil(lambda: any(f["status"] == "OK" for f in second.frames()), timeout=WAIT_MS)
+        assert panel.counter_labels["reconnects"].text() == "1"
+    finally:
+        first.vanish()
+        if second is not None:
+            second.vanish()
+
+
+def test_bad_path_shows_disconnected(make_window, qtbot) -> None:
+    window = make_window({"source": "virtual", "method": "numerical"})
+    panel = window.serial_panel
+    type_port(qtbot, panel, "/nonexistent/ttyQRF0")
+    click(qtbot, panel.connect_button)
+    qtbot.waitUntil(lambda: panel.shown_state() == DISCONNECTED, timeout=WAIT_MS)
+    assert "cannot open /nonexistent/ttyQRF0" in panel.last_error.text()
+    processed = window.worker.frames_processed
+    qtbot.waitUntil(lambda: window.worker.frames_processed > processed + 3, timeout=WAIT_MS)
+
+
+def test_loop_port_carries_the_bench_pose(make_window, qtbot) -> None:
+    window = make_window({"source": "virtual", "method": "numerical"})
+    panel = window.serial_panel
+    truth = window.virtual_form.value().pose
+    type_port(qtbot, panel, "loop://")
+    click(qtbot, panel.connect_button)
+    qtbot.waitUntil(lambda: panel.shown_state() == CONNECTED, timeout=WAIT_MS)
+    qtbot.waitUntil(lambda: ",OK*" in panel.last_sent.text(), timeout=WAIT_MS)
+    frame = parse_frame_line(panel.last_sent.text().encode() + b"\r\n")
+    assert frame["status"] == "OK" and meets_seed_criteria(frame["pose"], truth)
+    # loop:// sends every byte back: the link decoded its own frames with good checksums.
+    qtbot.waitUntil(lambda: panel.status().received.get("frames", 0) >= 3, timeout=WAIT_MS)
+    assert panel.status().received["bad_checksum"] == 0
+
+
+def test_settings_persist_with_the_app_config(qtbot, tmp_path: Path) -> None:
+    store_dir = tmp_path / "config"
+    window = MainWindow(ConfigStore(store_dir), {"source": "virtual"})
+    qtbot.addWidget(window)
+    panel = window.serial_panel
+    type_port(qtbot, panel, "/dev/ttyACM7")
+    baud = panel.fields["baud"]
+    baud.lineEdit().selectAll()
+    qtbot.keyClicks(baud.lineEdit(), "9600")
+    qtbot.keyClick(baud.lineEdit(), QtCore.Qt.Key.Key_Return)
+    panel.fields["max_rate_hz"].setValue(12.5)
+    window.shutdown()
+    again = MainWindow(ConfigStore(store_dir), {"source": "virtual"})
+    qtbot.addWidget(again)
+    try:
+        assert again.serial_panel.settings() == SerialLinkSettings(
+            port="/dev/ttyACM7", baud=9600, max_rate_hz=12.5
+        )
+        assert again.serial_panel.shown_state() == CLOSED  # never reconnects unasked
+    finally:
+        again.shutdown()
+
+
+def test_panel_screenshot(make_window, qtbot, tmp_path: Path) -> None:
+    window = make_window({"source": "virtual", "method": "numerical"})
+    panel = window.serial_panel
+    window.tabs.setCurrentIndex(window.tabs.count() - 1)
+    type_port(qtbot, panel, "loop://")
+    click(qtbot, panel.connect_button)
+    qtbot.waitUntil(lambda: int(panel.counter_labels["frames_sent"].text()) >= 3, timeout=WAIT_MS)
+    path = tmp_path / "serial_panel.png"
+    assert panel.grab().save(str(path))
+    assert path.stat().st_size > 2000
+    out = os.environ.get("QRFIELD_SCREENSHOT_DIR")
+    if out:
+        window.grab().save(str(Path(out) / "serial_window.png"))
+        panel.grab().save(str(Path(out) / "serial_panel.png"))
