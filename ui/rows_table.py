@@ -26,6 +26,7 @@ def _triple(row: LoggedRow, columns: Sequence[str]) -> str:
 #: (header, text of a row) per table column.
 COLUMNS: tuple[tuple[str, Callable[[LoggedRow], str]], ...] = (
     ("row", lambda r: str(r.number)),
+    ("pass", lambda r: ("pass" if r.passed else "fail") + ("" if r.confirmed else " (pending)")),
     ("time", lambda r: r.values.get("time", "")[11:19] or r.values.get("time", "")),
     ("combo", lambda r: r.combo),
     ("truth x, y, z (mm)", lambda r: _triple(r, ("gt_x", "gt_y", "gt_z"))),
@@ -35,7 +36,6 @@ COLUMNS: tuple[tuple[str, Callable[[LoggedRow], str]], ...] = (
     ("err pos (mm)", lambda r: r.values.get("err_pos", "") or "–"),
     ("err α, β, γ (deg)", lambda r: _triple(r, ("err_alpha", "err_beta", "err_gamma"))),
     ("frames", lambda r: f"{r.values.get('n_converged', '')}/{r.values.get('n_frames', '')}"),
-    ("pass", lambda r: ("pass" if r.passed else "fail") + ("" if r.confirmed else " (pending)")),
     ("note", lambda r: r.values.get("note", "")),
 )
 DISPLAY = QtCore.Qt.ItemDataRole.DisplayRole
