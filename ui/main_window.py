@@ -19,6 +19,7 @@ from qrfield.camera import CameraModel, CameraModelError, resolve_camera
 from qrfield.pipeline import methods_from_choice
 from qrfield.serial_link import SerialLinkSettings
 from qrfield.sources import Picamera2Settings, VirtualBenchSettings
+from ui.analysis_tab import AnalysisTab
 from ui.calibration_dialog import CalibrationDialog, CalibrationDialogSettings
 from ui.config import AppSettings, ConfigStore
 from ui.controls import CameraControls, SolverControls, SourceControls, app_settings_from, show_app_settings
@@ -26,6 +27,7 @@ from ui.plots import PosePlots
 from ui.pose_panel import PosePanel
 from ui.preview import PreviewView
 from ui.serial_panel import SerialPanel
+from ui.sessions_panel import BenchContext, SessionPanel
 from ui.settings_form import SettingsForm
 from ui.simulation_tab import CONFIG_KEY as SIMULATION_KEY
 from ui.simulation_tab import SimulationTab
@@ -112,6 +114,12 @@ class MainWindow(QtWidgets.QMainWindow):
         self.camera_controls.layout().addRow(self.calibrate_button)
         self.calibrate_button.clicked.connect(self.open_calibration)
         tabs.addTab(_scrolled(self.serial_panel), "Serial")
+        self.session_panel = SessionPanel(store, self._session_context)
+        self.analysis_tab = AnalysisTab(self.session_panel.root)
+        self.session_panel.set_default_solver(self.methods())
+        self.session_panel.sessionChanged.connect(lambda s: self.analysis_tab.set_current(s and s.path))
+        tabs.addTab(_scrolled(self.session_panel), "Session")
+        tabs.addTab(_scrolled(self.analysis_tab), "Analysis")
         app = self.app_settings
         self.simulation_tab = SimulationTab(app.camera, app.side_mm, store.value(SIMULATION_KEY))
         tabs.addTab(self.simulation_tab, "Simulation")
@@ -217,6 +225,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.plots.set_window(self.app_settings.plot_window_s)
         self.simulation_tab.set_app_camera(self.app_settings.camera, self.app_settings.side_mm)
         self.worker.configure(self._run_config())
+        self.session_panel.refresh_state()
 
     def _open_source(self) -> None:
         """Open the chosen source (again), e.g. after a failure."""
@@ -249,6 +258,13 @@ class MainWindow(QtWidgets.QMainWindow):
         with QtCore.QSignalBlocker(self.camera_controls.camera):
             self.camera_controls.camera.setCurrentText(spec)
         self._apply()
+
+    def _session_context(self) -> BenchContext:
+        """What a new session records and each row is checked against (the Session tab)."""
+        assert self.camera_model is not None
+        return BenchContext(
+            self.camera_model, self.app_settings.side_mm, self.methods(), self.solver_controls.settings()
+        )
 
     # ---------------------------------------------------------------- worker signals
     def _on_result_ready(self) -> None:
@@ -323,6 +339,7 @@ class MainWindow(QtWidgets.QMainWindow):
             self.plots.add(name, t, values)
         if result.truth is not None:
             self.plots.add("true", t, np.concatenate([result.truth.position_mm, result.truth.angles_deg]))
+        self.session_panel.on_processed(item)
 
     # ---------------------------------------------------------------- shutdown
     def save_settings(self) -> None:
@@ -335,6 +352,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.store.set_group("serial", self.serial_panel.saved_settings())
         if self.calibration_dialog is not None:
             self.store.set_group("calibration", self.calibration_dialog.settings())
+        self.session_panel.save_settings(self.store)
         self.store.set_value(SIMULATION_KEY, self.simulation_tab.settings())
         self.store.set_value("window", bytes(self.saveGeometry().toBase64()).decode())
         try:
@@ -354,8 +372,13 @@ class MainWindow(QtWidgets.QMainWindow):
         self.serial_panel.shutdown()
         if self.calibration_dialog is not None:
             self.calibration_dialog.shutdown()
+        self.session_panel.shutdown()
+        self.analysis_tab.shutdown()
 
     def closeEvent(self, event: QtGui.QCloseEvent) -> None:
+        if not self._closed and not self.session_panel.confirm_close():
+            event.ignore()  # rows not written yet: the operator chose to keep the app open
+            return
         self.shutdown()
         super().closeEvent(event)
 

@@ -97,7 +97,9 @@ def test_switching_source_to_a_folder(make_window, qtbot, tmp_path: Path, camera
     qtbot.waitUntil(
         lambda: window.last is not None and window.last.result.label.startswith("img"), timeout=WAIT_MS
     )
-    assert "folder" in window.status_source.text()
+    # The status line is set by the queued sourceOpened signal, which may land after the redraw
+    # timer has already drawn the folder's first frame: wait for it rather than race it.
+    qtbot.waitUntil(lambda: "folder" in window.status_source.text(), timeout=WAIT_MS)
     qtbot.waitUntil(lambda: meets_seed_criteria(window.pose_panel.displayed("ippe"), pose), timeout=WAIT_MS)
     assert np.all(np.isnan(window.pose_panel.displayed("true")))  # no truth column for real sources
 
