@@ -329,14 +329,21 @@ def add_camera_arguments(parser: Any, default: str | None = None) -> None:
     )
     parser.add_argument("--focal-px", type=float, metavar="F", help="focal length in pixels (with --size)")
     parser.add_argument("--size", metavar="WxH", help="image size for --focal-px, e.g. 640x480")
+    # Remembered so that camera_from_args can tell a default --camera from one the user typed.
+    parser.set_defaults(_camera_default=default)
 
 
 def camera_from_args(args: Any) -> CameraModel:
-    """The camera named by ``--camera`` or ``--focal-px``/``--size``; CameraModelError if neither."""
+    """The camera named by ``--camera`` or ``--focal-px``/``--size``.
+
+    ``--focal-px``/``--size`` win over a default ``--camera``; CameraModelError if neither is
+    given, or if both a typed ``--camera`` and ``--focal-px``/``--size`` are (which one was meant?).
+    """
     focal, size = getattr(args, "focal_px", None), getattr(args, "size", None)
     if focal is not None or size is not None:
-        if getattr(args, "camera", None) and args.camera != getattr(args, "_camera_default", None):
-            pass  # --focal-px wins over a default --camera; an explicit clash is reported below
+        camera = getattr(args, "camera", None)
+        if camera and camera != getattr(args, "_camera_default", None):
+            raise CameraModelError(f"give either --camera ({camera}) or --focal-px/--size, not both")
         if focal is None or size is None:
             raise CameraModelError("--focal-px and --size go together, e.g. --focal-px 620 --size 640x480")
         if not math.isfinite(focal) or focal <= 0:

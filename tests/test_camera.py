@@ -117,3 +117,19 @@ def test_unknown_name_lists_presets():
 def test_malformed_size():
     with pytest.raises(CameraModelError, match="WxH"):
         resolve_camera("picam-v2@640by480")
+
+
+def test_camera_and_focal_options_clash_only_when_both_are_typed():
+    import argparse
+
+    from qrfield.camera import add_camera_arguments, camera_from_args
+
+    parser = argparse.ArgumentParser()
+    add_camera_arguments(parser, default="picam-v2@640x480")
+    # --focal-px/--size over the default --camera: the focal-only model.
+    cam = camera_from_args(parser.parse_args(["--focal-px", "600", "--size", "640x480"]))
+    assert (cam.fx, cam.cx, cam.cy) == (600.0, 319.5, 239.5)
+    assert camera_from_args(parser.parse_args([])).name == "picam-v2@640x480"
+    typed = parser.parse_args(["--camera", "picam-v1@648x486", "--focal-px", "600", "--size", "640x480"])
+    with pytest.raises(CameraModelError, match="not both"):
+        camera_from_args(typed)
