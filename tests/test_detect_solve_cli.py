@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from qrfield.cli import main
-from qrfield.geometry import Pose
+from qrfield.geometry import Pose, angle_difference
 from qrfield.render import render_view
 
 CAMERA = "picam-v2@640x480"
@@ -53,7 +53,7 @@ def test_json_entries_per_image_with_truthful_poses(images, capsys):
         for entry in methods.values():
             assert entry["text"] == f"card-{i}" and entry["status"] == "ok" and entry["converged"]
             assert np.linalg.norm(np.array(entry["position_mm"]) - pose.position_mm) < 5.0
-            assert np.abs(np.array(entry["angles_deg"]) - pose.angles_deg).max() < 2.0
+            assert np.abs(angle_difference(entry["angles_deg"], pose.angles_deg)).max() < 2.0
             assert entry["detection"]["refined"] is True
     for path, why in ((blank, "no QR code found"), (junk, "cannot read image"), (missing, "no such file")):
         (entry,) = by_image[path]
