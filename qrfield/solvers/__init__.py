@@ -67,8 +67,10 @@ def solve(
         settings: NumericalSettings or IppeSettings matching ``method``; None for the defaults.
 
     Raises SolverError for bad input (shape, NaN/inf, collinear, self-intersecting, concave or
-    counter-clockwise corners, non-positive side, no camera model, wrong settings); otherwise
-    returns a PoseResult, with ``converged`` False and a ``reason`` when no pose was found.
+    counter-clockwise corners, non-positive side, no camera model, settings of the wrong class or
+    z_min_mm >= z_max_mm) and qrfield.settings.SettingError for a setting outside its limits (both
+    are ValueErrors); otherwise returns a PoseResult, with ``converged`` False and a ``reason`` when
+    no pose was found.
     """
     settings_class(method)
     cam = check_camera(camera)
@@ -90,7 +92,8 @@ def solve_batch(
 
     "numerical" is vectorised in numpy and gives, row by row, the same numbers as :func:`solve`
     (depths and iteration counts bit for bit; the mirror search is not run). "ippe" loops.
-    Raises SolverError for a wrong overall shape, side, camera or settings; rows with unusable
+    Raises SolverError for a wrong overall shape, side, camera or settings (SettingError, also a
+    ValueError, for a setting outside its limits); rows with unusable
     corners (NaN/inf, degenerate or wrongly ordered) come back not converged with ``valid`` False.
     """
     settings_class(method)
