@@ -34,6 +34,8 @@ def cases(count: int, seed: int, camera_name: str = "picam-v2@640x480", max_tilt
     corners = np.array([p.corners_px(camera, SIDE_MM) for p in poses])
     positions = np.array([p.position_mm for p in poses])
     angles = np.array([p.angles_deg for p in poses])
+    for array in (corners, positions, angles):
+        array.setflags(write=False)  # cached and shared by tests: a test that edits it must copy
     return camera, poses, corners, positions, angles
 
 
