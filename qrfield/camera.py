@@ -175,8 +175,11 @@ class CameraModel:
         }
 
     def save(self, path: str | os.PathLike[str]) -> None:
-        """Write the model as JSON (UTF-8, indented)."""
-        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n", encoding="utf-8")
+        """Write the model as JSON (UTF-8, indented), all or nothing: a crash or power cut while
+        overwriting a calibrated profile leaves the old file, never a truncated one."""
+        from qrfield.sessions.files import atomic_write  # lazily: sessions imports this module
+
+        atomic_write(path, (json.dumps(self.to_dict(), indent=2) + "\n").encode("utf-8"))
 
     # ------------------------------------------------------------------ derived
     @property
