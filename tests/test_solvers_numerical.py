@@ -238,3 +238,17 @@ def test_batch_in_chunks_equals_single(monkeypatch):
     assert len(b) == 59
     b = solve_batch(sample, camera, SIDE_MM, SEED_SETTINGS)
     assert len(b) == 60 and not b.valid[9] and b.valid.sum() == 59
+
+
+def test_scalar_angle_extraction_is_the_geometry_one_also_at_gimbal_lock():
+    # The single-solve path extracts angles with a pure-Python twin of geometry.angles_from_rotation.
+    from qrfield.geometry import rotation_matrix
+    from qrfield.solvers.floats import angles_single
+
+    rng = np.random.default_rng(6)
+    angles = rng.uniform(-180, 180, (200, 3))
+    angles[:50, 1] = 90.0
+    angles[50:100, 1] = -90.0
+    angles[100, :] = [0.0, 0.0, 180.0]
+    for r in rotation_matrix(angles):
+        np.testing.assert_allclose(angles_single(r.tolist()), angles_from_rotation(r), rtol=0, atol=1e-9)

@@ -8,13 +8,14 @@ from __future__ import annotations
 import math
 
 from qrfield.camera import CameraModel
+from qrfield.geometry import GIMBAL_EPS
 
 
 def angles_single(r: list[list[float]]) -> list[float]:
     """Scalar twin of geometry.angles_from_rotation: (alpha, beta, gamma) in degrees from rows of R."""
     s = min(max(r[0][2], -1.0), 1.0)
     beta = math.asin(s)
-    if abs(s) > 1.0 - 1e-9:
+    if abs(s) > 1.0 - GIMBAL_EPS:  # the same gimbal-lock threshold as the numpy twin
         alpha = math.atan2(math.copysign(1.0, s) * r[1][0], r[1][1])
         gamma = 0.0
     else:
