@@ -173,7 +173,8 @@ def render_view(
         noise_sigma: Gaussian noise standard deviation in grey levels (0 = none).
         blur_px: Gaussian blur sigma in pixels (0 = none), e.g. defocus.
         gradient: brightness gradient across the image, relative (0.3 = +-30 % left to right).
-        background: a grey level, or an (H, W) uint8 image behind the card.
+        background: a grey level, or an (H, W) uint8 camera image behind the card (e.g. an earlier
+            view: with lens distortion it is taken as already distorted and is not remapped).
         supersample: samples per pixel per axis (anti-aliasing); 1 disables it.
         seed: seed of the noise (None = fresh randomness).
         allow_partial: render even when the code is cut by the image border (for detector tests).
@@ -205,38 +206,51 @@ def render_view(
             height=canvas_size[1],
             name="ideal-canvas",
         )
-    canvas = _background(background, canvas_size, camera, canvas_offset)
-    _draw_card(canvas, ideal_camera, side_mm, pose, text, modules, int(supersample))
-    if camera.has_distortion:
-        canvas = cv2.remap(
+
+    def view_over(behind: np.ndarray | int) -> np.ndarray:
+        """The card drawn over ``behind`` on the ideal canvas, brought to camera pixels."""
+        canvas = _background(behind, canvas_size, camera)
+        _draw_card(canvas, ideal_camera, side_mm, pose, text, modules, int(supersample))
+        if not camera.has_distortion:
+            return canvas
+        return cv2.remap(
             canvas,
             map_u - np.float32(canvas_offset[0]),
             map_v - np.float32(canvas_offset[1]),
             cv2.INTER_LINEAR,
             borderMode=cv2.BORDER_REPLICATE,
         )
+
+    if camera.has_distortion and isinstance(background, np.ndarray):
+        # A background image is a camera image (already distorted): it must not go through the
+        # remap. The card over black and over white gives its coverage; composite after the remap.
+        _check_background_image(background, camera)
+        dark = view_over(0).astype(np.float32)
+        light = view_over(255).astype(np.float32)
+        composite = dark + (light - dark) * (background.astype(np.float32) / 255.0)
+        canvas = np.clip(composite + 0.5, 0, 255).astype(np.uint8)
+    else:
+        canvas = view_over(background)
     image = _degrade(canvas, noise_sigma, blur_px, gradient, seed)
     if color:
         image = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
     return RenderedView(image, corners, pose, camera, float(side_mm), text, modules)
 
 
-def _background(
-    background: np.ndarray | int, size: tuple[int, int], camera: CameraModel, offset: tuple[float, float]
-) -> np.ndarray:
+def _check_background_image(background: np.ndarray, camera: CameraModel) -> None:
+    if background.shape != (camera.height, camera.width) or background.dtype != np.uint8:
+        raise ValueError(
+            f"background must be a ({camera.height}, {camera.width}) uint8 grey image, "
+            f"got {background.shape} {background.dtype}"
+        )
+
+
+def _background(background: np.ndarray | int, size: tuple[int, int], camera: CameraModel) -> np.ndarray:
+    """The canvas to draw on: a copy of a background image (pinhole cameras only), or a grey level."""
     width, height = size
     if isinstance(background, np.ndarray):
-        if background.shape != (camera.height, camera.width) or background.dtype != np.uint8:
-            raise ValueError(
-                f"background must be a ({camera.height}, {camera.width}) uint8 grey image, "
-                f"got {background.shape} {background.dtype}"
-            )
-        if (width, height) == camera.size:
-            return background.copy()
-        ox, oy = -int(offset[0]), -int(offset[1])
-        return cv2.copyMakeBorder(
-            background, oy, height - camera.height - oy, ox, width - camera.width - ox, cv2.BORDER_REPLICATE
-        )
+        _check_background_image(background, camera)
+        return background.copy()
     grey = int(background)
     if not 0 <= grey <= 255:
         raise ValueError(f"background grey level must be 0..255, got {grey}")

@@ -138,3 +138,25 @@ def test_qr_symbol_is_a_valid_code():
     # Finder patterns: 7x7 dark ring at three corners, light at the fourth.
     assert symbol[0, :7].all() and symbol[:7, 0].all() and symbol[0, -7:].all() and symbol[-7:, 0].all()
     assert not symbol[-1, -1] or not symbol[-7:, -7:].all()
+
+
+@pytest.mark.parametrize("k1", [-0.25, 0.3], ids=["barrel", "pincushion"])
+def test_background_image_through_a_lens_is_not_distorted_again(k1):
+    # A background image is a camera image: only the new card passes through the lens model.
+    camera = CameraModel(fx=560, fy=556, cx=321, cy=238, width=640, height=480, dist=[k1, 0.05, 0, 0, 0])
+    far = render_view(camera, 60.0, Pose([-90.0, 0.0, 500.0], [0.0, 10.0, 5.0]), text="alpha")
+    near = render_view(camera, 60.0, Pose([60.0, 10.0, 330.0], [-10.0, 0.0, -20.0]), text="bravo",
+                       background=far.image)  # fmt: skip
+    alone = render_view(camera, 60.0, near.pose, text="bravo")
+
+    def box(corners, grow):
+        (u0, v0), (u1, v1) = (
+            np.floor(corners.min(0) - grow).astype(int),
+            np.ceil(corners.max(0) + grow).astype(int),
+        )
+        return slice(v0, v1), slice(u0, u1)
+
+    behind = box(far.corners_px, 10)  # the far code and its quiet zone, clear of the near card
+    assert np.abs(near.image[behind].astype(int) - far.image[behind]).max() <= 1
+    card = box(near.corners_px, -2)  # inside the near symbol: the card covers the background
+    assert np.abs(near.image[card].astype(int) - alone.image[card]).max() <= 1
