@@ -28,8 +28,8 @@ class Detection:
         corner_quality: (4,) px, per corner the RMS distance of the sub-pixel edge points to the two
             fitted sides that meet there (smaller is better; about 0.01-0.05 px on a clean view);
             NaN when not refined.
-        backend: which backend found the code ("zxing", "zxing-x2", "opencv-aruco", "opencv"), or
-            "track" when the tracker re-found it by refinement alone.
+        backend: which backend found the code ("zxing", "zxing-x2", "finders", "opencv-aruco",
+            "opencv"), or "track" when the tracker re-found it by refinement alone.
         refined: True when the corners are the sub-pixel fit, False when they are the backend's.
         modules: modules per side of the symbol (21 for version 1).
     """
