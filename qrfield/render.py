@@ -121,6 +121,35 @@ def card_side_mm(side_mm: float, modules: int) -> float:
     return side_mm * (modules + 2 * (QUIET_ZONE_MODULES + CARD_MARGIN_MODULES)) / modules
 
 
+@functools.lru_cache(maxsize=16)
+def view_radius(camera: CameraModel) -> float:
+    """The largest normalised radius tan(off-axis angle) that the image shows; inf without distortion.
+
+    OpenCV's 5-coefficient lens model folds back far outside the field of view: a point 67 degrees
+    off the axis of a lens with k1 = -0.28 projects inside a 60-degree-wide image. A point beyond
+    this radius is out of view wherever the model projects it. Taken from the exact undistortion
+    of the image's border (pixel edges), with a 0.1 % margin.
+    """
+    if not camera.has_distortion:
+        return math.inf
+    w, h = camera.width, camera.height
+    u, v = np.linspace(-0.5, w - 0.5, w + 1), np.linspace(-0.5, h - 0.5, h + 1)
+    border = np.concatenate(
+        [
+            np.column_stack([u, np.full_like(u, -0.5)]),
+            np.column_stack([u, np.full_like(u, h - 0.5)]),
+            np.column_stack([np.full_like(v, -0.5), v]),
+            np.column_stack([np.full_like(v, w - 0.5), v]),
+        ]
+    ).reshape(-1, 1, 2)
+    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-10)
+    if hasattr(cv2, "undistortPointsIter"):  # OpenCV 4.x
+        ideal = cv2.undistortPointsIter(border, camera.K, camera.dist, None, None, criteria)
+    else:  # OpenCV 5
+        ideal = cv2.undistortPoints(border, camera.K, camera.dist, R=None, P=None, criteria=criteria)
+    return 1.001 * float(np.hypot(ideal[..., 0], ideal[..., 1]).max())
+
+
 def check_view(camera: CameraModel, side_mm: float, pose: Pose, allow_partial: bool = False) -> np.ndarray:
     """Return the (4, 2) vertex pixels of a visible pose, or raise RenderError saying why not."""
     if not math.isfinite(side_mm) or side_mm <= 0:
@@ -140,11 +169,18 @@ def check_view(camera: CameraModel, side_mm: float, pose: Pose, allow_partial: b
             for i, (u, v) in enumerate(corners)
             if not (-0.5 <= u <= camera.width - 0.5 and -0.5 <= v <= camera.height - 0.5)
         ]
-        if outside:
-            raise RenderError(
-                f"the code is out of view: {', '.join(outside)} outside the "
-                f"{camera.width}x{camera.height} image"
+        radius = np.hypot(vertices[:, 0] / vertices[:, 2], vertices[:, 1] / vertices[:, 2])
+        beyond = [
+            f"V{i + 1} {math.degrees(math.atan(r)):.1f} deg off the optical axis"
+            for i, r in enumerate(radius)
+            if r > view_radius(camera)
+        ]
+        if outside or beyond:
+            reasons = (
+                [f"{', '.join(outside)} outside the {camera.width}x{camera.height} image"] if outside else []
             )
+            reasons += [f"{', '.join(beyond)}, beyond the lens' field of view"] if beyond else []
+            raise RenderError(f"the code is out of view: {'; '.join(reasons)}")
     return corners
 
 

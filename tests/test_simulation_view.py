@@ -55,3 +55,23 @@ def test_tilt_of_89_degrees_is_out_of_view(camera_vga):
     # Off the axis, where the line of sight meets the card 89 deg from its normal or more, too.
     pose = Pose([0.0, 60.0, 300.0], [89.0, 0.0, 0.0])  # normal points to -y; the camera sees its back
     assert not poses_in_view(camera_vga, 50.0, pose.rotation[None], pose.position_mm[None], 85.0)[0][0, 0]
+
+
+def test_a_card_beyond_the_lens_field_of_view_is_out_of_view():
+    # OpenCV's 5-coefficient model folds back far off the axis: with this wide lens (k1 = -0.28) a
+    # card 67 degrees off the axis of a 62-degree-wide view projects inside the image, mirrored.
+    from solver_cases import DISTORTED
+
+    from qrfield.geometry import project_points
+
+    pose = Pose([720.0, 0.0, 300.0], [0.0, 50.0, 0.0])
+    folded = project_points(pose.vertices_mm(20.0), DISTORTED)
+    assert np.all((folded >= 0) & (folded <= [639, 479]))  # the model's pixels are inside the image
+    with pytest.raises(RenderError, match="beyond the lens' field of view"):
+        check_view(DISTORTED, 20.0, pose)
+    in_view, _ = poses_in_view(DISTORTED, 20.0, pose.rotation[None], pose.position_mm[None])
+    assert not in_view[0, 0]
+    # A card inside the field of view, near the image's edge, stays in view.
+    near_edge = Pose([165.0, 0.0, 300.0], [0.0, 20.0, 0.0])
+    check_view(DISTORTED, 20.0, near_edge)
+    assert poses_in_view(DISTORTED, 20.0, near_edge.rotation[None], near_edge.position_mm[None])[0][0, 0]

@@ -5,7 +5,8 @@ when every vertex is in front of the camera (z > 1e-6 mm), the card faces the ca
 (dot(R[:, 2], t) > 0: its printed side, marker -Z, is turned towards the optical centre) and is
 seen no more obliquely than ``max_view_angle_deg`` (the angle between the card's normal and the
 line of sight to its centre; 90 = only facing away is excluded), and every vertex projects inside
-the image (OpenCV pixels: -0.5 <= u <= W - 0.5, -0.5 <= v <= H - 0.5). Out-of-view poses are not
+the image (OpenCV pixels: -0.5 <= u <= W - 0.5, -0.5 <= v <= H - 0.5) from within the lens' field of
+view (:func:`qrfield.render.view_radius`). Out-of-view poses are not
 failures of a solver: the study leaves them out of its counts.
 """
 
@@ -17,6 +18,7 @@ import numpy as np
 
 from qrfield.camera import CameraModel
 from qrfield.geometry import marker_vertices, project_points
+from qrfield.render import view_radius
 
 #: Vertices must be this far in front of the camera (mm), as in qrfield.render.check_view.
 MIN_DEPTH_MM = 1e-6
@@ -66,4 +68,8 @@ def poses_in_view(
     inside = np.all(
         (u >= -0.5) & (u <= camera.width - 0.5) & (v >= -0.5) & (v <= camera.height - 0.5), axis=-1
     )
+    # The lens model folds back far off the axis: a vertex beyond the field of view is out of view
+    # even where it projects inside the image (see qrfield.render.view_radius).
+    radius = np.hypot(safe[..., 0] / safe[..., 2], safe[..., 1] / safe[..., 2])
+    inside &= np.all(radius <= view_radius(camera), axis=-1)
     return in_front & faces & inside, corners
