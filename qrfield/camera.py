@@ -304,7 +304,9 @@ def resolve_camera(spec: str) -> CameraModel:
     spec = spec.strip()
     if not spec:
         raise CameraModelError("empty camera name; give a preset such as picam-v2@640x480")
-    base, _, size_text = spec.rpartition("@") if "@" in spec else (spec, "", "")
+    # A file that exists is taken whole, so that a path may contain '@' (/home/me@lab/cam.json).
+    whole_file = Path(spec).expanduser().is_file()
+    base, _, size_text = spec.rpartition("@") if "@" in spec and not whole_file else (spec, "", "")
     size = parse_size(size_text) if size_text else None
     path = Path(base).expanduser()
     if base.endswith(".json") or os.sep in base or path.is_file():

@@ -133,3 +133,11 @@ def test_camera_and_focal_options_clash_only_when_both_are_typed():
     typed = parser.parse_args(["--camera", "picam-v1@648x486", "--focal-px", "600", "--size", "640x480"])
     with pytest.raises(CameraModelError, match="not both"):
         camera_from_args(typed)
+
+
+def test_a_path_with_an_at_sign_is_a_file_not_a_size(tmp_path):
+    folder = tmp_path / "me@lab"
+    folder.mkdir()
+    CameraModel.from_focal(600.0, 640, 480).save(folder / "cam.json")
+    assert resolve_camera(str(folder / "cam.json")).fx == 600.0
+    assert resolve_camera(str(folder / "cam.json") + "@320x240").fx == pytest.approx(300.0)
