@@ -115,6 +115,22 @@ def test_bad_camera_file_is_one_clear_line(tmp_path):
     assert out.returncode == 2 and "missing field" in out.stderr and str(bad) in out.stderr
 
 
+@pytest.mark.parametrize("command", ["marker", "render"])
+def test_qr_text_too_long_to_encode_is_one_clear_line(tmp_path, command):
+    # 3000 letters exceed a QR code's capacity (2953 bytes at level L): OpenCV raises cv2.error.
+    text = "x" * 3000
+    if command == "marker":
+        args = ["marker", "--text", text, "--side-mm", "50", "--out", str(tmp_path / "m.svg")]
+    else:
+        args = ["render", "--focal-px", "500", "--size", "640x480", "--side-mm", "50"]
+        args += ["--pose", "0,0,300,0,0,0", "--text", text, "--out", str(tmp_path / "r.png")]
+    out = _run(*args)
+    assert out.returncode == 2
+    assert "Traceback" not in out.stderr and "maximum capacity" in out.stderr
+    assert len(out.stderr.strip().splitlines()) == 1
+    assert not list(tmp_path.iterdir())
+
+
 def test_no_display_says_how_to_run_headless():
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY", "QT_QPA_PLATFORM")}
     env["PYTHONPATH"] = REPO
