@@ -131,6 +131,21 @@ def test_qr_text_too_long_to_encode_is_one_clear_line(tmp_path, command):
     assert not list(tmp_path.iterdir())
 
 
+@pytest.mark.parametrize(
+    ("option", "value", "named"),
+    [
+        ("--side-mm", "-1", "side_mm"),
+        ("--camera", "nosuch", "nosuch"),
+        ("--quit-after", "-1", "--quit-after"),
+    ],
+)
+def test_gui_bad_option_is_one_clear_line_before_any_window(option, value, named):
+    out = _run("gui", option, value, env={"QT_QPA_PLATFORM": "offscreen"})
+    assert out.returncode == 2
+    assert named in out.stderr and "Traceback" not in out.stderr
+    assert len(out.stderr.strip().splitlines()) == 1
+
+
 def test_no_display_says_how_to_run_headless():
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY", "QT_QPA_PLATFORM")}
     env["PYTHONPATH"] = REPO
