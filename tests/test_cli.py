@@ -162,3 +162,18 @@ def test_bench_commands_run(name):
     out = _run("bench", name, "--views", "3")
     assert out.returncode == 0, out.stderr
     assert "ratio" in out.stdout
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["serial-monitor", "loop://", "--seconds", "nan"],  # would never stop
+        ["serial-monitor", "loop://", "--seconds", "-1"],
+        ["serial-demo", "loop://", "--seconds", "-1"],
+        ["serial-demo", "loop://", "--fps", "inf", "--seconds", "1"],  # would publish in a busy loop
+    ],
+)
+def test_serial_tools_reject_bad_durations_and_rates_with_one_line(argv, capsys):
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and ("--seconds" in err or "--fps" in err)
