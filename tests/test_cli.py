@@ -177,3 +177,17 @@ def test_serial_tools_reject_bad_durations_and_rates_with_one_line(argv, capsys)
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and ("--seconds" in err or "--fps" in err)
+
+
+def test_simulate_checks_its_output_folder_before_running_the_study(tmp_path, capsys, monkeypatch):
+    import qrfield.simulation
+
+    def must_not_run(*args, **kwargs):
+        raise AssertionError("the study ran although its results could not be written")
+
+    monkeypatch.setattr(qrfield.simulation, "run_study", must_not_run)
+    blocker = tmp_path / "a-file"
+    blocker.write_text("")
+    assert main(["simulate", "--quiet", "--out", str(blocker / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "cannot create the folder" in err and len(err.strip().splitlines()) == 1
