@@ -143,6 +143,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.frames < 0:
         raise ValueError(f"--frames must be >= 0, got {args.frames}")
+    if not 0 <= args.retry_s < float("inf"):  # nan would retry in a busy loop
+        raise ValueError(f"--retry-s must be a number of seconds >= 0, got {args.retry_s}")
     camera, named = _camera(args)
     virtual = from_arguments(VirtualBenchSettings, args, prefix="virtual_")
     picamera_given = any(
