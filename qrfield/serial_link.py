@@ -348,7 +348,8 @@ class SerialLink:
             return True
 
     def close(self, timeout: float = 2.0) -> None:
-        """Stop the thread (joined up to ``timeout`` s) and close the port; state becomes closed."""
+        """Write the newest pose still waiting (if connected), stop the thread (joined up to
+        ``timeout`` s) and close the port; state becomes closed."""
         with self._lock:
             self._stop = True
             self._lock.notify_all()
