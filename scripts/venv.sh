@@ -1,8 +1,8 @@
 # Sourced by run.sh and test.sh: make or reuse the venv "$VENV" and install qrfield with its dev
 # tools into it, again only when pyproject.toml changed. On Raspberry Pi OS the venv sees the
 # system's site-packages, so that the OS's picamera2 (apt: python3-picamera2) is importable, and
-# numpy stays 1.x there: the OS's picamera2 (its simplejpeg) is built for numpy 1.x and fails to
-# import under numpy 2.
+# numpy stays 1.x there: Bookworm's picamera2 (its simplejpeg) is built for numpy 1.x and fails to
+# import under numpy 2. pip then picks opencv-python-headless 4.11 (4.12 and later need numpy 2).
 VENV="${QRFIELD_VENV:-.venv}"
 PYTHON="${PYTHON:-python3}"
 
