@@ -56,6 +56,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         # Bad input is the user's to fix: one clear line, no traceback.
         print(f"qrfield {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except Exception as exc:
+        # OpenCV rejects bad arguments with cv2.error, not a ValueError (e.g. a QR text too long to
+        # encode, reached from render, marker and the virtual bench): still the user's input to fix.
+        cv2 = sys.modules.get("cv2")
+        if cv2 is None or not isinstance(exc, cv2.error):
+            raise
+        detail = (getattr(exc, "err", "") or str(exc)).strip()
+        print(f"qrfield {args.command}: error: OpenCV: {detail}", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print(f"qrfield {args.command}: interrupted", file=sys.stderr)
         return 130

@@ -348,7 +348,8 @@ class SerialLink:
             return True
 
     def close(self, timeout: float = 2.0) -> None:
-        """Stop the thread (joined up to ``timeout`` s) and close the port; state becomes closed."""
+        """Write the newest pose still waiting (if connected), stop the thread (joined up to
+        ``timeout`` s) and close the port; state becomes closed."""
         with self._lock:
             self._stop = True
             self._lock.notify_all()
@@ -446,8 +447,16 @@ class SerialLink:
             item: _Pending | None = None
             is_stale = False
             with self._lock:
-                if self._stop:
-                    break
+                stopping = self._stop
+                if stopping:
+                    # Closing: the newest pose not yet written still goes out, once, rate limit or
+                    # not (a run that stops right after its last frame must not lose that pose).
+                    item, self._pending = self._pending, None
+            if stopping:
+                if item is not None:
+                    self._write(item, False)  # once: a failed write is not retried while closing
+                break
+            with self._lock:
                 now = time.monotonic()
                 stale_due = (
                     last_sent + stale_after if stale_after > 0 and self._last_frame is not None else None

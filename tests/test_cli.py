@@ -115,6 +115,37 @@ def test_bad_camera_file_is_one_clear_line(tmp_path):
     assert out.returncode == 2 and "missing field" in out.stderr and str(bad) in out.stderr
 
 
+@pytest.mark.parametrize("command", ["marker", "render"])
+def test_qr_text_too_long_to_encode_is_one_clear_line(tmp_path, command):
+    # 3000 letters exceed a QR code's capacity (2953 bytes at level L): OpenCV raises cv2.error.
+    text = "x" * 3000
+    if command == "marker":
+        args = ["marker", "--text", text, "--side-mm", "50", "--out", str(tmp_path / "m.svg")]
+    else:
+        args = ["render", "--focal-px", "500", "--size", "640x480", "--side-mm", "50"]
+        args += ["--pose", "0,0,300,0,0,0", "--text", text, "--out", str(tmp_path / "r.png")]
+    out = _run(*args)
+    assert out.returncode == 2
+    assert "Traceback" not in out.stderr and "maximum capacity" in out.stderr
+    assert len(out.stderr.strip().splitlines()) == 1
+    assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "named"),
+    [
+        ("--side-mm", "-1", "side_mm"),
+        ("--camera", "nosuch", "nosuch"),
+        ("--quit-after", "-1", "--quit-after"),
+    ],
+)
+def test_gui_bad_option_is_one_clear_line_before_any_window(option, value, named):
+    out = _run("gui", option, value, env={"QT_QPA_PLATFORM": "offscreen"})
+    assert out.returncode == 2
+    assert named in out.stderr and "Traceback" not in out.stderr
+    assert len(out.stderr.strip().splitlines()) == 1
+
+
 def test_no_display_says_how_to_run_headless():
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY", "QT_QPA_PLATFORM")}
     env["PYTHONPATH"] = REPO
@@ -131,3 +162,34 @@ def test_bench_commands_run(name):
     out = _run("bench", name, "--views", "3")
     assert out.returncode == 0, out.stderr
     assert "ratio" in out.stdout
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["serial-monitor", "loop://", "--seconds", "nan"],  # would never stop
+        ["serial-monitor", "loop://", "--seconds", "-1"],
+        ["serial-demo", "loop://", "--seconds", "-1"],
+        ["serial-demo", "loop://", "--seconds", "1", "--fps", "inf"],  # would publish in a busy loop
+        ["run", "--source", "virtual", "--frames", "1", "--retry-s", "nan"],  # would retry in a busy loop
+        ["run", "--source", "virtual", "--frames", "1", "--retry-s", "-1"],
+    ],
+)
+def test_bad_durations_and_rates_are_one_line(argv, capsys):
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and argv[-2] in err
+
+
+def test_simulate_checks_its_output_folder_before_running_the_study(tmp_path, capsys, monkeypatch):
+    import qrfield.simulation
+
+    def must_not_run(*args, **kwargs):
+        raise AssertionError("the study ran although its results could not be written")
+
+    monkeypatch.setattr(qrfield.simulation, "run_study", must_not_run)
+    blocker = tmp_path / "a-file"
+    blocker.write_text("")
+    assert main(["simulate", "--quiet", "--out", str(blocker / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "cannot create the folder" in err and len(err.strip().splitlines()) == 1

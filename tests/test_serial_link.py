@@ -330,6 +330,20 @@ def test_rate_limit_caps_frames_per_second_and_the_newest_pose_goes_last():
     assert status.pending == 0 and status.frames_dropped > 0 and status.frames_sent == len(port.written)
 
 
+def test_close_still_writes_the_newest_pose_held_back_by_the_rate_limit():
+    # `qrfield run --frames 1 --serial PORT` closes the link right after publishing its only pose.
+    port = SlowPort(write_s=0)
+    settings = SerialLinkSettings(port="fake", max_rate_hz=0.1, stale_after_s=0)  # one frame per 10 s
+    link = SerialLink(settings, opener=lambda s: port).start()
+    link.publish(1, (1.0, 2.0, 300.0), (0, 0, 0))
+    wait_until(lambda: len(port.written) == 1, what="the first frame")
+    link.publish(2, (2.0, 2.0, 300.0), (0, 0, 0))  # held back: the next slot is 10 s away
+    link.close()
+    assert [parse_frame_line(line)["t_ms"] for line in port.written] == [1, 2]
+    status = link.status()
+    assert status.frames_sent == 2 and status.frames_dropped == 0 and status.state == CLOSED
+
+
 def test_non_finite_pose_goes_out_as_noconv_with_the_reason_recorded():
     port = SlowPort(write_s=0)
     sent = []

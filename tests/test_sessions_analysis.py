@@ -171,3 +171,21 @@ def test_sessions_pull_in_no_qt():
     subprocess.run(
         [sys.executable, "-c", code], check=True, env={**os.environ, "PYTHONPATH": repo}, timeout=120
     )
+
+
+def test_a_row_with_damaged_ground_truth_is_left_out_of_the_resemblance_not_fatal(tmp_path, camera_vga):
+    from qrfield.sessions import GroundTruth, Session, measure
+    from qrfield.sessions.analysis import analyze, format_report
+
+    session = Session.create(tmp_path, "damaged", camera=camera_vga, side_mm=50.0, solver="numerical")
+    frames = [{"position_mm": [0.0, 0.0, 300.0], "angles_deg": [10.0, 0.0, 0.0], "converged": True}]
+    session.log(measure(frames, GroundTruth(0.0, 0.0, 300.0, 10.0, 0.0, 0.0, "alpha")))
+    session.close()
+    with open(session.rows_path, "a", encoding="utf-8") as fh:  # a row edited by hand: gt_x is text
+        fh.write("2,now,alpha,abc" + "," * 18 + "1,\n")
+    result = analyze(session.path)
+    res = result["resemblance"]
+    assert (res["compared"], res["not_compared"]) == (1, 1)
+    assert isinstance(res["per_row"][0]["match"], bool) and res["per_row"][1]["match"] is None
+    assert "ground truth is incomplete" in res["per_row"][1]["simulation_reason"]
+    assert "1 row(s) without a complete ground truth not compared" in format_report(result)

@@ -321,6 +321,26 @@ def test_auto_falls_back_to_the_virtual_bench_and_says_why(no_picamera2, monkeyp
         source.close()
 
 
+def test_a_picamera2_that_fails_to_import_is_a_source_error_and_auto_moves_on(tmp_path, monkeypatch) -> None:
+    # The OS's picamera2 under a numpy 2 in the venv raises ValueError while importing (simplejpeg).
+    package = tmp_path / "picamera2"
+    package.mkdir()
+    (package / "__init__.py").write_text(
+        'raise ValueError("numpy.dtype size changed, may indicate binary incompatibility")\n'
+    )
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.delitem(sys.modules, "picamera2", raising=False)
+    with pytest.raises(SourceError, match=r"fails to import .*numpy\.dtype size changed.*numpy<2"):
+        Picamera2Source().open()
+    monkeypatch.setattr(opencv_module.cv2, "VideoCapture", lambda index, *a: DeadCapture(False))
+    source = open_source("auto")
+    try:
+        assert isinstance(source, VirtualBenchSource)
+        assert "picamera2 is installed but fails to import" in source.notes[0]
+    finally:
+        source.close()
+
+
 def test_auto_prefers_picamera2(fake_picamera2) -> None:
     source = open_source("auto")
     try:

@@ -14,7 +14,7 @@ DESCRIPTION = (
     "rotation combination, the rows, pass rate and mean / max absolute error per axis (withdrawn rows "
     "excluded), and the resemblance to the simulation: the share of rows whose pass agrees with the "
     "simulation's verdict at the same ground-truth pose (same camera, side and solver, corners rounded to "
-    "whole pixels), beside the seed's 73.15%%."
+    "whole pixels), beside the seed's 73.15 %."
 )
 
 

@@ -52,7 +52,25 @@ def display_available() -> bool:
     return True
 
 
+def check_arguments(args: argparse.Namespace) -> None:
+    """Reject bad --side-mm, --camera and --quit-after before any window opens (ValueError naming it).
+
+    The app would otherwise take them as they are (a negative QR side, a camera it cannot resolve).
+    """
+    from qrfield.camera import resolve_camera
+    from qrfield.settings import from_dict
+    from ui.config import AppSettings  # plain dataclasses, no Qt
+
+    if args.side_mm is not None:
+        from_dict(AppSettings, {"side_mm": args.side_mm})  # its declared limits, in mm
+    if args.camera is not None:
+        resolve_camera(args.camera)  # CameraModelError naming the preset or file
+    if args.quit_after is not None and not args.quit_after > 0:
+        raise ValueError(f"--quit-after must be a positive number of seconds, got {args.quit_after}")
+
+
 def run(args: argparse.Namespace) -> int:
+    check_arguments(args)
     if not display_available():
         print(
             "qrfield: no display (DISPLAY and WAYLAND_DISPLAY are unset), so no window can open; "

@@ -126,9 +126,17 @@ def _serial_link(args: argparse.Namespace, say: Any) -> Any:
     settings = from_arguments(SerialLinkSettings, args, prefix="serial_")
     settings = dataclasses.replace(settings, port=port)
 
+    shown = {"state": "", "error": ""}
+
     def on_status(status: Any) -> None:
-        if status.last_error:
-            say(f"serial {status.port}: {status.state}: {status.last_error}")
+        # Each state change once, and each new error once: a port that stays away is retried every
+        # reconnect interval with the same error, which would otherwise fill the log.
+        if status.state != shown["state"]:
+            shown["state"] = status.state
+            say(f"serial {status.port}: {status.state}")
+        if status.last_error and status.last_error != shown["error"]:
+            shown["error"] = status.last_error
+            say(f"serial {status.port}: {status.last_error}")
 
     link = SerialLink(settings, on_status=on_status).start()
     say(f"serial: sending $QRF frames to {port} at {settings.baud} baud, at most {settings.max_rate_hz:g}/s")
@@ -143,6 +151,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.frames < 0:
         raise ValueError(f"--frames must be >= 0, got {args.frames}")
+    if not 0 <= args.retry_s < float("inf"):  # nan would retry in a busy loop
+        raise ValueError(f"--retry-s must be a number of seconds >= 0, got {args.retry_s}")
     camera, named = _camera(args)
     virtual = from_arguments(VirtualBenchSettings, args, prefix="virtual_")
     picamera_given = any(

@@ -43,8 +43,10 @@ def run(args: argparse.Namespace) -> int:
     from qrfield.serial_link import SerialLink, SerialLinkSettings
     from qrfield.settings import validated
 
-    if not args.fps > 0:
+    if not 0 < args.fps < math.inf:
         raise ValueError(f"--fps must be positive, got {args.fps}")
+    if args.seconds is not None and not 0 < args.seconds < math.inf:
+        raise ValueError(f"--seconds must be a positive number of seconds, got {args.seconds}")
     settings = validated(SerialLinkSettings(port=args.port, baud=args.baud, max_rate_hz=args.max_rate))
 
     def on_sigterm(signum: int, frame: object) -> None:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import signal
 import sys
 import time
@@ -64,6 +65,8 @@ def run(args: argparse.Namespace) -> int:
     baud = baud_spec.validate(args.baud, where="--")
     if args.count is not None and args.count < 1:
         raise ValueError(f"--count must be at least 1, got {args.count}")
+    if args.seconds is not None and not 0 < args.seconds < math.inf:
+        raise ValueError(f"--seconds must be a positive number of seconds, got {args.seconds}")
     try:
         port = serial.serial_for_url(args.port, baudrate=baud, timeout=0.1)  # 8N1 is pyserial's default
     except (serial.SerialException, ValueError) as exc:

@@ -44,6 +44,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import contextlib
+    import os
     import shlex
     import signal
     import sys
@@ -65,6 +67,15 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--out {out}: exists and is not a folder")
     if out.is_dir() and any(out.iterdir()) and not args.force:
         raise ValueError(f"--out {out}: folder is not empty (choose another, or --force to write into it)")
+    # Make the folder now: a study can run for hours, and its results must not be lost at the end
+    # for want of a writable output folder.
+    created = not out.exists()
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OSError(f"--out {out}: cannot create the folder ({exc.strerror or exc})") from None
+    if not os.access(out, os.W_OK):
+        raise OSError(f"--out {out}: the folder is not writable")
 
     stop = threading.Event()
 
@@ -83,6 +94,11 @@ def run(args: argparse.Namespace) -> int:
     )
     try:
         result = run_study(config, progress=bar, stop=stop)
+    except BaseException:
+        if created:
+            with contextlib.suppress(OSError):
+                out.rmdir()  # only when still empty
+        raise
     finally:
         if bar is not None:
             bar.finish()

@@ -132,9 +132,23 @@ def resemblance(rows: Sequence[LoggedRow], info: SessionInfo) -> tuple[dict[str,
     if info.solver not in ("numerical", "ippe"):
         return None, f"the session names no known solver ({info.solver!r})"
     per_row = []
-    matches = 0
+    matches = compared = 0
     for row in rows:
-        sim_pass, reason = simulated_verdict(row_truth(row), info)
+        truth = row_truth(row)
+        if not (np.all(np.isfinite(truth.position_mm)) and np.all(np.isfinite(truth.angles_deg))):
+            # A hand-edited or damaged row: no pose to simulate; left out of the share, not fatal.
+            per_row.append(
+                {
+                    "row": row.number,
+                    "pass": row.passed,
+                    "simulation_pass": None,
+                    "match": None,
+                    "simulation_reason": "not compared: its ground truth is incomplete or not a number",
+                }
+            )
+            continue
+        compared += 1
+        sim_pass, reason = simulated_verdict(truth, info)
         match = sim_pass == row.passed
         matches += match
         per_row.append(
@@ -146,14 +160,15 @@ def resemblance(rows: Sequence[LoggedRow], info: SessionInfo) -> tuple[dict[str,
                 "simulation_reason": reason,
             }
         )
-    if not rows:
-        return None, "no rows to compare"
-    share = matches / len(rows)
+    if not compared:
+        return None, "no rows to compare" if not rows else "no row has a complete ground truth"
+    share = matches / compared
     return {
         "share": share,
         "percent": round(100.0 * share, 2),
         "matches": matches,
-        "compared": len(rows),
+        "compared": compared,
+        "not_compared": len(rows) - compared,
         "seed_percent": SEED_RESEMBLANCE_PERCENT,
         "solver": info.solver,
         "rounding": "whole pixels",
@@ -253,6 +268,11 @@ def format_report(result: dict[str, Any]) -> str:
             f"({res['matches']} of {res['compared']} rows agree with the simulated verdict, "
             f"whole-pixel corners, solver {res['solver']}); "
             f"seed: {res['seed_percent']:.2f}%"
+            + (
+                f"; {res['not_compared']} row(s) without a complete ground truth not compared"
+                if res.get("not_compared")
+                else ""
+            )
         )
     for path in result["plots"]:
         lines.append(f"wrote {path}")

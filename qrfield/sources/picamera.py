@@ -57,6 +57,14 @@ def import_picamera2() -> Any:
         from picamera2 import Picamera2  # type: ignore[import-not-found]
     except ImportError as exc:
         raise SourceError(PICAMERA2_MISSING) from exc
+    except Exception as exc:
+        # Installed but broken, e.g. the OS's picamera2 (its simplejpeg built for numpy 1.x) under a
+        # numpy 2 in the venv raises ValueError "numpy.dtype size changed": a source that cannot
+        # open, so that auto moves on to the next camera instead of stopping the app.
+        raise SourceError(
+            f"picamera2 is installed but fails to import ({type(exc).__name__}: {exc}); "
+            "if it mentions numpy, the OS's picamera2 needs numpy 1.x in the venv: pip install 'numpy<2'"
+        ) from exc
     return Picamera2
 
 
