@@ -134,3 +134,30 @@ def test_noise_frames_are_not_traced_for_finder_patterns(monkeypatch):
         seed=1,
     )
     assert finders.locate_by_finders(view.image) and traced
+
+
+def test_opencv_backend_works_without_the_bytes_api(monkeypatch, camera_vga):
+    # OpenCV before 4.12 (Raspberry Pi OS with numpy 1.x) has no detectAndDecodeBytes[Multi].
+    import cv2
+
+    from qrfield.detect import Detector, DetectorSettings
+    from qrfield.geometry import Pose
+    from qrfield.render import render_view
+
+    real = cv2.QRCodeDetector
+
+    class OldDetector:
+        def __init__(self):
+            self.inner = real()
+
+        def detectAndDecodeMulti(self, image):
+            return self.inner.detectAndDecodeMulti(image)
+
+        def detectAndDecode(self, image):
+            return self.inner.detectAndDecode(image)
+
+    monkeypatch.setattr(cv2, "QRCodeDetector", OldDetector)
+    view = render_view(camera_vga, 80.0, Pose([0, 0, 300], [10, -10, 20]), text="old-opencv")
+    found = Detector(DetectorSettings(backends="opencv")).detect(view.image)
+    assert [d.text for d in found] == ["old-opencv"]
+    assert np.abs(found[0].corners_px - view.corners_px).max() < 0.5

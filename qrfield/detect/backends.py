@@ -96,8 +96,12 @@ def _opencv_multi(
     """All codes by OpenCV's multi-code API; if it reads none, its single-code API (which decodes
     more of the real photos: 29 of 77 against 15)."""
     out = []
+    # OpenCV before 4.12 (what numpy 1.x, hence Raspberry Pi OS's picamera2, gets) has no Bytes
+    # variants; the text variants decode the same codes.
+    decode_multi = getattr(detector, "detectAndDecodeBytesMulti", None) or detector.detectAndDecodeMulti
+    decode_single = getattr(detector, "detectAndDecodeBytes", None) or detector.detectAndDecode
     try:
-        ok, payloads, points, _ = detector.detectAndDecodeBytesMulti(grey)
+        ok, payloads, points, _ = decode_multi(grey)
     except cv2.error:
         ok, payloads, points = False, (), None
     if ok and points is not None:
@@ -109,7 +113,7 @@ def _opencv_multi(
     if any(c.text for c in out):
         return out
     try:
-        payload, points, _ = detector.detectAndDecodeBytes(grey)
+        payload, points, _ = decode_single(grey)
     except cv2.error:
         return out
     if points is None:
@@ -121,10 +125,13 @@ def _opencv_multi(
     return [single, *[c for c in out if np.abs(c.corners_px - corners).max() > 2.0]]
 
 
-def _text(payload: bytes | None) -> str | None:
-    """Payload bytes as text: UTF-8, else Latin-1 (QR's default byte charset); None when empty."""
+def _text(payload: bytes | str | None) -> str | None:
+    """Payload bytes as text: UTF-8, else Latin-1 (QR's default byte charset); None when empty.
+    Text already decoded by OpenCV's older text API is taken as it is."""
     if not payload:
         return None
+    if isinstance(payload, str):
+        return payload
     try:
         return bytes(payload).decode("utf-8")
     except UnicodeDecodeError:
