@@ -70,7 +70,12 @@ def qr_symbol(text: str) -> np.ndarray:
     """
     if not text:
         raise ValueError("QR text must not be empty")
-    image = cv2.QRCodeEncoder.create().encode(text)
+    try:
+        image = cv2.QRCodeEncoder.create().encode(text)
+    except cv2.error:
+        raise ValueError(
+            f"OpenCV could not encode a {len(text)}-character text as a QR code (too long?)"
+        ) from None
     if image is None or image.size == 0:
         raise ValueError(f"OpenCV could not encode {text!r} as a QR code")
     dark = image < 128
