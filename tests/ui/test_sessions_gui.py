@@ -155,12 +155,20 @@ def test_rows_logged_on_the_virtual_bench_match_its_true_pose(make_window, qtbot
     window.virtual_form.widgets["z_mm"].setValue(350.0)
     window.virtual_form.widgets["alpha_deg"].setValue(25.0)
     truths.append(bench(window))
+    # The two edits reach the worker as two configurations, so a frame with z 350 and the old
+    # alpha may be drawn in between: wait for a frame showing both.
     qtbot.waitUntil(
-        lambda: window.last is not None and window.last.result.truth.position_mm[2] == 350.0, timeout=WAIT_MS
+        lambda: (
+            window.last is not None
+            and window.last.result.truth.position_mm[2] == 350.0
+            and window.last.result.truth.angles_deg[0] == pytest.approx(25.0)
+        ),
+        timeout=WAIT_MS,
     )
     qtbot.mouseClick(panel.form.follow_box, LEFT)
-    qtbot.waitUntil(lambda: panel.form.fields()["z"] == "350", timeout=WAIT_MS)
-    assert panel.form.fields()["alpha"] == "25"
+    qtbot.waitUntil(
+        lambda: (panel.form.fields()["z"], panel.form.fields()["alpha"]) == ("350", "25"), timeout=WAIT_MS
+    )
     with qtbot.waitSignal(panel.rowLogged, timeout=WAIT_MS):
         qtbot.mouseClick(panel.log_button, LEFT)
     assert panel.status.text().startswith("logged row 2")
