@@ -125,8 +125,14 @@ def test_virtual_chessboard_views_calibrate_back_to_the_camera(make_window, qtbo
     # Use: the app's camera model becomes the calibrated one.
     click(qtbot, dialog.use_button)
     assert window.app_settings.camera == str(path)
-    qtbot.waitUntil(lambda: window.camera_model.fx == pytest.approx(cam.fx), timeout=WAIT_MS)
-    assert window.worker.latest is not None
+    assert window.camera_model.fx == pytest.approx(cam.fx)
+    # ... and reaches the worker: the frames are solved with it from now on.
+    qtbot.waitUntil(
+        lambda: (
+            window.worker._config is not None and window.worker._config.camera.fx == pytest.approx(cam.fx)
+        ),
+        timeout=WAIT_MS,
+    )
 
     screenshot = tmp_path / "calibration_dialog.png"
     assert dialog.grab().save(str(screenshot)) and screenshot.stat().st_size > 5000
