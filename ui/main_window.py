@@ -157,7 +157,6 @@ class MainWindow(QtWidgets.QMainWindow):
         # ----- worker
         config = self._run_config()
         self.worker = PipelineWorker(config, source_factory=source_factory)
-        self.worker.resultReady.connect(self._on_result_ready)
         self.worker.sourceOpened.connect(self._on_source_opened)
         self.worker.sourceFailed.connect(self._on_source_failed)
         self.worker.sourceNote.connect(self._on_note)
@@ -177,7 +176,6 @@ class MainWindow(QtWidgets.QMainWindow):
 
         self.last: Processed | None = None
         self.frames_shown = 0
-        self._dirty = False
         self._t0 = time.monotonic()
         self._last_plot = 0.0
         self._rate_t = time.monotonic()
@@ -267,9 +265,6 @@ class MainWindow(QtWidgets.QMainWindow):
         )
 
     # ---------------------------------------------------------------- worker signals
-    def _on_result_ready(self) -> None:
-        self._dirty = True
-
     def _on_source_opened(self, description: str) -> None:
         self.banner_row.hide()
         self.status_source.setText(f"source: {description}")
