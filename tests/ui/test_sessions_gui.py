@@ -83,6 +83,16 @@ def show_tab(window, widget) -> None:
     assert tabs.tabText(index) in ("Session", "Analysis")
 
 
+def click_box(qtbot, box: QtWidgets.QCheckBox) -> None:
+    """Click a check box on its indicator (a click right of its text does not toggle it)."""
+    was = box.isChecked()
+    option = QtWidgets.QStyleOptionButton()
+    box.initStyleOption(option)
+    indicator = box.style().subElementRect(QtWidgets.QStyle.SubElement.SE_CheckBoxIndicator, option, box)
+    qtbot.mouseClick(box, LEFT, pos=indicator.center())
+    assert box.isChecked() != was
+
+
 def rows_csv(session_dir: Path) -> tuple[list[str], list[dict[str, str]]]:
     with open(session_dir / "rows.csv", newline="", encoding="utf-8") as f:
         reader = csv.reader(f)
@@ -110,7 +120,7 @@ def type_truth(qtbot, panel, texts: dict[str, str], combo: str = COMBO) -> None:
     """Type the ground truth as an operator: select the field's text, type, Tab to the next field."""
     form = panel.form
     if form.follow_box.isChecked():
-        qtbot.mouseClick(form.follow_box, LEFT)
+        click_box(qtbot, form.follow_box)
     widget: QtWidgets.QWidget = form.edits["x"]
     for name in POSE_FIELDS:
         assert widget is form.edits[name]  # the Tab order is x, y, z, alpha, beta, gamma
@@ -165,7 +175,7 @@ def test_rows_logged_on_the_virtual_bench_match_its_true_pose(make_window, qtbot
         ),
         timeout=WAIT_MS,
     )
-    qtbot.mouseClick(panel.form.follow_box, LEFT)
+    click_box(qtbot, panel.form.follow_box)
     qtbot.waitUntil(
         lambda: (panel.form.fields()["z"], panel.form.fields()["alpha"]) == ("350", "25"), timeout=WAIT_MS
     )
