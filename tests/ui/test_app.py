@@ -219,3 +219,19 @@ def qtbot_button_left():
     from PySide6 import QtCore
 
     return QtCore.Qt.MouseButton.LeftButton
+
+
+def test_every_tab_title_is_visible_without_scrolling(make_window, qtbot) -> None:
+    window = make_window({"source": "virtual"})
+    qtbot.waitExposed(window)
+    for tabs in (window.tabs, window.work_tabs):
+        bar = tabs.tabBar()
+        assert bar.sizeHint().width() <= tabs.width(), [tabs.tabText(i) for i in range(tabs.count())]
+    titles = [window.work_tabs.tabText(i) for i in range(window.work_tabs.count())]
+    assert titles == ["Live plots", "Session", "Analysis", "Simulation"]
+    # A page of forms and tables under the preview gets at least about half of the height.
+    top, bottom = window.left_splitter.sizes()
+    assert bottom < top
+    window.work_tabs.setCurrentIndex(titles.index("Session"))
+    top, bottom = window.left_splitter.sizes()
+    assert bottom >= top

@@ -76,7 +76,7 @@ def make_window(qtbot, tmp_path: Path, monkeypatch):
 
 def show_tab(window, widget) -> None:
     """Bring the tab holding ``widget`` (inside its scroll area) to the front."""
-    tabs = window.tabs
+    tabs = window.work_tabs
     pages = [tabs.widget(i) for i in range(tabs.count())]
     index = next(i for i, page in enumerate(pages) if widget is page or page.isAncestorOf(widget))
     tabs.setCurrentIndex(index)
