@@ -224,14 +224,18 @@ class MainWindow(QtWidgets.QMainWindow):
             picamera=self.source_controls.picamera.value(),
         )
 
-    def _apply(self) -> None:
+    def _apply(self, *_: object) -> None:
         """Controls changed: new settings for the worker, plots and panel."""
+        self._reconfigure(reopen=False)
+
+    def _reconfigure(self, reopen: bool) -> None:
+        """New settings for the worker (``reopen``: and open the source again), plots and panel."""
         self.app_settings = app_settings_from(
             self.app_settings, self.source_controls, self.solver_controls, self.camera_controls
         )
         self.plots.set_window(self.app_settings.plot_window_s)
         self.simulation_tab.set_app_camera(self.app_settings.camera, self.app_settings.side_mm)
-        self.worker.configure(self._run_config())
+        self.worker.configure(self._run_config(), reopen=reopen)
         self.session_panel.refresh_state()
 
     def _work_tab_chosen(self, index: int) -> None:
@@ -245,9 +249,8 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def _open_source(self) -> None:
         """Open the chosen source (again), e.g. after a failure."""
-        self._apply()
+        self._reconfigure(reopen=True)
         self.banner_row.hide()
-        self.worker.reopen()
 
     def set_source(self, spec: str) -> None:
         """Switch to another source (as choosing it in the Source tab does)."""

@@ -235,3 +235,24 @@ def test_every_tab_title_is_visible_without_scrolling(make_window, qtbot) -> Non
     window.work_tabs.setCurrentIndex(titles.index("Session"))
     top, bottom = window.left_splitter.sizes()
     assert bottom >= top
+
+
+def test_choosing_a_new_source_opens_it_once(make_window, qtbot, tmp_path: Path) -> None:
+    opened: list[str] = []
+
+    def factory(spec: str, **kwargs) -> FrameSource:
+        opened.append(spec)
+        return open_source(spec, **kwargs)
+
+    window = make_window({"source": str(tmp_path / "no-such-video.avi")}, source_factory=factory)
+    qtbot.waitUntil(lambda: window.banner_row.isVisible(), timeout=WAIT_MS)
+    window.set_source("virtual")  # a new source (new settings) and "open it": one open, not two
+    qtbot.waitUntil(lambda: window.frames_shown >= 3, timeout=WAIT_MS)
+    processed = window.worker.frames_processed
+    qtbot.waitUntil(lambda: window.worker.frames_processed >= processed + 5, timeout=WAIT_MS)
+    assert opened == [str(tmp_path / "no-such-video.avi"), "virtual"]
+    qtbot.mouseClick(window.source_controls.open_button, qtbot_button_left())  # same settings: reopen
+    qtbot.waitUntil(lambda: len(opened) == 3, timeout=WAIT_MS)
+    processed = window.worker.frames_processed
+    qtbot.waitUntil(lambda: window.worker.frames_processed >= processed + 5, timeout=WAIT_MS)
+    assert opened[2:] == ["virtual"]
