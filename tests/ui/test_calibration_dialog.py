@@ -212,3 +212,30 @@ def test_dialog_settings_persist_with_the_app_config(qtbot, tmp_path: Path) -> N
         assert again.calibration_dialog.board() == Board(7, 5, 30.0)
     finally:
         again.shutdown()
+
+
+def test_a_failed_save_leaves_the_existing_model_intact(qtbot, tmp_path: Path, monkeypatch) -> None:
+    from types import SimpleNamespace
+
+    from ui.calibration_dialog import CalibrationDialog
+
+    monkeypatch.chdir(tmp_path)
+    dialog = CalibrationDialog(lambda: resolve_camera(CAMERA))
+    qtbot.addWidget(dialog)
+    try:
+        path = dialog.save_path()
+        path.parent.mkdir(parents=True)
+        path.write_text('{"the model in use": 1}\n')
+
+        class DiskFull:
+            def save(self, target) -> None:
+                Path(target).write_text('{"fx": 5')  # half written, then the disk is full
+                raise OSError(28, "No space left on device")
+
+        dialog.result = SimpleNamespace(camera=DiskFull())
+        dialog.confirm_overwrite = lambda p: True
+        assert dialog.save() is None and "not saved" in dialog.note.text()
+        assert path.read_text() == '{"the model in use": 1}\n'
+        assert sorted(p.name for p in path.parent.iterdir()) == [path.name]  # no temporary left
+    finally:
+        dialog.shutdown()
