@@ -3,8 +3,25 @@
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 from pathlib import Path
+from typing import Any
+
+
+def close_on_signals(
+    window: Any, signals: tuple[int, ...] = (signal.SIGINT, signal.SIGTERM)
+) -> dict[int, Any]:
+    """Ctrl+C or SIGTERM closes ``window`` as its close button does (settings saved, worker joined,
+    pending session rows offered), instead of a KeyboardInterrupt traceback inside a Qt slot or
+    an exit that saves nothing. Returns the previous handlers (to restore them)."""
+    from PySide6 import QtCore
+
+    def handler(_signum: int, _frame: Any) -> None:
+        # Python runs this between two bytecodes, perhaps inside a slot: close from the event loop.
+        QtCore.QTimer.singleShot(0, window.close)
+
+    return {number: signal.signal(number, handler) for number in signals}
 
 
 def main(args: argparse.Namespace) -> int:
@@ -26,6 +43,7 @@ def main(args: argparse.Namespace) -> int:
     }
     window = MainWindow(store, overrides)
     window.show()
+    close_on_signals(window)
     quit_after = getattr(args, "quit_after", None)
     screenshot = getattr(args, "screenshot", None)
     if quit_after:

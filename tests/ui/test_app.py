@@ -256,3 +256,24 @@ def test_choosing_a_new_source_opens_it_once(make_window, qtbot, tmp_path: Path)
     processed = window.worker.frames_processed
     qtbot.waitUntil(lambda: window.worker.frames_processed >= processed + 5, timeout=WAIT_MS)
     assert opened[2:] == ["virtual"]
+
+
+def test_ctrl_c_or_sigterm_closes_the_window_and_saves_its_settings(
+    make_window, qtbot, tmp_path: Path
+) -> None:
+    import os
+    import signal
+
+    from ui.app import close_on_signals
+
+    window = make_window({"source": "virtual", "side_mm": 37.0})
+    qtbot.waitUntil(lambda: window.frames_shown >= 1, timeout=WAIT_MS)
+    previous = close_on_signals(window)
+    try:
+        os.kill(os.getpid(), signal.SIGTERM)
+        qtbot.waitUntil(lambda: not window.isVisible(), timeout=WAIT_MS)
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+    assert window.thread.isFinished() and window.worker.source is None
+    assert '"side_mm": 37.0' in (tmp_path / "config" / "app.json").read_text()
