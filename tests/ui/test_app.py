@@ -277,3 +277,18 @@ def test_ctrl_c_or_sigterm_closes_the_window_and_saves_its_settings(
             signal.signal(number, handler)
     assert window.thread.isFinished() and window.worker.source is None
     assert '"side_mm": 37.0' in (tmp_path / "config" / "app.json").read_text()
+
+
+def test_a_bad_command_line_value_is_named_and_no_window_opens(qtbot, tmp_path: Path, capsys) -> None:
+    import argparse
+
+    from PySide6 import QtWidgets
+
+    from ui.app import main
+
+    before = len(QtWidgets.QApplication.topLevelWidgets())
+    args = argparse.Namespace(source="virtual", side_mm=-5.0, config_dir=str(tmp_path / "config"))
+    assert main(args) == 2
+    error = capsys.readouterr().err
+    assert "side_mm" in error and "-5" in error and "minimum" in error
+    assert len(QtWidgets.QApplication.topLevelWidgets()) == before and not (tmp_path / "config").exists()
