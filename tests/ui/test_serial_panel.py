@@ -39,7 +39,7 @@ class Pty:
 
     def drain(self) -> bytes:
         """Everything written to the slave so far (non-blocking)."""
-        while True:
+        while self.master >= 0:
             try:
                 chunk = os.read(self.master, 65536)
             except (BlockingIOError, OSError):
@@ -60,8 +60,12 @@ class Pty:
         stale symlink would then "connect" to that stranger's terminal.
         """
         for fd in (self.master, self.slave):
-            with contextlib.suppress(OSError):
-                os.close(fd)
+            if fd >= 0:
+                with contextlib.suppress(OSError):
+                    os.close(fd)
+        # Once only: a second close of these numbers would close whatever file reused them since
+        # (the next pty's ends, the link's port, a Qt event fd).
+        self.master = self.slave = -1
         with contextlib.suppress(OSError):
             if os.readlink(self.path) == self.tty:  # not a newer Pty's link at the same path
                 os.unlink(self.path)
