@@ -3,29 +3,54 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import signal
 import sys
 from pathlib import Path
+from typing import Any
+
+
+def close_on_signals(
+    window: Any, signals: tuple[int, ...] = (signal.SIGINT, signal.SIGTERM)
+) -> dict[int, Any]:
+    """Ctrl+C or SIGTERM closes ``window`` as its close button does (settings saved, worker joined,
+    pending session rows offered), instead of a KeyboardInterrupt traceback inside a Qt slot or
+    an exit that saves nothing. Returns the previous handlers (to restore them)."""
+    from PySide6 import QtCore
+
+    def handler(_signum: int, _frame: Any) -> None:
+        # Python runs this between two bytecodes, perhaps inside a slot: close from the event loop.
+        QtCore.QTimer.singleShot(0, window.close)
+
+    return {number: signal.signal(number, handler) for number in signals}
 
 
 def main(args: argparse.Namespace) -> int:
     import pyqtgraph as pg
     from PySide6 import QtCore, QtWidgets
 
-    from ui.config import ConfigStore
+    from qrfield.settings import SettingError, validated
+    from ui.config import AppSettings, ConfigStore
     from ui.main_window import MainWindow
 
-    app = QtWidgets.QApplication.instance() or QtWidgets.QApplication(sys.argv[:1])
-    app.setApplicationName("qrfield")
-    pg.setConfigOptions(imageAxisOrder="row-major", antialias=True)
-    store = ConfigStore(getattr(args, "config_dir", None))
     overrides = {
         "source": getattr(args, "source", None),
         "camera": getattr(args, "camera", None),
         "side_mm": getattr(args, "side_mm", None),
         "method": getattr(args, "method", None),
     }
+    try:  # e.g. --side-mm -5: say so, rather than open a window that measures nothing
+        validated(dataclasses.replace(AppSettings(), **{k: v for k, v in overrides.items() if v is not None}))
+    except SettingError as exc:
+        print(f"qrfield gui: {exc}", file=sys.stderr)
+        return 2
+    app = QtWidgets.QApplication.instance() or QtWidgets.QApplication(sys.argv[:1])
+    app.setApplicationName("qrfield")
+    pg.setConfigOptions(imageAxisOrder="row-major", antialias=True)
+    store = ConfigStore(getattr(args, "config_dir", None))
     window = MainWindow(store, overrides)
     window.show()
+    close_on_signals(window)
     quit_after = getattr(args, "quit_after", None)
     screenshot = getattr(args, "screenshot", None)
     if quit_after:

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import os
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -558,10 +559,16 @@ class CalibrationDialog(QtWidgets.QDialog):
         if path.exists() and not self.confirm_overwrite(path):
             self.note.setText(f"not saved: {_shown_path(path)} exists")
             return None
+        tmp = path.with_name(path.name + ".tmp")
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
-            self.result.camera.save(path)
+            # Written aside and renamed over: a failed write never leaves a truncated model in place
+            # of the one the app may be using.
+            self.result.camera.save(tmp)
+            os.replace(tmp, path)
         except OSError as exc:
+            with contextlib.suppress(OSError):
+                tmp.unlink()
             self.note.setText(f"⚠ not saved: {exc}")
             return None
         self.saved_path = path

@@ -1,4 +1,5 @@
-"""The bench app's main window: preview, pose panel, live plots, and the control tabs.
+"""The bench app's main window: preview, pose panel, the control tabs (right) and, under the
+preview, the live plots and the Session, Analysis and Simulation tabs.
 
 The window never touches the camera: a :class:`~ui.worker.PipelineWorker` on its own QThread
 captures and processes; the window takes the newest result on a QTimer (older unread results are
@@ -118,12 +119,18 @@ class MainWindow(QtWidgets.QMainWindow):
         self.analysis_tab = AnalysisTab(self.session_panel.root)
         self.session_panel.set_default_solver(self.methods())
         self.session_panel.sessionChanged.connect(lambda s: self.analysis_tab.set_current(s and s.path))
-        tabs.addTab(_scrolled(self.session_panel), "Session")
-        tabs.addTab(_scrolled(self.analysis_tab), "Analysis")
+        self.tabs = tabs
+        # Under the preview, the wide pane: the live plots and the pages whose tables and pictures
+        # need the width (rows, analysis, coverage); the controls keep the narrow right-hand tabs.
+        work = QtWidgets.QTabWidget()
+        work.setObjectName("work_tabs")
+        work.addTab(self.plots, "Live plots")
+        work.addTab(_scrolled(self.session_panel), "Session")
+        work.addTab(_scrolled(self.analysis_tab), "Analysis")
         app = self.app_settings
         self.simulation_tab = SimulationTab(app.camera, app.side_mm, store.value(SIMULATION_KEY))
-        tabs.addTab(self.simulation_tab, "Simulation")
-        self.tabs = tabs
+        work.addTab(self.simulation_tab, "Simulation")
+        self.work_tabs = work
 
         left = QtWidgets.QSplitter(QtCore.Qt.Orientation.Vertical)
         top = QtWidgets.QWidget()
@@ -132,8 +139,10 @@ class MainWindow(QtWidgets.QMainWindow):
         top_layout.addWidget(banner_row)
         top_layout.addWidget(self.preview, 1)
         left.addWidget(top)
-        left.addWidget(self.plots)
-        left.setSizes([520, 280])
+        left.addWidget(work)
+        left.setSizes([470, 330])
+        self.left_splitter = left
+        work.currentChanged.connect(self._work_tab_chosen)
         right = QtWidgets.QWidget()
         right_layout = QtWidgets.QVBoxLayout(right)
         right_layout.addWidget(self.pose_panel)
@@ -157,7 +166,6 @@ class MainWindow(QtWidgets.QMainWindow):
         # ----- worker
         config = self._run_config()
         self.worker = PipelineWorker(config, source_factory=source_factory)
-        self.worker.resultReady.connect(self._on_result_ready)
         self.worker.sourceOpened.connect(self._on_source_opened)
         self.worker.sourceFailed.connect(self._on_source_failed)
         self.worker.sourceNote.connect(self._on_note)
@@ -177,7 +185,6 @@ class MainWindow(QtWidgets.QMainWindow):
 
         self.last: Processed | None = None
         self.frames_shown = 0
-        self._dirty = False
         self._t0 = time.monotonic()
         self._last_plot = 0.0
         self._rate_t = time.monotonic()
@@ -217,21 +224,33 @@ class MainWindow(QtWidgets.QMainWindow):
             picamera=self.source_controls.picamera.value(),
         )
 
-    def _apply(self) -> None:
+    def _apply(self, *_: object) -> None:
         """Controls changed: new settings for the worker, plots and panel."""
+        self._reconfigure(reopen=False)
+
+    def _reconfigure(self, reopen: bool) -> None:
+        """New settings for the worker (``reopen``: and open the source again), plots and panel."""
         self.app_settings = app_settings_from(
             self.app_settings, self.source_controls, self.solver_controls, self.camera_controls
         )
         self.plots.set_window(self.app_settings.plot_window_s)
         self.simulation_tab.set_app_camera(self.app_settings.camera, self.app_settings.side_mm)
-        self.worker.configure(self._run_config())
+        self.worker.configure(self._run_config(), reopen=reopen)
         self.session_panel.refresh_state()
+
+    def _work_tab_chosen(self, index: int) -> None:
+        """A form or table page under the preview gets at least about half the height (never shrunk)."""
+        if index <= 0:
+            return
+        top, bottom = self.left_splitter.sizes()
+        if bottom < 0.5 * (top + bottom):
+            half = (top + bottom) // 2
+            self.left_splitter.setSizes([top + bottom - half - 40, half + 40])
 
     def _open_source(self) -> None:
         """Open the chosen source (again), e.g. after a failure."""
-        self._apply()
+        self._reconfigure(reopen=True)
         self.banner_row.hide()
-        self.worker.reopen()
 
     def set_source(self, spec: str) -> None:
         """Switch to another source (as choosing it in the Source tab does)."""
@@ -267,9 +286,6 @@ class MainWindow(QtWidgets.QMainWindow):
         )
 
     # ---------------------------------------------------------------- worker signals
-    def _on_result_ready(self) -> None:
-        self._dirty = True
-
     def _on_source_opened(self, description: str) -> None:
         self.banner_row.hide()
         self.status_source.setText(f"source: {description}")

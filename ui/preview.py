@@ -39,6 +39,9 @@ class PreviewView(pg.GraphicsLayoutWidget):
         self.setBackground("#202020")
         self.view = self.addViewBox(lockAspect=True, invertY=True, enableMenu=False)
         self.image_item = pg.ImageItem(axisOrder="row-major")
+        # pyqtgraph spans pixel (i, j) over [j, j+1] x [i, i+1]; the overlays use OpenCV's pixel
+        # convention (pixel centres at integers): shift the image so that both agree.
+        self.image_item.setPos(-0.5, -0.5)
         self.view.addItem(self.image_item)
         self.outline = pg.PlotDataItem(pen=pg.mkPen("#00ff66", width=2))
         self.view.addItem(self.outline)

@@ -128,15 +128,19 @@ class PipelineWorker(QtCore.QObject):
         self.result_sinks: tuple[Any, ...] = ()
 
     # ---------------------------------------------------------------- called from the GUI thread
-    def configure(self, config: RunConfig) -> None:
-        """Use ``config`` from the next frame on (reopens the source only if it has to)."""
+    def configure(self, config: RunConfig, *, reopen: bool = False) -> None:
+        """Use ``config`` from the next frame on (reopens the source only if it has to, or when
+        ``reopen``: then it is opened once, with ``config``, even when its key changed too)."""
         with self._lock:
             self._pending = config
+            if reopen:
+                self._reopen.set()
         self._wake.set()
 
     def reopen(self) -> None:
         """Close and open the source again (after a failure, or to restart a file)."""
-        self._reopen.set()
+        with self._lock:
+            self._reopen.set()
         self._wake.set()
 
     def stop(self) -> None:
@@ -149,10 +153,6 @@ class PipelineWorker(QtCore.QObject):
         try:
             while not self._stop.is_set():
                 self._apply_pending()
-                if self._reopen.is_set():
-                    self._reopen.clear()
-                    self._close_source()
-                    self._open()
                 if self._reader is None:
                     self._wake.wait(self.POLL_S)
                     self._wake.clear()
@@ -163,18 +163,26 @@ class PipelineWorker(QtCore.QObject):
             self.finished.emit()
 
     def _apply_pending(self) -> None:
+        """New settings and a reopen request, taken together: a new source that must be opened
+        anyway is opened once, not once for the settings and again for the request."""
         with self._lock:
             config, self._pending = self._pending, None
-        if config is None:
-            return
-        old, self._config = self._config, config
-        if old is None or old.source_key() != config.source_key():
+            reopen = self._reopen.is_set()
+            self._reopen.clear()
+        opened = False
+        if config is not None:
+            old, self._config = self._config, config
+            if old is None or old.source_key() != config.source_key():
+                self._close_source()
+                self._open()
+                opened = True
+            elif isinstance(self.source, VirtualBenchSource) and old.virtual != config.virtual:
+                self.source.set_settings(config.virtual)
+            if old is None or self._pipeline is None or _pipeline_key(old) != _pipeline_key(config):
+                self._pipeline = self._make_pipeline(config)
+        if reopen and not opened and self._config is not None:
             self._close_source()
             self._open()
-        elif isinstance(self.source, VirtualBenchSource) and old.virtual != config.virtual:
-            self.source.set_settings(config.virtual)
-        if old is None or self._pipeline is None or _pipeline_key(old) != _pipeline_key(config):
-            self._pipeline = self._make_pipeline(config)
 
     def _make_pipeline(self, config: RunConfig) -> Pipeline | None:
         try:

@@ -219,3 +219,76 @@ def qtbot_button_left():
     from PySide6 import QtCore
 
     return QtCore.Qt.MouseButton.LeftButton
+
+
+def test_every_tab_title_is_visible_without_scrolling(make_window, qtbot) -> None:
+    window = make_window({"source": "virtual"})
+    qtbot.waitExposed(window)
+    for tabs in (window.tabs, window.work_tabs):
+        bar = tabs.tabBar()
+        assert bar.sizeHint().width() <= tabs.width(), [tabs.tabText(i) for i in range(tabs.count())]
+    titles = [window.work_tabs.tabText(i) for i in range(window.work_tabs.count())]
+    assert titles == ["Live plots", "Session", "Analysis", "Simulation"]
+    # A page of forms and tables under the preview gets at least about half of the height.
+    top, bottom = window.left_splitter.sizes()
+    assert bottom < top
+    window.work_tabs.setCurrentIndex(titles.index("Session"))
+    top, bottom = window.left_splitter.sizes()
+    assert bottom >= top
+
+
+def test_choosing_a_new_source_opens_it_once(make_window, qtbot, tmp_path: Path) -> None:
+    opened: list[str] = []
+
+    def factory(spec: str, **kwargs) -> FrameSource:
+        opened.append(spec)
+        return open_source(spec, **kwargs)
+
+    window = make_window({"source": str(tmp_path / "no-such-video.avi")}, source_factory=factory)
+    qtbot.waitUntil(lambda: window.banner_row.isVisible(), timeout=WAIT_MS)
+    window.set_source("virtual")  # a new source (new settings) and "open it": one open, not two
+    qtbot.waitUntil(lambda: window.frames_shown >= 3, timeout=WAIT_MS)
+    processed = window.worker.frames_processed
+    qtbot.waitUntil(lambda: window.worker.frames_processed >= processed + 5, timeout=WAIT_MS)
+    assert opened == [str(tmp_path / "no-such-video.avi"), "virtual"]
+    qtbot.mouseClick(window.source_controls.open_button, qtbot_button_left())  # same settings: reopen
+    qtbot.waitUntil(lambda: len(opened) == 3, timeout=WAIT_MS)
+    processed = window.worker.frames_processed
+    qtbot.waitUntil(lambda: window.worker.frames_processed >= processed + 5, timeout=WAIT_MS)
+    assert opened[2:] == ["virtual"]
+
+
+def test_ctrl_c_or_sigterm_closes_the_window_and_saves_its_settings(
+    make_window, qtbot, tmp_path: Path
+) -> None:
+    import os
+    import signal
+
+    from ui.app import close_on_signals
+
+    window = make_window({"source": "virtual", "side_mm": 37.0})
+    qtbot.waitUntil(lambda: window.frames_shown >= 1, timeout=WAIT_MS)
+    previous = close_on_signals(window)
+    try:
+        os.kill(os.getpid(), signal.SIGTERM)
+        qtbot.waitUntil(lambda: not window.isVisible(), timeout=WAIT_MS)
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+    assert window.thread.isFinished() and window.worker.source is None
+    assert '"side_mm": 37.0' in (tmp_path / "config" / "app.json").read_text()
+
+
+def test_a_bad_command_line_value_is_named_and_no_window_opens(qtbot, tmp_path: Path, capsys) -> None:
+    import argparse
+
+    from PySide6 import QtWidgets
+
+    from ui.app import main
+
+    before = len(QtWidgets.QApplication.topLevelWidgets())
+    args = argparse.Namespace(source="virtual", side_mm=-5.0, config_dir=str(tmp_path / "config"))
+    assert main(args) == 2
+    error = capsys.readouterr().err
+    assert "side_mm" in error and "-5" in error and "minimum" in error
+    assert len(QtWidgets.QApplication.topLevelWidgets()) == before and not (tmp_path / "config").exists()

@@ -125,8 +125,14 @@ def test_virtual_chessboard_views_calibrate_back_to_the_camera(make_window, qtbo
     # Use: the app's camera model becomes the calibrated one.
     click(qtbot, dialog.use_button)
     assert window.app_settings.camera == str(path)
-    qtbot.waitUntil(lambda: window.camera_model.fx == pytest.approx(cam.fx), timeout=WAIT_MS)
-    assert window.worker.latest is not None
+    assert window.camera_model.fx == pytest.approx(cam.fx)
+    # ... and reaches the worker: the frames are solved with it from now on.
+    qtbot.waitUntil(
+        lambda: (
+            window.worker._config is not None and window.worker._config.camera.fx == pytest.approx(cam.fx)
+        ),
+        timeout=WAIT_MS,
+    )
 
     screenshot = tmp_path / "calibration_dialog.png"
     assert dialog.grab().save(str(screenshot)) and screenshot.stat().st_size > 5000
@@ -206,3 +212,30 @@ def test_dialog_settings_persist_with_the_app_config(qtbot, tmp_path: Path) -> N
         assert again.calibration_dialog.board() == Board(7, 5, 30.0)
     finally:
         again.shutdown()
+
+
+def test_a_failed_save_leaves_the_existing_model_intact(qtbot, tmp_path: Path, monkeypatch) -> None:
+    from types import SimpleNamespace
+
+    from ui.calibration_dialog import CalibrationDialog
+
+    monkeypatch.chdir(tmp_path)
+    dialog = CalibrationDialog(lambda: resolve_camera(CAMERA))
+    qtbot.addWidget(dialog)
+    try:
+        path = dialog.save_path()
+        path.parent.mkdir(parents=True)
+        path.write_text('{"the model in use": 1}\n')
+
+        class DiskFull:
+            def save(self, target) -> None:
+                Path(target).write_text('{"fx": 5')  # half written, then the disk is full
+                raise OSError(28, "No space left on device")
+
+        dialog.result = SimpleNamespace(camera=DiskFull())
+        dialog.confirm_overwrite = lambda p: True
+        assert dialog.save() is None and "not saved" in dialog.note.text()
+        assert path.read_text() == '{"the model in use": 1}\n'
+        assert sorted(p.name for p in path.parent.iterdir()) == [path.name]  # no temporary left
+    finally:
+        dialog.shutdown()

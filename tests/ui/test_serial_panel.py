@@ -31,14 +31,15 @@ class Pty:
         self.path = path
         self.master, self.slave = os.openpty()
         os.set_blocking(self.master, False)
+        self.tty = os.ttyname(self.slave)
         tmp = path.with_suffix(".new")
-        os.symlink(os.ttyname(self.slave), tmp)
+        os.symlink(self.tty, tmp)
         os.replace(tmp, path)
         self.data = bytearray()
 
     def drain(self) -> bytes:
         """Everything written to the slave so far (non-blocking)."""
-        while True:
+        while self.master >= 0:
             try:
                 chunk = os.read(self.master, 65536)
             except (BlockingIOError, OSError):
@@ -52,10 +53,22 @@ class Pty:
         return [parse_frame_line(line) for line in split_lines(self.drain())]
 
     def vanish(self) -> None:
-        """The USB adapter is pulled: both ends closed."""
+        """The USB adapter is pulled: both ends closed and its device path gone.
+
+        The path must go too: the kernel soon hands the freed /dev/pts/N number to the next pty
+        opened on the machine (another test, another program), and a link reconnecting through a
+        stale symlink would then "connect" to that stranger's terminal.
+        """
         for fd in (self.master, self.slave):
-            with contextlib.suppress(OSError):
-                os.close(fd)
+            if fd >= 0:
+                with contextlib.suppress(OSError):
+                    os.close(fd)
+        # Once only: a second close of these numbers would close whatever file reused them since
+        # (the next pty's ends, the link's port, a Qt event fd).
+        self.master = self.slave = -1
+        with contextlib.suppress(OSError):
+            if os.readlink(self.path) == self.tty:  # not a newer Pty's link at the same path
+                os.unlink(self.path)
 
 
 def meets_seed_criteria(values: list[float], truth: Pose) -> bool:

@@ -76,11 +76,21 @@ def make_window(qtbot, tmp_path: Path, monkeypatch):
 
 def show_tab(window, widget) -> None:
     """Bring the tab holding ``widget`` (inside its scroll area) to the front."""
-    tabs = window.tabs
+    tabs = window.work_tabs
     pages = [tabs.widget(i) for i in range(tabs.count())]
     index = next(i for i, page in enumerate(pages) if widget is page or page.isAncestorOf(widget))
     tabs.setCurrentIndex(index)
     assert tabs.tabText(index) in ("Session", "Analysis")
+
+
+def click_box(qtbot, box: QtWidgets.QCheckBox) -> None:
+    """Click a check box on its indicator (a click right of its text does not toggle it)."""
+    was = box.isChecked()
+    option = QtWidgets.QStyleOptionButton()
+    box.initStyleOption(option)
+    indicator = box.style().subElementRect(QtWidgets.QStyle.SubElement.SE_CheckBoxIndicator, option, box)
+    qtbot.mouseClick(box, LEFT, pos=indicator.center())
+    assert box.isChecked() != was
 
 
 def rows_csv(session_dir: Path) -> tuple[list[str], list[dict[str, str]]]:
@@ -110,7 +120,7 @@ def type_truth(qtbot, panel, texts: dict[str, str], combo: str = COMBO) -> None:
     """Type the ground truth as an operator: select the field's text, type, Tab to the next field."""
     form = panel.form
     if form.follow_box.isChecked():
-        qtbot.mouseClick(form.follow_box, LEFT)
+        click_box(qtbot, form.follow_box)
     widget: QtWidgets.QWidget = form.edits["x"]
     for name in POSE_FIELDS:
         assert widget is form.edits[name]  # the Tab order is x, y, z, alpha, beta, gamma
@@ -155,12 +165,20 @@ def test_rows_logged_on_the_virtual_bench_match_its_true_pose(make_window, qtbot
     window.virtual_form.widgets["z_mm"].setValue(350.0)
     window.virtual_form.widgets["alpha_deg"].setValue(25.0)
     truths.append(bench(window))
+    # The two edits reach the worker as two configurations, so a frame with z 350 and the old
+    # alpha may be drawn in between: wait for a frame showing both.
     qtbot.waitUntil(
-        lambda: window.last is not None and window.last.result.truth.position_mm[2] == 350.0, timeout=WAIT_MS
+        lambda: (
+            window.last is not None
+            and window.last.result.truth.position_mm[2] == 350.0
+            and window.last.result.truth.angles_deg[0] == pytest.approx(25.0)
+        ),
+        timeout=WAIT_MS,
     )
-    qtbot.mouseClick(panel.form.follow_box, LEFT)
-    qtbot.waitUntil(lambda: panel.form.fields()["z"] == "350", timeout=WAIT_MS)
-    assert panel.form.fields()["alpha"] == "25"
+    click_box(qtbot, panel.form.follow_box)
+    qtbot.waitUntil(
+        lambda: (panel.form.fields()["z"], panel.form.fields()["alpha"]) == ("350", "25"), timeout=WAIT_MS
+    )
     with qtbot.waitSignal(panel.rowLogged, timeout=WAIT_MS):
         qtbot.mouseClick(panel.log_button, LEFT)
     assert panel.status.text().startswith("logged row 2")

@@ -59,7 +59,7 @@ def test_a_fast_live_camera_is_drained_and_results_stay_current(qtbot, camera_vg
         # by the reader (never queued), so each processed frame was the newest one at the time.
         assert reader.read_count > worker.frames_processed and reader.dropped > 0
         taken: list = []
-        qtbot.waitUntil(lambda: taken.append(worker.latest.take()) or taken[-1] is not None, timeout=5000)
+        qtbot.waitUntil(lambda: taken.append(worker.latest.take()) or taken[-1] is not None, timeout=20000)
         assert taken[-1].result.status == "OK", taken[-1].result.reason
     finally:
         assert stop_worker(worker, thread)
