@@ -72,9 +72,9 @@ def qr_symbol(text: str) -> np.ndarray:
         raise ValueError("QR text must not be empty")
     try:
         image = cv2.QRCodeEncoder.create().encode(text)
-    except cv2.error:
+    except cv2.error as exc:
         raise ValueError(
-            f"OpenCV could not encode a {len(text)}-character text as a QR code (too long?)"
+            f"OpenCV cannot encode a {len(text)}-character text as a QR code: {exc.err}"
         ) from None
     if image is None or image.size == 0:
         raise ValueError(f"OpenCV could not encode {text!r} as a QR code")
