@@ -273,19 +273,26 @@ class FrameFeed:
         self.source.close()
 
 
+def _open_once(args: argparse.Namespace, camera: Any, virtual: Any) -> Any:
+    """The source the options name, opened (SourceError if it cannot be)."""
+    from qrfield.sources import open_source
+
+    return open_source(
+        args.source,
+        camera=camera,
+        side_mm=args.side_mm,
+        virtual=virtual,
+        picamera=args.picamera,
+        loop=args.loop,
+        pace=args.pace,
+    )
+
+
 def _open(args: argparse.Namespace, camera: Any, virtual: Any, say: _Stderr, stop: StopFlag) -> Any:
-    from qrfield.sources import SourceError, open_source
+    from qrfield.sources import SourceError
 
     try:
-        source = open_source(
-            args.source,
-            camera=camera,
-            side_mm=args.side_mm,
-            virtual=virtual,
-            picamera=args.picamera,
-            loop=args.loop,
-            pace=args.pace,
-        )
+        source = _open_once(args, camera, virtual)
     except SourceError as exc:
         say(f"cannot open source: {exc}")
         if args.retry_s <= 0:
@@ -298,7 +305,7 @@ def _open(args: argparse.Namespace, camera: Any, virtual: Any, say: _Stderr, sto
 
 def _reopen(args: argparse.Namespace, camera: Any, virtual: Any, say: _Stderr, stop: StopFlag) -> Any:
     """Retry every --retry-s seconds until the source opens or a signal arrives."""
-    from qrfield.sources import SourceError, open_source
+    from qrfield.sources import SourceError
 
     while not stop:
         deadline = time.monotonic() + args.retry_s
@@ -307,15 +314,7 @@ def _reopen(args: argparse.Namespace, camera: Any, virtual: Any, say: _Stderr, s
         if stop:
             break
         try:
-            source = open_source(
-                args.source,
-                camera=camera,
-                side_mm=args.side_mm,
-                virtual=virtual,
-                picamera=args.picamera,
-                loop=args.loop,
-                pace=args.pace,
-            )
+            source = _open_once(args, camera, virtual)
         except SourceError as exc:
             say(f"still cannot open source: {exc}")
             continue
