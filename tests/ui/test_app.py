@@ -12,8 +12,6 @@ import pytest
 from qrfield.geometry import Pose, angle_difference
 from qrfield.render import render_view
 from qrfield.sources import Frame, FrameSource, SourceError, VirtualBenchSettings, open_source
-from ui.config import ConfigStore
-from ui.main_window import MainWindow
 
 pytestmark = pytest.mark.gui
 WAIT_MS = 15000
@@ -25,22 +23,6 @@ def meets_seed_criteria(values: np.ndarray, truth: Pose) -> bool:
         return False
     position_ok = np.linalg.norm(values[:3] - truth.position_mm) < 5.0
     return bool(position_ok and np.all(np.abs(angle_difference(values[3:], truth.angles_deg)) <= 2.0))
-
-
-@pytest.fixture
-def make_window(qtbot, tmp_path: Path):
-    windows: list[MainWindow] = []
-
-    def make(overrides: dict | None = None, **kwargs) -> MainWindow:
-        window = MainWindow(ConfigStore(tmp_path / "config"), overrides, **kwargs)
-        qtbot.addWidget(window)
-        window.show()
-        windows.append(window)
-        return window
-
-    yield make
-    for window in windows:
-        window.shutdown()
 
 
 def test_app_shows_the_virtual_bench_true_pose(make_window, qtbot, camera_vga) -> None:

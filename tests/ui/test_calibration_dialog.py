@@ -27,21 +27,9 @@ WAIT_MS = 20000
 CAMERA = "picam-v2@640x480"
 
 
-@pytest.fixture
-def make_window(qtbot, tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+@pytest.fixture(autouse=True)
+def _in_tmp_path(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.chdir(tmp_path)  # Save writes ./calib/NAME.json
-    windows: list[MainWindow] = []
-
-    def make(overrides: dict | None = None, **kwargs) -> MainWindow:
-        window = MainWindow(ConfigStore(tmp_path / "config"), overrides, **kwargs)
-        qtbot.addWidget(window)
-        window.show()
-        windows.append(window)
-        return window
-
-    yield make
-    for window in windows:
-        window.shutdown()
 
 
 def click(qtbot, widget) -> None:

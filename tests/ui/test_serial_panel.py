@@ -78,22 +78,6 @@ def meets_seed_criteria(values: list[float], truth: Pose) -> bool:
     return bool(position_ok and np.all(np.abs(angle_difference(v[3:], truth.angles_deg)) <= 2.0))
 
 
-@pytest.fixture
-def make_window(qtbot, tmp_path: Path):
-    windows: list[MainWindow] = []
-
-    def make(overrides: dict | None = None) -> MainWindow:
-        window = MainWindow(ConfigStore(tmp_path / "config"), overrides)
-        qtbot.addWidget(window)
-        window.show()
-        windows.append(window)
-        return window
-
-    yield make
-    for window in windows:
-        window.shutdown()
-
-
 def type_port(qtbot, panel: SerialPanel, port: str) -> None:
     edit = panel.port.lineEdit()
     edit.selectAll()

@@ -17,7 +17,6 @@ from PySide6 import QtCore, QtWidgets
 
 from qrfield.geometry import angle_difference
 from qrfield.sessions.files import FileOps
-from ui.config import ConfigStore
 from ui.main_window import MainWindow
 
 pytestmark = pytest.mark.gui
@@ -56,22 +55,17 @@ COMBO = "alpha+beta-gamma+"
 
 
 @pytest.fixture
-def make_window(qtbot, tmp_path: Path, monkeypatch):
+def session_window(make_window, tmp_path: Path, monkeypatch):
+    """The shared window fixture on the virtual bench, sessions in tmp_path, Session tab in front."""
     monkeypatch.setenv("QRFIELD_SESSIONS_DIR", str(tmp_path / "sessions"))
-    windows: list[MainWindow] = []
 
     def make() -> MainWindow:
         overrides = {"source": "virtual", "method": "both", "camera": "picam-v2@640x480", "side_mm": 50.0}
-        window = MainWindow(ConfigStore(tmp_path / "config"), overrides)
-        qtbot.addWidget(window)
-        window.show()
+        window = make_window(overrides)
         show_tab(window, window.session_panel)
-        windows.append(window)
         return window
 
-    yield make
-    for window in windows:
-        window.shutdown()
+    return make
 
 
 def show_tab(window, widget) -> None:
@@ -148,8 +142,8 @@ def meets_criteria(row: dict[str, str], truth: dict[str, float]) -> bool:
     return bool(position_ok and np.all(np.abs(angle_difference(measured[3:], expected[3:])) <= 2.0))
 
 
-def test_rows_logged_on_the_virtual_bench_match_its_true_pose(make_window, qtbot) -> None:
-    window = make_window()
+def test_rows_logged_on_the_virtual_bench_match_its_true_pose(session_window, qtbot) -> None:
+    window = session_window()
     panel = create_session(qtbot, window)
     session_dir = panel.session.path
     assert session_dir.parent == window.session_panel.root() and session_dir.name.endswith("-bench-test")
@@ -201,8 +195,8 @@ def test_rows_logged_on_the_virtual_bench_match_its_true_pose(make_window, qtbot
     assert '"side_mm": 50.0' in info and '"method": "numerical"' in info and "picam" in info
 
 
-def test_a_bad_field_blocks_the_row_with_its_message(make_window, qtbot) -> None:
-    window = make_window()
+def test_a_bad_field_blocks_the_row_with_its_message(session_window, qtbot) -> None:
+    window = session_window()
     panel = create_session(qtbot, window)
     texts = {k: f"{v:g}" for k, v in bench(window).items()}
     type_truth(qtbot, panel, {**texts, "z": "3OO"})  # letter O, not zero
@@ -238,8 +232,8 @@ def test_a_bad_field_blocks_the_row_with_its_message(make_window, qtbot) -> None
     log_by_enter(qtbot, panel, 1)
 
 
-def test_undo_resume_and_analysis(make_window, qtbot, tmp_path: Path, monkeypatch) -> None:
-    window = make_window()
+def test_undo_resume_and_analysis(session_window, qtbot, tmp_path: Path, monkeypatch) -> None:
+    window = session_window()
     panel = create_session(qtbot, window, "resume me")
     session_dir = panel.session.path
     texts = {k: f"{v:g}" for k, v in bench(window).items()}
@@ -262,7 +256,7 @@ def test_undo_resume_and_analysis(make_window, qtbot, tmp_path: Path, monkeypatc
     with open(session_dir / "rows.csv", "ab") as f:
         f.write(b"4,2026-11-23T00:00:00+00:00,alph")  # a crash in the middle of a line
 
-    second = make_window()
+    second = session_window()
     assert second.session_panel.row_settings.value().frames_per_row == FRAMES  # saved with the app
     panel2 = second.session_panel
     panel2.manage.setCurrentIndex(1)
@@ -312,8 +306,8 @@ class FailingOps(FileOps):
         return super().write(fd, data)
 
 
-def test_a_failed_write_stays_pending_until_retried_or_saved(make_window, qtbot, tmp_path, monkeypatch):
-    window = make_window()
+def test_a_failed_write_stays_pending_until_retried_or_saved(session_window, qtbot, tmp_path, monkeypatch):
+    window = session_window()
     panel = create_session(qtbot, window)
     ops = FailingOps()
     panel.session._ops = ops  # the disk fills up
@@ -357,8 +351,8 @@ def test_analysis_of_a_folder_that_is_no_session_says_why(qtbot, tmp_path: Path)
     tab.shutdown()
 
 
-def test_a_row_on_a_wobbling_bench_compares_with_its_mean_true_pose(make_window, qtbot) -> None:
-    window = make_window()
+def test_a_row_on_a_wobbling_bench_compares_with_its_mean_true_pose(session_window, qtbot) -> None:
+    window = session_window()
     window.virtual_form.widgets["wobble_period_s"].setValue(0.5)
     window.virtual_form.widgets["wobble_deg"].setValue(20.0)  # alpha and beta swing by +-20 degrees
     panel = window.session_panel
