@@ -374,19 +374,26 @@ def parse_rows(data: bytes, where: str = ROWS_FILE) -> RowsContent:
     return RowsContent(header, rows, warnings, len(complete), partial, withdrawn)
 
 
-def read_session(path: str | os.PathLike[str]) -> tuple[SessionInfo, RowsContent]:
-    """Read a session without changing anything (for analysis): its info and rows.
-
-    An unfinished last line is reported in the warnings and left where it is.
-    """
-    folder = Path(path)
+def _read_folder(folder: Path) -> tuple[SessionInfo, Path, RowsContent]:
+    """A session folder's info, the path of its rows.csv and its parsed rows; SessionError if unreadable."""
     info = _read_info(folder)
     rows_path = folder / ROWS_FILE
     try:
         data = rows_path.read_bytes()
     except FileNotFoundError:
         raise SessionError(f"{folder}: no {ROWS_FILE}") from None
-    content = parse_rows(data, str(rows_path))
+    except OSError as exc:
+        raise SessionError(f"{rows_path}: cannot read ({exc.strerror})") from None
+    return info, rows_path, parse_rows(data, str(rows_path))
+
+
+def read_session(path: str | os.PathLike[str]) -> tuple[SessionInfo, RowsContent]:
+    """Read a session without changing anything (for analysis): its info and rows.
+
+    An unfinished last line is reported in the warnings and left where it is.
+    """
+    folder = Path(path)
+    info, rows_path, content = _read_folder(folder)
     if content.partial:
         content.warnings.append(
             f"{rows_path}: ends with an unfinished line of {len(content.partial)} bytes "
@@ -518,15 +525,7 @@ class Session:
         Raises SessionError when the folder is not a readable session or another process logs to it.
         """
         folder = Path(path)
-        info = _read_info(folder)
-        rows_path = folder / ROWS_FILE
-        try:
-            data = rows_path.read_bytes()
-        except FileNotFoundError:
-            raise SessionError(f"{folder}: no {ROWS_FILE}") from None
-        except OSError as exc:
-            raise SessionError(f"{rows_path}: cannot read ({exc.strerror})") from None
-        content = parse_rows(data, str(rows_path))
+        info, rows_path, content = _read_folder(folder)
         session = cls(folder, info, content, file_ops)
         try:
             session._connect()
