@@ -1,6 +1,6 @@
 """Camera models: pinhole intrinsics plus OpenCV's five distortion coefficients.
 
-Conventions (DESIGN.md): pixels follow OpenCV, the centre of the top-left pixel is (0, 0), so the
+Conventions (docs/conventions.md): pixels follow OpenCV, the centre of the top-left pixel is (0, 0), so the
 centre of a W x H image is ((W-1)/2, (H-1)/2). fx, fy, cx, cy are in pixels; the distortion
 coefficients (k1, k2, p1, p2, k3) act on normalised image coordinates and are unitless.
 
@@ -23,6 +23,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from qrfield import paths
 
 #: Fields every camera JSON file must have.
 REQUIRED_FIELDS = ("width", "height", "fx", "fy", "cx", "cy")
@@ -279,7 +281,7 @@ def user_profile_dirs() -> list[Path]:
     env = os.environ.get("QRFIELD_CALIB_DIR")
     if env:
         dirs.append(Path(env))
-    dirs.append(Path.home() / ".config" / "qrfield" / "calib")
+    dirs.append(paths.user_calib_dir())
     return dirs
 
 

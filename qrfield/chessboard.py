@@ -7,8 +7,8 @@ sit on the board plane at (i * S, j * S, 0) mm for column i and row j, S the squ
 The renderer is the simulated twin of a person holding a printed board in front of the camera:
 it draws the board at a :class:`~qrfield.geometry.Pose` through a :class:`~qrfield.camera.CameraModel`
 (distortion included) and returns the exact corner pixels, the truth calibration is tested against.
-Board frame for rendering (as the marker frame of DESIGN.md): origin at the centre of the inner-corner
-grid, +X along a row (towards higher columns), +Y down the rows, +Z = X x Y (into the board).
+Board frame for rendering (as the marker frame of docs/conventions.md): origin at the centre of
+the inner-corner grid, +X along a row (towards higher columns), +Y down the rows, +Z = X x Y (into the board).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Pose geometry with the fixed conventions of DESIGN.md.
+"""Pose geometry with the fixed conventions of docs/conventions.md.
 
 Frames:
   - camera frame (OpenCV): origin at the optical centre, +X right, +Y down, +Z forward.

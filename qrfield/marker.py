@@ -1,7 +1,7 @@
 """Printable QR markers of exact size: SVG and PDF as vectors, PNG rasterised at a given dpi.
 
 The symbol (the square of the finder patterns' outer edges, quiet zone excluded: the L of
-DESIGN.md) measures exactly ``side_mm`` when printed at 100 %: its n x n modules (OpenCV's
+docs/conventions.md) measures exactly ``side_mm`` when printed at 100 %: its n x n modules (OpenCV's
 encoder, :func:`qrfield.render.qr_symbol`) have a pitch of L / n mm. Around it: a white quiet zone
 of 4 modules, a thin grey cut line just outside it (cut along it and the quiet zone stays whole),
 and below, a caption (the text, the size, "print at 100 %") with a check bar of known length.

@@ -4,7 +4,7 @@ One :class:`Pipeline` serves one stream (the headless runner and the app's worke
 own one). :meth:`Pipeline.process` never raises for a frame: whatever goes wrong becomes the
 result's ``status`` and ``reason``, so a frame loop keeps running.
 
-Statuses (those of the serial frame, DESIGN.md, plus ERROR):
+Statuses (those of the serial frame, docs/conventions.md, plus ERROR):
     OK      the first chosen method converged: a pose is given;
     NOQR    no code found (or none with the selected text);
     NOCONV  a code was found but the first chosen method did not converge (its reason says why);
@@ -28,7 +28,7 @@ from qrfield.camera import CameraModel, CameraModelError
 from qrfield.geometry import Pose
 from qrfield.sources.base import Frame
 
-#: The pose methods a pipeline can run (DESIGN.md: the thesis' model and OpenCV IPPE).
+#: The pose methods a pipeline can run (docs/conventions.md: the thesis' model and OpenCV IPPE).
 METHODS = ("numerical", "ippe")
 #: --method values: one method, or both side by side (the first listed gives the status).
 METHOD_CHOICES = ("numerical", "ippe", "both")

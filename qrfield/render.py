@@ -1,7 +1,7 @@
 """The virtual bench: renders a real QR code on a white card at a known pose through a camera model.
 
 The QR symbol (quiet zone excluded) is a square of side L mm centred on the marker frame's origin
-(DESIGN.md); around it lie the quiet zone (4 modules) and a white card margin. The returned
+(docs/conventions.md); around it lie the quiet zone (4 modules) and a white card margin. The returned
 ``corners_px`` are the exact projections of V1..V4 (top-left, top-right, bottom-right,
 bottom-left of the symbol), distortion included: the independent truth that detectors and solvers
 are tested against.

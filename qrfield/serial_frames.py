@@ -1,6 +1,6 @@
 """Serial frames to the gripper controller: encoding and a robust decoder (no I/O, no pyserial).
 
-The frame is fixed in DESIGN.md ("Serial frames"), one ASCII line per frame, NMEA style::
+The frame is fixed in docs/conventions.md ("Serial frames"), one ASCII line per frame, NMEA style::
 
     $QRF,<seq>,<t_ms>,<x>,<y>,<z>,<alpha>,<beta>,<gamma>,<status>*<CS>\\r\\n
 
@@ -18,7 +18,7 @@ The frame is fixed in DESIGN.md ("Serial frames"), one ASCII line per frame, NME
 Number formatting (our decisions): values are rounded by Python's ``format`` (correctly rounded from
 the binary value, exact ties to even); a value that rounds to zero is written without a sign ("0.0",
 never "-0.0"), so equal poses give equal bytes and a controller never sees a negative zero; an angle
-that rounds to -180.00 is written 180.00 (DESIGN.md's range for alpha and gamma is (-180, 180]).
+that rounds to -180.00 is written 180.00 (docs/conventions.md's range for alpha and gamma is (-180, 180]).
 Positions must lie within +-999999.9 mm (our limit) and angles within +-180 degrees, so a frame is
 at most 86 bytes (:data:`MAX_QRF_LINE` leaves room).
 
@@ -137,7 +137,7 @@ def encode_frame(
     angles_deg: Sequence[float] | np.ndarray | None,
     status: str,
 ) -> bytes:
-    """One ``$QRF`` line with checksum and CRLF, per DESIGN.md.
+    """One ``$QRF`` line with checksum and CRLF, per docs/conventions.md.
 
     seq: 0..65535; t_ms: 0..2**32-1 integer ms since the stream started (capture time);
     position_mm: (x, y, z) of the QR centre in the camera frame, mm; angles_deg: (alpha, beta,

@@ -79,7 +79,7 @@ __all__ = [
 ]
 
 
-#: Pipeline status (qrfield.pipeline) -> serial frame status (DESIGN.md knows OK, NOQR, NOCONV, STALE):
+#: Pipeline status (qrfield.pipeline) -> serial frame status (docs/conventions.md):
 #: an ERROR frame has no pose, which the controller must treat like a pose that did not converge.
 PIPELINE_TO_SERIAL_STATUS = {"OK": "OK", "NOQR": "NOQR", "NOCONV": "NOCONV", "ERROR": "NOCONV"}
 

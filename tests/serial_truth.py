@@ -1,4 +1,4 @@
-"""Independent truth for the serial tests: a frame parser written from DESIGN.md alone.
+"""Independent truth for the serial tests: a frame parser written from docs/conventions.md alone.
 
 It shares no code with qrfield.serial_link, so tests compare the link's bytes against this.
 """
@@ -15,7 +15,7 @@ FRAME = re.compile(rb"^\$(QRF,[^*]*)\*([0-9A-F]{2})\r\n$")
 def parse_frame_line(line: bytes) -> dict:
     """Parse one full line ``$QRF,...*CS\\r\\n``; asserts the framing and the XOR checksum."""
     match = FRAME.match(line)
-    assert match, f"not a DESIGN.md frame: {line!r}"
+    assert match, f"not a docs/conventions.md frame: {line!r}"
     body, cs = match.group(1), int(match.group(2), 16)
     assert functools.reduce(operator.xor, body, 0) == cs, f"checksum wrong in {line!r}"
     fields = body.decode("ascii").split(",")

@@ -90,7 +90,7 @@ def test_projection_matches_opencv_with_distortion():
 
 
 def test_upright_card_facing_camera_has_zero_angles():
-    # DESIGN.md: V1 top-left, V2 top-right on screen for an upright card at rotation identity.
+    # docs/conventions.md: V1 top-left, V2 top-right on screen for an upright card at rotation identity.
     cam = CameraModel.from_focal(500, 640, 480)
     corners = Pose([0, 0, 300], [0, 0, 0]).corners_px(cam, 60)
     (u1, v1), (u2, v2), _, (u4, v4) = corners

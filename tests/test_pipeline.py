@@ -163,7 +163,7 @@ def test_method_choices() -> None:
 
 
 def within_seed_criteria(measured: Pose, truth: Pose) -> bool:
-    """DESIGN.md: each angle within 2 degrees, position within 5 mm (Euclidean)."""
+    """docs/conventions.md: each angle within 2 degrees, position within 5 mm (Euclidean)."""
     angles_ok = np.all(np.abs(angle_difference(measured.angles_deg, truth.angles_deg)) <= 2.0)
     return bool(angles_ok and np.linalg.norm(measured.position_mm - truth.position_mm) < 5.0)
 

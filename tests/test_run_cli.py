@@ -193,7 +193,7 @@ def test_picamera2_missing_is_one_clear_line(tmp_path: Path) -> None:
 
 
 def xor_checksum(body: str) -> str:
-    """DESIGN.md: XOR of every byte between '$' and '*', two uppercase hex digits."""
+    """docs/conventions.md: XOR of every byte between '$' and '*', two uppercase hex digits."""
     value = 0
     for byte in body.encode("ascii"):
         value ^= byte

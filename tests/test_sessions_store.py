@@ -28,7 +28,7 @@ from qrfield.sessions import (
 )
 from qrfield.sessions.files import FileOps
 
-_DESIGN_TEXT = (  # the column list exactly as DESIGN.md writes it
+_DESIGN_TEXT = (  # the column list exactly as docs/conventions.md writes it
     "row,time,combo,gt_x,gt_y,gt_z,gt_alpha,gt_beta,gt_gamma,x,y,z,alpha,beta,gamma,n_frames,"
     "n_converged,err_pos,err_alpha,err_beta,err_gamma,pass,note"
 )

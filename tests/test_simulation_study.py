@@ -15,7 +15,8 @@ from qrfield.simulation.study import field_specs
 def test_default_combinations_are_the_twelve_of_design_md():
     combos = load_combinations("default")
     got = {c.multipliers for c in combos}
-    # DESIGN.md: single axes; pairs with equal and opposite signs; triples (+,+,+), (+,+,-), (+,-,+).
+    # docs/conventions.md: single axes; pairs with equal and opposite signs; triples (+,+,+), (+,+,-),
+    # (+,-,+).
     expected = {
         (1, 0, 0), (0, 1, 0), (0, 0, 1),
         (1, 1, 0), (1, -1, 0), (1, 0, 1), (1, 0, -1), (0, 1, 1), (0, 1, -1),

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from qrfield import paths
 from qrfield.settings import SettingError, from_dict, setting, to_dict
 
 CONFIG_FILE = "app.json"
@@ -41,9 +42,8 @@ class AppSettings:
 
 
 def config_dir() -> Path:
-    """``$QRFIELD_CONFIG_DIR`` or ``~/.config/qrfield``."""
-    env = os.environ.get("QRFIELD_CONFIG_DIR")
-    return Path(env).expanduser() if env else Path.home() / ".config" / "qrfield"
+    """The config folder (qrfield.paths.config_dir)."""
+    return paths.config_dir()
 
 
 class ConfigStore:

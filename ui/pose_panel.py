@@ -14,7 +14,7 @@ from qrfield.geometry import Pose, angle_difference
 ROWS = (("x", "mm"), ("y", "mm"), ("z", "mm"), ("α", "°"), ("β", "°"), ("γ", "°"))
 #: An ambiguity ratio at or above this counts as "the two mirror poses fit almost equally well".
 AMBIGUITY_WARNING = 0.8
-#: The seed's acceptance criteria (DESIGN.md).
+#: The seed's acceptance criteria (docs/conventions.md).
 MAX_ANGLE_ERROR_DEG = 2.0
 MAX_POSITION_ERROR_MM = 5.0
 TRUTH = "true"

@@ -1,4 +1,4 @@
-"""The serial panel: stream each measured pose to the gripper controller as $QRF lines (DESIGN.md).
+"""The serial panel: stream each measured pose to the gripper controller as $QRF lines (docs/conventions.md).
 
 The panel owns at most one :class:`~qrfield.serial_link.SerialLink` (the link's own thread opens,
 writes and reconnects the port). The pipeline worker hands every result to :class:`LinkPublisher`

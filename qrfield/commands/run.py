@@ -74,7 +74,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     group = parser.add_argument_group("virtual bench (--source virtual)")
     add_setting_arguments(group, VirtualBenchSettings, prefix="virtual_")
-    group = parser.add_argument_group("serial link to the gripper controller ($QRF frames, DESIGN.md)")
+    group = parser.add_argument_group(
+        "serial link to the gripper controller ($QRF frames; docs/conventions.md)"
+    )
     group.add_argument(
         "--serial",
         metavar="PORT",

@@ -4,7 +4,7 @@
     detections = Detector().detect(image)          # grey or BGR uint8, any size
     code = select_code(detections, select_text="")  # the largest, or the one with that text
 
-Vertex order V1..V4 and pixel convention: DESIGN.md. Modules: backends (zxing-cpp, OpenCV),
+Vertex order V1..V4 and pixel convention: docs/conventions.md. Modules: backends (zxing-cpp, OpenCV),
 finders (finder patterns by contours, for strong perspective), patterns (checks against the
 symbol's fixed patterns), refine (sub-pixel edges), detector, tracking, select.
 

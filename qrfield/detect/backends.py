@@ -1,10 +1,10 @@
 """Detector backends: each finds QR codes in a grey image and returns rough corners in V1..V4 order.
 
-V1..V4 (DESIGN.md): V1 the outer corner of the top-left finder pattern, V2 top-right, V3 bottom-right
-(no finder pattern), V4 bottom-left, following the code when it is rotated. Both OpenCV detectors and
-zxing-cpp already report their four points in this order (zxing's ``top_left`` .. ``bottom_left`` are
-the symbol's own corners, not the image's); tests check it against the renderer's truth under
-rotations of 0/90/180/270 degrees and tilts.
+V1..V4 (docs/conventions.md): V1 the outer corner of the top-left finder pattern, V2 top-right,
+V3 bottom-right (no finder pattern), V4 bottom-left, following the code when it is rotated. Both
+OpenCV detectors and zxing-cpp already report their four points in this order (zxing's
+``top_left`` .. ``bottom_left`` are the symbol's own corners, not the image's); tests check it
+against the renderer's truth under rotations of 0/90/180/270 degrees and tilts.
 
 Pixels follow OpenCV (centre of the top-left pixel = (0, 0)). zxing-cpp's corners are whole
 pixels; OpenCV's are about 0.5-1.5 px off: :mod:`qrfield.detect.refine` makes them sub-pixel.

@@ -16,7 +16,7 @@ class Detection:
     """One QR code found in an image.
 
     Attributes:
-        corners_px: (4, 2) float pixels of V1..V4 (DESIGN.md: V1 the outer corner of the top-left
+        corners_px: (4, 2) float pixels of V1..V4 (docs/conventions.md: V1 the outer corner of the top-left
             finder pattern, V2 top-right, V3 bottom-right (no finder pattern), V4 bottom-left, following
             the code when it is rotated); OpenCV pixel convention (top-left pixel centre = (0, 0)).
         text: the decoded payload, or None when it could not be read.

@@ -1,6 +1,6 @@
 """Settings of experiment sessions: the acceptance criteria and how many frames make one row.
 
-The criteria are the seed's (DESIGN.md): each of alpha, beta, gamma within 2 degrees of the ground
+The criteria are the seed's (docs/conventions.md): each of alpha, beta, gamma within 2 degrees of the ground
 truth (inclusive) and the position within 5 mm (Euclidean, strict), with at least one converged
 frame. They are settings so that a study can tighten or loosen them; the values used are saved in
 every session's ``session.json``.

@@ -1,6 +1,6 @@
 """Ground truth typed by the operator: parse and validate each field, with a message per field.
 
-Fields (DESIGN.md units): ``x``, ``y``, ``z`` in mm (the QR centre in the camera frame: +X right,
+Fields (docs/conventions.md units): ``x``, ``y``, ``z`` in mm (the QR centre in the camera frame: +X right,
 +Y down, +Z forward along the optical axis); ``alpha``, ``beta``, ``gamma`` in degrees
 (R = Rx(alpha) Ry(beta) Rz(gamma), marker to camera); ``combo``, the rotation combination's name.
 

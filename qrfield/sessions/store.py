@@ -1,9 +1,11 @@
-"""Experiment sessions on disk (DESIGN.md): ``<YYYYmmdd-HHMMSS>-<name>/session.json`` + ``rows.csv``.
+"""Experiment sessions on disk: ``<YYYYmmdd-HHMMSS>-<name>/session.json`` + ``rows.csv``.
+
+Format: docs/conventions.md, "Experiment sessions on disk".
 
 ``session.json`` (written atomically: temp file, fsync, os.replace) records the camera model, QR
 side, solver and its settings, acceptance criteria, frames per row, app version, operator, notes
-and creation time. ``rows.csv`` is UTF-8 with a header row: the required columns in DESIGN.md's
-order, then EXTRA_COLUMNS. Values in mm and degrees with 3 decimals, empty where unknown (no
+and creation time. ``rows.csv`` is UTF-8 with a header row: the required columns in the order of
+docs/conventions.md, then EXTRA_COLUMNS. Values in mm and degrees with 3 decimals, empty where unknown (no
 converged frame); ``time`` is local ISO 8601 time with its UTC offset; ``pass`` is 1 or 0;
 ``x``..``gamma`` are the means over the converged frames (angles: circular means), ``err_*`` are
 measured minus ground truth (angles wrapped to (-180, 180]), ``err_pos`` the Euclidean distance.
@@ -51,7 +53,7 @@ try:  # advisory lock: POSIX only
 except ImportError:  # pragma: no cover - Windows
     fcntl = None  # type: ignore[assignment]
 
-#: DESIGN.md's required columns, in order.
+#: docs/conventions.md's required columns, in order.
 REQUIRED_COLUMNS = (
     "row",
     "time",
@@ -96,7 +98,7 @@ COLUMNS = REQUIRED_COLUMNS + EXTRA_COLUMNS
 SESSION_FILE = "session.json"
 ROWS_FILE = "rows.csv"
 FORMAT = "qrfield-session/1"
-#: Solver methods a session may name (DESIGN.md: the thesis' model and OpenCV IPPE).
+#: Solver methods a session may name (docs/conventions.md: the thesis' model and OpenCV IPPE).
 SOLVER_METHODS = ("numerical", "ippe")
 #: Decimals written for mm and degree values.
 DECIMALS = 3

@@ -2,7 +2,7 @@
 
 A combination is a name and three multipliers (m_alpha, m_beta, m_gamma): at swept magnitude t
 (degrees) the card's angles are (alpha, beta, gamma) = t * (m_alpha, m_beta, m_gamma), with
-R = Rx(alpha) Ry(beta) Rz(gamma) (DESIGN.md). The seed simulated 12 combinations without listing
+R = Rx(alpha) Ry(beta) Rz(gamma) (docs/conventions.md). The seed simulated 12 combinations without listing
 them; our default set (``qrfield/data/combinations-default.csv``) is the single axes, the three pairs
 with equal and with opposite signs, and the triples (+,+,+), (+,+,-), (+,-,+).
 

@@ -41,7 +41,7 @@ SEED_COVERAGE_PERCENT = 77.28
 #: samples.csv is written only up to this many rows (solvers x samples).
 CSV_MAX_ROWS = 200_000
 SOLVER_NOTES = {
-    "numerical": "the thesis' model as DESIGN.md reads it (seed initial guess, seed stop rule)",
+    "numerical": "the thesis' model as docs/conventions.md reads it (seed initial guess, seed stop rule)",
     "ippe": "OpenCV IPPE_SQUARE (closed form, both candidates ranked by reprojection error)",
 }
 

@@ -1,6 +1,6 @@
 """Which simulated poses the camera sees: the vectorised twin of :func:`qrfield.render.check_view`.
 
-A pose (R, t) of the QR symbol (side L, vertices V1..V4 in the marker frame, DESIGN.md) is in view
+A pose (R, t) of the QR symbol (side L, vertices V1..V4 in the marker frame, docs/conventions.md) is in view
 when every vertex is in front of the camera (z > 1e-6 mm), the card faces the camera
 (dot(R[:, 2], t) > 0: its printed side, marker -Z, is turned towards the optical centre) and is
 seen no more obliquely than ``max_view_angle_deg`` (the angle between the card's normal and the

@@ -4,7 +4,7 @@ Entry points:
   - :func:`solve` one corner set -> :class:`PoseResult`;
   - :func:`solve_batch` N corner sets -> :class:`BatchResult` (vectorised for "numerical").
 
-Conventions (DESIGN.md): corners are pixels (u, v), OpenCV convention, in the order V1 top-left,
+Conventions (docs/conventions.md): corners are pixels (u, v), OpenCV convention, in the order V1 top-left,
 V2 top-right, V3 bottom-right, V4 bottom-left of the code (clockwise on screen); the side L is the
 symbol's side in mm (quiet zone excluded); poses are the QR centre in mm in the camera frame and
 alpha, beta, gamma in degrees with R = Rx(alpha) Ry(beta) Rz(gamma) (marker to camera).

@@ -3,7 +3,7 @@
 A usable corner set is four finite pixels V1..V4 forming a convex quadrilateral that runs
 clockwise on screen (image coordinates, y down), i.e. every turn e_(k-1) x e_k between successive
 edges is positive. That is what any square in front of a pinhole camera projects to in the
-order of DESIGN.md (top-left, top-right, bottom-right, bottom-left; verified against rendered
+order of docs/conventions.md (top-left, top-right, bottom-right, bottom-left; verified against rendered
 views in the tests). Anything else is reported by name: NaN/inf, wrong shape, coincident or
 collinear corners, a self-intersecting ("bow-tie") or concave quadrilateral, counter-clockwise order.
 """

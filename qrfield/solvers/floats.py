@@ -1,6 +1,6 @@
 """Pose helpers on Python floats for the single-solve paths (no numpy call overhead on 4 points).
 
-Rotations are given as rows [[r00, r01, r02], ...] (marker to camera, DESIGN.md), positions in mm.
+Rotations are given as rows [[r00, r01, r02], ...] (marker to camera, docs/conventions.md), positions in mm.
 """
 
 from __future__ import annotations

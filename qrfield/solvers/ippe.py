@@ -3,7 +3,7 @@
 cv2.solvePnPGeneric with SOLVEPNP_IPPE_SQUARE returns the two poses of the planar ambiguity
 (Collins and Bartoli 2014) for the object points of :func:`qrfield.geometry.ippe_object_points`
 (V1..V4 in OpenCV's frame: +Y up, +Z towards the camera); both are refined (LM or VVS) and
-converted to the marker frame of DESIGN.md with :func:`qrfield.geometry.rotation_from_ippe`. The
+converted to the marker frame of docs/conventions.md with :func:`qrfield.geometry.rotation_from_ippe`. The
 one with the smaller reprojection error is the answer, the other its ``alternative``, and
 ``ambiguity`` = best error / second error (near 1: the image cannot tell the two apart). When
 refining the second candidate slides it onto the answer (it is then no local minimum of its own),
@@ -85,7 +85,7 @@ def _ideal_pixels(corners: np.ndarray, camera: CameraModel) -> np.ndarray:
 
 
 class _Candidate:
-    """One IPPE pose in the marker frame of DESIGN.md, as Python floats (cheap on 4 points)."""
+    """One IPPE pose in the marker frame of docs/conventions.md, as Python floats (cheap on 4 points)."""
 
     __slots__ = ("error", "position", "residual", "rows", "vertices")
 
@@ -100,7 +100,7 @@ class _Candidate:
     ) -> None:
         import cv2
 
-        # OpenCV's IPPE frame has +Y up and +Z towards the camera: convert to DESIGN.md's marker frame.
+        # OpenCV's IPPE frame has +Y up and +Z towards the camera: convert to our marker frame.
         self.rows = rotation_from_ippe(cv2.Rodrigues(rvec)[0]).tolist()
         (a, b, _), (d, e, _), (g, h, _) = self.rows
         self.position = tvec.reshape(3).tolist()

@@ -6,7 +6,7 @@ Every function here takes its values as lists of 4 (or 6) items that are either 
 passed in are used, all correctly rounded IEEE operations applied in the same order, so both
 paths give bit-identical depths and iteration counts.
 
-Notation (DESIGN.md): the corner i has normalised (undistorted) image coordinates (x_i, y_i), its
+Notation (docs/conventions.md): the corner i has normalised (undistorted) image coordinates (x_i, y_i), its
 line of sight m_i = (x_i, y_i, 1), and the vertex V_i = z_i * m_i at depth z_i (mm). The six
 lengths are the four sides V1V2, V2V3, V3V4, V4V1 (L) and the diagonals V1V3, V2V4 (L*sqrt(2)).
 """

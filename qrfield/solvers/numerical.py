@@ -1,4 +1,4 @@
-"""The thesis' numerical positioning model (Teoh 2022), as DESIGN.md reconstructs it.
+"""The thesis' numerical positioning model (Teoh 2022), as docs/conventions.md reconstructs it.
 
 What is the seed's (named in its abstract, symbol list and chapter 1): the four vertices as
 positioning points; the pinhole model and similar triangles (vertex i lies on its line of sight,
@@ -11,7 +11,7 @@ What is our reconstruction (the seed gives no equations):
   - unknowns: the four depths z_1..z_4 (mm) along the lines of sight of the undistorted corners;
   - residuals: diff = calculated minus actual length of the four sides (L) and two diagonals (L sqrt 2);
   - update: a Gauss-Newton step on the six residuals, scaled by tf (tf = 1 is the full step);
-  - stop rule "seed" (DESIGN.md's reading of the seed): converged as soon as max |diff_i| < tolerance;
+  - stop rule "seed" (our reading of the seed): converged as soon as max |diff_i| < tolerance;
     not converged when n reaches n_max, when the step falls below STALL_MM (a least-squares optimum
     whose residual stays above the tolerance, e.g. with noisy corners) or when the normal equations
     are singular;
@@ -70,7 +70,7 @@ class NumericalSettings:
     """Settings of the numerical model; each help text names the seed's symbol where it has one.
 
     The defaults are for measuring real images: our parallelogram guess and settled stop rule with
-    a 1 mm tolerance. :data:`SEED_SETTINGS` is the thesis' model as DESIGN.md reads it (seed guess,
+    a 1 mm tolerance. :data:`SEED_SETTINGS` is the thesis' model as docs/conventions.md reads it (seed guess,
     seed stop rule, 0.01 mm) for reproducing its simulation.
     """
 
@@ -136,7 +136,7 @@ class NumericalSettings:
     )
 
 
-#: The thesis' model as DESIGN.md reads it: seed guess, seed stop rule, a tight tolerance.
+#: The thesis' model as docs/conventions.md reads it: seed guess, seed stop rule, a tight tolerance.
 SEED_SETTINGS = NumericalSettings(tolerance_mm=0.01, initial_guess="seed", stop="seed")
 
 

@@ -1,6 +1,6 @@
 """What a pose solver returns: one :class:`PoseResult` per corner set, or a :class:`BatchResult`.
 
-Frames, units and order follow DESIGN.md: positions in mm in the OpenCV camera frame (+X right,
+Frames, units and order follow docs/conventions.md: positions in mm in the OpenCV camera frame (+X right,
 +Y down, +Z forward), angles (alpha, beta, gamma) in degrees with R = Rx(alpha) Ry(beta) Rz(gamma)
 mapping marker to camera coordinates, vertices and corners in the order V1..V4 (top-left,
 top-right, bottom-right, bottom-left of the symbol).

@@ -1,4 +1,4 @@
-"""The preview draws the image and its overlays in one pixel convention (DESIGN.md: OpenCV's, the
+"""The preview draws the image and its overlays in one pixel convention (docs/conventions.md: OpenCV's, the
 centre of the top-left pixel is (0, 0))."""
 
 from __future__ import annotations

@@ -22,7 +22,7 @@ from ui.main_window import MainWindow
 pytestmark = pytest.mark.gui
 WAIT_MS = 15000
 LEFT = QtCore.Qt.MouseButton.LeftButton
-# DESIGN.md, "Experiment sessions on disk", typed here from the document (not from the code).
+# docs/conventions.md, "Experiment sessions on disk", typed here from the document (not from the code).
 DESIGN_COLUMNS = [
     "row",
     "time",
