@@ -5,15 +5,22 @@ centre of a W x H image is ((W-1)/2, (H-1)/2). fx, fy, cx, cy are in pixels; the
 coefficients (k1, k2, p1, p2, k3) act on normalised image coordinates and are unitless.
 
 A camera is named on the command line as one of
-  - ``NAME[@WxH]``: a profile ``NAME.json`` looked up in ``./calib``, the user's profile folder
-    (``$QRFIELD_CALIB_DIR`` or ``~/.config/qrfield/calib``), then the presets shipped in ``calib/``;
-  - ``PATH[@WxH]``: a JSON file;
+  - ``NAME[@WxH]``: a profile ``NAME.json`` looked up in ``$QRFIELD_CALIB_DIR``, then the user's
+    profile folder (``~/.config/qrfield/calib``, where calibrations are saved), then the presets
+    shipped in ``calib/``. A profile of the user's with a preset's name is the user's choice and
+    wins, and :func:`camera_origin` says so; a ``./calib`` folder in the current folder is *not*
+    searched by name (it would silently replace a preset wherever one happens to be): give its
+    path, ``--camera calib/NAME.json``;
+  - ``PATH[@WxH]``: a JSON file (relative paths from the current folder);
   - ``--focal-px F --size WxH``: the thesis' minimal model (principal point at the image centre).
 ``@WxH`` rescales the profile to another resolution of the same sensor mode (same aspect ratio).
+Every number is checked against :mod:`qrfield.limits`: focal lengths, image size, and a lens
+model that OpenCV can invert over the whole image (:func:`check_distortion`).
 """
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import os
@@ -25,6 +32,8 @@ from typing import Any
 import numpy as np
 
 from qrfield import paths
+from qrfield.files import Fields, FileFormatError, describe_value, read_json
+from qrfield.limits import DISTORTION_ROUND_TRIP_PX, DISTORTION_SCALE, FOCAL_PX, IMAGE_SIDE_PX, LimitError
 
 #: Fields every camera JSON file must have.
 REQUIRED_FIELDS = ("width", "height", "fx", "fy", "cx", "cy")
@@ -47,6 +56,7 @@ class CameraModel:
         dist: (5,) OpenCV distortion coefficients k1, k2, p1, p2, k3 (zeros = ideal pinhole).
         name: a label for humans (preset name or file stem).
         notes: free text: where the numbers come from.
+        path: the profile file it was read from ("" when built otherwise); not part of equality.
     """
 
     fx: float
@@ -58,6 +68,7 @@ class CameraModel:
     dist: np.ndarray = field(default_factory=lambda: np.zeros(5))
     name: str = "custom"
     notes: str = ""
+    path: str = field(default="", compare=False)
 
     def __post_init__(self) -> None:
         dist = np.asarray(self.dist, dtype=float).reshape(-1)
@@ -76,6 +87,7 @@ class CameraModel:
         for key in ("fx", "fy", "cx", "cy"):
             object.__setattr__(self, key, float(getattr(self, key)))
         _validate(self.fx, self.fy, self.cx, self.cy, self.width, self.height, f"camera {self.name!r}")
+        check_distortion(self, f"camera {self.name!r}")
 
     # ------------------------------------------------------------------ constructors
     @classmethod
@@ -96,28 +108,37 @@ class CameraModel:
     def from_dict(cls, data: dict[str, Any], where: str = "camera") -> CameraModel:
         """Build from a JSON-like dict; raises CameraModelError naming ``where`` and the field."""
         if not isinstance(data, dict):
-            raise CameraModelError(f"{where}: expected a JSON object, got {type(data).__name__}")
+            raise CameraModelError(f"{where}: expected a JSON object, got {describe_value(data)}")
         for key in REQUIRED_FIELDS:
             if key not in data:
                 raise CameraModelError(f"{where}: missing field '{key}'")
         values: dict[str, Any] = {}
-        for key in REQUIRED_FIELDS:
-            value = data[key]
-            if isinstance(value, bool) or not isinstance(value, (int, float)):
-                raise CameraModelError(f"{where}: field '{key}' must be a number, got {value!r}")
-            if not math.isfinite(value):
-                raise CameraModelError(f"{where}: field '{key}' must be finite, got {value!r}")
-            values[key] = value
+        fields = Fields(data, where)
+        try:
+            for key in REQUIRED_FIELDS:
+                values[key] = fields.number(key)
+            name = fields.text("name", "custom", max_chars=200)
+            notes = fields.text("notes", "")
+        except FileFormatError as exc:
+            raise CameraModelError(str(exc)) from None
         for key in ("width", "height"):
             if values[key] != int(values[key]) or values[key] <= 0:
                 raise CameraModelError(
                     f"{where}: field '{key}' must be a positive whole number of pixels, got {values[key]!r}"
                 )
         dist = data.get("dist", [0.0] * 5)
-        try:
-            dist_arr = np.asarray(dist, dtype=float).reshape(-1)
-        except (TypeError, ValueError):
-            raise CameraModelError(f"{where}: field 'dist' must be a list of numbers, got {dist!r}") from None
+        if not isinstance(dist, list) or not all(
+            isinstance(d, (int, float)) and not isinstance(d, bool) for d in dist
+        ):
+            raise CameraModelError(
+                f"{where}: field 'dist' must be a list of numbers k1, k2, p1, p2, k3, "
+                f"got {describe_value(dist)}"
+            )
+        if len(dist) > 14:  # OpenCV's longest model
+            raise CameraModelError(
+                f"{where}: field 'dist' has {len(dist)} terms; OpenCV's models have at most 14"
+            )
+        dist_arr = np.asarray(dist, dtype=float).reshape(-1)
         if not np.all(np.isfinite(dist_arr)):
             raise CameraModelError(f"{where}: field 'dist' has a non-finite value: {dist!r}")
         _validate(
@@ -129,37 +150,32 @@ class CameraModel:
             int(values["height"]),
             where,
         )
-        return cls(
-            fx=values["fx"],
-            fy=values["fy"],
-            cx=values["cx"],
-            cy=values["cy"],
-            width=int(values["width"]),
-            height=int(values["height"]),
-            dist=dist_arr,
-            name=str(data.get("name", "custom")),
-            notes=str(data.get("notes", "")),
-        )
+        try:
+            return cls(
+                fx=values["fx"],
+                fy=values["fy"],
+                cx=values["cx"],
+                cy=values["cy"],
+                width=int(values["width"]),
+                height=int(values["height"]),
+                dist=dist_arr,
+                name=name,
+                notes=notes,
+            )
+        except CameraModelError as exc:  # the distortion check: name the file, not the model
+            raise CameraModelError(str(exc).replace(f"camera {name!r}", where, 1)) from None
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> CameraModel:
         """Load a camera JSON file; one clear CameraModelError naming the file and field."""
         path = Path(path)
         try:
-            text = path.read_text(encoding="utf-8")
-        except FileNotFoundError:
-            raise CameraModelError(f"camera file {path}: no such file") from None
-        except OSError as exc:
-            raise CameraModelError(f"camera file {path}: cannot read ({exc.strerror})") from None
-        except UnicodeDecodeError:
-            raise CameraModelError(f"camera file {path}: not JSON (not UTF-8 text)") from None
-        try:
-            data = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise CameraModelError(f"camera file {path}: not JSON ({exc.msg} at line {exc.lineno})") from None
+            data = read_json(path, "camera file", max_bytes=1024 * 1024)
+        except FileFormatError as exc:
+            raise CameraModelError(str(exc)) from None
         if isinstance(data, dict) and "name" not in data:
             data = {**data, "name": path.stem}
-        return cls.from_dict(data, where=f"camera file {path}")
+        return replace(cls.from_dict(data, where=f"camera file {path}"), path=str(path))
 
     # ------------------------------------------------------------------ output
     def to_dict(self) -> dict[str, Any]:
@@ -179,9 +195,9 @@ class CameraModel:
     def save(self, path: str | os.PathLike[str]) -> None:
         """Write the model as JSON (UTF-8, indented), all or nothing: a crash or power cut while
         overwriting a calibrated profile leaves the old file, never a truncated one."""
-        from qrfield.sessions.files import atomic_write  # lazily: sessions imports this module
+        from qrfield.files import atomic_write_json
 
-        atomic_write(path, (json.dumps(self.to_dict(), indent=2) + "\n").encode("utf-8"))
+        atomic_write_json(path, self.to_dict())
 
     # ------------------------------------------------------------------ derived
     @property
@@ -246,14 +262,23 @@ class CameraModel:
 
 
 def _validate(fx: float, fy: float, cx: float, cy: float, width: int, height: int, where: str) -> None:
-    """Raise CameraModelError (prefixed with ``where``) for unusable intrinsics."""
+    """Raise CameraModelError (prefixed with ``where``) for unusable intrinsics (qrfield.limits)."""
     if width <= 0 or height <= 0:
         raise CameraModelError(f"{where}: image size {width}x{height} must be positive")
+    for key, value in (("width", width), ("height", height)):
+        try:
+            IMAGE_SIDE_PX.check(value, f"{where}: field '{key}'")
+        except LimitError as exc:
+            raise CameraModelError(str(exc)) from None
     for key, value in (("fx", fx), ("fy", fy)):
         if not math.isfinite(value) or value <= 0:
             raise CameraModelError(
                 f"{where}: field '{key}' must be a positive focal length in pixels, got {value!r}"
             )
+        try:
+            FOCAL_PX.check(value, f"{where}: field '{key}'")
+        except LimitError as exc:
+            raise CameraModelError(str(exc)) from None
     if not (-0.5 <= cx <= width - 0.5):
         raise CameraModelError(
             f"{where}: field 'cx' = {cx!r} puts the principal point outside the {width}-pixel-wide image"
@@ -262,6 +287,127 @@ def _validate(fx: float, fy: float, cx: float, cy: float, width: int, height: in
         raise CameraModelError(
             f"{where}: field 'cy' = {cy!r} puts the principal point outside the {height}-pixel-high image"
         )
+
+
+def check_distortion(camera: CameraModel, where: str) -> None:
+    """CameraModelError naming ``where`` and 'dist' when the lens model cannot be inverted over the image.
+
+    Usable means (qrfield.limits.DISTORTION_ROUND_TRIP_PX): every point of the ellipse inscribed in
+    the image (through the middles of its four edges), undistorted by the solvers' own iteration and
+    distorted back by cv2.projectPoints, lands within that many pixels of itself, and the radial
+    factor r (1 + k1 r^2 + k2 r^4 + k3 r^6) keeps growing out to there (the model does not fold back
+    inside it). k1 = 1e6 fails the first (OpenCV's iteration oscillates); k1 = -1 on a wide lens both.
+    The image's corners beyond the ellipse are not required: a real calibration with k3 often folds
+    there, where its chessboard views never reached (:func:`distortion_note` says so).
+    """
+    if not camera.has_distortion:
+        return
+    problem = _distortion_problem(*_distortion_key(camera), corners=False)
+    if problem:
+        coefficients = ", ".join(f"{d:g}" for d in camera.dist)
+        raise CameraModelError(f"{where}: field 'dist' ({coefficients}) {problem}")
+
+
+def distortion_note(camera: CameraModel) -> str:
+    """ "" when the lens model can be inverted over the whole image, corners included; else one line
+    saying that poses from codes in the corners are unreliable (for calibrate's advice)."""
+    if not camera.has_distortion:
+        return ""
+    problem = _distortion_problem(*_distortion_key(camera), corners=True)
+    if not problem:
+        return ""
+    return (
+        f"the lens model {problem.replace('over the', 'in the corners of the')}: poses from codes "
+        "near the corners are unreliable; take views that reach the corners, or calibrate with --fix-k3"
+    )
+
+
+def _distortion_key(camera: CameraModel) -> tuple[Any, ...]:
+    return (
+        camera.fx,
+        camera.fy,
+        camera.cx,
+        camera.cy,
+        camera.width,
+        camera.height,
+        tuple(camera.dist.tolist()),
+    )
+
+
+@functools.lru_cache(maxsize=64)
+def _distortion_problem(
+    fx: float,
+    fy: float,
+    cx: float,
+    cy: float,
+    width: int,
+    height: int,
+    dist: tuple[float, ...],
+    corners: bool,
+) -> str:
+    """Why the model cannot be inverted over the inscribed ellipse (or, ``corners``, the whole
+    image's border at its pixel edges), or ""."""
+    import cv2
+
+    from qrfield.solvers.rays import UNDISTORT_CRITERIA  # the solvers' iteration is what must work
+
+    K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+    D = np.asarray(dist, dtype=float)
+    if corners:
+        n = 64  # points per side of the border (pixel edges), corners included
+        u = np.linspace(-0.5, width - 0.5, n + 1)
+        v = np.linspace(-0.5, height - 0.5, n + 1)
+        outline = np.concatenate(
+            [
+                np.column_stack([u, np.full_like(u, -0.5)]),
+                np.column_stack([u, np.full_like(u, height - 0.5)]),
+                np.column_stack([np.full_like(v, -0.5), v]),
+                np.column_stack([np.full_like(v, width - 0.5), v]),
+            ]
+        )
+    else:
+        t = np.linspace(0.0, 2.0 * np.pi, 256, endpoint=False)
+        outline = np.column_stack(
+            [(width - 1) / 2.0 + width / 2.0 * np.cos(t), (height - 1) / 2.0 + height / 2.0 * np.sin(t)]
+        )
+    pts = outline.reshape(-1, 1, 2)
+    with np.errstate(all="ignore"):
+        if hasattr(cv2, "undistortPointsIter"):  # OpenCV 4.x
+            ideal = cv2.undistortPointsIter(pts, K, D, None, None, UNDISTORT_CRITERIA)
+        else:  # OpenCV 5
+            ideal = cv2.undistortPoints(pts, K, D, R=None, P=None, criteria=UNDISTORT_CRITERIA)
+        ideal = ideal.reshape(-1, 2)
+        if not np.all(np.isfinite(ideal)):
+            return f"cannot be inverted over the {width}x{height} image (OpenCV's undistortion diverges)"
+        rays = np.column_stack([ideal, np.ones(len(ideal))])
+        back, _ = cv2.projectPoints(rays, np.zeros(3), np.zeros(3), K, D)
+        miss = float(np.nanmax(np.abs(back.reshape(-1, 2) - outline)))
+    if not math.isfinite(miss) or miss > DISTORTION_ROUND_TRIP_PX:
+        return (
+            f"cannot be inverted over the {width}x{height} image: undistorting points of the image and "
+            f"distorting them back misses by {miss:.3g} px (at most {DISTORTION_ROUND_TRIP_PX:g} px)"
+        )
+    distorted = np.column_stack([(outline[:, 0] - cx) / fx, (outline[:, 1] - cy) / fy])
+    with np.errstate(all="ignore"):
+        scale = np.hypot(distorted[:, 0], distorted[:, 1]) / np.hypot(ideal[:, 0], ideal[:, 1])
+    scale = scale[np.isfinite(scale)]
+    for extreme in (float(scale.min()), float(scale.max())) if scale.size else ():
+        if not DISTORTION_SCALE.minimum <= extreme <= DISTORTION_SCALE.maximum:
+            return (
+                f"{'stretches' if extreme > 1 else 'shrinks'} the {width}x{height} image's edge "
+                f"{extreme:.3g} times (a real lens: {DISTORTION_SCALE.minimum:.2g}.."
+                f"{DISTORTION_SCALE.maximum:g}); is it a calibration of this camera?"
+            )
+    k1, k2, k3 = D[0], D[1] if D.size > 1 else 0.0, D[4] if D.size > 4 else 0.0
+    r = np.linspace(0.0, float(np.hypot(ideal[:, 0], ideal[:, 1]).max()), 2001)
+    growth = 1.0 + 3.0 * k1 * r**2 + 5.0 * k2 * r**4 + 7.0 * k3 * r**6  # d/dr of r * radial factor
+    if np.any(growth <= 0.0):
+        fold = float(r[np.argmax(growth <= 0.0)])
+        return (
+            f"folds back over the {width}x{height} image: its radial distortion stops growing "
+            f"{math.degrees(math.atan(fold)):.1f} degrees off the axis, inside the field of view"
+        )
+    return ""
 
 
 # ---------------------------------------------------------------------- lookup by name
@@ -276,13 +422,40 @@ def preset_dir() -> Path:
 
 
 def user_profile_dirs() -> list[Path]:
-    """Folders searched for ``NAME.json`` before the shipped presets, in order."""
-    dirs = [Path.cwd() / "calib"]
-    env = os.environ.get("QRFIELD_CALIB_DIR")
+    """Folders searched for ``NAME.json`` before the shipped presets, in order.
+
+    ``$QRFIELD_CALIB_DIR`` (if set), then the user's profile folder. The current folder's
+    ``./calib`` is not searched by name: see the module docstring.
+    """
+    dirs = []
+    env = os.environ.get("QRFIELD_CALIB_DIR", "").strip()
     if env:
-        dirs.append(Path(env))
+        dirs.append(Path(env).expanduser())
     dirs.append(paths.user_calib_dir())
     return dirs
+
+
+def camera_origin(camera: CameraModel) -> str:
+    """Where a camera model came from, with the file's path, for the line every command prints."""
+    if not camera.path:
+        return camera.notes.split(";")[0] if camera.notes else "built in"
+    file = Path(camera.path)
+    try:
+        preset = file.resolve().parent == preset_dir().resolve()
+    except OSError:
+        preset = False
+    if preset:
+        return f"shipped preset {file}"
+    shadowed = (preset_dir() / file.name).is_file() and any(file.parent == d for d in user_profile_dirs())
+    note = " (it replaces the shipped preset of that name)" if shadowed else ""
+    return f"profile {file}{note}"
+
+
+def say_camera(camera: CameraModel, command: str) -> None:
+    """One line on stderr naming the camera model and the file it came from (docs/cli.md)."""
+    import sys
+
+    print(f"qrfield {command}: camera {camera.name} from {camera_origin(camera)}", file=sys.stderr)
 
 
 def preset_names() -> list[str]:
@@ -298,6 +471,11 @@ def parse_size(text: str) -> tuple[int, int]:
     width, height = int(parts[0]), int(parts[1])
     if width <= 0 or height <= 0:
         raise CameraModelError(f"image size {text!r} must be positive")
+    try:
+        for value in (width, height):
+            IMAGE_SIDE_PX.check(value, f"image size {text!r}")
+    except LimitError as exc:
+        raise CameraModelError(str(exc)) from None
     return width, height
 
 
@@ -314,49 +492,83 @@ def resolve_camera(spec: str) -> CameraModel:
     if base.endswith(".json") or os.sep in base or path.is_file():
         camera = CameraModel.load(path)
     else:
+        if base in (".", "..") or "/" in base:  # a name, never a path outside the folders searched
+            raise CameraModelError(f"no camera profile named {base!r}")
         candidates = [d / f"{base}.json" for d in user_profile_dirs()] + [preset_dir() / f"{base}.json"]
         found = next((c for c in candidates if c.is_file()), None)
         if found is None:
+            local = Path("calib") / f"{base}.json"
+            hint = (
+                f"; ./{local} is not searched by name: give its path, --camera {local}"
+                if local.is_file()
+                else ""
+            )
             raise CameraModelError(
                 f"no camera profile named {base!r}; presets: {', '.join(preset_names())} "
-                "(or give a path to a JSON file, or --focal-px F --size WxH)"
+                f"(or give a path to a JSON file, or --focal-px F --size WxH){hint}"
             )
         camera = CameraModel.load(found)
     return camera.scaled(*size) if size else camera
 
 
-def add_camera_arguments(parser: Any, default: str | None = None) -> None:
-    """Add ``--camera``, ``--focal-px`` and ``--size`` to an argparse parser."""
+def add_camera_arguments(parser: Any, default: str | None = None, focal_only: bool = False) -> None:
+    """Add ``--camera``, ``--focal-px`` and ``--size`` to an argparse parser.
+
+    ``focal_only``: the command takes images, whose own size serves when ``--size`` is left out
+    (see :func:`camera_from_args`).
+    """
     parser.add_argument(
         "--camera",
         default=default,
         metavar="CAM",
-        help="camera profile NAME[@WxH] (presets: picam-v1, picam-v2, picam-v3, picam-hq-6mm, "
-        "webcam-60) or PATH.json[@WxH]",
+        help="camera profile NAME[@WxH] (your profiles in ~/.config/qrfield/calib, then the presets "
+        "picam-v1, picam-v2, picam-v3, picam-hq-6mm, webcam-60) or PATH.json[@WxH]; the file used is printed",
     )
-    parser.add_argument("--focal-px", type=float, metavar="F", help="focal length in pixels (with --size)")
+    from qrfield.arguments import limited
+
+    parser.add_argument(
+        "--focal-px",
+        type=limited(FOCAL_PX, "--focal-px"),
+        metavar="F",
+        help=f"focal length in pixels ({FOCAL_PX.describe()}), with --size"
+        + (
+            " (with IMAGE files, --size may be left out: each image's own size is taken)"
+            if focal_only
+            else ""
+        ),
+    )
     parser.add_argument("--size", metavar="WxH", help="image size for --focal-px, e.g. 640x480")
     # Remembered so that camera_from_args can tell a default --camera from one the user typed.
     parser.set_defaults(_camera_default=default)
 
 
-def camera_from_args(args: Any) -> CameraModel:
+def camera_from_args(args: Any, focal_only: bool = False) -> CameraModel | None:
     """The camera named by ``--camera`` or ``--focal-px``/``--size``.
 
     ``--focal-px``/``--size`` win over a default ``--camera``; CameraModelError if neither is
     given, or if both a typed ``--camera`` and ``--focal-px``/``--size`` are (which one was meant?).
+    ``focal_only``: ``--focal-px`` without ``--size`` is accepted and gives None: the caller makes
+    :meth:`CameraModel.from_focal` at each image's own size (``args.focal_px``).
     """
     focal, size = getattr(args, "focal_px", None), getattr(args, "size", None)
     if focal is not None or size is not None:
         camera = getattr(args, "camera", None)
         if camera and camera != getattr(args, "_camera_default", None):
             raise CameraModelError(f"give either --camera ({camera}) or --focal-px/--size, not both")
+        if focal is not None and size is None and focal_only:
+            _checked_focal(focal)
+            return None
         if focal is None or size is None:
             raise CameraModelError("--focal-px and --size go together, e.g. --focal-px 620 --size 640x480")
-        if not math.isfinite(focal) or focal <= 0:
-            raise CameraModelError(f"--focal-px must be a positive number of pixels, got {focal}")
         width, height = parse_size(size)
-        return CameraModel.from_focal(focal, width, height)
+        return CameraModel.from_focal(_checked_focal(focal), width, height)
     if not getattr(args, "camera", None):
         raise CameraModelError("name a camera: --camera NAME[@WxH] or --focal-px F --size WxH")
     return resolve_camera(args.camera)
+
+
+def _checked_focal(focal: Any) -> float:
+    try:
+        return FOCAL_PX.check(focal, "--focal-px")
+    except LimitError as exc:
+        raise CameraModelError(str(exc)) from None

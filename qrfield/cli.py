@@ -15,6 +15,7 @@ from collections.abc import Sequence
 
 import qrfield
 from qrfield import commands
+from qrfield.arguments import NEGATIVE_VALUES_HELP, ArgumentParser, stdout_closed
 from qrfield.camera import CameraModelError
 
 
@@ -28,16 +29,18 @@ def command_names() -> list[str]:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog="qrfield",
         description="Measure the 3D position and orientation of a printed QR code from one camera. "
-        "Without a subcommand, opens the bench app.",
+        "Without a subcommand, opens the bench app. Paths are taken from the current folder; "
+        f"{NEGATIVE_VALUES_HELP}.",
     )
     parser.add_argument("--version", action="version", version=f"qrfield {qrfield.__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in command_names():
         module = importlib.import_module(f"qrfield.commands.{name.replace('-', '_')}")
-        sp = sub.add_parser(name, help=module.HELP, description=getattr(module, "DESCRIPTION", module.HELP))
+        description = getattr(module, "DESCRIPTION", module.HELP)
+        sp = sub.add_parser(name, help=module.HELP, description=f"{description} ({NEGATIVE_VALUES_HELP}.)")
         module.add_arguments(sp)
         sp.set_defaults(_run=module.run)
     return parser
@@ -49,9 +52,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     if not argv or (argv[0].startswith("-") and argv[0] not in ("-h", "--help", "--version")):
         argv = ["gui", *argv]  # no subcommand: the app, with any options given
-    args = parser.parse_args(argv)
     try:
-        return int(args._run(args) or 0)
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help, --version, or a usage error already printed in one line
+        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
+    try:
+        code = int(args._run(args) or 0)
+        sys.stdout.flush()  # here, not at exit: a closed pipe must be caught below, not printed
+        return code
+    except BrokenPipeError:
+        # The reader went away (`qrfield solve ... | head`): what it wanted it has; stop quietly.
+        stdout_closed()
+        return 0
     except (CameraModelError, ValueError, OSError) as exc:
         # Bad input is the user's to fix: one clear line, no traceback.
         print(f"qrfield {args.command}: error: {exc}", file=sys.stderr)

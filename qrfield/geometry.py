@@ -174,16 +174,10 @@ class Pose:
 
     @classmethod
     def parse(cls, text: str) -> Pose:
-        """Parse ``X,Y,Z,ALPHA,BETA,GAMMA`` (mm and degrees)."""
-        parts = [p for p in text.replace(" ", "").split(",") if p != ""]
-        if len(parts) != 6:
-            raise ValueError(
-                f"pose {text!r}: expected 6 comma-separated numbers X,Y,Z,ALPHA,BETA,GAMMA (mm, degrees)"
-            )
-        try:
-            values = [float(p) for p in parts]
-        except ValueError:
-            raise ValueError(f"pose {text!r}: not all six values are numbers") from None
+        """Parse ``X,Y,Z,ALPHA,BETA,GAMMA`` (mm and degrees; commas, semicolons or spaces)."""
+        from qrfield.arguments import parse_numbers
+
+        values = parse_numbers(text, "pose", names=("X", "Y", "Z", "ALPHA", "BETA", "GAMMA"))
         return cls(values[:3], values[3:])
 
     def vertices_mm(self, side_mm: float) -> np.ndarray:

@@ -374,13 +374,11 @@ def write_marker(
         data = marker_pdf(layout)
     else:
         data = marker_png(layout, dpi)
-    if path.is_dir():
-        raise IsADirectoryError(f"{path} is a folder; give a file name")
-    if not path.parent.is_dir():
-        raise FileNotFoundError(f"cannot write {path}: folder {path.parent} does not exist")
+    from qrfield.files import atomic_write, check_target
+
+    check_target(path)
     try:
-        with path.open("wb" if force else "xb") as handle:
-            handle.write(data)
+        atomic_write(path, data, overwrite=force)
     except FileExistsError:
         raise FileExistsError(f"{path} exists; choose another name or add --force to overwrite it") from None
     except PermissionError:

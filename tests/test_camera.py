@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
-from qrfield.camera import CameraModel, CameraModelError, preset_names, resolve_camera
+from qrfield.camera import CameraModel, CameraModelError, camera_origin, preset_names, resolve_camera
 
 
 def test_presets_match_their_datasheet_formula():
@@ -73,12 +73,33 @@ def test_json_round_trip(tmp_path):
     np.testing.assert_array_equal(back.dist, cam.dist)
 
 
-def test_named_profile_found_in_cwd_calib(tmp_path, monkeypatch):
+def test_cwd_calib_is_a_path_not_a_name_and_never_replaces_a_preset(tmp_path, monkeypatch, capsys):
+    # docs/cli.md: ./calib/NAME.json is not searched by name (it silently replaced the shipped preset
+    # picam-v2 wherever such a folder happened to be); its path works, and says which file it is.
     (tmp_path / "calib").mkdir()
     CameraModel.from_focal(700.0, 800, 600, name="mine").save(tmp_path / "calib" / "mine.json")
+    CameraModel.from_focal(999.0, 3280, 2464, name="picam-v2").save(tmp_path / "calib" / "picam-v2.json")
     monkeypatch.chdir(tmp_path)
-    cam = resolve_camera("mine@400x300")
+    monkeypatch.setenv("QRFIELD_CONFIG_DIR", str(tmp_path / "config"))
+    with pytest.raises(CameraModelError, match=r"not searched by name: give its path, --camera calib/mine.json"):
+        resolve_camera("mine")
+    cam = resolve_camera("calib/mine.json@400x300")
     assert cam.fx == pytest.approx(350.0) and cam.size == (400, 300)
+    assert camera_origin(cam) == "profile calib/mine.json"
+    preset = resolve_camera("picam-v2")
+    assert preset.fx == pytest.approx(2714.286)  # the datasheet preset, not ./calib's 999 px
+    assert camera_origin(preset).startswith("shipped preset ") and preset.path.endswith("calib/picam-v2.json")
+
+
+def test_users_profile_of_a_preset_name_wins_and_says_so(tmp_path, monkeypatch):
+    monkeypatch.setenv("QRFIELD_CONFIG_DIR", str(tmp_path))
+    (tmp_path / "calib").mkdir()
+    CameraModel.from_focal(2500.0, 3280, 2464, name="picam-v2").save(tmp_path / "calib" / "picam-v2.json")
+    cam = resolve_camera("picam-v2@640x480")
+    assert cam.fx == pytest.approx(2500.0 * 640 / 3280)
+    assert camera_origin(cam) == (
+        f"profile {tmp_path / 'calib' / 'picam-v2.json'} (it replaces the shipped preset of that name)"
+    )
 
 
 @pytest.mark.parametrize(

@@ -263,7 +263,7 @@ def test_cli(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     assert out.read_bytes() == marker_pdf(marker_layout("qrfield", 50.0))
     for argv, message in [
         (["--text", "", "--side-mm", "50", "--out", str(tmp_path / "a.svg")], "empty"),
-        (["--text", "x", "--side-mm", "-1", "--out", str(tmp_path / "a.svg")], "positive"),
+        (["--text", "x", "--side-mm", "-1", "--out", str(tmp_path / "a.svg")], "below the smallest"),
         (["--text", "x", "--side-mm", "50", "--out", str(tmp_path / "a.gif")], ".gif"),
         (
             ["--text", "x", "--side-mm", "50", "--out", str(tmp_path / "a.svg"), "--dpi", "300"],

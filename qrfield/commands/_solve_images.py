@@ -9,36 +9,22 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from pathlib import Path
 from typing import Any
 
 from qrfield.camera import CameraModel, CameraModelError
 
 
-def _read(path: str) -> tuple[Any, str]:
-    """(BGR or grey uint8 image, "") or (None, why not)."""
-    import cv2
-    import numpy as np
-
-    file = Path(path)
-    if not file.is_file():
-        return (
-            None,
-            "cannot read image: no such file" if not file.exists() else "cannot read image: not a file",
-        )
-    try:
-        data = np.fromfile(file, dtype=np.uint8)
-    except OSError as exc:
-        return None, f"cannot read image: {exc.strerror or exc}"
-    image = cv2.imdecode(data, cv2.IMREAD_COLOR) if data.size else None
-    if image is None:
-        return None, "cannot read image: not an image format OpenCV can decode"
-    return image, ""
-
-
-def _camera_for(camera: CameraModel, image: Any) -> tuple[CameraModel | None, str]:
-    """The camera at the image's size (a rescaled profile of the same sensor mode), or why not."""
+def _camera_for(
+    camera: CameraModel | None, focal_px: float | None, image: Any
+) -> tuple[CameraModel | None, str]:
+    """The camera at the image's size (a rescaled profile of the same sensor mode; or, given only
+    ``focal_px``, the focal-only model at the image's own size), or why not."""
     height, width = image.shape[:2]
+    if camera is None:
+        try:
+            return CameraModel.from_focal(float(focal_px or 0.0), width, height), ""
+        except CameraModelError as exc:
+            return None, f"image is {width}x{height}: {exc}"
     if (width, height) == (camera.width, camera.height):
         return camera, ""
     try:
@@ -51,23 +37,29 @@ def _camera_for(camera: CameraModel, image: Any) -> tuple[CameraModel | None, st
 
 
 def solve_images(
-    args: argparse.Namespace, camera: CameraModel, methods: tuple[str, ...], settings: dict[str, Any]
+    args: argparse.Namespace, camera: CameraModel | None, methods: tuple[str, ...], settings: dict[str, Any]
 ) -> int:
-    """Detect and solve each of ``args.images``; print a table or JSON; exit 0 when all converged."""
+    """Detect and solve each of ``args.images`` (files, folders, globs); print a table or JSON;
+    exit 0 when all converged. ``camera`` None: ``args.focal_px`` at each image's own size."""
     from qrfield.commands.solve import format_table
     from qrfield.detect import Detector, DetectorSettings, select_code
+    from qrfield.images import ImageError, ImageSettings, expand_image_paths, read_image
     from qrfield.settings import from_arguments
     from qrfield.solvers import SolverError, solve
 
     detector_settings = from_arguments(DetectorSettings, args, prefix="detect-")
+    image_settings = from_arguments(ImageSettings, args)
     detector = Detector(detector_settings)
     entries: list[dict[str, Any]] = []
     all_ok = True
-    for path in args.images:
-        image, status = _read(path)
-        cam = None
+    for path in expand_image_paths(args.images):
+        cam, status = None, ""
+        try:
+            image = read_image(path, image_settings)
+        except ImageError as exc:
+            image, status = None, str(exc).removeprefix(f"{path}: ")
         if image is not None:
-            cam, status = _camera_for(camera, image)
+            cam, status = _camera_for(camera, args.focal_px, image)
         detections = []
         if cam is not None:
             detections = detector.detect(image)

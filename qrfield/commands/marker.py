@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import argparse
 
+from qrfield.arguments import limited, number
+from qrfield.limits import SIDE_MM
+
 HELP = "write a printable QR marker of exact size (SVG, PDF or PNG)"
 DESCRIPTION = (
     "Write a QR code whose symbol (quiet zone excluded, the L every other command asks for) measures "
@@ -16,10 +19,21 @@ DESCRIPTION = (
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--text", required=True, metavar="T", help="the QR payload, e.g. qrfield")
     parser.add_argument(
-        "--side-mm", type=float, required=True, metavar="L", help="symbol side without quiet zone, mm"
+        "--side-mm",
+        type=limited(SIDE_MM, "--side-mm"),
+        required=True,
+        metavar="L",
+        help=f"symbol side without quiet zone, mm ({SIDE_MM.describe()})",
     )
-    parser.add_argument("--out", required=True, metavar="FILE", help="FILE.svg, FILE.pdf or FILE.png")
-    parser.add_argument("--dpi", type=float, default=None, metavar="D", help="PNG resolution (default 600)")
+    parser.add_argument(
+        "--out",
+        required=True,
+        metavar="FILE",
+        help="FILE.svg, FILE.pdf or FILE.png (in a folder that exists)",
+    )
+    parser.add_argument(
+        "--dpi", type=number("--dpi", 0.0), default=None, metavar="D", help="PNG resolution (default 600)"
+    )
     parser.add_argument("--force", action="store_true", help="overwrite --out if it exists")
 
 

@@ -6,7 +6,9 @@ import argparse
 import json
 import sys
 
+from qrfield.arguments import limited, number
 from qrfield.camera import add_camera_arguments
+from qrfield.limits import SIDE_MM
 
 HELP = "render a QR card at a known pose through a camera model (test images with exact corners)"
 
@@ -14,20 +16,38 @@ HELP = "render a QR card at a known pose through a camera model (test images wit
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_camera_arguments(parser, default="picam-v2@640x480")
     parser.add_argument(
-        "--side-mm", type=float, required=True, metavar="L", help="QR symbol side without quiet zone, mm"
+        "--side-mm",
+        type=limited(SIDE_MM, "--side-mm"),
+        required=True,
+        metavar="L",
+        help=f"QR symbol side without quiet zone, mm ({SIDE_MM.describe()})",
     )
     parser.add_argument(
         "--pose",
         required=True,
         metavar="X,Y,Z,A,B,G",
-        help="QR centre in the camera frame (mm) and alpha,beta,gamma (degrees), e.g. 0,0,300,10,20,0",
+        help="QR centre in the camera frame (mm) and alpha,beta,gamma (degrees), e.g. 0,0,300,10,20,0; "
+        "a negative first value works as it is: --pose -10,5,300,0,0,0",
     )
     parser.add_argument(
-        "--noise", type=float, default=0.0, metavar="SIGMA", help="Gaussian noise, grey levels"
+        "--noise",
+        type=number("--noise", 0.0, 255.0, "grey levels"),
+        default=0.0,
+        metavar="SIGMA",
+        help="Gaussian noise, grey levels (0..255)",
     )
-    parser.add_argument("--blur", type=float, default=0.0, metavar="PX", help="Gaussian blur sigma, pixels")
     parser.add_argument(
-        "--gradient", type=float, default=0.0, help="brightness gradient across the image (0.3 = +-30%%)"
+        "--blur",
+        type=number("--blur", 0.0, 100.0, "px"),
+        default=0.0,
+        metavar="PX",
+        help="Gaussian blur sigma, pixels (0..100)",
+    )
+    parser.add_argument(
+        "--gradient",
+        type=number("--gradient", 0.0, 1.0),
+        default=0.0,
+        help="brightness gradient across the image (0..1; 0.3 = +-30%%)",
     )
     parser.add_argument("--seed", type=int, default=None, help="noise seed (repeatable images)")
     parser.add_argument("--text", default="qrfield", help="QR payload (default: qrfield)")
@@ -41,12 +61,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import cv2
 
-    from qrfield.camera import camera_from_args
+    from qrfield.camera import camera_from_args, say_camera
+    from qrfield.files import atomic_write, check_target
     from qrfield.geometry import Pose
+    from qrfield.images import ImageSettings, check_pixels
     from qrfield.render import render_view
 
     camera = camera_from_args(args)
+    assert camera is not None
     pose = Pose.parse(args.pose)
+    check_pixels(camera.width, camera.height, ImageSettings(), f"camera {camera.name}")
+    out = check_target(args.out, "--out")
     view = render_view(
         camera,
         args.side_mm,
@@ -59,11 +84,13 @@ def run(args: argparse.Namespace) -> int:
         color=args.color,
     )
     try:
-        ok = cv2.imwrite(args.out, view.image)
+        ok, encoded = cv2.imencode(out.suffix or ".png", view.image)
     except cv2.error as exc:
         raise OSError(f"cannot write {args.out}: {exc.err}") from None
-    if not ok:
-        raise OSError(f"cannot write {args.out} (unknown extension or folder not writable)")
+    if not ok or not out.suffix:
+        raise OSError(f"cannot write {args.out}: unknown image format {out.suffix or '(no extension)'!r}")
+    atomic_write(out, encoded.tobytes())
+    say_camera(camera, "render")
     corners = [[round(float(u), 4), round(float(v), 4)] for u, v in view.corners_px]
     if args.json:
         json.dump(

@@ -5,9 +5,12 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import re
 import sys
 
+from qrfield.arguments import limited, parse_numbers
 from qrfield.camera import add_camera_arguments
+from qrfield.limits import SIDE_MM
 
 HELP = "compute a QR code's position (mm) and orientation (degrees) from images or its four corner pixels"
 DESCRIPTION = (
@@ -20,6 +23,7 @@ DESCRIPTION = (
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from qrfield.images import ImageSettings
     from qrfield.settings import add_arguments as add_setting_arguments
     from qrfield.solvers.ippe import IppeSettings
     from qrfield.solvers.numerical import NumericalSettings
@@ -28,16 +32,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "images",
         nargs="*",
         metavar="IMAGE",
-        help="image files to detect the code in and solve (instead of --corners)",
+        help="image files, folders (their images, by name) or quoted glob patterns ('shots/*.png', "
+        "'**/*.jpg') to detect the code in and solve (instead of --corners); one process for all",
     )
     parser.add_argument(
         "--corners",
         metavar='"U1,V1 U2,V2 U3,V3 U4,V4"',
-        help="pixels of V1..V4 (OpenCV convention: the top-left pixel's centre is 0,0)",
+        help="pixels of V1..V4 (OpenCV convention: the top-left pixel's centre is 0,0); 8 numbers "
+        "separated by commas or spaces; --corners=-3,5,... works too",
     )
-    add_camera_arguments(parser)
+    add_camera_arguments(parser, focal_only=True)
     parser.add_argument(
-        "--side-mm", type=float, required=True, metavar="L", help="QR symbol side without quiet zone, mm"
+        "--side-mm",
+        type=limited(SIDE_MM, "--side-mm"),
+        required=True,
+        metavar="L",
+        help=f"QR symbol side without quiet zone, mm ({SIDE_MM.describe()})",
     )
     parser.add_argument(
         "--method", choices=("numerical", "ippe", "both"), default="both", help="solver (default: both)"
@@ -58,6 +68,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     group = parser.add_argument_group("detection settings (with IMAGE)")
     add_setting_arguments(group, DetectorSettings, prefix="detect-")  # type: ignore[arg-type]
+    group = parser.add_argument_group("image files (with IMAGE)")
+    add_setting_arguments(group, ImageSettings)  # type: ignore[arg-type]
     group = parser.add_argument_group("numerical model settings")
     add_setting_arguments(group, NumericalSettings)  # type: ignore[arg-type]
     group = parser.add_argument_group("IPPE settings")
@@ -65,23 +77,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def parse_corners(text: str) -> list[list[float]]:
-    """``"u1,v1 u2,v2 u3,v3 u4,v4"`` -> [[u1, v1], ...]; ValueError saying what is malformed."""
-    pairs = text.replace(";", " ").split()
+    """``"u1,v1 u2,v2 u3,v3 u4,v4"`` (pairs separated by spaces or ';'), or 8 numbers separated by
+    commas, -> [[u1, v1], ...]. ValueError naming --corners and what is malformed."""
+    pairs = re.split(r"[;\s]+", text.strip()) if text.strip() else []
+    if len(pairs) == 1:  # "u1,v1,u2,v2,...": 8 numbers, paired in order
+        values = parse_numbers(pairs[0], "--corners")
+        pairs = [f"{values[k]!r},{values[k + 1]!r}" for k in range(0, len(values) - 1, 2)]
+        if len(values) % 2:
+            pairs.append(repr(values[-1]))
     if len(pairs) != 4:
         raise ValueError(
-            f"--corners needs 4 pixel pairs 'u,v' separated by spaces (V1 V2 V3 V4), "
-            f"got {len(pairs)}: {text!r}"
+            "--corners needs 4 pixel pairs 'u,v' separated by spaces (V1 V2 V3 V4), or 8 numbers "
+            f"separated by commas; got {len(pairs)} pairs: {text!r}"
         )
-    out = []
-    for i, pair in enumerate(pairs, start=1):
-        parts = pair.split(",")
-        try:
-            if len(parts) != 2:
-                raise ValueError
-            out.append([float(parts[0]), float(parts[1])])
-        except ValueError:
-            raise ValueError(f"--corners: V{i} {pair!r} is not a pair of numbers u,v") from None
-    return out
+    return [
+        parse_numbers(pair, "--corners", names=(f"V{i} u", f"V{i} v"))
+        for i, pair in enumerate(pairs, start=1)
+    ]
 
 
 def _fmt(value: float | None, digits: int) -> str:
@@ -117,13 +129,14 @@ def format_table(results: list) -> str:  # type: ignore[type-arg]
 
 
 def run(args: argparse.Namespace) -> int:
-    from qrfield.camera import camera_from_args
+    from qrfield.camera import camera_from_args, say_camera
+    from qrfield.limits import check_corners_in_view
     from qrfield.settings import from_arguments
     from qrfield.solvers import IppeSettings, NumericalSettings, solve
 
-    if bool(args.images) == bool(args.corners):
+    if bool(args.images) == (args.corners is not None):
         raise ValueError("give either IMAGE files or --corners (one of them)")
-    camera = camera_from_args(args)
+    camera = camera_from_args(args, focal_only=bool(args.images))
     methods = ("numerical", "ippe") if args.method == "both" else (args.method,)
     settings = {
         "numerical": from_arguments(NumericalSettings, args),
@@ -132,8 +145,14 @@ def run(args: argparse.Namespace) -> int:
     if args.images:
         from qrfield.commands._solve_images import solve_images
 
+        if camera is not None:
+            say_camera(camera, "solve")
         return solve_images(args, camera, methods, settings)
+    if camera is None:  # pragma: no cover - camera_from_args gives None only with images
+        raise ValueError("--focal-px without --size needs IMAGE files")
     corners = parse_corners(args.corners)
+    check_corners_in_view(corners, camera.width, camera.height)
+    say_camera(camera, "solve")
     results = [solve(corners, camera, args.side_mm, method, settings[method]) for method in methods]
     if args.json:
         json.dump([r.to_json_dict() for r in results], sys.stdout, allow_nan=False)

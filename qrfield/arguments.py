@@ -1,0 +1,141 @@
+"""Command-line values: the parser every command is built with, one parser for comma lists of
+numbers, and number options checked against :mod:`qrfield.limits`.
+
+argparse takes any word that starts with '-' and is not a plain negative number for an option,
+so ``--pose -10,5,300,0,0,0`` failed with "expected one argument". :class:`ArgumentParser` reads a
+word that starts with '-' followed by a digit (or '.' and a digit) as a value: qrfield has no
+option that starts with a digit, so such a word can only be a negative number or a list of them.
+Every subcommand parser is made by ``add_subparsers`` of the top parser, so every option of every
+command, including options added later, gets this. ``--pose=-10,...`` works as well.
+
+Errors are one line, ``qrfield CMD: error: ... (see qrfield CMD --help)``, with exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import re
+import sys
+from collections.abc import Callable, Sequence
+from typing import Any, NoReturn
+
+from qrfield.limits import Limit, LimitError
+
+#: A word that is a value, not an option: '-' then a digit, or '-.' then a digit.
+_VALUE_WORD = re.compile(r"^-\.?\d")
+
+#: Separators of :func:`parse_numbers`: commas, semicolons, white space.
+_SEPARATORS = re.compile(r"[,;\s]+")
+
+#: Text for help messages.
+NEGATIVE_VALUES_HELP = (
+    "values may start with '-': --pose -10,5,300,0,0,0 and --pose=-10,5,300,0,0,0 both work"
+)
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse's parser that takes ``-10,5,300`` as a value and reports errors in one line."""
+
+    def _parse_optional(self, arg_string: str) -> Any:
+        if _VALUE_WORD.match(arg_string):
+            return None  # a value (a negative number or a list of them), never an option
+        return super()._parse_optional(arg_string)
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def parse_numbers(
+    text: Any,
+    where: str,
+    *,
+    count: int | None = None,
+    names: Sequence[str] | None = None,
+) -> list[float]:
+    """The finite numbers of a list such as ``-10,5,300,0,0,0`` (commas, semicolons or spaces).
+
+    ``count``: how many are required (also ``len(names)``); ``names`` name the values in messages
+    (e.g. ``("X", "Y", "Z", "A", "B", "G")``). ValueError naming ``where`` (the option) and the value.
+    """
+    if names is not None and count is None:
+        count = len(names)
+    if not isinstance(text, str):
+        raise ValueError(f"{where}: expected a comma-separated list of numbers, got {text!r}")
+    parts = [p for p in _SEPARATORS.split(text.strip()) if p]
+    if count is not None and len(parts) != count:
+        shape = ",".join(names) if names else f"{count} numbers"
+        raise ValueError(
+            f"{where}: expected {count} comma-separated numbers {shape}, got {len(parts)}: {text!r}"
+        )
+    values = []
+    for i, part in enumerate(parts):
+        label = names[i] if names else f"value {i + 1}"
+        try:
+            value = float(part)
+        except ValueError:
+            raise ValueError(f"{where}: {label} {part!r} is not a number") from None
+        if not math.isfinite(value):
+            raise ValueError(f"{where}: {label} must be a finite number, got {part!r}")
+        values.append(value)
+    return values
+
+
+def limited(limit: Limit, option: str) -> Callable[[str], float]:
+    """An argparse ``type=`` for a number inside ``limit`` (the error names the option and limits)."""
+
+    def parse(text: str) -> float:
+        try:
+            return limit.check(_number(text), option)
+        except LimitError as exc:
+            raise argparse.ArgumentTypeError(str(exc).removeprefix(f"{option}: ")) from None
+
+    parse.__name__ = limit.label.replace(" ", "_")  # argparse names the type in some messages
+    return parse
+
+
+def number(
+    option: str, minimum: float | None = None, maximum: float | None = None, unit: str = ""
+) -> Callable[[str], float]:
+    """An argparse ``type=`` for a finite number in ``minimum..maximum`` (either may be None)."""
+    lo = -math.inf if minimum is None else minimum
+    hi = math.inf if maximum is None else maximum
+    return limited(Limit(option.lstrip("-").replace("-", " "), unit, lo, hi), option)
+
+
+def whole_number(option: str, minimum: int | None = None, maximum: int | None = None) -> Callable[[str], int]:
+    """An argparse ``type=`` for an int in ``minimum..maximum``."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text.strip())
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+        if minimum is not None and value < minimum:
+            raise argparse.ArgumentTypeError(f"{value} is below the smallest accepted, {minimum}")
+        if maximum is not None and value > maximum:
+            raise argparse.ArgumentTypeError(f"{value} is above the largest accepted, {maximum}")
+        return value
+
+    parse.__name__ = "whole_number"
+    return parse
+
+
+def _number(text: str) -> float:
+    try:
+        return float(text)
+    except (TypeError, ValueError):
+        raise LimitError(f"expected a number, got {text!r}") from None
+
+
+def stdout_closed() -> None:
+    """After BrokenPipeError on stdout (``qrfield solve ... | head``): point stdout at /dev/null, so
+    that Python's exit flush cannot fail again and print "Broken pipe"."""
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError, AttributeError):
+        sys.stdout = None  # type: ignore[assignment]

@@ -1,0 +1,295 @@
+"""Image files: which paths are images, their size read from the header, and a decode that refuses
+an image above the pixel limit *before* decoding it.
+
+A 0.8 MB PNG can hold 32000 x 24000 pixels, which OpenCV would decode into 2.3 GB (and a Raspberry
+Pi would be killed). So the width and height are read from the file's header first: PNG (IHDR),
+JPEG (the SOF segment, after any EXIF), BMP, GIF, WebP (VP8, VP8L, VP8X), TIFF (classic and
+BigTIFF) and PNM/PAM. An image above :class:`ImageSettings` ``max_megapixels`` (default
+:data:`qrfield.limits.DEFAULT_MAX_MEGAPIXELS`) is refused with its size; a file whose size cannot
+be read from its header (another format, or a damaged header) is refused too, since only
+decoding it would tell its size.
+
+Paths: :func:`expand_image_paths` takes files, folders (their image files, sorted by name) and
+glob patterns (``shots/*.png``, ``**`` for subfolders), each relative to the current folder.
+"""
+
+from __future__ import annotations
+
+import glob
+import os
+import struct
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from qrfield.limits import DEFAULT_MAX_MEGAPIXELS
+from qrfield.settings import setting
+
+#: File name endings taken as images when a folder is given.
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".pgm", ".ppm", ".pbm", ".pnm")
+#: Formats whose header :func:`probe_size` reads (for messages).
+PROBED_FORMATS = "PNG, JPEG, BMP, GIF, WebP, TIFF, PNM"
+#: Bytes read from the start of a file to find its size (JPEG segments are followed by seeking).
+_HEAD_BYTES = 4096
+_GLOB_CHARS = ("*", "?", "[")
+
+
+@dataclass(frozen=True)
+class ImageSettings:
+    """Limits on the image files qrfield decodes."""
+
+    max_megapixels: float = setting(
+        DEFAULT_MAX_MEGAPIXELS,
+        label="image pixel limit",
+        unit="MP",
+        minimum=0.01,
+        maximum=1000.0,
+        decimals=1,
+        help="larger images are refused before they are decoded (a 50 MP colour image takes 150 MB)",
+    )
+
+
+class ImageError(ValueError):
+    """An image file that is refused or cannot be read; the message names the file and why."""
+
+
+def is_glob(text: str) -> bool:
+    """True when ``text`` contains a glob character (``*``, ``?``, ``[``)."""
+    return any(ch in text for ch in _GLOB_CHARS)
+
+
+def expand_image_paths(items: list[str]) -> list[str]:
+    """The image paths given: files as they are, each folder replaced by its image files (sorted by
+    name), each glob pattern by the files it matches (sorted). A path that exists is never taken for
+    a pattern; a pattern that matches nothing, or a folder without images, stays in the list as it is,
+    so that the reader reports it (:func:`read_image` says "no file matches" / "no images")."""
+    paths: list[str] = []
+    for item in items:
+        path = Path(item)
+        if path.is_dir():
+            found = sorted(
+                str(p) for p in path.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file()
+            )
+            paths.extend(found or [item])
+        elif not os.path.lexists(item) and is_glob(item):
+            matches = sorted(m for m in glob.glob(item, recursive=True) if os.path.isfile(m))
+            paths.extend(matches or [item])
+        else:
+            paths.append(item)
+    return paths
+
+
+def probe_size(path: str | os.PathLike[str]) -> tuple[int, int] | None:
+    """(width, height) from the file's header, or None when the format is not one of
+    :data:`PROBED_FORMATS` or the header is damaged. Reads a few KB, never the pixels."""
+    with open(path, "rb") as handle:
+        head = handle.read(_HEAD_BYTES)
+        try:
+            if head.startswith(b"\xff\xd8"):
+                return _jpeg_size(handle)
+            if head[:4] in (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+"):
+                return _tiff_size(handle, head)
+        except (struct.error, ValueError, OverflowError):
+            return None
+    return _header_size(head)
+
+
+def _header_size(head: bytes) -> tuple[int, int] | None:
+    try:
+        if head.startswith(b"\x89PNG\r\n\x1a\n") and head[12:16] == b"IHDR":
+            return struct.unpack(">II", head[16:24])
+        if head.startswith(b"BM") and len(head) >= 26:
+            header_size = struct.unpack("<I", head[14:18])[0]
+            if header_size == 12:  # OS/2 BITMAPCOREHEADER
+                return struct.unpack("<HH", head[18:22])
+            width, height = struct.unpack("<ii", head[18:26])
+            return abs(width), abs(height)  # height < 0: rows stored top-down
+        if head[:6] in (b"GIF87a", b"GIF89a"):
+            return struct.unpack("<HH", head[6:10])
+        if head.startswith(b"RIFF") and head[8:12] == b"WEBP":
+            return _webp_size(head)
+        if head[:1] == b"P" and head[1:2] in b"1234567":
+            return _pnm_size(head)
+    except (struct.error, IndexError, ValueError):
+        return None
+    return None
+
+
+def _jpeg_size(handle: Any) -> tuple[int, int] | None:
+    """Walk the JPEG's segments (seeking over EXIF and other APPn data) to its SOF marker."""
+    handle.seek(2)
+    for _ in range(10_000):  # a damaged file must not loop forever
+        byte = handle.read(1)
+        while byte == b"\xff":  # fill bytes before a marker
+            marker = handle.read(1)
+            if marker != b"\xff":
+                break
+        else:
+            return None
+        if not marker:
+            return None
+        code = marker[0]
+        if code in (0x01, *range(0xD0, 0xD8)):  # markers without a length
+            continue
+        if code in (0xD9, 0xDA):  # end of image, start of scan: no SOF before them
+            return None
+        length_bytes = handle.read(2)
+        if len(length_bytes) != 2:
+            return None
+        length = struct.unpack(">H", length_bytes)[0]
+        if length < 2:
+            return None
+        if code in (0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF):
+            data = handle.read(5)
+            if len(data) != 5:
+                return None
+            height, width = struct.unpack(">HH", data[1:5])
+            return width, height
+        handle.seek(length - 2, os.SEEK_CUR)
+    return None
+
+
+def _webp_size(head: bytes) -> tuple[int, int] | None:
+    chunk = head[12:16]
+    if chunk == b"VP8 ":  # lossy: the key frame's start code, then 14-bit width and height
+        if head[23:26] != b"\x9d\x01\x2a":
+            return None
+        width, height = struct.unpack("<HH", head[26:30])
+        return width & 0x3FFF, height & 0x3FFF
+    if chunk == b"VP8L":  # lossless: signature 0x2f, then 14 bits each of width-1 and height-1
+        if head[20] != 0x2F:
+            return None
+        bits = struct.unpack("<I", head[21:25])[0]
+        return (bits & 0x3FFF) + 1, ((bits >> 14) & 0x3FFF) + 1
+    if chunk == b"VP8X":  # extended: 24-bit canvas width-1 and height-1
+        width = int.from_bytes(head[24:27], "little") + 1
+        height = int.from_bytes(head[27:30], "little") + 1
+        return width, height
+    return None
+
+
+def _tiff_size(handle: Any, head: bytes) -> tuple[int, int] | None:
+    """ImageWidth (256) and ImageLength (257) of the first IFD, which libtiff (hence OpenCV) often
+    writes after the pixels: found by seeking, not by reading the file."""
+    order = "<" if head[:2] == b"II" else ">"
+    big = head[2:4] in (b"+\x00", b"\x00+")
+
+    def at(offset: int, size: int) -> bytes:
+        handle.seek(offset)
+        return handle.read(size)
+
+    if big:
+        offset = struct.unpack(order + "Q", head[8:16])[0]
+        count = struct.unpack(order + "Q", at(offset, 8))[0]
+        entry_size, start, value_at = 20, offset + 8, 12
+    else:
+        offset = struct.unpack(order + "I", head[4:8])[0]
+        count = struct.unpack(order + "H", at(offset, 2))[0]
+        entry_size, start, value_at = 12, offset + 2, 8
+    table = at(start, entry_size * min(count, 500))
+    sizes: dict[int, int] = {}
+    for k in range(len(table) // entry_size):
+        entry = table[k * entry_size : (k + 1) * entry_size]
+        tag, kind = struct.unpack(order + "HH", entry[:4])
+        if tag in (256, 257):
+            if kind == 3:  # SHORT
+                sizes[tag] = struct.unpack(order + "H", entry[value_at : value_at + 2])[0]
+            elif kind == 4:  # LONG
+                sizes[tag] = struct.unpack(order + "I", entry[value_at : value_at + 4])[0]
+            elif kind == 16:  # LONG8 (BigTIFF)
+                sizes[tag] = struct.unpack(order + "Q", entry[value_at : value_at + 8])[0]
+    if 256 in sizes and 257 in sizes:
+        return sizes[256], sizes[257]
+    return None
+
+
+def _pnm_size(head: bytes) -> tuple[int, int] | None:
+    if head[1:2] == b"7":  # PAM: WIDTH and HEIGHT header lines
+        fields = {}
+        for line in head.split(b"\n")[1:]:
+            words = line.split()
+            if words and words[0] == b"ENDHDR":
+                break
+            if len(words) >= 2:
+                fields[words[0]] = words[1]
+        return int(fields[b"WIDTH"]), int(fields[b"HEIGHT"])
+    tokens: list[bytes] = []
+    for line in head[2:].split(b"\n"):
+        tokens += line.split(b"#", 1)[0].split()
+        if len(tokens) >= 2:
+            return int(tokens[0]), int(tokens[1])
+    return None
+
+
+def check_pixels(width: int, height: int, settings: ImageSettings, where: str) -> None:
+    """ImageError naming ``where`` when width x height is above ``settings.max_megapixels``."""
+    megapixels = width * height / 1e6
+    if megapixels > settings.max_megapixels:
+        raise ImageError(
+            f"{where}: {width}x{height} is {megapixels:.1f} MP, above the limit of "
+            f"{settings.max_megapixels:g} MP; refused before decoding (--max-megapixels raises the limit)"
+        )
+
+
+def read_image(
+    path: str | os.PathLike[str], settings: ImageSettings | None = None, *, grey: bool = False
+) -> Any:
+    """The image as a BGR (or ``grey``) uint8 array; ImageError with the reason, never a traceback.
+
+    The size is read from the header and checked against the pixel limit before anything is decoded;
+    the file is read whole only then.
+    """
+    import cv2
+    import numpy as np
+
+    settings = settings or ImageSettings()
+    text = os.fspath(path)
+    file = Path(text)
+    if not os.path.lexists(text):
+        if is_glob(text):
+            raise ImageError(f"{text}: no file matches this pattern")
+        raise ImageError(f"{text}: cannot read image: no such file")
+    if file.is_dir():
+        raise ImageError(
+            f"{text}: cannot read image: a folder without image files ({', '.join(IMAGE_SUFFIXES)})"
+        )
+    if not file.is_file():
+        raise ImageError(f"{text}: cannot read image: not a regular file")
+    try:
+        size = probe_size(file)
+    except OSError as exc:
+        raise ImageError(f"{text}: cannot read image: {exc.strerror or exc}") from None
+    if size is None:
+        raise ImageError(
+            f"{text}: cannot read image: not an image format whose size qrfield can read before "
+            f"decoding ({PROBED_FORMATS})"
+        )
+    width, height = size
+    if width <= 0 or height <= 0:
+        raise ImageError(f"{text}: cannot read image: its header says {width}x{height} pixels")
+    check_pixels(width, height, settings, text)
+    # The whole file is read only now; it cannot be much larger than its pixels uncompressed.
+    limit = int(settings.max_megapixels * 1e6 * 4) + (16 << 20)
+    try:
+        if file.stat().st_size > limit:
+            raise ImageError(
+                f"{text}: cannot read image: {file.stat().st_size} bytes is too large "
+                f"for {width}x{height} pixels"
+            )
+        data = np.fromfile(file, dtype=np.uint8)  # also copes with non-ASCII paths
+    except OSError as exc:
+        raise ImageError(f"{text}: cannot read image: {exc.strerror or exc}") from None
+    flags = cv2.IMREAD_GRAYSCALE if grey else cv2.IMREAD_COLOR
+    try:
+        image = cv2.imdecode(data, flags) if data.size else None
+    except cv2.error as exc:
+        raise ImageError(
+            f"{text}: cannot read image: OpenCV cannot decode it ({(exc.err or str(exc)).strip()})"
+        ) from None
+    if image is None:
+        raise ImageError(
+            f"{text}: cannot read image: OpenCV cannot decode it (damaged, or a format OpenCV cannot decode)"
+        )
+    if image.shape[1] != width or image.shape[0] != height:  # the header lied: trust the pixels
+        check_pixels(image.shape[1], image.shape[0], settings, text)
+    return image
