@@ -232,14 +232,15 @@ def detect_board(
 
 
 def read_image(path: str | os.PathLike[str]) -> np.ndarray | None:
-    """The image file as a grey uint8 array, or None when it cannot be read or decoded."""
+    """The image file as a grey uint8 array, or None when it cannot be read or decoded (or is above
+    the pixel limit, refused before decoding: qrfield.images)."""
+    from qrfield.images import ImageError
+    from qrfield.images import read_image as read_checked
+
     try:
-        data = np.fromfile(str(path), dtype=np.uint8)  # also copes with non-ASCII paths
-    except OSError:
+        return read_checked(path, mode="grey")
+    except ImageError:
         return None
-    if data.size == 0:
-        return None
-    return cv2.imdecode(data, cv2.IMREAD_GRAYSCALE)
 
 
 def detect_board_file(path: str | os.PathLike[str], board: Board) -> BoardDetection:

@@ -192,12 +192,13 @@ class CameraModel:
             "notes": self.notes,
         }
 
-    def save(self, path: str | os.PathLike[str]) -> None:
+    def save(self, path: str | os.PathLike[str], *, overwrite: bool = True) -> None:
         """Write the model as JSON (UTF-8, indented), all or nothing: a crash or power cut while
-        overwriting a calibrated profile leaves the old file, never a truncated one."""
-        from qrfield.files import atomic_write_json
+        overwriting a calibrated profile leaves the old file, never a truncated one. The folder must
+        exist; ``overwrite=False``: FileExistsError if ``path`` exists."""
+        from qrfield.files import atomic_write
 
-        atomic_write_json(path, self.to_dict())
+        atomic_write(path, json.dumps(self.to_dict(), indent=2) + "\n", overwrite=overwrite)
 
     # ------------------------------------------------------------------ derived
     @property

@@ -540,19 +540,27 @@ def make_folder(folder: str | os.PathLike[str], what: str = "folder") -> Path:
     folder = Path(folder)
     if folder.is_dir():
         return folder
+    where = f"{what} {folder}: cannot create the folder"
     if os.path.lexists(folder):
-        raise NotADirectoryError(f"{what} {folder} exists and is not a folder")
-    if any(_inside(folder, own) for own in own_folders()):
-        folder.mkdir(parents=True, exist_ok=True)
-        return folder
-    parent = folder.parent
-    if not parent.is_dir():
-        raise FileNotFoundError(
-            f"cannot create {what} {folder}: folder {parent} does not exist (qrfield creates no folders "
-            "above the one you named; make it first)"
-        )
-    folder.mkdir(exist_ok=True)
-    fsync_dir(parent)
+        raise NotADirectoryError(f"{where}: a file of that name exists")
+    try:
+        if any(_inside(folder, own) for own in own_folders()):
+            folder.mkdir(parents=True, exist_ok=True)
+            return folder
+        parent = folder.parent
+        if os.path.lexists(parent) and not parent.is_dir():
+            raise NotADirectoryError(f"{where}: {parent} is a file, not a folder")
+        if not parent.is_dir():
+            raise FileNotFoundError(
+                f"{where}: {parent} does not exist (qrfield creates no folders above the one you named; "
+                "make it first)"
+            )
+        folder.mkdir(exist_ok=True)
+    except (FileNotFoundError, NotADirectoryError):
+        raise
+    except OSError as exc:
+        raise OSError(f"{where} ({exc.strerror or exc})") from None
+    fsync_dir(folder.parent)
     return folder
 
 

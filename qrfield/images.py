@@ -232,9 +232,10 @@ def check_pixels(width: int, height: int, settings: ImageSettings, where: str) -
 
 
 def read_image(
-    path: str | os.PathLike[str], settings: ImageSettings | None = None, *, grey: bool = False
+    path: str | os.PathLike[str], settings: ImageSettings | None = None, *, mode: str = "color"
 ) -> Any:
-    """The image as a BGR (or ``grey``) uint8 array; ImageError with the reason, never a traceback.
+    """The image as a uint8 array, ``mode`` "color" (BGR), "grey", or "any" (grey files stay grey);
+    ImageError with the reason, never a traceback.
 
     The size is read from the header and checked against the pixel limit before anything is decoded;
     the file is read whole only then.
@@ -279,7 +280,7 @@ def read_image(
         data = np.fromfile(file, dtype=np.uint8)  # also copes with non-ASCII paths
     except OSError as exc:
         raise ImageError(f"{text}: cannot read image: {exc.strerror or exc}") from None
-    flags = cv2.IMREAD_GRAYSCALE if grey else cv2.IMREAD_COLOR
+    flags = {"color": cv2.IMREAD_COLOR, "grey": cv2.IMREAD_GRAYSCALE, "any": cv2.IMREAD_ANYCOLOR}[mode]
     try:
         image = cv2.imdecode(data, flags) if data.size else None
     except cv2.error as exc:
@@ -293,3 +294,23 @@ def read_image(
     if image.shape[1] != width or image.shape[0] != height:  # the header lied: trust the pixels
         check_pixels(image.shape[1], image.shape[0], settings, text)
     return image
+
+
+def write_image(path: str | os.PathLike[str], image: Any, *, overwrite: bool = True) -> Path:
+    """Encode ``image`` by the file's extension (.png, .jpg, ...) and write it all or nothing
+    (:func:`qrfield.files.atomic_write`); OSError saying why not. Returns the path."""
+    import cv2
+
+    from qrfield.files import atomic_write, check_target
+
+    target = check_target(path)
+    suffix = target.suffix.lower()
+    if not suffix:
+        raise OSError(f"cannot write {target}: no file extension to tell the image format (.png, .jpg, ...)")
+    try:
+        ok, encoded = cv2.imencode(suffix, image)
+    except cv2.error as exc:
+        raise OSError(f"cannot write {target}: {(exc.err or str(exc)).strip()}") from None
+    if not ok:
+        raise OSError(f"cannot write {target}: OpenCV cannot encode {suffix} images")
+    return atomic_write(target, encoded.tobytes(), overwrite=overwrite)

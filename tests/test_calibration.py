@@ -292,9 +292,16 @@ def test_cli_json_and_camera_profile(
     image_files: list[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
 ) -> None:
     monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("QRFIELD_CONFIG_DIR", str(tmp_path / "config"))
     blank = tmp_path / "blank.png"
     cv2.imwrite(str(blank), np.full((480, 640), 128, np.uint8))
-    args = [*image_files, str(blank), "--board", "9x6", "--square-mm", "25", "--out", "calib/bench.json"]
+    # --out in a folder that does not exist: refused before the calibration, no folder created.
+    args = [*image_files, str(blank), "--board", "9x6", "--square-mm", "25"]
+    assert main(["calibrate", *args, "--out", "calib/bench.json"]) == 2
+    assert "folder calib does not exist" in capsys.readouterr().err and not Path("calib").exists()
+    # In the user's profile folder (qrfield's own, made when needed) the profile is found by name.
+    profile = tmp_path / "config" / "calib" / "bench.json"
+    args += ["--out", str(profile)]
     assert main(["calibrate", *args, "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
     assert {"fx", "fy", "cx", "cy", "dist", "rms_px", "used", "skipped"} <= set(data)
@@ -302,19 +309,19 @@ def test_cli_json_and_camera_profile(
     assert data["skipped"] == [{"image": str(blank), "reason": data["skipped"][0]["reason"]}]
     assert "not found" in data["skipped"][0]["reason"]
     assert len(data["dist"]) == 5 and data["fx"] == pytest.approx(TRUE_CAMERA.fx, rel=0.005)
-    by_path = resolve_camera("calib/bench.json")
+    by_path = resolve_camera(str(profile))
     by_name = resolve_camera("bench")
-    assert by_path == by_name
+    assert by_path == by_name and by_name.path == str(profile)
     assert by_path.fx == pytest.approx(data["fx"]) and by_path.cy == pytest.approx(data["cy"])
     assert "9x6" in by_path.notes and "25 mm" in by_path.notes and "board00.png" in by_path.notes
     assert by_name.scaled(320, 240).fx == pytest.approx(data["fx"] / 2)
 
     # An existing profile is never overwritten silently.
-    before = Path("calib/bench.json").read_text()
+    before = profile.read_text()
     assert main(["calibrate", *args]) == 2
     err = capsys.readouterr().err
     assert "exists" in err and "--force" in err and err.count("\n") == 1
-    assert Path("calib/bench.json").read_text() == before
+    assert profile.read_text() == before
     assert main(["calibrate", *args, "--force", "--fix-k3"]) == 0
     out = capsys.readouterr().out
     assert "RMS reprojection error" in out and "blank.png" in out

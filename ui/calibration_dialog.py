@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import os
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -38,6 +37,7 @@ from qrfield.calibration import (
 )
 from qrfield.camera import CameraModel
 from qrfield.chessboard import Board
+from qrfield.files import make_folder
 from qrfield.settings import setting
 from qrfield.virtual_board import VirtualChessboard
 from ui.settings_form import SettingsForm
@@ -559,16 +559,12 @@ class CalibrationDialog(QtWidgets.QDialog):
         if path.exists() and not self.confirm_overwrite(path):
             self.note.setText(f"not saved: {_shown_path(path)} exists")
             return None
-        tmp = path.with_name(path.name + ".tmp")
         try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            # Written aside and renamed over: a failed write never leaves a truncated model in place
-            # of the one the app may be using.
-            self.result.camera.save(tmp)
-            os.replace(tmp, path)
+            make_folder(path.parent, "profile folder")
+            # All or nothing (qrfield.files.atomic_write): a failed write never leaves a truncated
+            # model in place of the one the app may be using.
+            self.result.camera.save(path)
         except OSError as exc:
-            with contextlib.suppress(OSError):
-                tmp.unlink()
             self.note.setText(f"⚠ not saved: {exc}")
             return None
         self.saved_path = path

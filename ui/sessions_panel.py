@@ -484,7 +484,12 @@ class SessionPanel(QtWidgets.QWidget):
         if self._following:
             truth = bench_mean_truth(collector.frames, truth.combo, collector.method) or truth
         measurement = collector.measurement(truth, self.session.info.criteria, note=self._note)
-        outcome = self.session.log(measurement)
+        try:
+            outcome = self.session.log(measurement)
+        except SessionError as exc:  # refused before anything is written (e.g. a note too long)
+            self._say(f"row NOT logged: {exc}", error=True)
+            self._update_state()
+            return
         verdict = "pass" if measurement.judgement.passed else f"fail ({measurement.judgement.reason})"
         self._after(outcome, f"logged row {outcome.row}: {verdict}")
         if outcome.ok and outcome.row is not None:

@@ -17,14 +17,15 @@ import json
 import sys
 from pathlib import Path
 
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".pgm", ".ppm")
+from qrfield.arguments import number
 
 HELP = "calibrate a camera from chessboard photos and write a camera profile (JSON)"
 DESCRIPTION = (
     "Find a chessboard in each image (OpenCV, sub-pixel corners), calibrate (cv2.calibrateCamera: "
     "fx, fy, cx, cy and distortion k1, k2, p1, p2, k3), print the RMS and per-image reprojection "
     "errors and the images skipped with their reason, and write a camera profile usable wherever a "
-    "camera is named (--camera calib/NAME.json, or --camera NAME from the folder holding calib/)."
+    "camera is named (--camera PATH.json; or --camera NAME when written to your profile folder, "
+    "~/.config/qrfield/calib). The folder of --out must exist (your profile folder is created)."
 )
 
 
@@ -33,7 +34,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "images",
         nargs="+",
         metavar="IMAGE",
-        help="photos of the board (10-20 views, spread over the image), or folders of them",
+        help="photos of the board (10-20 views, spread over the image), folders of them, or quoted "
+        "glob patterns ('shots/*.png')",
     )
     parser.add_argument(
         "--board",
@@ -42,9 +44,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="inner corners per row x per column (OpenCV pattern size), "
         "e.g. 9x6 for a board of 10 x 7 squares",
     )
-    parser.add_argument("--square-mm", type=float, required=True, metavar="S", help="side of one square, mm")
     parser.add_argument(
-        "--out", required=True, metavar="FILE.json", help="camera profile to write, e.g. calib/NAME.json"
+        "--square-mm",
+        type=number("--square-mm", 0.1, 10_000.0, "mm"),
+        required=True,
+        metavar="S",
+        help="side of one square, mm",
+    )
+    parser.add_argument(
+        "--out",
+        required=True,
+        metavar="FILE.json",
+        help="camera profile to write, e.g. ~/.config/qrfield/calib/NAME.json (then --camera NAME works) "
+        "or calib/NAME.json (its folder must exist)",
     )
     parser.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     parser.add_argument("--fix-k3", action="store_true", help="keep k3 = 0 (few views, or a mild lens)")
@@ -58,23 +70,24 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def expand_images(items: list[str]) -> list[str]:
-    """The image paths given, with each folder replaced by its image files (sorted by name)."""
-    paths: list[str] = []
+    """The image paths given (files, folders, globs: :func:`qrfield.images.expand_image_paths`);
+    ValueError for a folder without images or a pattern that matches nothing."""
+    from qrfield.images import IMAGE_SUFFIXES, expand_image_paths, is_glob
+
+    paths = expand_image_paths(items)
     for item in items:
-        folder = Path(item)
-        if folder.is_dir():
-            found = sorted(str(p) for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
-            if not found:
-                raise ValueError(f"folder {folder} holds no images ({', '.join(IMAGE_SUFFIXES)})")
-            paths.extend(found)
-        else:
-            paths.append(item)
+        if Path(item).is_dir() and item in paths:
+            raise ValueError(f"folder {item} holds no images ({', '.join(IMAGE_SUFFIXES)})")
+        if is_glob(item) and item in paths and not Path(item).exists():
+            raise ValueError(f"no file matches {item}")
     return paths
 
 
 def run(args: argparse.Namespace) -> int:
     from qrfield.calibration import calibrate_images
+    from qrfield.camera import distortion_note, user_profile_dirs
     from qrfield.chessboard import Board
+    from qrfield.files import check_target, make_folder
 
     board = Board.parse(args.board, args.square_mm)
     out = Path(args.out)
@@ -84,13 +97,19 @@ def run(args: argparse.Namespace) -> int:
         raise IsADirectoryError(f"--out {out} is a folder; give a file name such as {out / 'NAME.json'}")
     if out.exists() and not args.force:
         raise FileExistsError(f"--out {out} exists; choose another name or add --force to overwrite it")
+    if any(out.parent == folder for folder in user_profile_dirs()):
+        make_folder(out.parent, "profile folder")  # qrfield's own folder: made when needed
+    check_target(out, "--out")  # before hours of work: the folder must exist
     images = expand_images(args.images)
     result = calibrate_images(images, board, fix_k3=args.fix_k3, name=out.stem)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    result.camera.save(out)
+    result.camera.save(out, overwrite=args.force)
+    note = distortion_note(result.camera)
 
     if args.json:
-        json.dump({**result.to_json(), "out": str(out)}, sys.stdout)
+        data = result.to_json()
+        if note:
+            data["advice"] = [*data.get("advice", []), note]
+        json.dump({**data, "out": str(out)}, sys.stdout)
         print()
         return 0
     cam = result.camera
@@ -114,14 +133,8 @@ def run(args: argparse.Namespace) -> int:
     print("coverage (views per cell, 3x3 grid of the image):")
     for row in result.coverage:
         print("  " + " ".join(f"{n:3d}" for n in row))
-    for hint in result.advice():
+    for hint in [*result.advice(), *([note] if note else [])]:
         print(f"advice: {hint}")
-    print(
-        f"wrote {out}: use --camera {out}"
-        + (
-            f" (or --camera {out.stem} from {out.parent.parent.resolve()})"
-            if out.parent.name == "calib"
-            else ""
-        )
-    )
+    by_name = any(out.parent == folder for folder in user_profile_dirs())
+    print(f"wrote {out}: use --camera {out.stem if by_name else out}")
     return 0

@@ -59,12 +59,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import cv2
-
     from qrfield.camera import camera_from_args, say_camera
-    from qrfield.files import atomic_write, check_target
+    from qrfield.files import check_target
     from qrfield.geometry import Pose
-    from qrfield.images import ImageSettings, check_pixels
+    from qrfield.images import ImageSettings, check_pixels, write_image
     from qrfield.render import render_view
 
     camera = camera_from_args(args)
@@ -83,13 +81,7 @@ def run(args: argparse.Namespace) -> int:
         seed=args.seed,
         color=args.color,
     )
-    try:
-        ok, encoded = cv2.imencode(out.suffix or ".png", view.image)
-    except cv2.error as exc:
-        raise OSError(f"cannot write {args.out}: {exc.err}") from None
-    if not ok or not out.suffix:
-        raise OSError(f"cannot write {args.out}: unknown image format {out.suffix or '(no extension)'!r}")
-    atomic_write(out, encoded.tobytes())
+    write_image(out, view.image)
     say_camera(camera, "render")
     corners = [[round(float(u), 4), round(float(v), 4)] for u, v in view.corners_px]
     if args.json:

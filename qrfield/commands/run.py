@@ -47,9 +47,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--json-lines", action="store_true", help="one JSON object per frame on stdout")
     add_camera_arguments(parser, default=None)
+    from qrfield.arguments import limited
+    from qrfield.limits import SIDE_MM
+
     parser.add_argument(
         "--side-mm",
-        type=float,
+        type=limited(SIDE_MM, "--side-mm"),
         default=DEFAULT_SIDE_MM,
         metavar="L",
         help=f"QR symbol side without quiet zone, mm (default {DEFAULT_SIDE_MM:g})",

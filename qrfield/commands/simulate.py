@@ -70,10 +70,9 @@ def run(args: argparse.Namespace) -> int:
     # Make the folder now: a study can run for hours, and its results must not be lost at the end
     # for want of a writable output folder.
     created = not out.exists()
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OSError(f"--out {out}: cannot create the folder ({exc.strerror or exc})") from None
+    from qrfield.files import make_folder
+
+    make_folder(out, "--out folder")  # the folder named, never the folders above it
     if not os.access(out, os.W_OK):
         raise OSError(f"--out {out}: the folder is not writable")
 

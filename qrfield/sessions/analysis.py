@@ -216,10 +216,10 @@ def analyze(
     if compare:
         result["resemblance"], result["resemblance_reason"] = resemblance(active, info)
     if out_dir is not None:
+        from qrfield.files import make_folder
         from qrfield.sessions.plots import plot_errors_vs_tilt, plot_measured_vs_truth
 
-        out = Path(out_dir)
-        out.mkdir(parents=True, exist_ok=True)
+        out = make_folder(Path(out_dir), "--out folder")  # never the folders above it
         result["plots"] = [
             str(plot_errors_vs_tilt(active, info, out / "errors_vs_tilt.png")),
             str(plot_measured_vs_truth(active, info, out / "measured_vs_truth.png")),

@@ -12,7 +12,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from qrfield.sessions.analysis import row_errors, row_tilt_deg
@@ -21,13 +20,9 @@ from qrfield.sessions.store import LoggedRow, SessionInfo
 
 
 def _write(path: Path, img: np.ndarray) -> Path:
-    try:
-        ok = cv2.imwrite(str(path), img)
-    except cv2.error as exc:
-        raise OSError(f"cannot write {path}: {exc.err}") from None
-    if not ok:
-        raise OSError(f"cannot write {path} (folder not writable?)")
-    return path
+    from qrfield.images import write_image
+
+    return write_image(path, img)
 
 
 def plot_errors_vs_tilt(rows: Sequence[LoggedRow], info: SessionInfo, path: Path) -> Path:

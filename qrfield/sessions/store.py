@@ -43,6 +43,17 @@ from typing import Any
 
 import qrfield
 from qrfield.camera import CameraModel, CameraModelError
+from qrfield.files import (
+    Fields,
+    FileFormatError,
+    check_field_sizes,
+    csv_text_reader,
+    decode_text,
+    make_folder,
+    read_bytes,
+    read_json,
+)
+from qrfield.limits import SIDE_MM, LimitError
 from qrfield.sessions.averaging import Measurement
 from qrfield.sessions.criteria import AcceptanceCriteria, SessionSettings
 from qrfield.sessions.files import FileOps, atomic_write, fsync_dir, unique_path
@@ -97,6 +108,13 @@ EXTRA_COLUMNS = (
 COLUMNS = REQUIRED_COLUMNS + EXTRA_COLUMNS
 SESSION_FILE = "session.json"
 ROWS_FILE = "rows.csv"
+#: Largest session.json read (bytes); it holds a camera model and settings, a few KB.
+MAX_INFO_BYTES = 1024 * 1024
+#: Largest rows.csv read (bytes): some 800,000 rows, years of bench work.
+MAX_ROWS_BYTES = 256 * 1024 * 1024
+#: ``pass`` texts read as a pass or a fail besides the 1 and 0 qrfield writes (a hand-edited file);
+#: each is named in a warning. Anything else counts as a fail, with a warning too.
+PASS_WORDS = {"1": "1", "0": "0", "yes": "1", "no": "0", "true": "1", "false": "0", "pass": "1", "fail": "0"}
 FORMAT = "qrfield-session/1"
 #: Solver methods a session may name (docs/conventions.md: the thesis' model and OpenCV IPPE).
 SOLVER_METHODS = ("numerical", "ippe")
@@ -145,38 +163,36 @@ class SessionInfo:
 
     @classmethod
     def from_dict(cls, data: Any, where: str) -> SessionInfo:
-        if not isinstance(data, dict):
-            raise SessionError(f"{where}: expected a JSON object")
+        """Read the fields of session.json; SessionError naming ``where`` and the field for a missing
+        one, a value of the wrong type (e.g. ``"side_mm": "50"``) or one outside its limits."""
         try:
-            camera = CameraModel.from_dict(data.get("camera"), where=f"{where} camera")
-            side = float(data["side_mm"])
-            solver = data.get("solver") or {}
-            method = str(solver.get("method", ""))
-            settings = solver.get("settings") or {}
-            criteria = from_dict(AcceptanceCriteria, data.get("criteria"), strict=False)
+            fields = Fields(data, where)
+            camera = CameraModel.from_dict(fields.mapping("camera"), where=f"{where} camera")
+            side = SIDE_MM.check(fields.number("side_mm"), f"{where}: field 'side_mm'")
+            solver = Fields(fields.mapping("solver", {}), f"{where} solver")
+            method = solver.text("method", "")
+            settings = solver.mapping("settings", {})
+            criteria = from_dict(AcceptanceCriteria, fields.mapping("criteria", {}), strict=False)
             frames = from_dict(
-                SessionSettings, {"frames_per_row": data.get("frames_per_row", 10)}
+                SessionSettings, {"frames_per_row": fields.integer("frames_per_row", 10)}
             ).frames_per_row
-        except KeyError as exc:
-            raise SessionError(f"{where}: missing field {exc.args[0]!r}") from None
-        except (TypeError, ValueError, AttributeError, CameraModelError, SettingError) as exc:
-            raise SessionError(f"{where}: {exc}") from None
-        if not math.isfinite(side) or side <= 0:
-            raise SessionError(f"{where}: side_mm must be a positive length in mm, got {side!r}")
-        if not isinstance(settings, dict):
-            raise SessionError(f"{where}: solver settings must be a JSON object")
+            texts = {
+                key: fields.text(key, "") for key in ("name", "created", "operator", "notes", "app_version")
+            }
+        except (FileFormatError, CameraModelError, SettingError, LimitError) as exc:
+            raise SessionError(str(exc) if str(exc).startswith(where) else f"{where}: {exc}") from None
         return cls(
-            name=str(data.get("name", "")),
-            created=str(data.get("created", "")),
+            name=texts["name"],
+            created=texts["created"],
             camera=camera,
             side_mm=side,
             solver=method,
             solver_settings=settings,
             criteria=criteria,
             frames_per_row=int(frames),
-            operator=str(data.get("operator", "")),
-            notes=str(data.get("notes", "")),
-            app_version=str(data.get("app_version", "")),
+            operator=texts["operator"],
+            notes=texts["notes"],
+            app_version=texts["app_version"],
         )
 
 
@@ -327,13 +343,18 @@ def parse_rows(data: bytes, where: str = ROWS_FILE) -> RowsContent:
     end = data.rfind(b"\n") + 1
     complete, partial = data[:end], data[end:]
     try:
-        text = complete.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise SessionError(f"{where}: not UTF-8 text (byte {exc.start})") from None
+        # A byte-order mark (a spreadsheet's "CSV UTF-8") is accepted; the sizes stay those of the bytes.
+        text = decode_text(complete, where)
+    except FileFormatError as exc:
+        raise SessionError(str(exc)) from None
     lines = text.split("\n")[:-1]  # records end with "\n"; other line breaks may sit inside quoted notes
     if not lines:
         raise SessionError(f"{where}: no header row")
-    header = next(csv.reader([lines[0]]))
+    try:
+        header = next(csv_text_reader(lines[0]))
+    except csv.Error as exc:
+        raise SessionError(f"{where}: the header row is not CSV ({exc})") from None
+    header = [name.strip() for name in header]
     if tuple(header[: len(REQUIRED_COLUMNS)]) != REQUIRED_COLUMNS:
         raise SessionError(
             f"{where}: the header does not start with the required columns {','.join(REQUIRED_COLUMNS)}"
@@ -347,7 +368,11 @@ def parse_rows(data: bytes, where: str = ROWS_FILE) -> RowsContent:
         if "\x00" in line:
             warnings.append(f"{where} line {lineno}: contains NUL bytes (damaged); ignored")
             continue
-        fields = next(csv.reader([line]))
+        try:
+            fields = next(csv_text_reader(line), [])
+        except csv.Error as exc:  # e.g. a field over MAX_FIELD_CHARS written by another program
+            warnings.append(f"{where} line {lineno}: not a CSV record ({exc}); ignored")
+            continue
         values = dict(zip(header, fields, strict=False))
         if len(fields) != len(header):
             warnings.append(f"{where} line {lineno}: {len(fields)} fields, the header has {len(header)}")
@@ -361,6 +386,17 @@ def parse_rows(data: bytes, where: str = ROWS_FILE) -> RowsContent:
                 continue
             if number in by_number:
                 warnings.append(f"{where} line {lineno}: row {number} appears twice; both kept")
+            verdict = values.get("pass", "")
+            normal = PASS_WORDS.get(verdict.strip().lower())
+            if normal is None:
+                warnings.append(
+                    f"{where} line {lineno}: row {number} has pass {verdict!r}, not 1 or 0; counted as failed"
+                )
+                normal = "0"
+            elif normal != verdict:
+                shown = "passed" if normal == "1" else "failed"
+                warnings.append(f"{where} line {lineno}: row {number} has pass {verdict!r}, read as {shown}")
+            values["pass"] = normal
             row = LoggedRow(number, values)
             rows.append(row)
             by_number[number] = row
@@ -381,11 +417,11 @@ def _read_folder(folder: Path) -> tuple[SessionInfo, Path, RowsContent]:
     info = _read_info(folder)
     rows_path = folder / ROWS_FILE
     try:
-        data = rows_path.read_bytes()
-    except FileNotFoundError:
-        raise SessionError(f"{folder}: no {ROWS_FILE}") from None
-    except OSError as exc:
-        raise SessionError(f"{rows_path}: cannot read ({exc.strerror})") from None
+        data = read_bytes(rows_path, "rows file", MAX_ROWS_BYTES)
+    except FileFormatError as exc:
+        if exc.kind == "missing":
+            raise SessionError(f"{folder}: no {ROWS_FILE}") from None
+        raise SessionError(str(exc)) from None
     return info, rows_path, parse_rows(data, str(rows_path))
 
 
@@ -409,11 +445,11 @@ def _read_info(folder: Path) -> SessionInfo:
         raise SessionError(f"{folder}: no such session folder")
     path = folder / SESSION_FILE
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise SessionError(f"{folder}: not a session (no {SESSION_FILE})") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise SessionError(f"{path}: not valid JSON ({exc})") from None
+        data = read_json(path, "session file", max_bytes=MAX_INFO_BYTES)
+    except FileFormatError as exc:
+        if exc.kind == "missing":
+            raise SessionError(f"{folder}: not a session (no {SESSION_FILE})") from None
+        raise SessionError(str(exc)) from None
     return SessionInfo.from_dict(data, str(path))
 
 
@@ -489,7 +525,10 @@ class Session:
             {} if frames_per_row is None else {"frames_per_row": frames_per_row},
         ).frames_per_row
         root_path = Path(root)
-        root_path.mkdir(parents=True, exist_ok=True)
+        try:
+            make_folder(root_path, "sessions folder")  # never the folders above one the user named
+        except OSError as exc:
+            raise SessionError(str(exc)) from None
         stamp_time = now or dt.datetime.now()
         for _ in range(3600):
             folder = root_path / f"{stamp_time.strftime(_STAMP)}-{safe}"
@@ -584,10 +623,18 @@ class Session:
 
     # ------------------------------------------------------------------ logging
     def log(self, measurement: Measurement, *, time_text: str | None = None) -> LogOutcome:
-        """Number, append and fsync one measurement row; "logged" only once it is on disk."""
+        """Number, append and fsync one measurement row; "logged" only once it is on disk.
+
+        Raises SessionError (nothing numbered, nothing written) for a value longer than
+        MAX_FIELD_CHARS characters, which no CSV reader could read back.
+        """
         number = self.next_row
-        self.next_row += 1
         values = measurement_values(measurement, number, time_text or _now_text())
+        try:  # refused before it is numbered: a field the csv module cannot read back
+            check_field_sizes(values, f"row {number}")
+        except FileFormatError as exc:
+            raise SessionError(str(exc)) from None
+        self.next_row += 1
         row = LoggedRow(number, values, confirmed=False)
         self.rows.append(row)
         self.pending.append(_Record(str(number), _csv_line(values, self.columns), row=row))
@@ -608,7 +655,7 @@ class Session:
         if row.withdrawn:
             raise SessionError(f"row {number} is already withdrawn")
         values = dict.fromkeys(self.columns, "")
-        values.update(time=_now_text(), note=f"withdraws row {number} ({_one_line(reason)})")
+        values.update(time=_now_text(), note=f"withdraws row {number} ({_one_line(reason)[:1000]})")
         values["withdraws"] = str(number)
         row.withdrawn = True
         self._withdrawn.add(number)

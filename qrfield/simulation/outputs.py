@@ -19,9 +19,10 @@ import json
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 
+from qrfield.files import atomic_file, atomic_write, make_folder
+from qrfield.images import write_image
 from qrfield.simulation import heatmap
 from qrfield.simulation.runner import (
     END_FAILED,
@@ -71,8 +72,7 @@ def write_outputs(
 
     ``command``, if given, is the command line that made the study (quoted in summary.md).
     """
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    out = make_folder(Path(out_dir), "output folder")  # never the folders above it
     written = [
         _write_text(out / "study.toml", result.config.to_toml()),
         _write_text(out / "summary.json", json.dumps(result.summary(), indent=2) + "\n"),
@@ -89,14 +89,19 @@ def write_outputs(
 
 
 def _write_text(path: Path, text: str) -> Path:
-    path.write_text(text, encoding="utf-8")
-    return path
+    return atomic_write(path, text)
 
 
 def write_npz(result: StudyResult, path: Path) -> Path:
     best, end = result.max_angle_deg()
+    with atomic_file(path, "wb") as handle:
+        _savez(handle, result, best, end)
+    return path
+
+
+def _savez(handle: Any, result: StudyResult, best: np.ndarray, end: np.ndarray) -> None:
     np.savez_compressed(
-        path,
+        handle,
         x_mm=result.x_mm,
         y_mm=result.y_mm,
         z_mm=result.z_mm,
@@ -119,7 +124,6 @@ def write_npz(result: StudyResult, path: Path) -> Path:
         seconds=np.array(result.seconds),
         partial=np.array(result.partial),
     )
-    return path
 
 
 STATUS_NAMES = {NOT_RUN: "not run", OUT_OF_VIEW: "out of view", FAILED: "failed", PASSED: "passed"}
@@ -154,7 +158,7 @@ def write_samples_csv(result: StudyResult, path: Path) -> Path:
         *(_column(result.truth_angles_deg[c_all, a_all, k], "%.6g") for k in range(3)),
     ]
     status_names = np.array([STATUS_NAMES[k] for k in (NOT_RUN, 0, 1, PASSED)])
-    with path.open("w", encoding="utf-8", newline="") as fh:
+    with atomic_file(path, "w", newline="") as fh:
         fh.write(SAMPLE_COLUMNS + "\n")
         for s, key in enumerate(result.solvers):
             sel = (s, c_all, g_all, a_all)
@@ -180,7 +184,7 @@ def write_samples_csv(result: StudyResult, path: Path) -> Path:
 def write_max_angles_csv(result: StudyResult, path: Path) -> Path:
     best, end = result.max_angle_deg()
     positions = result.grid_positions()
-    with path.open("w", newline="", encoding="utf-8") as fh:
+    with atomic_file(path, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["solver", "combination", "x_mm", "y_mm", "z_mm", "max_angle_deg", "sweep_end"])
         for s, key in enumerate(result.solvers):
@@ -210,7 +214,7 @@ def cell_kinds(result: StudyResult, best: np.ndarray, end: np.ndarray) -> np.nda
 
 def write_heatmaps(result: StudyResult, folder: Path) -> list[Path]:
     """One PNG per combination and z (a panel per solver); returns the paths."""
-    folder.mkdir(parents=True, exist_ok=True)
+    make_folder(folder, "heatmaps folder")
     best, end = result.max_angle_deg()
     kinds = cell_kinds(result, best, end)
     nz, ny, nx = result.grid_shape
@@ -244,9 +248,7 @@ def write_heatmaps(result: StudyResult, folder: Path) -> list[Path]:
                 view_ended=by_view,
             )
             path = folder / f"{_safe(combo.name)}_z{z:g}.png"
-            if not cv2.imwrite(str(path), img):
-                raise OSError(f"cannot write {path}")
-            paths.append(path)
+            paths.append(write_image(path, img))
     return paths
 
 

@@ -73,6 +73,10 @@ def make_source(
         SourceError: the spec names nothing usable (the message lists the valid forms).
     """
     spec = spec.strip()
+    if not spec:  # Path("") is the current folder: never taken for a folder of images by accident
+        raise SourceError(
+            "source '': empty; give auto, virtual, picamera2, usb:N, or a path (. for the current folder)"
+        )
     if spec == "virtual":
         return VirtualBenchSource(camera or resolve_camera(DEFAULT_VIRTUAL_CAMERA), side_mm, virtual)
     if spec == "picamera2":

@@ -7,12 +7,8 @@ import os
 import time
 from pathlib import Path
 
-import cv2
-
+from qrfield.images import IMAGE_SUFFIXES, ImageError, read_image
 from qrfield.sources.base import EndOfStream, Frame, FrameSource, Pacer, SourceError
-
-#: File name endings treated as images (case-insensitive).
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".pgm", ".ppm")
 
 log = logging.getLogger(__name__)
 
@@ -70,10 +66,15 @@ class ImageFolderSource(FrameSource):
             if path in self.skipped:
                 continue
             # ANYCOLOR keeps grey images grey; without ANYDEPTH, 16-bit files come back as 8-bit.
-            image = cv2.imread(str(path), cv2.IMREAD_ANYCOLOR)
+            # qrfield.images reads the size from the header first: an image above the pixel limit
+            # is skipped before it is decoded.
+            try:
+                image = read_image(path, mode="any")
+            except ImageError as exc:
+                image, why = None, str(exc).removeprefix(f"{path}: ")
             if image is None:
                 self.skipped.append(path)
-                message = f"skipped {path.name}: OpenCV cannot read it as an image"
+                message = f"skipped {path.name}: {why}"
                 self.notes.append(message)
                 log.warning("%s: %s", self.path, message)
                 continue

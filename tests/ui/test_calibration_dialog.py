@@ -215,12 +215,13 @@ def test_a_failed_save_leaves_the_existing_model_intact(qtbot, tmp_path: Path, m
         path.parent.mkdir(parents=True)
         path.write_text('{"the model in use": 1}\n')
 
-        class DiskFull:
-            def save(self, target) -> None:
-                Path(target).write_text('{"fx": 5')  # half written, then the disk is full
-                raise OSError(28, "No space left on device")
+        import qrfield.files
 
-        dialog.result = SimpleNamespace(camera=DiskFull())
+        def disk_full(fd: int) -> None:  # the data is written, then the disk is full
+            raise OSError(28, "No space left on device")
+
+        monkeypatch.setattr(qrfield.files.os, "fsync", disk_full)
+        dialog.result = SimpleNamespace(camera=resolve_camera(CAMERA))
         dialog.confirm_overwrite = lambda p: True
         assert dialog.save() is None and "not saved" in dialog.note.text()
         assert path.read_text() == '{"the model in use": 1}\n'
