@@ -45,14 +45,27 @@ class Candidate:
     modules: int | None = None
 
 
-def _zxing(grey: np.ndarray) -> list[Candidate]:
+def read_qr_barcodes(grey: np.ndarray) -> list:  # type: ignore[type-arg]
+    """zxing-cpp's results for the QR codes in a grey image, their text plain (as encoded).
+
+    HRI text mode would spell control characters as <SOH> etc., so 2.x is asked for plain text.
+    zxing-cpp 1.4 (Debian 12's python3-zxing-cpp, 32-bit Raspberry Pi OS) has no TextMode and no
+    text_mode argument, and its text is the plain payload already (its wrappers/python/zxing.cpp at
+    v1.4.0: read_barcodes(image, formats, try_rotate, try_downscale, binarizer, is_pure,
+    ean_add_on_symbol); results have valid, text, bytes, format, position, orientation, no extra).
+    """
     import zxingcpp
 
+    options = {"formats": zxingcpp.BarcodeFormat.QRCode}
+    text_mode = getattr(zxingcpp, "TextMode", None)
+    if text_mode is not None:
+        options["text_mode"] = text_mode.Plain
+    return list(zxingcpp.read_barcodes(grey, **options))
+
+
+def _zxing(grey: np.ndarray) -> list[Candidate]:
     out = []
-    # Plain text: the payload as encoded (HRI mode would spell control characters as <SOH> etc.)
-    barcodes = zxingcpp.read_barcodes(
-        grey, formats=zxingcpp.BarcodeFormat.QRCode, text_mode=zxingcpp.TextMode.Plain
-    )
+    barcodes = read_qr_barcodes(grey)
     for barcode in barcodes:
         p = barcode.position
         corners = np.array(
@@ -171,6 +184,13 @@ def parse_backends(spec: str) -> tuple[str, ...]:
         raise BackendError(
             f"unknown detector backend(s) {', '.join(unknown)} in {spec!r}; "
             f"choose from {', '.join(BACKEND_NAMES)}"
+        )
+    if "opencv-aruco" in names and not hasattr(cv2, "QRCodeDetectorAruco"):
+        # Added in OpenCV 4.8 (opencv/opencv#23264); Debian 12 / 32-bit Raspberry Pi OS have 4.6.
+        others = ", ".join(n for n in BACKEND_NAMES if n != "opencv-aruco")
+        raise BackendError(
+            f"detector backend opencv-aruco needs OpenCV 4.8 or newer (cv2.QRCodeDetectorAruco); this is "
+            f"OpenCV {cv2.__version__}: choose from {others}"
         )
     return names
 

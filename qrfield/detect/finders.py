@@ -129,7 +129,7 @@ def _fit_symbol(
 
 def decode_rectified(grey: np.ndarray, corners: np.ndarray, modules: int) -> str | None:
     """Warp the symbol at ``corners`` (V1..V4) upright with a quiet zone and decode it with zxing-cpp."""
-    import zxingcpp
+    from qrfield.detect.backends import read_qr_barcodes  # here: backends imports this module
 
     q, s = RECTIFIED_QUIET, RECTIFIED_PX
     dst = np.array([[q, q], [q + modules, q], [q + modules, q + modules], [q, q + modules]], np.float32) * s
@@ -138,9 +138,7 @@ def decode_rectified(grey: np.ndarray, corners: np.ndarray, modules: int) -> str
     upright = cv2.warpPerspective(
         grey, h, (size, size), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE
     )
-    barcodes = zxingcpp.read_barcodes(
-        upright, formats=zxingcpp.BarcodeFormat.QRCode, text_mode=zxingcpp.TextMode.Plain
-    )
+    barcodes = read_qr_barcodes(upright)
     return barcodes[0].text if barcodes and barcodes[0].valid else None
 
 
