@@ -81,7 +81,7 @@ def test_cwd_calib_is_a_path_not_a_name_and_never_replaces_a_preset(tmp_path, mo
     CameraModel.from_focal(999.0, 3280, 2464, name="picam-v2").save(tmp_path / "calib" / "picam-v2.json")
     monkeypatch.chdir(tmp_path)
     monkeypatch.setenv("QRFIELD_CONFIG_DIR", str(tmp_path / "config"))
-    with pytest.raises(CameraModelError, match=r"not searched by name: give its path, --camera calib/mine.json"):
+    with pytest.raises(CameraModelError, match=r"not searched by name: give its path, --camera calib/mine"):
         resolve_camera("mine")
     cam = resolve_camera("calib/mine.json@400x300")
     assert cam.fx == pytest.approx(350.0) and cam.size == (400, 300)
