@@ -126,12 +126,13 @@ else
   kind="core"
 fi
 stamp="$VENV/.qrfield-installed"
-want="$(cksum < "$QRFIELD_REPO/pyproject.toml") $kind"
+sum="$(cksum < "$QRFIELD_REPO/pyproject.toml")"
+want="$sum $kind"
 have="$(cat "$stamp" 2>/dev/null || true)"
-# A venv that has the app's extra also serves a run without a display.
-if [ "$kind" = core ] && [ "$have" = "${want% core} gui" ]; then
-  want="$have"
-fi
+# What is installed may be more than what is needed: the test tools' venv serves run.sh too.
+case "$kind:$have" in
+  "core:$sum gui" | "core:$sum gui,dev" | "gui:$sum gui,dev") want="$have" ;;
+esac
 if [ "$have" != "$want" ]; then
   pip=("$VENV/bin/python" -m pip --disable-pip-version-check)
   case "$kind" in

@@ -13,13 +13,14 @@ then one combination per line, e.g. ``alpha+beta-,1,-1,0``.
 from __future__ import annotations
 
 import csv
-import io
 import math
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 
 import numpy as np
+
+from qrfield.files import FileFormatError, csv_text_reader, read_text
 
 #: The ``combinations`` study value that names the shipped default set.
 DEFAULT_NAME = "default"
@@ -62,12 +63,10 @@ def default_path() -> Path:
 def load_combinations(source: str | Path) -> list[Combination]:
     """Combinations from a CSV file (``"default"`` = the shipped set); CombinationError if unusable."""
     path = default_path() if str(source) == DEFAULT_NAME else Path(source)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise CombinationError(f"combinations file {path}: no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise CombinationError(f"combinations file {path}: cannot read ({exc})") from None
+    try:  # qrfield.files: bounded, a spreadsheet's byte-order mark accepted
+        text = read_text(path, "combinations file", max_bytes=1024 * 1024)
+    except FileFormatError as exc:
+        raise CombinationError(str(exc)) from None
     return parse_combinations(text, where=f"combinations file {path}")
 
 
@@ -77,7 +76,12 @@ def parse_combinations(text: str, where: str = "combinations") -> list[Combinati
     lines = [(n, line) for n, line in lines if not line.lstrip().startswith("#")]
     if not lines:
         raise CombinationError(f"{where}: no header and no combinations")
-    rows = list(csv.reader(io.StringIO("\n".join(line for _, line in lines))))
+    try:
+        rows = list(csv_text_reader("\n".join(line for _, line in lines)))
+    except csv.Error as exc:  # a field longer than the csv module's limit, a NUL byte
+        raise CombinationError(f"{where}: not CSV ({exc})") from None
+    if len(rows) != len(lines):  # a quoted field spanning lines
+        raise CombinationError(f"{where}: a quoted field spans lines; one combination per line")
     header = tuple(cell.strip().lower() for cell in rows[0])
     if header != HEADER:
         raise CombinationError(

@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from qrfield.files import FileFormatError, loads_toml, read_toml
 from qrfield.settings import SettingError, SettingSpec
 from qrfield.simulation.combinations import DEFAULT_NAME, Combination, load_combinations
 
@@ -294,15 +295,11 @@ def default_study_path() -> Path:
 
 
 def _read_toml(path: Path) -> dict[str, Any]:
+    """A study file read with qrfield.files' limits (size, nesting, a BOM accepted)."""
     try:
-        with path.open("rb") as fh:
-            return tomllib.load(fh)
-    except FileNotFoundError:
-        raise StudyError(f"study file {path}: no such file") from None
-    except OSError as exc:
-        raise StudyError(f"study file {path}: cannot read ({exc.strerror})") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise StudyError(f"study file {path}: not valid TOML ({exc})") from None
+        return read_toml(path, "study file")
+    except FileFormatError as exc:
+        raise StudyError(str(exc)) from None
 
 
 def load_study(path: str | Path | None = None, overrides: Iterable[str] = ()) -> StudyConfig:
@@ -412,8 +409,12 @@ def _parse_value(text: str) -> Any:
 
     def one(item: str) -> Any:
         try:
-            return tomllib.loads(f"v = {item}")["v"]
-        except tomllib.TOMLDecodeError:
+            return loads_toml(f"v = {item}", "override")["v"]
+        except FileFormatError as exc:
+            if "nested" in str(exc):  # [[[[...: too deep for any field (qrfield.files.MAX_DEPTH)
+                raise StudyError(
+                    f"override value {item[:40]!r}...: {str(exc).removeprefix('override: ')}"
+                ) from None
             return item
 
     if text.startswith("["):
