@@ -167,15 +167,14 @@ def test_no_overwrite_refuses_an_existing_file(tmp_path):
     atomic_write(path, "a", overwrite=False)
     with pytest.raises(FileExistsError):
         atomic_write(path, "b", overwrite=False)
-    with pytest.raises(FileExistsError):
-        with atomic_file(path, "w", overwrite=False) as handle:
-            handle.write("c")
+    with pytest.raises(FileExistsError), atomic_file(path, "w", overwrite=False) as handle:
+        handle.write("c")
     assert path.read_text() == "a"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["card.svg"]
 
 
 def test_writers_never_create_the_folder_of_a_file(tmp_path):
-    with pytest.raises(FileNotFoundError, match="folder .*missing does not exist"):
+    with pytest.raises(FileNotFoundError, match=r"folder .*missing does not exist"):
         atomic_write(tmp_path / "missing" / "x.json", "{}")
     assert not (tmp_path / "missing").exists()
     with pytest.raises(IsADirectoryError):

@@ -1,0 +1,152 @@
+"""Image files: sizes from headers (truth: OpenCV's own decode), the pixel limit before decoding,
+files/folders/globs, and ``qrfield solve`` over many images in one process."""
+
+from __future__ import annotations
+
+import json
+import struct
+import zlib
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from qrfield.cli import main
+from qrfield.images import ImageError, ImageSettings, expand_image_paths, probe_size, read_image
+
+FORMATS = [".png", ".jpg", ".bmp", ".tif", ".webp", ".pgm", ".ppm", ".pbm"]
+
+
+@pytest.mark.parametrize("suffix", FORMATS)
+@pytest.mark.parametrize("size", [(33, 17), (640, 480), (1001, 3)])
+def test_header_size_matches_what_opencv_decodes(tmp_path, suffix, size):
+    w, h = size
+    rng = np.random.default_rng(w * h)
+    image = rng.integers(0, 255, (h, w, 3) if suffix == ".ppm" else (h, w), dtype=np.uint8)
+    path = tmp_path / f"x{suffix}"
+    assert cv2.imwrite(str(path), image)
+    decoded = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    assert probe_size(path) == (decoded.shape[1], decoded.shape[0]) == (w, h)
+
+
+def test_header_sizes_of_the_real_photos(shared_data):
+    photos = sorted((shared_data / "qr-photos").rglob("*.[jp][pn]g"))
+    assert len(photos) >= 70
+    for photo in photos:  # JPEGs with EXIF before their SOF marker among them
+        decoded = cv2.imread(str(photo), cv2.IMREAD_UNCHANGED)
+        assert probe_size(photo) == (decoded.shape[1], decoded.shape[0]), photo
+
+
+def big_png(path: Path, width: int, height: int) -> Path:
+    """A valid grey PNG of width x height black pixels, compressed row by row (a few hundred KB)."""
+    compressor = zlib.compressobj(9)
+    row = b"\x00" * (width + 1)  # filter byte + pixels
+    chunks = [compressor.compress(row) for _ in range(height)]
+    data = b"".join(chunks) + compressor.flush()
+
+    def chunk(kind: bytes, body: bytes) -> bytes:
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
+
+    ihdr = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
+    path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", data) + chunk(b"IEND", b""))
+    return path
+
+
+def test_an_image_above_the_pixel_limit_is_refused_before_decoding(tmp_path, monkeypatch):
+    # The issue's 0.8 MB PNG of 32000 x 24000 took 4.5 GB to decode; its size is in its header.
+    # (Time and memory: `qrfield bench images`.) Smaller here: the rule is the same.
+    path = big_png(tmp_path / "big.png", 12000, 8000)
+    assert probe_size(path) == (12000, 8000) and path.stat().st_size < 1_000_000
+
+    def never(*args, **kwargs):
+        raise AssertionError("decoded although above the limit")
+
+    monkeypatch.setattr(cv2, "imdecode", never)
+    with pytest.raises(ImageError, match=r"12000x8000 is 96.0 MP, above the limit of 50 MP; refused before"):
+        read_image(path)
+    # The limit is a setting: raised, the same file is decoded.
+    monkeypatch.undo()
+    image = read_image(path, ImageSettings(max_megapixels=100), mode="grey")
+    assert image.shape == (8000, 12000)
+
+
+def test_solve_reports_a_refused_image_and_goes_on(tmp_path, capsys):
+    big = big_png(tmp_path / "big.png", 9000, 6000)
+    small = tmp_path / "small.png"
+    cv2.imwrite(str(small), np.full((48, 64), 255, np.uint8))
+    assert main(["solve", str(big), str(small), "--focal-px", "500", "--side-mm", "50", "--json"]) == 1
+    entries = json.loads(capsys.readouterr().out)
+    assert [e["image"] for e in entries] == [str(big), str(small)]
+    assert "54.0 MP, above the limit of 50 MP" in entries[0]["status"]
+    assert entries[1]["status"] == "no QR code found"
+    assert main(["solve", str(big), "--focal-px", "500", "--side-mm", "50", "--max-megapixels", "60"]) == 1
+    assert "no QR code found" in capsys.readouterr().out  # decoded (54 MP < 60)
+
+
+def test_unknown_formats_and_damaged_headers_are_refused_with_a_reason(tmp_path):
+    junk = tmp_path / "junk.png"
+    junk.write_bytes(b"not an image at all")
+    with pytest.raises(ImageError, match="cannot read image: not an image format whose size"):
+        read_image(junk)
+    lying = tmp_path / "lying.png"  # a PNG header saying 10x10, then garbage
+    lying.write_bytes(
+        b"\x89PNG\r\n\x1a\n" + struct.pack(">I", 13) + b"IHDR" + struct.pack(">II", 10, 10) + b"x" * 20
+    )
+    with pytest.raises(ImageError, match="cannot read image: OpenCV cannot decode it"):
+        read_image(lying)
+
+
+def test_files_folders_and_globs_in_order(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "shots").mkdir()
+    (tmp_path / "shots" / "sub").mkdir()
+    for name in ("b.png", "a.jpg", "notes.txt", "sub/c.png"):
+        (tmp_path / "shots" / name).write_bytes(b"")
+    (tmp_path / "empty").mkdir()
+    assert expand_image_paths(["shots"]) == ["shots/a.jpg", "shots/b.png"]  # not the .txt, not sub/
+    assert expand_image_paths(["shots/*.png", "shots/**/*.png"]) == [
+        "shots/b.png",
+        "shots/b.png",
+        "shots/sub/c.png",
+    ]
+    assert expand_image_paths(["none/*.png", "empty", "missing.png"]) == [
+        "none/*.png",
+        "empty",
+        "missing.png",
+    ]
+    with pytest.raises(ImageError, match="no file matches this pattern"):
+        read_image("none/*.png")
+    with pytest.raises(ImageError, match="a folder without image files"):
+        read_image("empty")
+
+
+def test_solve_folder_focal_only_each_image_at_its_own_size(tmp_path, capsys):
+    # Must show: `solve FOLDER --focal-px 500 --side-mm 50 --json` over images of mixed sizes gives
+    # one entry per image; each solved with f = 500 px at its own size (truth: the rendered pose).
+    from qrfield.camera import CameraModel
+    from qrfield.geometry import Pose
+    from qrfield.render import render_view
+
+    folder = tmp_path / "views"
+    folder.mkdir()
+    truths = {}
+    for i, (w, h) in enumerate([(640, 480), (800, 600), (480, 640), (1024, 576)]):
+        pose = Pose([5.0 * i, -3.0, 280.0 + 20 * i], [10.0, -12.0, 5.0 * i])
+        view = render_view(CameraModel.from_focal(500.0, w, h), 50.0, pose, text=f"code-{i}")
+        path = folder / f"view{i}.png"
+        cv2.imwrite(str(path), view.image)
+        truths[str(path)] = pose
+    argv = ["solve", str(folder), "--focal-px", "500", "--side-mm", "50", "--method", "ippe", "--json"]
+    assert main(argv) == 0
+    entries = json.loads(capsys.readouterr().out)
+    assert sorted(e["image"] for e in entries) == sorted(truths)
+    for entry in entries:
+        truth = truths[entry["image"]]
+        assert entry["status"] == "ok"
+        assert np.linalg.norm(np.array(entry["position_mm"]) - truth.position_mm) < 3.0
+
+
+def test_focal_only_without_images_still_needs_a_size(capsys):
+    assert main(["solve", "--corners", "1,2 3,4 5,6 7,8", "--focal-px", "500", "--side-mm", "50"]) == 2
+    assert "--focal-px and --size go together" in capsys.readouterr().err
