@@ -15,7 +15,7 @@ from collections.abc import Sequence
 
 import qrfield
 from qrfield import commands
-from qrfield.arguments import NEGATIVE_VALUES_HELP, ArgumentParser, stdout_closed
+from qrfield.arguments import NEGATIVE_VALUES_HELP, ArgumentParser, one_line, stdout_closed
 from qrfield.camera import CameraModelError
 
 
@@ -66,7 +66,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 0
     except (CameraModelError, ValueError, OSError) as exc:
         # Bad input is the user's to fix: one clear line, no traceback.
-        print(f"qrfield {args.command}: error: {exc}", file=sys.stderr)
+        print(f"qrfield {args.command}: error: {one_line(str(exc))}", file=sys.stderr)
         return 2
     except Exception as exc:
         # OpenCV rejects bad arguments with cv2.error, not a ValueError (e.g. a QR text too long to
@@ -75,7 +75,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if cv2 is None or not isinstance(exc, cv2.error):
             raise
         detail = (getattr(exc, "err", "") or str(exc)).strip()
-        print(f"qrfield {args.command}: error: OpenCV: {detail}", file=sys.stderr)
+        print(f"qrfield {args.command}: error: OpenCV: {one_line(detail)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"qrfield {args.command}: interrupted", file=sys.stderr)

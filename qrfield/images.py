@@ -110,7 +110,7 @@ def _header_size(head: bytes) -> tuple[int, int] | None:
             return _webp_size(head)
         if head[:1] == b"P" and head[1:2] in b"1234567":
             return _pnm_size(head)
-    except (struct.error, IndexError, ValueError):
+    except (struct.error, IndexError, KeyError, ValueError):
         return None
     return None
 
