@@ -33,19 +33,20 @@ from qrfield.sessions.store import Session, parse_rows
 from qrfield.simulation.combinations import CombinationError, parse_combinations
 from qrfield.simulation.study import StudyError, load_study, parse_override
 
+SLOW_IS_FINE = [HealthCheck.too_slow, HealthCheck.function_scoped_fixture, HealthCheck.data_too_large]
 settings.register_profile(
     "qrfield-ci",
     max_examples=40,
     deadline=None,
     derandomize=True,
     database=None,
-    suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture, HealthCheck.data_too_large],
+    suppress_health_check=SLOW_IS_FINE,
 )
 settings.register_profile(
     "qrfield-thorough",
     max_examples=1000,
     deadline=None,
-    suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture, HealthCheck.data_too_large],
+    suppress_health_check=SLOW_IS_FINE,
 )
 PROFILE = settings.get_profile(f"qrfield-{os.environ.get('QRFIELD_HYPOTHESIS', 'ci')}")
 
@@ -61,7 +62,7 @@ number_lists = st.lists(numbers, min_size=0, max_size=9).flatmap(
 words = st.text(alphabet=string.printable + "é°µ\u2028\x00", max_size=30)
 json_values = st.recursive(
     st.none() | st.booleans() | st.floats(allow_nan=False) | st.integers() | st.text(max_size=20),
-    lambda children: st.lists(children, max_size=4) | st.dictionaries(st.text(max_size=8), children, max_size=4),
+    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=8), inner, max_size=4),
     max_leaves=20,
 )
 
@@ -148,13 +149,26 @@ def _scene(folder: Path) -> None:
 
 
 BASES = {
-    "solve": [["view.png", "--focal-px", "400", "--side-mm", "40"], ["--camera", "picam-v2@160x120", "--side-mm", "40"]],
-    "render": [["--focal-px", "400", "--size", "160x120", "--side-mm", "40", "--pose", "0,0,200,0,0,0", "--out", "r.png"]],
+    "solve": [["view.png", "--focal-px", "400", "--side-mm", "40"],
+              ["--camera", "picam-v2@160x120", "--side-mm", "40"]],
+    "render": [["--focal-px", "400", "--size", "160x120", "--side-mm", "40", "--pose", "0,0,200,0,0,0",
+                "--out", "r.png"]],
     "marker": [["--text", "x", "--side-mm", "20", "--out", "m.svg"]],
     "calibrate": [["shots", "--board", "4x3", "--square-mm", "20", "--out", "c.json"]],
     "analyze": [["session-folder", "--no-simulation"]],
 }  # fmt: skip
-PATHS = ["view.png", "notes.txt", "shots", "shots/*.png", "missing.png", "x/y/z.png", "out", "out/r.png", "", "."]
+PATHS = [
+    "view.png",
+    "notes.txt",
+    "shots",
+    "shots/*.png",
+    "missing.png",
+    "x/y/z.png",
+    "out",
+    "out/r.png",
+    "",
+    ".",
+]
 
 
 @PROFILE
@@ -162,13 +176,17 @@ PATHS = ["view.png", "notes.txt", "shots", "shots/*.png", "missing.png", "x/y/z.
     command=st.sampled_from(sorted(BASES)),
     data=st.data(),
 )
-def test_cheap_commands_never_traceback_and_write_only_what_they_name(command, data, tmp_path_factory, own_folders):
+def test_cheap_commands_never_traceback_and_write_only_what_they_name(
+    command, data, tmp_path_factory, own_folders
+):
     folder = tmp_path_factory.mktemp("cwd")
     _scene(folder)
     base = data.draw(st.sampled_from(BASES[command]))
     tokens = data.draw(
         st.lists(
-            st.one_of(st.sampled_from(option_tokens(command)), numbers, number_lists, words, st.sampled_from(PATHS)),
+            st.one_of(
+                st.sampled_from(option_tokens(command)), numbers, number_lists, words, st.sampled_from(PATHS)
+            ),
             max_size=6,
         )
     )
@@ -179,7 +197,10 @@ def test_cheap_commands_never_traceback_and_write_only_what_they_name(command, d
     assert code in (0, 1, 2), (argv, code)
     assert "Traceback" not in err
     if code == 2:
-        assert err.strip() and len(err.strip().splitlines()) <= 2, (argv, err)  # the error (and a camera line)
+        assert err.strip() and len(err.strip().splitlines()) <= 2, (
+            argv,
+            err,
+        )  # the error (and a camera line)
     made = {p for p in folder.rglob("*")} - before
     named = {a for a in argv if a and not a.startswith("-")}
     for path in made:
@@ -190,7 +211,15 @@ def test_cheap_commands_never_traceback_and_write_only_what_they_name(command, d
 
 
 # ------------------------------------------------------------------------------------ file readers
-VALID_CAMERA = {"width": 640, "height": 480, "fx": 500.0, "fy": 500.0, "cx": 319.5, "cy": 239.5, "dist": [0.0] * 5}
+VALID_CAMERA = {
+    "width": 640,
+    "height": 480,
+    "fx": 500.0,
+    "fy": 500.0,
+    "cx": 319.5,
+    "cy": 239.5,
+    "dist": [0.0] * 5,
+}
 
 
 @PROFILE
@@ -223,12 +252,16 @@ def _session_folder(root: Path, camera: CameraModel) -> Path:
 
 @PROFILE
 @given(
-    key=st.sampled_from(["side_mm", "camera", "solver", "criteria", "frames_per_row", "name", "notes", "format"]),
+    key=st.sampled_from(
+        ["side_mm", "camera", "solver", "criteria", "frames_per_row", "name", "notes", "format"]
+    ),
     value=json_values,
     rows=st.lists(st.text(max_size=60), max_size=5),
     bom=st.booleans(),
 )
-def test_session_files_open_or_are_refused_with_a_message(key, value, rows, bom, tmp_path_factory, camera_vga):
+def test_session_files_open_or_are_refused_with_a_message(
+    key, value, rows, bom, tmp_path_factory, camera_vga
+):
     folder = _session_folder(tmp_path_factory.mktemp("sessions"), camera_vga)
     info = folder / "session.json"
     info.write_text(json.dumps({**json.loads(info.read_text()), key: value}))
@@ -320,8 +353,8 @@ def test_json_text_parses_or_is_refused(value, depth):
         assert "nested" in str(exc) or "not JSON" in str(exc) or "characters long" in str(exc)
 
 
-MAGIC = [b"", b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR", b"\xff\xd8", b"BM", b"GIF89a", b"RIFF\x00\x00\x00\x00WEBPVP8X",
-         b"II*\x00", b"MM\x00*", b"II+\x00", b"P5\n", b"P7\n"]  # fmt: skip
+MAGIC = [b"", b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR", b"\xff\xd8", b"BM", b"GIF89a",
+         b"RIFF\x00\x00\x00\x00WEBPVP8X", b"II*\x00", b"MM\x00*", b"II+\x00", b"P5\n", b"P7\n"]  # fmt: skip
 
 
 @PROFILE
