@@ -103,6 +103,22 @@ def limited(limit: Limit, option: str) -> Callable[[str], float]:
     return parse
 
 
+def add_side_argument(parser: Any, default: float | None = None) -> None:
+    """``--side-mm L``: the QR symbol's side without its quiet zone (mm), checked against
+    :data:`qrfield.limits.SIDE_MM`; required unless a ``default`` is given."""
+    from qrfield.limits import SIDE_MM
+
+    shown = f"; default {default:g}" if default is not None else ""
+    parser.add_argument(
+        "--side-mm",
+        type=limited(SIDE_MM, "--side-mm"),
+        required=default is None,
+        default=default,
+        metavar="L",
+        help=f"QR symbol side without quiet zone, mm ({SIDE_MM.describe()}{shown})",
+    )
+
+
 def number(
     option: str, minimum: float | None = None, maximum: float | None = None, unit: str = ""
 ) -> Callable[[str], float]:

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from qrfield.arguments import limited, number
-from qrfield.limits import SIDE_MM
+from qrfield.arguments import add_side_argument, number
 
 HELP = "write a printable QR marker of exact size (SVG, PDF or PNG)"
 DESCRIPTION = (
@@ -18,13 +17,7 @@ DESCRIPTION = (
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--text", required=True, metavar="T", help="the QR payload, e.g. qrfield")
-    parser.add_argument(
-        "--side-mm",
-        type=limited(SIDE_MM, "--side-mm"),
-        required=True,
-        metavar="L",
-        help=f"symbol side without quiet zone, mm ({SIDE_MM.describe()})",
-    )
+    add_side_argument(parser)
     parser.add_argument(
         "--out",
         required=True,

@@ -6,22 +6,15 @@ import argparse
 import json
 import sys
 
-from qrfield.arguments import limited, number
+from qrfield.arguments import add_side_argument, number
 from qrfield.camera import add_camera_arguments
-from qrfield.limits import SIDE_MM
 
 HELP = "render a QR card at a known pose through a camera model (test images with exact corners)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_camera_arguments(parser, default="picam-v2@640x480")
-    parser.add_argument(
-        "--side-mm",
-        type=limited(SIDE_MM, "--side-mm"),
-        required=True,
-        metavar="L",
-        help=f"QR symbol side without quiet zone, mm ({SIDE_MM.describe()})",
-    )
+    add_side_argument(parser)
     parser.add_argument(
         "--pose",
         required=True,

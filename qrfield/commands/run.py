@@ -47,16 +47,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--json-lines", action="store_true", help="one JSON object per frame on stdout")
     add_camera_arguments(parser, default=None)
-    from qrfield.arguments import limited
-    from qrfield.limits import SIDE_MM
+    from qrfield.arguments import add_side_argument
 
-    parser.add_argument(
-        "--side-mm",
-        type=limited(SIDE_MM, "--side-mm"),
-        default=DEFAULT_SIDE_MM,
-        metavar="L",
-        help=f"QR symbol side without quiet zone, mm (default {DEFAULT_SIDE_MM:g})",
-    )
+    add_side_argument(parser, default=DEFAULT_SIDE_MM)
     parser.add_argument(
         "--method",
         choices=METHOD_CHOICES,

@@ -8,9 +8,8 @@ import math
 import re
 import sys
 
-from qrfield.arguments import limited, parse_numbers
+from qrfield.arguments import add_side_argument, parse_numbers
 from qrfield.camera import add_camera_arguments
-from qrfield.limits import SIDE_MM
 
 HELP = "compute a QR code's position (mm) and orientation (degrees) from images or its four corner pixels"
 DESCRIPTION = (
@@ -42,13 +41,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "separated by commas or spaces; --corners=-3,5,... works too",
     )
     add_camera_arguments(parser, focal_only=True)
-    parser.add_argument(
-        "--side-mm",
-        type=limited(SIDE_MM, "--side-mm"),
-        required=True,
-        metavar="L",
-        help=f"QR symbol side without quiet zone, mm ({SIDE_MM.describe()})",
-    )
+    add_side_argument(parser)
     parser.add_argument(
         "--method", choices=("numerical", "ippe", "both"), default="both", help="solver (default: both)"
     )
