@@ -99,3 +99,13 @@ def test_solve_piped_into_head_is_quiet(tmp_path):
     done = subprocess.run(["bash", "-c", script], env=env, capture_output=True, text=True, timeout=300)
     assert done.stdout.strip().endswith("rc=0"), done.stdout
     assert "Broken pipe" not in done.stderr and "Traceback" not in done.stderr, done.stderr
+
+
+@pytest.mark.parametrize(
+    "argv", [["analyze", "0.0", "\r"], ["solve", "--corners", "1,2\n3,4", "--side-mm", "x\ny"]]
+)
+def test_control_characters_in_what_was_typed_keep_the_error_on_one_line(argv, capsys):
+    # Found by tests/test_fuzz.py: "unrecognized arguments: \r" split the message in two.
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.endswith("\n") and "\r" not in err

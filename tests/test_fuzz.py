@@ -21,7 +21,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from qrfield.camera import CameraModel, CameraModelError
@@ -280,6 +280,7 @@ def test_session_files_open_or_are_refused_with_a_message(
 
 @PROFILE
 @given(data=st.binary(max_size=400) | st.text(max_size=400).map(lambda t: t.encode("utf-8", "surrogatepass")))
+@example(data=b"\n")  # found: an empty header line raised StopIteration
 def test_rows_bytes_parse_or_are_refused(data):
     from qrfield.sessions.store import COLUMNS
 
@@ -359,6 +360,7 @@ MAGIC = [b"", b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR", b"\xff\xd8", b"BM", b"GIF8
 
 @PROFILE
 @given(magic=st.sampled_from(MAGIC), rest=st.binary(max_size=200))
+@example(magic=b"P7\n", rest=b"")  # found: a PAM header without WIDTH raised KeyError
 def test_image_headers_of_any_bytes_are_read_or_refused(magic, rest, tmp_path_factory):
     path = tmp_path_factory.mktemp("img") / "x.img"
     path.write_bytes(magic + rest)

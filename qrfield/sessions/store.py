@@ -351,7 +351,7 @@ def parse_rows(data: bytes, where: str = ROWS_FILE) -> RowsContent:
     if not lines:
         raise SessionError(f"{where}: no header row")
     try:
-        header = next(csv_text_reader(lines[0]))
+        header = next(csv_text_reader(lines[0]), [])  # an empty first line has no fields
     except csv.Error as exc:
         raise SessionError(f"{where}: the header row is not CSV ({exc})") from None
     header = [name.strip() for name in header]
