@@ -227,3 +227,14 @@ def test_settings_file_missing_good_wrong_type_and_unmovable(tmp_path, monkeypat
     loaded = read_json_or_set_aside(path)
     assert loaded.damaged and not loaded.safe_to_overwrite and "could not keep it aside" in loaded.problem
     assert path.read_text() == "{"
+
+
+def test_atomic_write_json_is_what_a_config_store_saves(tmp_path):
+    # How ui/config.py's ConfigStore.save should write app.json (docs/cli.md; the lead wires it).
+    from qrfield.files import atomic_write_json
+
+    path = tmp_path / "app.json"
+    data = {"window": {"w": 800}, "app": {"side_mm": 50.0}}
+    atomic_write_json(path, data, sort_keys=True)
+    assert path.read_text() == json.dumps(data, indent=2, sort_keys=True) + "\n"
+    assert read_json_or_set_aside(path).data == data

@@ -173,6 +173,10 @@ def run(args: argparse.Namespace) -> int:
             return 1 if not stop else 0
         if source.name != "virtual" and not named:
             say(f"camera model: {camera.name} assumed (name yours with --camera)")
+        if camera.path:
+            from qrfield.camera import camera_origin
+
+            say(f"camera {camera.name} from {camera_origin(camera)}")
         pipeline = Pipeline(
             camera, args.side_mm, methods_from_choice(args.method), select_text=args.select_text
         )
