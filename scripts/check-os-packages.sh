@@ -22,7 +22,8 @@ photos="$REPO/../shared/data/qr-photos"
 if [ -d "$photos" ]; then
   echo "== solve over the real photos"
   "$VENV/bin/qrfield" solve "$photos/**/*.[jp][pn]g" --focal-px 600 --side-mm 50 --method ippe --json 2>/dev/null \
-    | "$VENV/bin/python" -c "import json, sys; d = json.load(sys.stdin); print(len({e['image'] for e in d}), 'images,', sum(e['status'] == 'ok' for e in d), 'solved')"
+    | "$VENV/bin/python" -c "import json, sys; d = json.load(sys.stdin); print(len({e['image'] for e in d}), 'images,', sum(e['status'] == 'ok' for e in d), 'solved')" \
+    || true  # solve exits 1 when some image has no converged pose
 fi
 echo "== the non-GUI tests on these versions"
 "$VENV/bin/python" -m pip install --disable-pip-version-check --quiet "pytest>=8" "pytest-timeout>=2.3" "hypothesis>=6.100"

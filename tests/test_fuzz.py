@@ -4,9 +4,14 @@ Properties: arbitrary text, numbers, comma lists and nested JSON/TOML never give
 each input is accepted or refused with a message (one line for the CLI); nothing is written where
 it should not be (a command writes only the file or folder it was told to, inside its folder).
 
-Size: profile "qrfield-ci" (the default; CI) runs 40 examples per property, derandomized so that a
-red CI run is reproducible, no deadline (the machine is shared); QRFIELD_HYPOTHESIS=thorough runs
-1000 random examples per property (minutes). 12 properties, so 480 examples in CI, ~20-40 s.
+Size: 11 properties. Profile "qrfield-ci" (the default; CI) runs 40 examples each (440 in all,
+about 6 s here), derandomized so that a red CI run is reproducible, no deadline (the machine is
+shared); QRFIELD_HYPOTHESIS=thorough runs 1000 random examples each (11,000; about 3 minutes).
+
+What it found (each fixed, with a regression test or an @example):
+- a usage error quoting a typed "\r" or "\n" split the one-line message (qrfield.arguments.one_line);
+- a PAM image header without WIDTH raised KeyError in the new header probe;
+- a rows.csv whose first line is empty raised StopIteration (an old bug of the header parse).
 """
 
 from __future__ import annotations
