@@ -73,7 +73,8 @@ def _camera_file(tmp_path, **changes):
 @pytest.mark.parametrize(
     ("dist", "words"),
     [
-        ([1e6, 0, 0, 0, 0], "stretches the 640x480 image's edge"),  # once accepted, z 24x off
+        # Once accepted, z 24x off. OpenCV 5 inverts it (the scale check refuses it), 4.6 cannot.
+        ([1e6, 0, 0, 0, 0], "(stretches the 640x480 image's edge|cannot be inverted)"),
         ([-1.0, 0, 0, 0, 0], "cannot be inverted"),  # folds back inside the image
         ([0.0, 0.0, 0.5, 0.0, 0.0], "cannot be inverted"),  # absurd tangential term
     ],
