@@ -64,6 +64,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         # The reader went away (`qrfield solve ... | head`): what it wanted it has; stop quietly.
         stdout_closed()
         return 0
+    except ModuleNotFoundError as exc:
+        if (exc.name or "").split(".")[0] not in ("PySide6", "shiboken6", "pyqtgraph"):
+            raise
+        from qrfield.commands.gui import GUI_EXTRA_HINT  # e.g. `bench pipeline` measures the app too
+
+        print(f"qrfield {args.command}: error: this needs {exc.name}: {GUI_EXTRA_HINT}", file=sys.stderr)
+        return 3
     except (CameraModelError, ValueError, OSError) as exc:
         # Bad input is the user's to fix: one clear line, no traceback.
         print(f"qrfield {args.command}: error: {one_line(str(exc))}", file=sys.stderr)

@@ -95,3 +95,8 @@ def test_missing_qt_libraries_name_the_apt_package(monkeypatch):
     problem = qt_problem(lambda name: None, lambda lib: lib == "libxcb-cursor.so.0")
     assert problem.endswith("sudo apt install libxcb-cursor0") and "libxcb-cursor.so.0" in problem
     assert qt_problem(lambda name: None, lambda lib: False) == ""
+
+
+def test_a_command_that_needs_the_app_names_the_extra(without_qt, tmp_path):
+    done = _qrfield(without_qt, tmp_path, "bench", "pipeline", "--seconds", "0.1")
+    assert done.returncode == 3 and "qrfield[gui]" in done.stderr and "Traceback" not in done.stderr
