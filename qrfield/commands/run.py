@@ -36,7 +36,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from qrfield.pipeline import METHOD_CHOICES
     from qrfield.serial_link import SerialLinkSettings
     from qrfield.settings import add_arguments as add_setting_arguments
-    from qrfield.sources import SOURCE_HELP, Picamera2Settings, VirtualBenchSettings
+    from qrfield.sources import SOURCE_HELP, Picamera2Settings, UsbCameraSettings, VirtualBenchSettings
 
     parser.add_argument(
         "--headless", action="store_true", help="no window (always true for run; accepted for clarity)"
@@ -88,6 +88,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "Raspberry Pi camera (--source picamera2; default size: the camera model's)"
     )
     add_setting_arguments(group, Picamera2Settings, prefix="picamera_")
+    group = parser.add_argument_group("USB camera (--source usb:N)")
+    add_setting_arguments(group, UsbCameraSettings, prefix="usb_")
 
 
 class StopFlag:
@@ -149,13 +151,21 @@ def run(args: argparse.Namespace) -> int:
     from qrfield.pipeline import Pipeline, methods_from_choice
     from qrfield.serial_link import publish_result
     from qrfield.settings import from_arguments, specs
-    from qrfield.sources import EndOfStream, Picamera2Settings, SourceError, VirtualBenchSettings
+    from qrfield.sources import (
+        EndOfStream,
+        Picamera2Settings,
+        SourceError,
+        UsbCameraSettings,
+        VirtualBenchSettings,
+        stream_camera,
+    )
 
     if args.frames < 0:
         raise ValueError(f"--frames must be >= 0, got {args.frames}")
     if not 0 <= args.retry_s < float("inf"):  # nan would retry in a busy loop
         raise ValueError(f"--retry-s must be a number of seconds >= 0, got {args.retry_s}")
     camera, named = _camera(args)
+    named_camera = camera  # the model the user named (a source may map it to its stream)
     virtual = from_arguments(VirtualBenchSettings, args, prefix="virtual_")
     picamera_given = any(
         getattr(args, f"picamera_{spec.name}") is not None for spec in specs(Picamera2Settings)
@@ -164,6 +174,7 @@ def run(args: argparse.Namespace) -> int:
     args.picamera = (
         from_arguments(Picamera2Settings, args, prefix="picamera_", base=base) if picamera_given else None
     )
+    args.usb = from_arguments(UsbCameraSettings, args, prefix="usb_")
     stop = StopFlag()
     previous = stop.install()
     say = _Stderr()
@@ -177,6 +188,7 @@ def run(args: argparse.Namespace) -> int:
             return 1 if not stop else 0
         if source.name != "virtual" and not named:
             say(f"camera model: {camera.name} assumed (name yours with --camera)")
+        camera = stream_camera(source, camera)  # a picamera2 stream's: through its sensor crop
         pipeline = Pipeline(
             camera, args.side_mm, methods_from_choice(args.method), select_text=args.select_text
         )
@@ -195,9 +207,16 @@ def run(args: argparse.Namespace) -> int:
                 frames.close()
                 if args.retry_s <= 0:
                     return 1
-                source = _reopen(args, camera, virtual, say, stop)
+                source = _reopen(args, named_camera, virtual, say, stop)
                 if source is None:
                     break
+                if stream_camera(source, named_camera) != pipeline.camera:
+                    pipeline = Pipeline(
+                        stream_camera(source, named_camera),
+                        args.side_mm,
+                        methods_from_choice(args.method),
+                        select_text=args.select_text,
+                    )
                 frames = FrameFeed(source, stop, dropped_before=frames.dropped)
                 continue
             result = pipeline.process(frame)
@@ -285,6 +304,7 @@ def _open_once(args: argparse.Namespace, camera: Any, virtual: Any) -> Any:
         side_mm=args.side_mm,
         virtual=virtual,
         picamera=args.picamera,
+        usb=getattr(args, "usb", None),
         loop=args.loop,
         pace=args.pace,
     )
