@@ -110,7 +110,7 @@ class UsbCameraSource(FrameSource):
         return text + ")"
 
     def _open_impl(self) -> None:
-        cap = _quietly_open(self.index)
+        cap = quietly_open(self.index)
         if not cap.isOpened():
             cap.release()
             where = f" (/dev/video{self.index})" if os.name == "posix" else ""
@@ -223,7 +223,7 @@ def _set_and_check(cap: cv2.VideoCapture, prop: int, value: float) -> bool:
     return abs(cap.get(prop) - value) < 0.5
 
 
-def _quietly_open(index: int) -> cv2.VideoCapture:
+def quietly_open(index: int) -> cv2.VideoCapture:
     """cv2.VideoCapture(index) without OpenCV's console warnings when there is no such camera
     (the SourceError raised instead says so once, in words)."""
     logging = getattr(getattr(cv2, "utils", None), "logging", None)

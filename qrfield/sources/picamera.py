@@ -48,14 +48,9 @@ TIMESTAMP_TOLERANCE_S = 5.0
 LENS_SETTLED = 0.05
 #: ... and the source drops at most this many frames at open waiting for it (1 s at 30 fps).
 LENS_SETTLE_FRAMES = 30
-#: The presets for the sensors picamera2 names (camera_properties['Model']), for messages.
-SENSOR_PRESETS = {
-    "imx219": "picam-v2",
-    "imx708": "picam-v3",
-    "imx708_wide": "(no preset: calibrate the wide lens)",
-    "imx477": "picam-hq-6mm (with the 6 mm lens)",
-    "ov5647": "picam-v1",
-}
+#: The preset for each sensor picamera2 names (camera_properties['Model']); the HQ camera's lens
+#: is interchangeable: picam-hq-6mm is for the 6 mm lens only.
+SENSOR_PRESETS = {"imx219": "picam-v2", "imx708": "picam-v3", "imx477": "picam-hq-6mm", "ov5647": "picam-v1"}
 
 
 @dataclass(frozen=True)
@@ -138,6 +133,7 @@ class StreamInfo:
     profile: CameraModel | None = None
     camera: CameraModel | None = None
     model_notes: list[str] = field(default_factory=list)
+    clock: str = ""
 
     def lines(self) -> list[str]:
         """The report of ``qrfield camera check`` and the app's Camera tab, one fact per line."""
@@ -170,6 +166,10 @@ class StreamInfo:
         if self.camera is not None:
             out.append(f"camera model of the stream: {self.camera.summary()}")
             out += self.formula_lines()
+        else:
+            out.append("camera model of the stream: none (no camera model named)")
+        if self.clock:
+            out.append(f"frame time: {self.clock}")
         out += [f"note: {n}" for n in self.model_notes]
         return out
 
@@ -345,18 +345,23 @@ class Picamera2Source(FrameSource):
                 f"picamera2 delivers {width}x{height} frames, configured for "
                 f"{info.out_size[0]}x{info.out_size[1]}"
             )
-        self.camera = self._stream_camera(info)
-        info.camera = self.camera
+        self.use_profile(self.profile)
+
+    def use_profile(self, profile: CameraModel | None) -> CameraModel | None:
+        """Derive :attr:`camera` from ``profile`` for the open stream (its mode, crop and focus);
+        the model and how it was made go to ``notes``. SourceError when it cannot be mapped."""
+        info = self.stream
+        self.profile, info.profile, info.model_notes = profile, profile, []
+        self.camera = info.camera = self._stream_camera(info)
         if self.camera is not None:
             self.notes.append(f"camera model: {self.camera.summary()} ({self.camera.notes.split('. ')[0]})")
-        for note in info.model_notes:
-            self.notes.append(note)
+        self.notes.extend(info.model_notes)
+        return self.camera
 
     def _stream_camera(self, info: StreamInfo) -> CameraModel | None:
         """The profile mapped to this stream (mode, crop, lens); SourceError when it cannot be."""
         profile = self.profile
         if profile is None:
-            info.model_notes.append("no camera model given: the stream's model is not derived")
             return None
         if (
             profile.sensor_resolution is not None
@@ -468,6 +473,7 @@ class Picamera2Source(FrameSource):
         if isinstance(stamp, (int, float)) and stamp > 0:
             t = float(stamp) / 1e9
             if -0.05 <= now - t <= TIMESTAMP_TOLERANCE_S:
+                self.stream.clock = "the frame's SensorTimestamp (end of readout, CLOCK_MONOTONIC)"
                 return t
             if not self._clock_noted:
                 self._clock_noted = True
@@ -475,6 +481,7 @@ class Picamera2Source(FrameSource):
                     f"SensorTimestamp is {now - t:+.1f} s from the monotonic clock: frame times are "
                     "delivery times instead"
                 )
+        self.stream.clock = "delivery time (time.monotonic; no usable SensorTimestamp)"
         return now
 
     def _lock_exposure(self, metadata: dict[str, Any]) -> None:
