@@ -100,7 +100,7 @@ class CameraModel:
         for key in ("fx", "fy", "cx", "cy"):
             object.__setattr__(self, key, float(getattr(self, key)))
         _validate(self.fx, self.fy, self.cx, self.cy, self.width, self.height, f"camera {self.name!r}")
-        checked = _sensor_fields({key: getattr(self, key) for key in SENSOR_FIELDS}, f"camera {self.name!r}")
+        checked = sensor_fields({key: getattr(self, key) for key in SENSOR_FIELDS}, f"camera {self.name!r}")
         for key, value in checked.items():
             object.__setattr__(self, key, value)
 
@@ -166,7 +166,7 @@ class CameraModel:
             dist=dist_arr,
             name=str(data.get("name", "custom")),
             notes=str(data.get("notes", "")),
-            **_sensor_fields({key: data.get(key) for key in SENSOR_FIELDS}, where),
+            **sensor_fields({key: data.get(key) for key in SENSOR_FIELDS}, where),
         )
 
     @classmethod
@@ -481,8 +481,10 @@ def _whole_numbers(values: Any, count: int, key: str, where: str) -> tuple[int, 
     return tuple(int(v) for v in items)
 
 
-def _sensor_fields(values: dict[str, Any], where: str) -> dict[str, Any]:
-    """The optional sensor fields (SENSOR_FIELDS) checked and coerced; None/"" stay unset."""
+def sensor_fields(values: dict[str, Any], where: str) -> dict[str, Any]:
+    """The optional sensor fields (SENSOR_FIELDS) checked and coerced; None/"" stay unset.
+
+    CameraModelError (prefixed with ``where``) names the field that is wrong."""
     out: dict[str, Any] = {}
     resolution = values.get("sensor_resolution")
     if resolution is not None:

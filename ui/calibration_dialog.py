@@ -506,10 +506,11 @@ class CalibrationDialog(QtWidgets.QDialog):
         detections = list(self.captured)
         s = self.settings()
         name = s.name.strip() or "calibrated"
+        stream = self.camera_provider()  # its sensor crop and lens position go into the profile
 
         def work() -> None:
             try:
-                outcome: Any = calibrate(detections, board, fix_k3=s.fix_k3, name=name)
+                outcome: Any = calibrate(detections, board, fix_k3=s.fix_k3, name=name, stream=stream)
             except CalibrationError as exc:
                 outcome = f"calibration failed: {exc}"
             except Exception as exc:  # never let the thread die silently

@@ -11,6 +11,7 @@ from PySide6 import QtCore, QtWidgets
 from qrfield.camera import preset_names
 from qrfield.settings import specs
 from qrfield.sources import Picamera2Settings
+from ui.camera_report import CameraReport
 from ui.config import AppSettings
 from ui.settings_form import SettingsForm, set_widget_value, widget_for, widget_value
 
@@ -155,6 +156,8 @@ class CameraControls(QtWidgets.QWidget):
         layout.addRow(_spec("side_mm").label, self.side_mm)
         self.plot_window_s = widget_for(_spec("plot_window_s"))
         layout.addRow(_spec("plot_window_s").label, self.plot_window_s)
+        self.report = CameraReport()  # the open stream's mode, crop and model (qrfield camera check)
+        layout.addRow(self.report)
         browse.clicked.connect(self._choose_file)
         self.camera.activated.connect(lambda *_: self.changed.emit())
         self.camera.lineEdit().editingFinished.connect(self.changed.emit)

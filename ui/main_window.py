@@ -265,7 +265,7 @@ class MainWindow(QtWidgets.QMainWindow):
         """Show the calibration dialog (made once; it previews the frames this window draws)."""
         if self.calibration_dialog is None:
             settings = self.store.group("calibration", CalibrationDialogSettings)
-            self.calibration_dialog = CalibrationDialog(lambda: self.camera_model, settings, self)
+            self.calibration_dialog = CalibrationDialog(self.stream_camera, settings, self)
             self.frameDrawn.connect(self.calibration_dialog.on_frame)
             self.calibration_dialog.cameraChosen.connect(self.use_camera)
         self.calibration_dialog.show()
@@ -280,13 +280,19 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def _session_context(self) -> BenchContext:
         """What a new session records and each row is checked against (the Session tab)."""
-        assert self.camera_model is not None
         return BenchContext(
-            self.camera_model, self.app_settings.side_mm, self.methods(), self.solver_controls.settings()
+            self.stream_camera(), self.app_settings.side_mm, self.methods(), self.solver_controls.settings()
         )
+
+    def stream_camera(self) -> CameraModel:
+        """The camera model the frames are measured with: the open stream's (a picamera2 stream's,
+        derived through its sensor mode and crop; sessions record it), else the one named."""
+        assert self.camera_model is not None
+        return self.worker.source_camera or self.camera_model
 
     # ---------------------------------------------------------------- worker signals
     def _on_source_opened(self, description: str) -> None:
+        self.camera_controls.report.show_stream(self.worker.stream_report)
         self.banner_row.hide()
         self.status_source.setText(f"source: {description}")
         self.plots.clear_history()

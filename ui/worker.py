@@ -31,7 +31,9 @@ from qrfield.sources import (
     VirtualBenchSettings,
     VirtualBenchSource,
     open_source,
+    stream_camera,
 )
+from qrfield.sources.discovery import stream_report
 
 
 @dataclass(frozen=True)
@@ -52,13 +54,12 @@ class RunConfig:
     def source_key(self) -> tuple[Any, ...]:
         """What requires reopening the source when it changes."""
         bench = (self.camera, self.side_mm) if self.source in ("virtual", "auto") else ()
-        size = (
-            (self.camera.size,)
-            if self.source.startswith("usb") or self.source in ("picamera2", "auto")
-            else ()
-        )
-        pi = (self.picamera,) if self.source in ("picamera2", "auto") else ()
-        return (self.source, self.loop, *bench, *size, *pi)
+        size = (self.camera.size,) if self.source.startswith("usb") else ()
+        # picamera2 derives the stream's model from the profile at open: a new profile reopens it.
+        pi = self.source.startswith("picamera2") or self.source == "auto"
+        pi_key = (self.camera, self.picamera) if pi else ()
+        sim = (self.virtual, self.side_mm) if self.source.startswith("picamera2-sim") else ()
+        return (self.source, self.loop, *bench, *size, *pi_key, *sim)
 
 
 class LatestBox:
@@ -123,6 +124,11 @@ class PipelineWorker(QtCore.QObject):
         self._pipeline: Pipeline | None = None
         self._notes_seen = 0
         self.frames_processed = 0
+        #: The open source's own camera model (a picamera2 stream's, through its sensor crop; None
+        #: when the named model applies) and its report (qrfield.sources.discovery.stream_report);
+        #: both set before sourceOpened is emitted.
+        self.source_camera: CameraModel | None = None
+        self.stream_report: list[str] = []
         #: Called on the worker thread with every FrameResult (e.g. the serial panel's publisher);
         #: each must return at once and never touch widgets. Replace the tuple, never mutate it.
         self.result_sinks: tuple[Any, ...] = ()
@@ -187,7 +193,7 @@ class PipelineWorker(QtCore.QObject):
     def _make_pipeline(self, config: RunConfig) -> Pipeline | None:
         try:
             return Pipeline(
-                config.camera,
+                stream_camera(self.source, config.camera) if self.source is not None else config.camera,
                 config.side_mm,
                 config.methods,
                 solver_settings=config.solver_settings,
@@ -216,6 +222,11 @@ class PipelineWorker(QtCore.QObject):
             return
         self.source = source
         self._notes_seen = 0
+        camera = stream_camera(source, config.camera)
+        self.source_camera = source.camera
+        self.stream_report = stream_report(source, camera)
+        if self._pipeline is not None and self._pipeline.camera != camera:
+            self._pipeline = self._make_pipeline(config)  # the stream's model differs from the named
         self._reader = LatestFrameReader(source).start()
         self.sourceOpened.emit(source.description)
         if self._pipeline is not None:
@@ -261,6 +272,7 @@ class PipelineWorker(QtCore.QObject):
         if reader is not None:
             reader.stop()
         source, self.source = self.source, None
+        self.source_camera = None
         if source is not None:
             try:
                 source.close()

@@ -137,6 +137,17 @@ def list_cameras(include_simulated: bool = False) -> tuple[list[FoundCamera], li
     return found, reasons
 
 
+def stream_report(source: Any, camera: CameraModel | None) -> list[str]:
+    """What an opened source delivers and the camera model its frames are measured with (the
+    app's Camera tab): a picamera2 stream's full report, else the source and ``camera``."""
+    if isinstance(source, Picamera2Source):
+        return [f"source: {source.description}", *source.stream.lines()]
+    lines = [f"source: {source.description}"]
+    if camera is not None:
+        lines.append(f"camera model: {camera.name}: {camera.summary()}")
+    return lines + [f"note: {n}" for n in source.notes]
+
+
 def check_lines(source: Any, profile: CameraModel | None, frames: int = 3) -> list[str]:
     """What the opened ``source`` delivers and the camera model of its frames, one fact a line.
 
