@@ -165,19 +165,17 @@ def check_lines(source: Any, profile: CameraModel | None, frames: int = 3) -> li
                 source.use_profile(resolve_camera(preset))
         times = [source.read().t_capture for _ in range(frames)]
         lines += source.stream.lines()
-        if len(times) > 1:
-            steps = ", ".join(f"{1000 * (b - a):.1f}" for a, b in itertools.pairwise(times))
-            lines.append(f"frames: {frames} read; time steps {steps} ms")
+        steps = ", ".join(f"{1000 * (b - a):.1f}" for a, b in itertools.pairwise(times))
+        frames_line = f"frames: {frames} read" + (f"; time steps {steps} ms" if steps else "")
     else:
         frame = None
         for _ in range(frames):
             frame = source.read()
-        if frame is not None:
-            lines.append(f"frames: {frames} read at {frame.size[0]}x{frame.size[1]}")
+        frames_line = f"frames: {frames} read at {frame.size[0]}x{frame.size[1]}" if frame else ""
         camera = getattr(source, "profile", None) or profile
         if camera is not None:
             lines.append(f"camera model: {camera.name}: {camera.summary()} (the frames have its size)")
     for note in source.notes:  # the model is in the report already, and some notes are too
         if not note.startswith("camera model: ") and f"note: {note}" not in lines:
             lines.append(f"note: {note}")
-    return lines
+    return [*lines, frames_line] if frames_line else lines

@@ -178,16 +178,23 @@ class StreamInfo:
         p, cam, crop = self.profile, self.camera, self.scaler_crop
         if p is None or cam is None or crop is None or p.sensor_crop is None:
             return []
-        # f and c in full-resolution pixels (the profile's, after any focus change).
-        full_fx = cam.fx * crop[2] / cam.width
+        # f and c in full-resolution pixels: the profile's, after any focus change.
+        full_fx, full_fy = cam.fx * crop[2] / cam.width, cam.fy * crop[3] / cam.height
         full_cx = (cam.cx + 0.5) * crop[2] / cam.width - 0.5 + crop[0]
-        return [
+        full_cy = (cam.cy + 0.5) * crop[3] / cam.height - 0.5 + crop[1]
+        own_fx = p.fx * p.sensor_crop[2] / p.width  # the profile's own, in full-resolution pixels
+        focus = full_fx / own_fx
+        lines = [
             f"  fx = f * out_w / crop_w = {full_fx:.3f} * {cam.width} / {crop[2]} = {cam.fx:.3f}",
+            f"  fy = f * out_h / crop_h = {full_fy:.3f} * {cam.height} / {crop[3]} = {cam.fy:.3f}",
             f"  cx = (c - crop_x + 0.5) * out_w / crop_w - 0.5 = ({full_cx:.3f} - {crop[0]} + 0.5) * "
             f"{cam.width} / {crop[2]} - 0.5 = {cam.cx:.3f}",
-            "  (f, c: the profile in full-resolution pixels; docs/conventions.md, "
-            '"Camera models follow the stream")',
+            f"  cy = ({full_cy:.3f} - {crop[1]} + 0.5) * {cam.height} / {crop[3]} - 0.5 = {cam.cy:.3f}",
+            f"  (f, c: the profile {p.name} in full-resolution pixels"
+            + (f"; f = {own_fx:.3f} x {focus:.5f} for the focus" if abs(focus - 1) > 1e-9 else "")
+            + '; docs/conventions.md, "Camera models follow the stream")',
         ]
+        return lines
 
 
 class Picamera2Source(FrameSource):
