@@ -303,7 +303,7 @@ def test_a_profile_that_does_not_say_its_sensor_crop_is_refused(stand_in) -> Non
 
 def test_a_profile_of_another_sensor_is_refused_and_names_the_right_one(stand_in) -> None:
     stand_in("imx708")
-    with pytest.raises(SourceError, match=r"3280x2464 sensor, but camera 0 is a imx708.*picam-v3"):
+    with pytest.raises(SourceError, match=r"3280x2464 sensor, but camera 0's sensor, the imx708, .*picam-v3"):
         Picamera2Source(profile=resolve_camera("picam-v2@640x480")).open()
 
 
@@ -342,6 +342,12 @@ def test_lens_position_comes_from_the_profile_and_a_different_one_is_a_warning(s
         # The thin lens (f = 4.74 mm): v(3.5) / v(2.0) = (1/4.74 - 0.002) / (1/4.74 - 0.0035).
         expected = (1 / 4.74 - 0.002) / (1 / 4.74 - 0.0035)
         assert source.camera.fx / calibrated.scaled(1536, 864).fx == pytest.approx(expected, rel=1e-9)
+
+
+def test_a_lens_position_the_lens_cannot_reach_is_refused(stand_in) -> None:
+    stand_in("imx708")
+    with pytest.raises(SourceError, match=r"lens position 20 dioptres .* outside this camera's 0\.\.15"):
+        Picamera2Source(Picamera2Settings(lens_position=20.0), profile=resolve_camera("picam-v3")).open()
 
 
 def test_a_camera_without_autofocus_gets_no_focus_controls(stand_in) -> None:

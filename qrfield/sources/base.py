@@ -21,6 +21,10 @@ if TYPE_CHECKING:
     from qrfield.camera import CameraModel
 
 
+#: Frames a camera runs on automatic exposure (and a USB camera on autofocus) before they are locked.
+SETTLE_FRAMES = 15
+
+
 class SourceError(RuntimeError):
     """A camera source cannot be opened or stopped delivering frames; the message says which and why."""
 

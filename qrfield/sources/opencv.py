@@ -12,7 +12,7 @@ import numpy as np
 
 from qrfield.camera import CameraModel
 from qrfield.settings import setting, validated
-from qrfield.sources.base import EndOfStream, Frame, FrameSource, Pacer, SourceError
+from qrfield.sources.base import SETTLE_FRAMES, EndOfStream, Frame, FrameSource, Pacer, SourceError
 
 #: Consecutive failed grabs after which a USB camera counts as gone.
 USB_MAX_FAILED_READS = 5
@@ -45,7 +45,11 @@ class UsbCameraSettings:
         help="freeze automatic exposure once settled, where offered",
     )
     settle_frames: int = setting(
-        15, label="settle frames", minimum=0, maximum=300, help="frames before focus and exposure are locked"
+        SETTLE_FRAMES,
+        label="settle frames",
+        minimum=0,
+        maximum=300,
+        help="frames before focus and exposure are locked",
     )
 
 

@@ -31,7 +31,7 @@ import numpy as np
 from qrfield.camera import CameraModel, CameraModelError, format_crop
 from qrfield.geometry import Pose
 from qrfield.settings import setting, validated
-from qrfield.sources.base import Frame, FrameSource, SourceError
+from qrfield.sources.base import SETTLE_FRAMES, Frame, FrameSource, SourceError
 from qrfield.sources.sensor_modes import PICAMERA2_CHOICE, SensorMode, check_policy, choose_mode
 
 PICAMERA2_MISSING = (
@@ -76,7 +76,7 @@ class Picamera2Settings:
         help="freeze automatic exposure and gain once settled, for steady brightness",
     )
     settle_frames: int = setting(
-        15, label="settle frames", minimum=0, maximum=300, help="frames before the lock"
+        SETTLE_FRAMES, label="settle frames", minimum=0, maximum=300, help="frames before the lock"
     )
     camera_num: int = setting(0, label="camera number", minimum=0, maximum=7)
     sensor_mode: str = setting(
@@ -317,6 +317,12 @@ class Picamera2Source(FrameSource):
         if "AfMode" in camera.camera_controls:
             info.autofocus = True
             info.lens_position, info.lens_source = self._lens_position()
+            limits = camera.camera_controls.get("LensPosition")
+            if limits and not limits[0] <= info.lens_position <= limits[1]:
+                raise SourceError(
+                    f"picamera2: lens position {info.lens_position:g} dioptres ({info.lens_source}) is "
+                    f"outside this camera's {limits[0]:g}..{limits[1]:g} dioptres"
+                )
             controls.update(AfMode=AF_MODE_MANUAL, LensPosition=float(info.lens_position))
         if controls:
             camera.set_controls(controls)
@@ -378,8 +384,8 @@ class Picamera2Source(FrameSource):
             preset = SENSOR_PRESETS.get(info.sensor, "")
             raise SourceError(
                 f"camera model {profile.name!r} describes a {profile.sensor_resolution[0]}x"
-                f"{profile.sensor_resolution[1]} sensor, but camera {self.settings.camera_num} is a "
-                f"{info.sensor} of {info.sensor_resolution[0]}x{info.sensor_resolution[1]}"
+                f"{profile.sensor_resolution[1]} sensor, but camera {self.settings.camera_num}'s sensor, "
+                f"the {info.sensor}, is {info.sensor_resolution[0]}x{info.sensor_resolution[1]}"
                 + (f": name its profile ({preset})" if preset else "")
             )
         model = profile

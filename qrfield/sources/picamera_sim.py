@@ -25,9 +25,9 @@ Where each behaviour comes from (read, not guessed):
   depth (P2 ``_select_native_mode``).
 - ``sensor_modes``: reconfigures the camera for each mode when first read (P2 ``sensor_modes``), so
   it fails while the camera runs ("Camera must be stopped before configuring", P2 ``configure_``).
-- ``create_video_configuration`` / ``create_preview_configuration``: their defaults (main XBGR8888
-  at 1280x720 / 640x480, raw of the main's size, FrameDurationLimits (33333, 33333) /
-  (100, 83333)), the key check of ``_make_initial_stream_config``, even sizes (``align_stream``).
+- ``create_video_configuration``: its defaults (main XBGR8888 at 1280x720, raw of the main's size,
+  FrameDurationLimits (33333, 33333)), the key check of ``_make_initial_stream_config``, even
+  sizes (``align_stream``).
 - ``configure``: the sensor keys allowed are bit_depth and output_size (P2 ``check_camera_config``);
   the mode is chosen by P2 ``_make_libcamera_config``: the size to match is ``sensor.output_size``,
   else ``raw.size``, else ``main.size``; each raw mode is scored by ``score_mode`` (copied below) and
@@ -62,7 +62,8 @@ Where each behaviour comes from (read, not guessed):
   blur circle (f^2 / N) * |P - 1000/z| / 1000 mm on the sensor; IMX708 f = 4.74 mm, f/1.8).
 
 Not modelled: libcamera's stride and width alignment (sizes that are multiples of 64 are
-unaffected), YUV and raw streams, lores, brightness following exposure, the sensor's flips.
+unaffected), the preview and still configurations, YUV and raw streams, lores, brightness
+following exposure, the sensor's flips.
 """
 
 from __future__ import annotations
@@ -425,23 +426,7 @@ class SimPicamera2:
         buffer_count: int = 6,
         **kwargs: Any,
     ) -> dict[str, Any]:
-        return self._make_config(
-            main, raw, controls, sensor, buffer_count, (1280, 720), (33333, 33333), "video", kwargs
-        )
-
-    def create_preview_configuration(
-        self,
-        main: dict[str, Any] | None = None,
-        lores: dict[str, Any] | None = None,
-        raw: dict[str, Any] | None = None,
-        controls: dict[str, Any] | None = None,
-        sensor: dict[str, Any] | None = None,
-        buffer_count: int = 4,
-        **kwargs: Any,
-    ) -> dict[str, Any]:
-        return self._make_config(
-            main, raw, controls, sensor, buffer_count, (640, 480), (100, 83333), "preview", kwargs
-        )
+        return self._make_config(main, raw, controls, sensor, buffer_count, kwargs)
 
     def _make_config(
         self,
@@ -450,11 +435,9 @@ class SimPicamera2:
         controls: dict[str, Any] | None,
         sensor: dict[str, Any] | None,
         buffer_count: int,
-        default_size: tuple[int, int],
-        durations: tuple[int, int],
-        use_case: str,
         extra: dict[str, Any],
     ) -> dict[str, Any]:
+        default_size, durations, use_case = (1280, 720), (33333, 33333), "video"
         unknown = set(extra) - {"transform", "colour_space", "display", "encode", "queue", "use_case"}
         if unknown:
             raise TypeError(f"unexpected keyword argument(s) {sorted(unknown)}")
@@ -544,7 +527,9 @@ class SimPicamera2:
         if config is not None:
             self.configure(config)
         if self.camera_config is None:
-            self.configure(self.create_preview_configuration())
+            raise RuntimeError(
+                "stand-in: configure() before start() (the preview configuration is not modelled)"
+            )
         self.started = True
         self._t0 = time.monotonic()
         self._next_ns = time.monotonic_ns()
