@@ -360,8 +360,10 @@ def test_a_camera_without_autofocus_gets_no_focus_controls(stand_in) -> None:
 def test_frame_time_is_the_sensor_timestamp(stand_in) -> None:
     with Picamera2Source(profile=resolve_camera("picam-v2")) as source:
         times = [source.read().t_capture for _ in range(4)]
-    # The stand-in's frames are 33.333 ms apart (FrameDurationLimits); delivery times would jitter.
-    assert np.allclose(np.diff(times), 0.033333, atol=1e-6), np.diff(times)
+    # The stand-in's frames are whole frame durations apart (33.333 ms; more when the reader is slow
+    # and frames go by unread); delivery times would jitter.
+    steps = np.diff(times) / 0.033333
+    assert np.all(steps > 0.99) and np.allclose(steps, np.round(steps), atol=1e-3), steps
 
 
 def test_a_sensor_timestamp_on_another_clock_is_noted_and_not_used(stand_in) -> None:

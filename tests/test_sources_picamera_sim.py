@@ -127,7 +127,9 @@ def test_sensor_modes_cannot_be_read_while_running():
 def test_frames_come_at_the_frame_rate_with_sensor_timestamps():
     camera = started("imx219", (640, 480))
     stamps = [camera.capture_metadata()["SensorTimestamp"] for _ in range(4)]
-    assert np.diff(stamps).tolist() == [33333000] * 3  # FrameDurationLimits (33333, 33333) us
+    # FrameDurationLimits (33333, 33333) us; a reader slower than that misses frames, as on a Pi.
+    steps = np.diff(stamps) / 33333000
+    assert np.all(steps >= 1) and np.all(steps == np.round(steps)), steps
 
 
 def test_a_camera_that_is_not_there_is_an_index_error():
