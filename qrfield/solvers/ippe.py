@@ -5,7 +5,8 @@ cv2.solvePnPGeneric with SOLVEPNP_IPPE_SQUARE returns the two poses of the plana
 (V1..V4 in OpenCV's frame: +Y up, +Z towards the camera); both are refined (LM or VVS) and
 converted to the marker frame of docs/conventions.md with :func:`qrfield.geometry.rotation_from_ippe`. The
 one with the smaller reprojection error is the answer, the other its ``alternative``, and
-``ambiguity`` = best error / second error (near 1: the image cannot tell the two apart). When
+``ambiguity`` = best error / second error (near 1: the image cannot tell the two apart; the same
+definition as the numerical model's, see :class:`PoseResult`). When
 refining the second candidate slides it onto the answer (it is then no local minimum of its own),
 the alternative is IPPE's unrefined closed-form mirror, so that the two always differ.
 Corners are undistorted first (exactly, by iteration) when the camera has distortion, so the
@@ -36,6 +37,7 @@ from qrfield.settings import setting, validated
 from qrfield.solvers.floats import angles_single, reprojection_single
 from qrfield.solvers.rays import normalised_single, undistort
 from qrfield.solvers.result import BatchResult, PoseResult, SolverError
+from qrfield.solvers.uncertainty import ambiguity_ratio, batch_uncertainty
 
 REFINERS = ("lm", "vvs", "none")
 #: Card normals closer than this (degrees) mean the two candidates are one pose.
@@ -196,7 +198,7 @@ def solve_ippe(
         # Refining the mirror slid it onto the answer (it is no local minimum of its own): keep
         # IPPE's closed-form mirror, so that the ambiguity compares two different poses.
         second = _Candidate(candidates[1][1], candidates[1][2], side, camera, flat, rays)
-    ambiguity = first.error / second.error if second.error > 0.0 else 1.0
+    ambiguity = ambiguity_ratio(first.error, second.error)
     return replace(first.result(corners), alternative=second.result(corners), ambiguity=ambiguity)
 
 
@@ -232,9 +234,18 @@ def _closed_form(corners: np.ndarray, camera: CameraModel, side: float) -> PoseR
 
 
 def solve_ippe_batch(
-    corners: np.ndarray, valid: np.ndarray, camera: CameraModel, side: float, settings: IppeSettings | None
+    corners: np.ndarray,
+    valid: np.ndarray,
+    camera: CameraModel,
+    side: float,
+    settings: IppeSettings | None,
+    cov: np.ndarray | None = None,
 ) -> BatchResult:
-    """N poses by IPPE (a loop over :func:`solve_ippe`; no vectorised IPPE in OpenCV)."""
+    """N poses by IPPE (a loop over :func:`solve_ippe`; no vectorised IPPE in OpenCV).
+
+    ``cov``: (N, 4, 2, 2) checked corner covariances (px^2) or None; propagated (vectorised) to
+    the std fields after the loop.
+    """
     count = corners.shape[0]
     out = {
         "position_mm": np.full((count, 3), np.nan),
@@ -252,6 +263,21 @@ def solve_ippe_batch(
         out["rotation"][i] = r.rotation
         out["residual_mm"][i] = r.residual_mm
         out["reprojection_px"][i] = r.reprojection_px
+    if cov is not None:
+        out.update(
+            batch_uncertainty(
+                "ippe",
+                corners,
+                cov,
+                camera,
+                side,
+                out["rotation"],
+                out["position_mm"],
+                out["angles_deg"],
+                None,
+                converged,
+            )
+        )
     return BatchResult(
         method="ippe", converged=converged, iterations=np.zeros(count, int), valid=valid.copy(), **out
     )
