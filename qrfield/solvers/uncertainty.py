@@ -22,14 +22,16 @@ Method (first order; measured calibration in docs/uncertainty.md):
   3. The pose covariance is A Sigma_n A^T; the angles follow from omega by the inverse of the
      Euler-rate matrix E = [e_x, Rx e_y, Rx Ry e_z] (singular at beta = +-90: NaN there).
 
-The mirror test: the reprojection chi-square r^T Sigma_n^-1 r of the answer and of its mirror
-candidate; ``ambiguous`` when the mirror's exceeds the answer's by less than FLIP_DELTA_CHI2 (a
-likelihood ratio mirror / answer above exp(-FLIP_DELTA_CHI2 / 2)). There the error is not Gaussian
+The mirror test: the reprojection chi-square r^T Sigma_n^-1 r of the answer's branch and of its
+mirror's (each at its own chi-square optimum, one Gauss-Newton step from the solver's pose);
+``ambiguous`` when the mirror's exceeds the answer's by less than FLIP_DELTA_CHI2 (a likelihood
+ratio mirror / answer above exp(-FLIP_DELTA_CHI2 / 2)). There the error is not Gaussian
 (the two branches of the planar ambiguity are both plausible) and the std does not describe it.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import replace
 
@@ -41,8 +43,10 @@ from qrfield.solvers.result import PoseResult, SolverError
 
 #: The mirror candidate counts as fitting the corners within their uncertainty when its
 #: reprojection chi-square exceeds the answer's by less than this, i.e. when the mirror is at least
-#: exp(-2) = 14 % as likely as the answer (measured recall and precision: docs/uncertainty.md).
-FLIP_DELTA_CHI2 = 4.0
+#: exp(-4.5) = 1.1 % as likely as the answer. Chosen for recall: on seeded views with known noise
+#: it leaves no flip unflagged, where 4 and 6 leave a few, each a pose tens of degrees off with a
+#: std of a degree (measured recall and precision: docs/uncertainty.md, ``qrfield bench pose``).
+FLIP_DELTA_CHI2 = 9.0
 #: Without a corner covariance the test falls back on the ratio of the two candidates' RMS
 #: reprojection errors (``PoseResult.ambiguity``): at or above this the mirror counts as fitting.
 AMBIGUITY_FALLBACK = 0.5
@@ -73,6 +77,14 @@ def _unit_steps() -> np.ndarray:
 
 _INCIDENCE = _incidence()
 _UNIT_STEPS = _unit_steps()
+#: (3, 9): v @ _LEVI_CIVITA is [v]x flattened.
+_LEVI_CIVITA = np.array(
+    [[0, 0, 0, 0, 0, -1, 0, 1, 0], [0, 0, 1, 0, 0, 0, -1, 0, 0], [0, -1, 0, 1, 0, 0, 0, 0, 0]], dtype=float
+)
+#: Flat indices of the 4 diagonal 2x2 blocks of an 8 x 8 matrix, in (corner, row, column) order.
+_BLOCK_DIAGONAL = np.array(
+    [(2 * i + r) * 8 + 2 * i + c for i in range(4) for r in range(2) for c in range(2)]
+)
 
 
 def check_corners_cov(cov: object, batch: int | None = None) -> np.ndarray:
@@ -152,54 +164,75 @@ def normalised_cov(cov_px: np.ndarray, x: np.ndarray, y: np.ndarray, camera: Cam
     return inv @ cov @ np.swapaxes(inv, -1, -2)
 
 
-def _inverse_2x2(m: np.ndarray) -> np.ndarray:
-    """(..., 2, 2) inverses in closed form."""
-    a, b, c, d = m[..., 0, 0], m[..., 0, 1], m[..., 1, 0], m[..., 1, 1]
-    det = a * d - b * c
-    out = np.empty_like(m)
-    out[..., 0, 0], out[..., 0, 1] = d / det, -b / det
-    out[..., 1, 0], out[..., 1, 1] = -c / det, a / det
-    return out
-
-
-def information(cov_n: np.ndarray) -> np.ndarray:
-    """(..., 4, 2, 2) inverses of the corners' normalised covariance blocks; a block without
-    variance gets a floor of 1e-12 of the largest, so that exact corners stay usable."""
-    floor = 1e-12 * np.maximum(np.max(cov_n[..., 0, 0] + cov_n[..., 1, 1], axis=-1), 1e-300)
-    return _inverse_2x2(cov_n + floor[..., None, None, None] * _EYE3[:2, :2])
+def information_matrix(cov_n: np.ndarray) -> np.ndarray:
+    """(8, 8) block-diagonal inverse of one corner set's normalised covariance (4, 2, 2); a block
+    without variance gets a floor of 1e-12 of the largest, so that exact corners stay usable."""
+    c = cov_n.reshape(16).tolist()
+    floor = 1e-12 * max(max(c[4 * i] + c[4 * i + 3] for i in range(4)), 1e-300)
+    w = [0.0] * 64
+    for i in range(4):
+        a, b, cc, d = c[4 * i] + floor, c[4 * i + 1], c[4 * i + 2], c[4 * i + 3] + floor
+        det = a * d - b * cc
+        k = 18 * i  # row 2i, column 2i of the flat 8 x 8
+        w[k], w[k + 1], w[k + 8], w[k + 9] = d / det, -b / det, -cc / det, a / det
+    return np.array(w).reshape(8, 8)
 
 
 # ---------------------------------------------------------------------- Jacobians of the solvers
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
-    """(..., 3, 3) matrices [v]x with [v]x w = v x w."""
-    zero = np.zeros(v.shape[:-1])
-    vx, vy, vz = v[..., 0], v[..., 1], v[..., 2]
-    return np.stack([zero, -vz, vy, vz, zero, -vx, -vy, vx, zero], axis=-1).reshape(*v.shape[:-1], 3, 3)
+    """(..., 3, 3) matrices [v]x with [v]x w = v x w (one matmul: [v]x is linear in v)."""
+    return (v @ _LEVI_CIVITA).reshape(*v.shape[:-1], 3, 3)
+
+
+@functools.lru_cache(maxsize=16)
+def _vertices(side: float) -> np.ndarray:
+    """marker_vertices(side), cached read-only (4, 3) mm."""
+    q = marker_vertices(side)
+    q.setflags(write=False)
+    return q
+
+
+def rigid_projection(
+    rotation: np.ndarray, position: np.ndarray, side: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The rigid square at pose (R (..., 3, 3), t (..., 3) mm): its normalised projection (..., 8)
+    (x1, y1, ..., x4, y4), that projection's Jacobian (..., 8, 6) with respect to p = (omega rad,
+    t mm), and the vertices' depths (..., 4) mm (a depth <= 0 makes the first two meaningless)."""
+    arm = rotation[..., None, :, :] @ _vertices(side)[:, :, None]  # R q_i, (..., 4, 3, 1)
+    arm = arm[..., 0]
+    p = arm + position[..., None, :]
+    ax, ay, az = arm[..., 0], arm[..., 1], arm[..., 2]
+    inv_z = 1.0 / p[..., 2]
+    u, v = p[..., 0] * inv_z, p[..., 1] * inv_z
+    # du/domega = (R q) x (1, 0, -u) / Z, dv/domega = (R q) x (0, 1, -v) / Z;
+    # d(u, v)/dt = [[1, 0, -u], [0, 1, -v]] / Z.
+    jac = np.zeros((*p.shape[:-1], 2, 6))
+    jac[..., 0, 0], jac[..., 0, 1], jac[..., 0, 2] = -u * ay, az + u * ax, -ay
+    jac[..., 1, 0], jac[..., 1, 1], jac[..., 1, 2] = -v * ay - az, v * ax, ax
+    jac[..., 0, 3], jac[..., 1, 4] = 1.0, 1.0
+    jac[..., 0, 5], jac[..., 1, 5] = -u, -v
+    jac *= inv_z[..., None, None]
+    proj = np.stack([u, v], axis=-1)
+    return proj.reshape(*p.shape[:-2], 8), jac.reshape(*p.shape[:-2], 8, 6), p[..., 2]
 
 
 def rigid_jacobian(rotation: np.ndarray, position: np.ndarray, side: float) -> np.ndarray:
     """(..., 8, 6) derivative of the rigid square's normalised projection (x1, y1, ..., x4, y4) at
     pose (R (..., 3, 3), t (..., 3) mm) with respect to p = (omega rad, t mm)."""
-    arm = np.matmul(rotation[..., None, :, :], marker_vertices(side)[:, :, None])[..., 0]  # R q_i
-    p = arm + position[..., None, :]
-    inv_z = 1.0 / p[..., 2]
-    u, v = p[..., 0] * inv_z, p[..., 1] * inv_z
-    # d(u, v)/dP = [[1, 0, -u], [0, 1, -v]] / Z; dP/d omega = -[R q]x, dP/dt = I.
-    dproj = np.zeros((*p.shape[:-1], 2, 3))
-    dproj[..., 0, 0] = dproj[..., 1, 1] = 1.0
-    dproj[..., 0, 2], dproj[..., 1, 2] = -u, -v
-    dproj *= inv_z[..., None, None]
-    jac = np.concatenate([-dproj @ _skew(arm), dproj], axis=-1)  # (..., 4, 2, 6)
-    return jac.reshape(*p.shape[:-2], 8, 6)
+    return rigid_projection(rotation, position, side)[1]
 
 
 def ippe_jacobian(rotation: np.ndarray, position: np.ndarray, side: float, camera: CameraModel) -> np.ndarray:
     """(..., 6, 8) derivative of the least-squares pose (IPPE refined by LM or VVS, unweighted
     pixels) p = (omega, t) with respect to the normalised corners: (J^T W J)^-1 J^T W."""
-    jac = rigid_jacobian(rotation, position, side)
-    w = np.tile([camera.fx**2, camera.fy**2], 4)
+    return least_squares_jacobian(rigid_jacobian(rotation, position, side), camera)
+
+
+def least_squares_jacobian(jac: np.ndarray, camera: CameraModel) -> np.ndarray:
+    """(J^T W J)^-1 J^T W for the rigid projection's Jacobian J (..., 8, 6), W = diag(fx^2, fy^2, ...)."""
+    w = np.array([camera.fx**2, camera.fy**2] * 4)
     jtw = np.swapaxes(jac, -1, -2) * w
     return np.linalg.solve(jtw @ jac, jtw)
 
@@ -213,21 +246,24 @@ def numerical_jacobian(z: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarra
     the Kabsch rotation's first-order change (what qrfield.solvers.kernel.pose_from_vertices
     computes for four vertices) and the mean vertex.
     """
-    rays = np.stack([x, y, np.ones_like(x)], axis=-1)  # (..., 4, 3)
+    rays = np.ones((*z.shape, 3))  # lines of sight (x, y, 1), (..., 4, 3)
+    rays[..., 0], rays[..., 1] = x, y
     verts = z[..., None] * rays
     d = _INCIDENCE @ verts  # (..., 6, 3): V_i - V_j of each pair
-    e = d / np.sqrt(np.sum(d * d, axis=-1, keepdims=True))
+    e = d / np.sqrt((d * d).sum(axis=-1))[..., None]
     jz = _INCIDENCE * (e @ np.swapaxes(rays, -1, -2))  # d diff_k / d z_i, (..., 6, 4)
     jn = (_INCIDENCE[:, :, None] * e[..., :, None, :2]) * z[..., None, :, None]  # (..., 6, 4, 2)
     jzt = np.swapaxes(jz, -1, -2)
-    dz = -np.linalg.solve(jzt @ jz, jzt @ jn.reshape(*jn.shape[:-2], 8))  # (..., 4, 8)
+    dz = np.linalg.solve(jzt @ jz, jzt @ jn.reshape(*jn.shape[:-2], 8))  # minus dz/dn, (..., 4, 8)
     # dV_i / dn = m_i dz_i / dn + z_i (unit steps in x_i and y_i).
-    dv = rays[..., :, :, None] * dz[..., :, None, :] + _UNIT_STEPS * z[..., :, None, None]  # (..., 4, 3, 8)
-    arm = verts - verts.mean(axis=-2, keepdims=True)
+    dv = _UNIT_STEPS * z[..., :, None, None] - rays[..., :, :, None] * dz[..., :, None, :]  # (..., 4, 3, 8)
+    arm = verts - 0.25 * verts.sum(axis=-2)[..., None, :]
     outer = np.swapaxes(arm, -1, -2) @ arm
-    h = np.trace(outer, axis1=-2, axis2=-1)[..., None, None] * _EYE3 - outer
-    torque = np.sum(_skew(arm) @ dv, axis=-3)  # sum_i p_i x dV_i, (..., 3, 8)
-    return np.concatenate([np.linalg.solve(h, torque), dv.mean(axis=-3)], axis=-2)
+    h = (arm * arm).sum(axis=(-2, -1))[..., None, None] * _EYE3 - outer
+    out = np.empty((*z.shape[:-1], 6, 8))
+    out[..., :3, :] = np.linalg.solve(h, (_skew(arm) @ dv).sum(axis=-3))  # H^-1 sum_i p_i x dV_i
+    out[..., 3:, :] = 0.25 * dv.sum(axis=-3)
+    return out
 
 
 def euler_jacobian(angles_deg: np.ndarray) -> np.ndarray:
@@ -253,9 +289,8 @@ def pose_covariance(jac: np.ndarray, cov_n: np.ndarray, angles_deg: np.ndarray) 
     """(..., 6, 6) covariance of (x, y, z mm, alpha, beta, gamma deg) from the Jacobian (..., 6, 8)
     of p = (omega, t) over the normalised corners and their covariance (..., 4, 2, 2)."""
     full = np.concatenate([jac[..., 3:, :], euler_jacobian(angles_deg) @ jac[..., :3, :]], axis=-2)
-    sigma = np.zeros((*cov_n.shape[:-3], 4, 2, 4, 2))
-    for i in range(4):  # block diagonal: corners independent
-        sigma[..., i, :, i, :] = cov_n[..., i, :, :]
+    sigma = np.zeros((*cov_n.shape[:-3], 64))
+    sigma[..., _BLOCK_DIAGONAL] = cov_n.reshape(*cov_n.shape[:-3], 16)  # corners independent
     sigma = sigma.reshape(*cov_n.shape[:-3], 8, 8)
     return full @ sigma @ np.swapaxes(full, -1, -2)
 
@@ -269,17 +304,31 @@ def pose_std(cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 # ---------------------------------------------------------------------- the mirror test
 
 
-def reprojection_chi2(
-    rotations: np.ndarray, positions: np.ndarray, side: float, n_obs: np.ndarray, info: np.ndarray
+def branch_chi2(
+    projection: tuple[np.ndarray, np.ndarray, np.ndarray], n_obs: np.ndarray, info: np.ndarray
 ) -> np.ndarray:
-    """(k,) chi-square sum_i r_i^T W_i r_i of rigid squares at poses (k, 3, 3), (k, 3) against the
-    normalised corners n_obs (4, 2) with information blocks W (4, 2, 2); inf when a vertex is
-    behind the camera."""
-    p = np.matmul(rotations[:, None, :, :], marker_vertices(side)[:, :, None])[..., 0] + positions[:, None, :]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        r = n_obs - p[..., :2] / p[..., 2:3]  # (k, 4, 2)
-    chi2 = np.sum(r[..., None, :] @ info @ r[..., :, None], axis=(1, 2, 3))
-    return np.where(np.all(p[..., 2] > 0.0, axis=-1), chi2, np.inf)
+    """(k,) chi-square of each branch of the ambiguity at its own chi-square optimum, from the
+    rigid projections of k poses on those branches (:func:`rigid_projection`: (k, 8), (k, 8, 6),
+    (k, 4)), the normalised corners n_obs (8,) and their information matrix W (8, 8).
+
+    The optimum is that of the chi-square linearised at the pose given (one Gauss-Newton step,
+    predicted): r^T W r - g^T H^-1 g with g = J^T W r, H = J^T W J. The solvers' poses minimise
+    other residuals (lengths; unweighted pixels), so under an anisotropic or uneven corner
+    covariance their own chi-square overstates the branch's. inf when a vertex is behind the camera.
+    """
+    proj, jac, depth = projection
+    out = np.full(proj.shape[0], np.inf)
+    front = np.flatnonzero(depth.min(axis=-1) > 0.0)
+    if front.size == 0:
+        return out
+    r = n_obs - proj[front]  # (k, 8)
+    jac = jac[front]
+    jtw = np.swapaxes(jac, -1, -2) @ info
+    g = jtw @ r[..., None]  # (k, 6, 1)
+    step = np.linalg.solve(jtw @ jac, g)
+    chi2 = ((r @ info) * r).sum(axis=-1) - (g * step).sum(axis=(-2, -1))
+    out[front] = np.maximum(chi2, 0.0)
+    return out
 
 
 def is_ambiguous(chi2_answer: float, chi2_mirror: float) -> bool:
@@ -331,20 +380,21 @@ def with_uncertainty(
     x_list, y_list = normalised_single(corners, flat, camera)
     x, y = np.array(x_list), np.array(y_list)
     cov_n = normalised_cov(cov, x, y, camera)
-    if result.method == "numerical":
-        jac = numerical_jacobian(result.vertices_mm[:, 2], x, y)
-    else:
-        jac = ippe_jacobian(result.rotation, result.position_mm, side, camera)
-    pose_cov = pose_covariance(jac, cov_n, result.angles_deg)
-    fields["pose_cov"] = pose_cov
-    fields["position_std_mm"], fields["angles_std_deg"] = pose_std(pose_cov)
     rotations, positions = [result.rotation], [result.position_mm]
     mirror = _mirror_start(result, x_list, y_list)
     if mirror is not None:
         rotations.append(mirror[0])
         positions.append(mirror[1])
-    n_obs = np.stack([x, y], axis=-1)
-    chi2 = reprojection_chi2(np.array(rotations), np.array(positions), side, n_obs, information(cov_n))
+    projection = rigid_projection(np.array(rotations), np.array(positions), side)
+    if result.method == "numerical":
+        jac = numerical_jacobian(result.vertices_mm[:, 2], x, y)
+    else:
+        jac = least_squares_jacobian(projection[1][0], camera)
+    pose_cov = pose_covariance(jac, cov_n, result.angles_deg)
+    fields["pose_cov"] = pose_cov
+    fields["position_std_mm"], fields["angles_std_deg"] = pose_std(pose_cov)
+    n_obs = np.array([v for pair in zip(x_list, y_list, strict=True) for v in pair])
+    chi2 = branch_chi2(projection, n_obs, information_matrix(cov_n))
     fields["chi2"] = float(chi2[0])
     if mirror is not None:
         fields.update(mirror_chi2=float(chi2[1]), ambiguous=is_ambiguous(chi2[0], chi2[1]))
