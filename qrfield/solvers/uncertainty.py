@@ -165,10 +165,11 @@ def normalised_cov(cov_px: np.ndarray, x: np.ndarray, y: np.ndarray, camera: Cam
 
 
 def information_matrix(cov_n: np.ndarray) -> np.ndarray:
-    """(8, 8) block-diagonal inverse of one corner set's normalised covariance (4, 2, 2); a block
-    without variance gets a floor of 1e-12 of the largest, so that exact corners stay usable."""
+    """(8, 8) block-diagonal inverse of one corner set's normalised covariance (4, 2, 2); a floor of
+    1e-12 of the largest variance (and 1e-30, about 1e-12 px^2, when all are 0) keeps exact
+    corners usable."""
     c = cov_n.reshape(16).tolist()
-    floor = 1e-12 * max(max(c[4 * i] + c[4 * i + 3] for i in range(4)), 1e-300)
+    floor = 1e-12 * max(c[4 * i] + c[4 * i + 3] for i in range(4)) + 1e-30
     w = [0.0] * 64
     for i in range(4):
         a, b, cc, d = c[4 * i] + floor, c[4 * i + 1], c[4 * i + 2], c[4 * i + 3] + floor
