@@ -241,6 +241,7 @@ def real_optics(data: Path | None) -> None:
     sel = [c for c in cases if c.source == "cornerSubPix" and c.converged]
     ratio = np.median([np.max(c.ref_std / c.std) for c in sel]) if sel else math.nan
     print(f"   the reference's own std is at most {ratio:.2f} of the square's (median over cases)")
+    _per_frame(sel)
     print("   median |error| per component, cornerSubPix corners, 90 mm squares:")
     for method in ("numerical", "ippe"):
         big = [c for c in sel if c.method == method and c.size == 3]
@@ -251,3 +252,27 @@ def real_optics(data: Path | None) -> None:
                 + "  ".join(f"{n} {v:.2f}" for n, v in zip(COMPONENTS, med, strict=True))
                 + "  (mm, deg)"
             )
+
+
+def _per_frame(cases: list[SquareCase]) -> None:
+    """One line per frame for its middle 90 mm square (board rows 1-4): the errors and how many of
+    the six components lie within 2 reported stds."""
+    print("   per frame, the middle 90 mm square: |position error| mm; alpha, beta, gamma errors deg;")
+    print("   components within 2 std")
+    print(f"   {'frame':<9}{'z mm':>6}{'std px':>8}   {'numerical':<34}{'ippe':<34}")
+    for frame in sorted({c.frame for c in cases}):
+        middle = [c for c in cases if c.frame == frame and c.size == 3]
+        cells = []
+        for method in ("numerical", "ippe"):
+            # Made row by row: the middle one of the three 3 x 3 squares is the second.
+            mine = [c for c in middle if c.method == method]
+            if len(mine) != 3:
+                cells.append(f"{'-':<34}")
+                continue
+            e, z = mine[1].errors, mine[1].errors / mine[1].std
+            covered = int(np.sum(np.abs(z) < 2.0))
+            cells.append(
+                f"{np.linalg.norm(e[:3]):5.2f}; {e[3]:+5.2f} {e[4]:+5.2f} {e[5]:+5.2f}  {covered}/6".ljust(34)
+            )
+        first = middle[0]
+        print(f"   {frame:<9}{first.distance_mm:>6.0f}{first.corner_std_px:>8.3f}   " + "".join(cells))

@@ -295,6 +295,10 @@ def end_to_end(count: int, seed: int, view_set: str) -> None:
     )
     passed = {name: np.zeros(len(views), bool) for name in names}
     z_image: dict[str, list[np.ndarray]] = {m: [] for m in METHODS}
+    # What an interim covariance from the edge fit's residual (Detection.corner_quality, px) would
+    # give, were it used: measured here, not used by the detector (see docs/uncertainty.md).
+    z_residual: dict[str, list[np.ndarray]] = {m: [] for m in METHODS}
+    corner_errors: list[np.ndarray] = []
     ceiling_cov = isotropic_cov(0.05)
     for i, view in enumerate(views):
         grey = view.image
@@ -306,6 +310,14 @@ def end_to_end(count: int, seed: int, view_set: str) -> None:
                 passed[f"qrfield {method}"][i] = r.converged and _passes(r.rotation, r.position_mm, view)
                 if r.converged and cov is not None and not r.ambiguous:
                     z_image[method].append(z_scores(r, view.truth))
+                quality = np.asarray(detection.corner_quality, float)
+                if detection.refined and np.all(np.isfinite(quality)):
+                    interim = np.eye(2)[None] * (quality**2)[:, None, None] / 2.0  # RMS radius = quality
+                    q = solve(detection.corners_px, view.camera, view.side_mm, method, corners_cov=interim)
+                    if q.converged and not q.ambiguous:
+                        z_residual[method].append(z_scores(q, view.truth))
+                if method == METHODS[0]:
+                    corner_errors.append(np.linalg.norm(detection.corners_px - view.corners_px, axis=1))
             noisy = view.corners_px + rng.normal(0.0, 0.05, (4, 2))
             c = solve(noisy, view.camera, view.side_mm, method, corners_cov=ceiling_cov)
             passed[f"ceiling: true + 0.05 px, {method}"][i] = c.converged and _passes(
@@ -336,6 +348,16 @@ def end_to_end(count: int, seed: int, view_set: str) -> None:
             print(
                 f"   on pictures, qrfield {method}: the detector reports no corner covariance: not measured"
             )
+    if corner_errors:
+        err = np.concatenate(corner_errors)
+        print(
+            f"   detected corners vs truth: median {np.median(err):.3f} px, 90th percentile "
+            f"{np.percentile(err, 90):.3f} px, max {err.max():.3f} px over {len(corner_errors)} codes"
+        )
+    for method in METHODS:
+        if z_residual[method]:
+            line = calibration_line(f"   edge-fit residual as std, {method}", np.array(z_residual[method]))[0]
+            print(line + "  (not used)")
 
 
 # ---------------------------------------------------------------------- 5: cost
