@@ -20,7 +20,7 @@ from qrfield.camera import CameraModel, resolve_camera
 from qrfield.geometry import Pose
 
 #: A lens with visible barrel distortion (k1, k2, p1, p2, k3) at 640x480, typical of a wide Pi
-#: camera: the same numbers as the tests' DISTORTED case (tests/solver_cases.py).
+#: camera (also the tests' DISTORTED case, tests/solver_cases.py).
 DISTORTED = CameraModel(
     fx=530.0,
     fy=528.0,
@@ -29,7 +29,7 @@ DISTORTED = CameraModel(
     width=640,
     height=480,
     dist=np.array([-0.28, 0.09, 0.0012, -0.0008, -0.012]),
-    name="bench-distorted",
+    name="distorted-640x480",
 )
 #: QR sides (mm), distances (mm) and the largest tilt (deg) the sets draw from.
 SIDES_MM = (30.0, 50.0, 100.0)
@@ -83,15 +83,20 @@ def _poses(rng: np.random.Generator, camera: CameraModel, side: float) -> Pose:
     ]
 
 
+def _draw(rng: np.random.Generator, index: int) -> tuple[CameraModel, float, Pose]:
+    """The camera (pinhole and DISTORTED alternately), QR side and pose of view ``index``."""
+    camera = cameras()[index % 2]
+    side = float(rng.choice(SIDES_MM))
+    return camera, side, _poses(rng, camera, side)
+
+
 def corner_set(count: int, seed: int) -> list[BenchView]:
     """Corner-level views (no pictures): pinhole and DISTORTED alternately, sides SIDES_MM, z and
     tilt as in :data:`Z_RANGE_MM`, :data:`MAX_TILT_DEG`."""
     rng = np.random.default_rng(seed)
     out = []
     for i in range(count):
-        camera = cameras()[i % 2]
-        side = float(rng.choice(SIDES_MM))
-        pose = _poses(rng, camera, side)
+        camera, side, pose = _draw(rng, i)
         out.append(BenchView(camera, side, pose, pose.corners_px(camera, side)))
     return out
 
@@ -99,15 +104,13 @@ def corner_set(count: int, seed: int) -> list[BenchView]:
 def render_set(count: int, seed: int) -> list[BenchView]:
     """Rendered views by qrfield.render: payloads of PAYLOAD_BYTES (log-uniform), sides SIDES_MM,
     z 150-1000 mm, tilt up to 60 deg, noise 0-4 grey levels, blur 0.3-1.2 px, brightness gradients
-    up to +-30 %, pinhole and DISTORTED alternately."""
+    up to 30 %, pinhole and DISTORTED alternately."""
     from qrfield.render import render_view
 
     rng = np.random.default_rng(seed)
     out = []
     for i in range(count):
-        camera = cameras()[i % 2]
-        side = float(rng.choice(SIDES_MM))
-        pose = _poses(rng, camera, side)
+        camera, side, pose = _draw(rng, i)
         length = round(math.exp(rng.uniform(*np.log(PAYLOAD_BYTES))))
         text = "".join(rng.choice(list(_ALPHABET), length))
         view = render_view(

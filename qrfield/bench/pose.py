@@ -190,6 +190,9 @@ def _flip_table(flips: dict[str, tuple[np.ndarray, ...]]) -> None:
         "  other thresholds (recall/precision)"
     )
     for label, (amb, flip, chi2, chi2_m, fallback) in flips.items():
+        if not flip.any():
+            print(f"{label:<30}{0:>7}{int(amb.sum()):>9}   (no flip among these views)")
+            continue
         recall, precision = recall_precision(amb, flip)
         others = []
         for delta in (2.0, 4.0, 6.0, 16.0):

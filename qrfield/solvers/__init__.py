@@ -9,7 +9,9 @@ V2 top-right, V3 bottom-right, V4 bottom-left of the code (clockwise on screen);
 symbol's side in mm (quiet zone excluded); poses are the QR centre in mm in the camera frame and
 alpha, beta, gamma in degrees with R = Rx(alpha) Ry(beta) Rz(gamma) (marker to camera).
 Bad input raises :class:`SolverError` (a ValueError); a pose that cannot be found is returned with
-``converged`` False and a ``reason``, never raised.
+``converged`` False and a ``reason``, never raised. Given the corners' covariance (``corners_cov``,
+px^2), each pose carries its standard uncertainty and the mirror (flip) test:
+:mod:`qrfield.solvers.uncertainty`, docs/uncertainty.md.
 """
 
 from __future__ import annotations
