@@ -48,6 +48,10 @@ POSE_JSON_KEYS = (
     "reason",
     "ambiguity",
     "residual_mm",
+    "corners_std_px",
+    "position_std_mm",
+    "angles_std_deg",
+    "ambiguous",
 )
 
 
@@ -166,7 +170,8 @@ class Pipeline:
         select_text: only a code with this payload counts ("" = any; see qrfield.detect.select_code).
         t0: stream start, time.monotonic() s (None = the first frame's capture time).
         tracker, solve, select: replace qrfield.detect.Tracker(settings), qrfield.solvers.solve
-            and qrfield.detect.select_code (tests, other detectors).
+            (called with the detection's ``corners_cov`` keyword) and qrfield.detect.select_code
+            (tests, other detectors).
     """
 
     def __init__(
@@ -271,6 +276,7 @@ class Pipeline:
                     self.side_mm,
                     method=method,
                     settings=self.solver_settings.get(method),
+                    corners_cov=getattr(result.detection, "corners_cov", None),
                 )
             except Exception as exc:  # one method failing must not hide the other's answer
                 errors.append(f"{method}: {type(exc).__name__}: {exc}")

@@ -35,6 +35,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar='"U1,V1 U2,V2 U3,V3 U4,V4"',
         help="pixels of V1..V4 (OpenCV convention: the top-left pixel's centre is 0,0)",
     )
+    parser.add_argument(
+        "--corner-std-px",
+        type=float,
+        metavar="S",
+        help="with --corners: the corners' standard uncertainty, px per coordinate (independent "
+        "corners), propagated to the pose's std and used by the flip test; without it the std "
+        "fields are null (with IMAGE the detector's own corner covariance is used)",
+    )
     add_camera_arguments(parser)
     parser.add_argument(
         "--side-mm", type=float, required=True, metavar="L", help="QR symbol side without quiet zone, mm"
@@ -92,7 +100,7 @@ def format_table(results: list) -> str:  # type: ignore[type-arg]
     """A human-readable table of PoseResults: one row per result (and one per mirror candidate)."""
     header = (
         f"{'method':<18}{'x mm':>9}{'y mm':>9}{'z mm':>9}{'alpha':>9}{'beta':>9}{'gamma':>9}"
-        f"{'conv':>6}{'iter':>6}{'reproj px':>11}{'resid mm':>10}{'ambig':>8}"
+        f"{'conv':>6}{'iter':>6}{'reproj px':>11}{'resid mm':>10}{'ambig':>8}{'flip?':>7}"
     )
     lines = [header, "-" * len(header)]
     notes = []
@@ -104,14 +112,24 @@ def format_table(results: list) -> str:  # type: ignore[type-arg]
             x, y, z = p.position_mm
             a, b, g = p.angles_deg
             amb = r.ambiguity if p is r else None
+            flip = ("yes" if r.ambiguous else "no") if p is r else ""
             lines.append(
                 f"{label:<18}{_fmt(x, 1):>9}{_fmt(y, 1):>9}{_fmt(z, 1):>9}{_fmt(a, 2):>9}{_fmt(b, 2):>9}"
                 f"{_fmt(g, 2):>9}{'yes' if p.converged else 'no':>6}{p.iterations:>6}"
-                f"{_fmt(p.reprojection_px, 4):>11}{_fmt(p.residual_mm, 4):>10}{_fmt(amb, 3):>8}"
+                f"{_fmt(p.reprojection_px, 4):>11}{_fmt(p.residual_mm, 4):>10}{_fmt(amb, 3):>8}{flip:>7}"
             )
+            stds = [*p.position_std_mm, *p.angles_std_deg]
+            if any(math.isfinite(v) for v in stds):
+                cells = "".join(f"{'+-' + _fmt(v, 2):>9}" for v in stds)
+                lines.append(f"{'  std':<18}{cells}")
             if p.reason:
                 notes.append(f"{label.strip()}: {p.reason}")
     lines.append("angles in degrees: R = Rx(alpha) Ry(beta) Rz(gamma); position = QR centre, camera frame")
+    if any(r.ambiguous for r in results):
+        lines.append(
+            "flip? yes: the mirror pose also fits the corners within their uncertainty; the pose may be "
+            "its mirror image (docs/uncertainty.md)"
+        )
     lines.extend(notes)
     return "\n".join(lines)
 
@@ -123,6 +141,10 @@ def run(args: argparse.Namespace) -> int:
 
     if bool(args.images) == bool(args.corners):
         raise ValueError("give either IMAGE files or --corners (one of them)")
+    if args.images and args.corner_std_px is not None:
+        raise ValueError(
+            "--corner-std-px goes with --corners; with IMAGE the corner uncertainty comes from the detector"
+        )
     camera = camera_from_args(args)
     methods = ("numerical", "ippe") if args.method == "both" else (args.method,)
     settings = {
@@ -134,7 +156,12 @@ def run(args: argparse.Namespace) -> int:
 
         return solve_images(args, camera, methods, settings)
     corners = parse_corners(args.corners)
-    results = [solve(corners, camera, args.side_mm, method, settings[method]) for method in methods]
+    cov = None
+    if args.corner_std_px is not None:
+        from qrfield.solvers.uncertainty import isotropic_cov
+
+        cov = isotropic_cov(args.corner_std_px)  # ValueError naming the number when it is unusable
+    results = [solve(corners, camera, args.side_mm, method, settings[method], cov) for method in methods]
     if args.json:
         json.dump([r.to_json_dict() for r in results], sys.stdout, allow_nan=False)
         print()

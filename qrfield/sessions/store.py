@@ -79,9 +79,11 @@ REQUIRED_COLUMNS = (
     "pass",
     "note",
 )
-#: Our extra columns: sample standard deviations over the converged frames (mm, deg), mean solver
-#: iterations, mean RMS reprojection error (px), the solver method, and ``withdraws`` (set only on
-#: withdrawal records: the number of the row they withdraw).
+#: Our extra columns: ``std_*`` the frame-to-frame sample standard deviations over the converged
+#: frames (mm, deg: how much the frames scattered), mean solver iterations, mean RMS reprojection
+#: error (px), the solver method, ``withdraws`` (set only on withdrawal records: the number of the
+#: row they withdraw), and ``sigma_*`` the mean per-frame uncertainty (mm, deg: each frame's
+#: propagated std from its corners, docs/conventions.md "Pose uncertainty"; empty when unknown).
 EXTRA_COLUMNS = (
     "std_x",
     "std_y",
@@ -93,6 +95,12 @@ EXTRA_COLUMNS = (
     "reprojection_px",
     "method",
     "withdraws",
+    "sigma_x",
+    "sigma_y",
+    "sigma_z",
+    "sigma_alpha",
+    "sigma_beta",
+    "sigma_gamma",
 )
 COLUMNS = REQUIRED_COLUMNS + EXTRA_COLUMNS
 SESSION_FILE = "session.json"
@@ -292,9 +300,11 @@ def measurement_values(measurement: Measurement, number: int, time_text: str) ->
     for k, axis in enumerate("xyz"):
         values[axis] = _fmt(a.position_mm[k])
         values[f"std_{axis}"] = _fmt(a.std_position_mm[k])
+        values[f"sigma_{axis}"] = _fmt(a.sigma_position_mm[k])
     for k, angle in enumerate(("alpha", "beta", "gamma")):
         values[angle] = _fmt(a.angles_deg[k])
         values[f"std_{angle}"] = _fmt(a.std_angles_deg[k])
+        values[f"sigma_{angle}"] = _fmt(a.sigma_angles_deg[k])
         values[f"err_{angle}"] = _fmt(j.err_angles_deg[k])
     return values
 

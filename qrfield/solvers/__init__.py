@@ -9,7 +9,9 @@ V2 top-right, V3 bottom-right, V4 bottom-left of the code (clockwise on screen);
 symbol's side in mm (quiet zone excluded); poses are the QR centre in mm in the camera frame and
 alpha, beta, gamma in degrees with R = Rx(alpha) Ry(beta) Rz(gamma) (marker to camera).
 Bad input raises :class:`SolverError` (a ValueError); a pose that cannot be found is returned with
-``converged`` False and a ``reason``, never raised.
+``converged`` False and a ``reason``, never raised. Given the corners' covariance (``corners_cov``,
+px^2), each pose carries its standard uncertainty and the mirror (flip) test:
+:mod:`qrfield.solvers.uncertainty`, docs/uncertainty.md.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from qrfield.solvers.ippe import IppeSettings, solve_ippe, solve_ippe_batch
 from qrfield.solvers.numerical import SEED_SETTINGS, NumericalSettings, solve_numerical
 from qrfield.solvers.numerical_batch import solve_numerical_batch
 from qrfield.solvers.result import BatchResult, PoseResult, SolverError
+from qrfield.solvers.uncertainty import check_corners_cov, with_uncertainty
 
 __all__ = [
     "METHODS",
@@ -55,8 +58,9 @@ def solve(
     side_mm: float,
     method: str = "numerical",
     settings: NumericalSettings | IppeSettings | None = None,
+    corners_cov: np.ndarray | None = None,
 ) -> PoseResult:
-    """The pose of one QR code from its four corner pixels.
+    """The pose of one QR code from its four corner pixels, with its uncertainty.
 
     Args:
         corners_px: (4, 2) pixels (u, v) of V1..V4 (top-left, top-right, bottom-right, bottom-left),
@@ -65,6 +69,10 @@ def solve(
         side_mm: the QR symbol's side L in mm (quiet zone excluded), > 0.
         method: "numerical" (the thesis' model, our reconstruction) or "ippe" (OpenCV IPPE_SQUARE).
         settings: NumericalSettings or IppeSettings matching ``method``; None for the defaults.
+        corners_cov: (4, 2, 2) covariance of V1..V4 in px^2 (as seen, distorted; corners
+            independent), e.g. ``Detection.corners_cov`` or ``uncertainty.isotropic_cov(0.1)``;
+            None when unknown. Propagated to ``position_std_mm``, ``angles_std_deg`` and
+            ``pose_cov`` and used by the mirror test ``ambiguous`` (docs/uncertainty.md).
 
     Raises SolverError for bad input (shape, NaN/inf, collinear, self-intersecting, concave or
     counter-clockwise corners, non-positive side, no camera model, settings of the wrong class or
@@ -76,9 +84,12 @@ def solve(
     cam = check_camera(camera)
     side = check_side(side_mm)
     corners, flat = check_corners_single(corners_px)
+    cov = None if corners_cov is None else check_corners_cov(corners_cov)
     if method == "numerical":
-        return solve_numerical(corners, flat, cam, side, settings)  # type: ignore[arg-type]
-    return solve_ippe(corners, flat, cam, side, settings)  # type: ignore[arg-type]
+        result = solve_numerical(corners, flat, cam, side, settings)  # type: ignore[arg-type]
+    else:
+        result = solve_ippe(corners, flat, cam, side, settings)  # type: ignore[arg-type]
+    return with_uncertainty(result, corners, flat, cam, side, cov)
 
 
 def solve_batch(
@@ -87,11 +98,14 @@ def solve_batch(
     side_mm: float,
     settings: NumericalSettings | IppeSettings | None = None,
     method: str = "numerical",
+    corners_cov: np.ndarray | None = None,
 ) -> BatchResult:
     """Poses of N QR codes at once from corners (N, 4, 2) (pixels, V1..V4 each).
 
     "numerical" is vectorised in numpy and gives, row by row, the same numbers as :func:`solve`
     (depths and iteration counts bit for bit; the mirror search is not run). "ippe" loops.
+    ``corners_cov`` (N, 4, 2, 2), or one (4, 2, 2) for every row, in px^2: propagated to the std
+    fields as :func:`solve` does (vectorised; no mirror test, so no ``ambiguous`` flag).
     Raises SolverError for a wrong overall shape, side, camera or settings (SettingError, also a
     ValueError, for a setting outside its limits); rows with unusable
     corners (NaN/inf, degenerate or wrongly ordered) come back not converged with ``valid`` False.
@@ -100,6 +114,7 @@ def solve_batch(
     cam = check_camera(camera)
     side = check_side(side_mm)
     corners, valid = check_corners_batch(corners_px)
+    cov = None if corners_cov is None else check_corners_cov(corners_cov, batch=corners.shape[0])
     if method == "numerical":
-        return solve_numerical_batch(corners, valid, cam, side, settings)  # type: ignore[arg-type]
-    return solve_ippe_batch(corners, valid, cam, side, settings)  # type: ignore[arg-type]
+        return solve_numerical_batch(corners, valid, cam, side, settings, cov)  # type: ignore[arg-type]
+    return solve_ippe_batch(corners, valid, cam, side, settings, cov)  # type: ignore[arg-type]
