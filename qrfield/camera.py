@@ -30,6 +30,8 @@ from qrfield import paths
 REQUIRED_FIELDS = ("width", "height", "fx", "fy", "cx", "cy")
 #: Largest relative aspect-ratio mismatch accepted when rescaling to another resolution.
 ASPECT_TOLERANCE = 0.01
+#: The camera model used when none is named (the virtual bench renders through it, too).
+DEFAULT_CAMERA = "picam-v2@640x480"
 
 
 class CameraModelError(ValueError):

@@ -10,13 +10,11 @@ import numpy as np
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from qrfield.geometry import Pose, angle_difference
+from qrfield.sessions.criteria import AcceptanceCriteria
 
 ROWS = (("x", "mm"), ("y", "mm"), ("z", "mm"), ("α", "°"), ("β", "°"), ("γ", "°"))
 #: An ambiguity ratio at or above this counts as "the two mirror poses fit almost equally well".
 AMBIGUITY_WARNING = 0.8
-#: The seed's acceptance criteria (docs/conventions.md).
-MAX_ANGLE_ERROR_DEG = 2.0
-MAX_POSITION_ERROR_MM = 5.0
 TRUTH = "true"
 
 
@@ -67,7 +65,13 @@ class PosePanel(QtWidgets.QWidget):
         self._big.setPointSize(22)
         self._big.setBold(True)
         self._big.setStyleHint(QtGui.QFont.StyleHint.Monospace)
+        #: What the verdict against the true pose judges by (the session's; the seed's by default).
+        self.criteria = AcceptanceCriteria()
         self.set_columns(("numerical",), truth=False)
+
+    def set_criteria(self, criteria: AcceptanceCriteria) -> None:
+        """Judge against ``criteria`` from the next result on."""
+        self.criteria = criteria
 
     def set_columns(self, methods: tuple[str, ...], truth: bool) -> None:
         """One column per method, plus the true pose when ``truth``."""
@@ -158,10 +162,11 @@ class PosePanel(QtWidgets.QWidget):
                 parts.append(f"{name}: —")
                 continue
             position_error, angle_errors = pose_errors(pose, result.truth)
-            ok = position_error < MAX_POSITION_ERROR_MM and max(angle_errors) <= MAX_ANGLE_ERROR_DEG
+            ok = bool(self.criteria.meets(position_error, max(angle_errors)))
+            label = self.criteria.label()
             parts.append(
                 f"{name}: Δpos {position_error:.2f} mm, Δangle ≤ {max(angle_errors):.2f}° "
-                + ("✔ meets 2°/5 mm" if ok else "✘ fails 2°/5 mm")
+                + (f"✔ meets {label}" if ok else f"✘ fails {label}")
             )
         return "vs true pose — " + "; ".join(parts)
 

@@ -26,6 +26,7 @@ import numpy as np
 from PySide6 import QtCore, QtWidgets
 
 from qrfield.camera import CameraModel
+from qrfield.methods import METHODS
 from qrfield.sessions import (
     AcceptanceCriteria,
     FrameCollector,
@@ -44,7 +45,6 @@ from ui.rows_table import RowsTable
 from ui.settings_form import SettingsForm
 
 ENV_ROOT = "QRFIELD_SESSIONS_DIR"
-SOLVERS = ("numerical", "ippe")
 
 
 @dataclass(frozen=True)
@@ -142,7 +142,7 @@ class SessionPanel(QtWidgets.QWidget):
         self.notes_edit.setTabChangesFocus(True)
         self.notes_edit.setMaximumHeight(54)
         self.solver_combo = QtWidgets.QComboBox()
-        self.solver_combo.addItems(list(SOLVERS))
+        self.solver_combo.addItems(list(METHODS))
         self.solver_combo.setToolTip("the pose method whose results the rows average")
         self.folder_form = SettingsForm(
             SessionFolderSettings, store.group("session_folder", SessionFolderSettings)

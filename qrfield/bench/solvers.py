@@ -44,6 +44,7 @@ def run(args: argparse.Namespace) -> int:
     from qrfield.camera import resolve_camera
     from qrfield.geometry import angle_difference, ippe_object_points
     from qrfield.sampling import random_visible_poses
+    from qrfield.sessions.criteria import AcceptanceCriteria
     from qrfield.solvers import SEED_SETTINGS, IppeSettings, NumericalSettings, solve, solve_batch
 
     camera = resolve_camera(args.camera)
@@ -117,9 +118,10 @@ def run(args: argparse.Namespace) -> int:
     for label, us in rows:
         print(f"{label:<52}{us:>10.2f}{us / base:>12.2f}{1e6 / us:>12.0f}")
 
+    criteria = AcceptanceCriteria()
     print()
     print(
-        "converged share, mean iterations, and share meeting the seed's criteria (2 deg, 5 mm) "
+        f"converged share, mean iterations, and share meeting the seed's criteria ({criteria.label()}) "
         "among all poses; numerical by the batch path:"
     )
     print(f"{'settings':<48}{'corners':<10}{'converged':>10}{'iter':>7}{'pass':>8}")
@@ -134,7 +136,7 @@ def run(args: argparse.Namespace) -> int:
             b = solve_batch(data, camera, side, settings)
             err_pos = np.linalg.norm(b.position_mm - truth_pos, axis=1)
             err_ang = np.max(np.abs(angle_difference(b.angles_deg, truth_ang)), axis=1)
-            ok = b.converged & (err_pos < 5.0) & (err_ang <= 2.0)
+            ok = b.converged & criteria.meets(err_pos, err_ang)
             print(
                 f"{label:<48}{data_label:<10}{b.converged.mean():>10.4f}{b.iterations.mean():>7.2f}{ok.mean():>8.4f}"
             )
