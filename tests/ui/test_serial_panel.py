@@ -15,8 +15,8 @@ from PySide6 import QtCore
 from serial_truth import parse_frame_line, split_lines
 
 from qrfield.geometry import Pose, angle_difference
+from qrfield.runconfig import ConfigStore
 from qrfield.serial_link import CLOSED, CONNECTED, DISCONNECTED, SerialLinkSettings
-from ui.config import ConfigStore
 from ui.main_window import MainWindow
 from ui.serial_panel import STATE_COLOURS, SerialPanel
 
@@ -100,13 +100,14 @@ def test_bench_pose_streams_over_a_pty_and_disconnect_stops_it(make_window, qtbo
         click(qtbot, panel.connect_button)
         assert panel.connect_button.text() == "Disconnect" and not panel.port.isEnabled()
         qtbot.waitUntil(lambda: panel.shown_state() == CONNECTED, timeout=WAIT_MS)
-        qtbot.waitUntil(lambda: sum(f["status"] == "OK" for f in pty.frames()) >= 8, timeout=WAIT_MS)
+        # The virtual bench's poses are made up: SIM, never OK (docs/conventions.md).
+        qtbot.waitUntil(lambda: sum(f["status"] == "SIM" for f in pty.frames()) >= 8, timeout=WAIT_MS)
         frames = pty.frames()
-        ok = [f for f in frames if f["status"] == "OK"]
+        ok = [f for f in frames if f["status"] == "SIM"]
         assert all(meets_seed_criteria(f["pose"], truth) for f in ok), ok[:3]
         seqs = [f["seq"] for f in frames]
         assert seqs == list(range(seqs[0], seqs[0] + len(seqs)))  # in order, none lost on the wire
-        assert all(f["status"] in ("OK", "NOQR", "NOCONV", "STALE") for f in frames)
+        assert all(f["status"] in ("SIM", "NOQR", "NOCONV", "STALE", "NOSRC") for f in frames)
         # The counters shown are the link's, and the last line shown is one that went out.
         qtbot.waitUntil(
             lambda: int(panel.counter_labels["frames_sent"].text()) >= len(frames), timeout=WAIT_MS
@@ -161,7 +162,7 @@ def test_vanished_port_shows_disconnected_app_goes_on_and_resumes(make_window, q
         assert panel.shown_state() == DISCONNECTED
         second = Pty(path)  # plugged in again (another pty behind the same path)
         qtbot.waitUntil(lambda: panel.shown_state() == CONNECTED, timeout=WAIT_MS)
-        qtbot.waitUntil(lambda: any(f["status"] == "OK" for f in second.frames()), timeout=WAIT_MS)
+        qtbot.waitUntil(lambda: any(f["status"] == "SIM" for f in second.frames()), timeout=WAIT_MS)
         assert panel.counter_labels["reconnects"].text() == "1"
     finally:
         first.vanish()
@@ -187,9 +188,9 @@ def test_loop_port_carries_the_bench_pose(make_window, qtbot) -> None:
     type_port(qtbot, panel, "loop://")
     click(qtbot, panel.connect_button)
     qtbot.waitUntil(lambda: panel.shown_state() == CONNECTED, timeout=WAIT_MS)
-    qtbot.waitUntil(lambda: ",OK*" in panel.last_sent.text(), timeout=WAIT_MS)
+    qtbot.waitUntil(lambda: ",SIM*" in panel.last_sent.text(), timeout=WAIT_MS)
     frame = parse_frame_line(panel.last_sent.text().encode() + b"\r\n")
-    assert frame["status"] == "OK" and meets_seed_criteria(frame["pose"], truth)
+    assert frame["status"] == "SIM" and meets_seed_criteria(frame["pose"], truth)
     # loop:// sends every byte back: the link decoded its own frames with good checksums.
     qtbot.waitUntil(lambda: panel.status().received.get("frames", 0) >= 3, timeout=WAIT_MS)
     assert panel.status().received["bad_checksum"] == 0
