@@ -277,9 +277,12 @@ def add_config_dir_argument(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def add_run_arguments(parser: argparse.ArgumentParser, *, only: tuple[str, ...] | None = None) -> None:
+def add_run_arguments(
+    parser: argparse.ArgumentParser, *, only: tuple[str, ...] | None = None, run_skip: tuple[str, ...] = ()
+) -> None:
     """``--config-dir`` and one option per setting of the run configuration (default None: the
-    value comes from the file, else the declared default). ``only`` limits the sections."""
+    value comes from the file, else the declared default). ``only`` limits the sections,
+    ``run_skip`` the settings of the run section."""
     from qrfield.camera import add_camera_arguments
     from qrfield.settings import add_arguments
 
@@ -289,8 +292,9 @@ def add_run_arguments(parser: argparse.ArgumentParser, *, only: tuple[str, ...] 
             continue
         group = parser.add_argument_group(f"{section.title} (section {section.name!r} of app.json)")
         if section.cls is RunSettings:
-            add_arguments(group, RunSettings, skip=("camera",))
-            add_camera_arguments(group, default=None)
+            add_arguments(group, RunSettings, skip=("camera", *run_skip))
+            if "camera" not in run_skip:
+                add_camera_arguments(group, default=None)
         elif section.name == "serial":
             group.add_argument(
                 "--serial",
@@ -348,17 +352,21 @@ class Effective:
             )
         return notes
 
-    def run_config(self, *, pace: bool | None = None, allow_virtual: bool = True) -> RunConfig:
+    def run_config(
+        self, *, camera: Any = None, pace: bool | None = None, allow_virtual: bool = True
+    ) -> RunConfig:
+        """The RunConfig of these settings (``camera``: another camera model, e.g. a session's)."""
         g = self.groups
+        camera = camera if camera is not None else self.camera
         run: RunSettings = g["run"]
         # picamera2 is sized from the camera model unless its own size was chosen (file or option).
         picamera_chosen = any(v.origin != FROM_DEFAULT for v in self.values if v.section == "picamera")
         picamera = g["picamera"]
         if {self.origin("picamera", "width"), self.origin("picamera", "height")} == {FROM_DEFAULT}:
-            picamera = dataclasses.replace(picamera, width=self.camera.width, height=self.camera.height)
+            picamera = dataclasses.replace(picamera, width=camera.width, height=camera.height)
         return RunConfig(
             source=run.source,
-            camera=self.camera,
+            camera=camera,
             side_mm=run.side_mm,
             methods=methods_from_choice(run.method),
             solver_settings={name: g[name] for name in ("numerical", "ippe")},
@@ -377,14 +385,17 @@ class Effective:
         return dataclasses.replace(settings, port=self.serial_port) if self.serial_port else settings
 
 
-def effective_settings(args: argparse.Namespace | None = None, *, config_dir: Any = None) -> Effective:
+def effective_settings(
+    args: argparse.Namespace | None = None, *, config_dir: Any = None, resolve_camera: bool = True
+) -> Effective:
     """Every setting of the run configuration: command line over the file over the default.
 
     ``args``: options added by :func:`add_run_arguments` (None = the file alone). Raises
     SettingError (a ValueError) naming a bad command-line value, CameraModelError for a camera that
-    cannot be resolved.
+    cannot be resolved (``resolve_camera`` False: not resolved, ``camera`` is None).
     """
-    from qrfield.camera import CameraModel, camera_from_args, resolve_camera
+    from qrfield.camera import camera_from_args
+    from qrfield.camera import resolve_camera as resolve
 
     directory = getattr(args, "config_dir", None) if args is not None else config_dir
     store = ConfigStore(directory)
@@ -415,7 +426,7 @@ def effective_settings(args: argparse.Namespace | None = None, *, config_dir: An
             values.append(
                 Value(section.name, spec.name, getattr(instance, spec.name), origin, option, spec.unit)
             )
-    camera: CameraModel
+    camera: Any = None
     focal_given = args is not None and (
         getattr(args, "focal_px", None) is not None or getattr(args, "size", None) is not None
     )
@@ -423,12 +434,8 @@ def effective_settings(args: argparse.Namespace | None = None, *, config_dir: An
         camera = camera_from_args(args)
         groups["run"] = dataclasses.replace(groups["run"], camera=camera.name)
         _set_origin(values, "run", "camera", camera.name, FROM_COMMAND_LINE, "--focal-px/--size")
-    elif args is not None and getattr(args, "camera", None):
-        camera = resolve_camera(args.camera)
-        groups["run"] = dataclasses.replace(groups["run"], camera=args.camera)
-        _set_origin(values, "run", "camera", args.camera, FROM_COMMAND_LINE, "--camera")
-    else:
-        camera = resolve_camera(groups["run"].camera)
+    elif resolve_camera:
+        camera = resolve(groups["run"].camera)
     port = getattr(args, "serial", None) if args is not None else None
     serial_port = None
     if port is not None:

@@ -106,7 +106,7 @@ class CommandHandler:
                 self._set_streaming(args[0].strip().upper() == "ON")
                 self._send(encode_answer("STREAM"))
             else:
-                self._send(encode_answer("STREAM", "ERR", "give STREAM,ON or STREAM,OFF"))
+                self._send(encode_answer("STREAM", "ERR", "give STREAM ON or OFF"))
         elif name == "MEAS":
             self._start_meas(args)
         elif not name:
@@ -117,7 +117,7 @@ class CommandHandler:
     def _start_meas(self, args: tuple[str, ...]) -> None:
         text = args[0].strip() if len(args) == 1 else ""
         if not text.isdigit() or not 1 <= int(text) <= MAX_MEAS_FRAMES:
-            self._send(encode_answer("MEAS", "ERR", f"give MEAS,n with n 1..{MAX_MEAS_FRAMES}"))
+            self._send(encode_answer("MEAS", "ERR", f"give MEAS n with n 1..{MAX_MEAS_FRAMES}"))
             return
         n = int(text)
         with self._lock:

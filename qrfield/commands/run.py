@@ -24,6 +24,7 @@ import argparse
 import json
 import signal
 import sys
+import time
 from typing import Any
 
 HELP = "measure poses from a camera source without a window (headless; JSON lines for other programs)"
@@ -61,15 +62,22 @@ class _Events:
         self.say, self.writer, self.link = say, writer, link
         self.loop: Any = None
         self.latest_only = False  # a live source was read (newest frame only)
+        self._last_failure, self._failure_said_at = "", 0.0
 
     def opened(self, description: str, again: bool) -> None:
+        self._last_failure = ""
         self.say(f"source reopened: {description}" if again else f"source: {description}")
         self.latest_only = self.latest_only or self.loop.latest_only
         if self.link is not None and self.loop.simulated:
             self.say("serial: this source is not a live camera: its poses go out as SIM, never OK")
 
     def failed(self, message: str, ended: bool) -> None:
-        self.say(message)
+        # A source that stays away is retried every --retry-s with the same error: said once a minute.
+        now = time.monotonic()
+        reason = message.removeprefix("still ")
+        if reason != self._last_failure or now - self._failure_said_at >= 60.0:
+            self.say(message)
+            self._last_failure, self._failure_said_at = reason, now
 
     def note(self, message: str) -> None:
         self.say(message)
@@ -113,8 +121,8 @@ def _gripper_link(settings: Any, say: _Stderr) -> Any:
 
     link = GripperLink(settings, on_status=on_status).start()
     say(
-        f"serial: $QRF frames to {settings.port} at {settings.baud} baud, at most {settings.max_rate_hz:g}/s; "
-        "answering $QRC commands (PING, STREAM, MEAS)"
+        f"serial: $QRF frames to {settings.port} at {settings.baud} baud, at most "
+        f"{settings.max_rate_hz:g}/s; answering $QRC commands (PING, STREAM, MEAS)"
     )
     return link
 
@@ -170,9 +178,10 @@ def run(args: argparse.Namespace) -> int:
             code = 1
     if writer.dropped:
         say(f"stdout: {writer.dropped} lines not written (the reader did not keep up; {left} at the end)")
-    ending_text = f"stopped by {stop_signal['name']}" if ending == STOPPED and stop_signal["name"] else "done"
-    if ending == STOPPED and not stop_signal["name"]:
-        ending_text = "stopped: stdout was closed"
+    ending_text = {
+        STOPPED: f"stopped by {stop_signal['name']}" if stop_signal["name"] else "stopped: stdout was closed",
+        FAILED: "ended: no source",
+    }.get(ending, "done")
     summary = f"{ending_text} after {loop.frames_processed} frames"
     if loop.dropped or events.latest_only:
         summary += (

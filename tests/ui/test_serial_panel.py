@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from PySide6 import QtCore
-from serial_truth import parse_frame_line, split_lines
+from serial_truth import command_line, frames_and_answers, parse_frame_line, split_lines
 
 from qrfield.geometry import Pose, angle_difference
 from qrfield.runconfig import ConfigStore
@@ -50,7 +50,8 @@ class Pty:
         return bytes(self.data)
 
     def frames(self) -> list[dict]:
-        return [parse_frame_line(line) for line in split_lines(self.drain())]
+        """The $QRF frames so far (answers to commands left out)."""
+        return frames_and_answers(self.drain())[0]
 
     def vanish(self) -> None:
         """The USB adapter is pulled: both ends closed and its device path gone.
@@ -168,6 +169,29 @@ def test_vanished_port_shows_disconnected_app_goes_on_and_resumes(make_window, q
         first.vanish()
         if second is not None:
             second.vanish()
+
+
+def test_the_controllers_commands_are_answered_in_the_serial_tab(make_window, qtbot, tmp_path: Path) -> None:
+    window = make_window({"source": "virtual", "method": "numerical"})
+    panel = window.serial_panel
+    truth = window.virtual_form.value().pose
+    pty = Pty(tmp_path / "ttyQRF")
+    try:
+        type_port(qtbot, panel, str(pty.path))
+        click(qtbot, panel.connect_button)
+        qtbot.waitUntil(lambda: len(pty.frames()) >= 3, timeout=WAIT_MS)
+        os.write(pty.master, command_line("PING") + command_line("MEAS", "5"))
+        qtbot.waitUntil(lambda: len(frames_and_answers(pty.drain())[1]) >= 2, timeout=WAIT_MS)
+        ping, meas = frames_and_answers(pty.drain())[1][:2]
+        assert ping == {"type": "QRA", "command": "PING", "result": "OK"}
+        assert meas["type"] == "QRM" and meas["status"] == "SIM" and meas["n_used"] == 5
+        assert meets_seed_criteria(meas["pose"], truth)
+        qtbot.waitUntil(lambda: panel.counter_labels["answers_sent"].text() == "2", timeout=WAIT_MS)
+        # The source goes away: the controller hears NOSRC, not silence.
+        window.set_source(str(tmp_path / "missing.avi"))
+        qtbot.waitUntil(lambda: any(f["status"] == "NOSRC" for f in pty.frames()), timeout=WAIT_MS)
+    finally:
+        pty.vanish()
 
 
 def test_bad_path_shows_disconnected(make_window, qtbot) -> None:
