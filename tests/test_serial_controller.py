@@ -7,6 +7,7 @@ test here waits for a deadline.
 
 from __future__ import annotations
 
+import re
 import threading
 import time
 from dataclasses import dataclass, field
@@ -240,3 +241,18 @@ def test_gripper_link_answers_on_its_port_and_sends_ok_only_for_a_live_camera() 
     assert answers[0] == {"type": "QRA", "command": "PING", "result": "OK"}
     assert answers[1]["status"] == "OK" and answers[1]["pose"] == [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]
     assert link.status().answers_sent == 2
+
+
+def test_the_example_lines_in_docs_serial_md_are_valid() -> None:
+    from pathlib import Path
+
+    from serial_truth import parse_frame_line, parse_line
+
+    text = (Path(__file__).resolve().parent.parent / "docs" / "serial.md").read_text(encoding="utf-8")
+    lines = re.findall(r"\$Q[A-Z]{2},[^\s`*]*\*[0-9A-F]{2}", text)
+    assert len(lines) >= 10
+    for line in lines:
+        data = line.encode() + b"\r\n"
+        parse_frame_line(data) if line.startswith("$QRF") else parse_line(data)
+        if line.startswith(("$QRA", "$QRM")):
+            parse_answer_line(data)

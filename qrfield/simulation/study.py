@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from qrfield.methods import METHODS
 from qrfield.sessions.criteria import AcceptanceCriteria
 from qrfield.settings import SettingError, SettingSpec
 from qrfield.simulation.combinations import DEFAULT_NAME, Combination, load_combinations
@@ -231,7 +232,7 @@ def range_values(rng: Sequence[float]) -> np.ndarray:
 def solver_method(key: str) -> str:
     """ "numerical" or "ippe" from a solver key (the key itself or its prefix before '-')."""
     head = key.split("-", 1)[0]
-    if head not in ("numerical", "ippe") or key.endswith("-"):
+    if head not in METHODS or key.endswith("-"):
         raise StudyError(
             f"field 'solvers': unknown solver {key!r}; use numerical, numerical-<guess> "
             "(e.g. numerical-parallelogram) or ippe"
