@@ -36,7 +36,7 @@ from typing import Any
 
 from qrfield import paths
 from qrfield.camera import DEFAULT_CAMERA
-from qrfield.methods import METHOD_CHOICES, methods_from_choice
+from qrfield.methods import METHOD_CHOICES, METHODS, methods_from_choice
 from qrfield.settings import SettingError, from_dict, setting, specs, to_dict
 
 #: The one file of settings in the config folder.
@@ -369,7 +369,7 @@ class Effective:
             camera=camera,
             side_mm=run.side_mm,
             methods=methods_from_choice(run.method),
-            solver_settings={name: g[name] for name in ("numerical", "ippe")},
+            solver_settings={name: g[name] for name in METHODS},
             detector_settings=g["detector"],
             virtual=g["virtual"],
             loop=run.loop,

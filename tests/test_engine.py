@@ -85,6 +85,13 @@ class Recorder:
             return [c[0] for c in self.calls]
 
 
+def wait_for(predicate, timeout: float = 20.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.01)
+
+
 def config(source: str = "fake", **kw) -> RunConfig:
     return RunConfig(source, CAMERA, 50.0, ("ippe",), **kw)
 
@@ -152,15 +159,10 @@ def test_without_retry_a_failed_source_ends_the_loop_or_waits_for_reopen() -> No
                      hold_when_down=True)  # fmt: skip
     thread = threading.Thread(target=held.run, daemon=True)
     thread.start()
-    deadline = time.monotonic() + 20
-    while "down" not in rec.kinds():
-        assert time.monotonic() < deadline
-        time.sleep(0.01)
+    wait_for(lambda: "down" in rec.kinds())
     assert held.source is None and thread.is_alive()
     held.reopen()
-    while rec.kinds().count("result") < 3:
-        assert time.monotonic() < deadline
-        time.sleep(0.01)
+    wait_for(lambda: rec.kinds().count("result") >= 3)
     held.stop()
     thread.join(10)
     assert not thread.is_alive() and held.source is None
@@ -173,14 +175,9 @@ def test_a_live_camera_that_stops_delivering_is_down_until_frames_come_again() -
     loop.NO_FRAMES_S = 0.3
     thread = threading.Thread(target=loop.run, daemon=True)
     thread.start()
-    deadline = time.monotonic() + 20
-    while "down" not in rec.kinds():
-        assert time.monotonic() < deadline
-        time.sleep(0.01)
+    wait_for(lambda: "down" in rec.kinds())
     source.release.set()
-    while "up" not in rec.kinds():
-        assert time.monotonic() < deadline
-        time.sleep(0.01)
+    wait_for(lambda: "up" in rec.kinds())
     loop.stop()
     thread.join(10)
     down = next(c for c in rec.calls if c[0] == "down")

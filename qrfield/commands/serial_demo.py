@@ -72,7 +72,10 @@ def run(args: argparse.Namespace) -> int:
     def on_sigterm(signum: int, frame: object) -> None:
         raise KeyboardInterrupt
 
-    previous = signal.signal(signal.SIGTERM, on_sigterm)
+    try:
+        previous = signal.signal(signal.SIGTERM, on_sigterm)
+    except ValueError:  # not the main thread (a test, an embedding program): Ctrl-C only
+        previous = None
     link = GripperLink(settings, on_status=lambda s: print(s.summary(), file=sys.stderr, flush=True))
     start = time.monotonic()
     next_report = start + 1.0
@@ -96,5 +99,6 @@ def run(args: argparse.Namespace) -> int:
         pass
     finally:
         link.close()
-        signal.signal(signal.SIGTERM, previous)
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
     return 0

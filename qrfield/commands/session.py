@@ -69,7 +69,7 @@ def _add_new(parser: argparse.ArgumentParser) -> None:
     )
     add_arguments(group, SessionSettings)
     add_arguments(group, AcceptanceCriteria)
-    add_run_arguments(parser, only=("numerical", "ippe"))
+    add_run_arguments(parser, only=METHODS)
 
 
 def _run_new(args: argparse.Namespace) -> int:
