@@ -114,19 +114,8 @@ def test_cli_rows_are_the_apps_rows_column_by_column(make_window, qtbot, tmp_pat
     for column in app_header:
         a, c = app_row[column], cli_row[column]
         assert kind(a) == kind(c), (column, a, c)
-    same = (
-        "row",
-        "combo",
-        "gt_x",
-        "gt_y",
-        "gt_z",
-        "gt_alpha",
-        "gt_beta",
-        "gt_gamma",
-        "n_frames",
-        "note",
-        "method",
-    )
+    # The same truth, combination, note, frame count and solver give the same texts.
+    same = [c for c in app_header if c.startswith("gt_")] + ["row", "combo", "n_frames", "note", "method"]
     assert {k: cli_row[k] for k in same} == {k: app_row[k] for k in same}
     assert (cli_row["pass"], app_row["pass"]) == ("1", "1")
     assert set(cli_meta) == set(app_meta) and cli_meta["columns"] == app_meta["columns"]
