@@ -40,6 +40,8 @@ REQUIRED_FIELDS = ("width", "height", "fx", "fy", "cx", "cy")
 ASPECT_TOLERANCE = 0.01
 #: Optional fields of the camera JSON format: the sensor geometry a profile was made at.
 SENSOR_FIELDS = ("sensor_resolution", "sensor_crop", "sensor_mode", "lens_position", "focal_length_mm")
+#: The camera model used when none is named (the virtual bench renders through it, too).
+DEFAULT_CAMERA = "picam-v2@640x480"
 
 
 class CameraModelError(ValueError):

@@ -12,8 +12,10 @@ import numpy as np
 import pytest
 
 from qrfield.camera import resolve_camera
+from qrfield.detect import DetectorSettings
 from qrfield.geometry import Pose, angle_difference
-from qrfield.pipeline import ERROR, METHODS, NOCONV, NOQR, OK, POSE_JSON_KEYS, Pipeline, methods_from_choice
+from qrfield.methods import METHODS, methods_from_choice
+from qrfield.pipeline import ERROR, NOCONV, NOQR, OK, POSE_JSON_KEYS, Pipeline
 from qrfield.sources import Frame, VirtualBenchSettings, VirtualBenchSource
 
 
@@ -83,7 +85,9 @@ def test_no_code_is_noqr_with_null_pose_fields() -> None:
 
 
 def test_select_text_that_matches_nothing_is_noqr() -> None:
-    pipeline = make_pipeline([FakeDetection(CORNERS, "other")], ok_solve, select_text="gripper")
+    pipeline = make_pipeline(
+        [FakeDetection(CORNERS, "other")], ok_solve, detector_settings=DetectorSettings(select_text="gripper")
+    )
     result = pipeline.process(frame())
     assert result.status == NOQR and "none with the text 'gripper'" in result.reason
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 
 import cv2
@@ -13,8 +12,6 @@ from qrfield.cli import main
 from qrfield.sessions import GroundTruth, Session, measure
 from qrfield.sessions.analysis import SEED_RESEMBLANCE_PERCENT, analyze
 from qrfield.sessions.plotting import nice_ticks
-
-HAVE_SOLVERS = importlib.util.find_spec("qrfield.solvers") is not None
 
 
 def one_frame(pos, ang, converged=True):
@@ -95,8 +92,6 @@ def test_analyze_json_figures_by_hand(session_dir, tmp_path, capsys):
     # Overall over the 4 rows with a pose: position errors 1, 5, 2, 0.
     assert result["mean_abs_error"]["pos_mm"] == pytest.approx(2.0)
     assert result["max_abs_error"]["pos_mm"] == pytest.approx(5.0)
-    if not HAVE_SOLVERS:
-        assert result["resemblance"] is None and "qrfield.solvers" in result["resemblance_reason"]
     for name in ("errors_vs_tilt.png", "measured_vs_truth.png"):
         img = cv2.imread(str(out / name))
         assert img is not None and img.shape[0] > 300 and img.shape[1] > 600
@@ -131,9 +126,6 @@ def test_nice_ticks(lo, hi, ticks):
     np.testing.assert_allclose(values, ticks)
 
 
-@pytest.mark.skipif(
-    not HAVE_SOLVERS, reason="qrfield.solvers is not merged yet: no simulated verdict to compare"
-)
 def test_resemblance_with_the_solver(tmp_path, camera_vga):
     s = Session.create(tmp_path, "resemblance", camera=camera_vga, side_mm=60.0, solver="numerical")
     easy = (0.0, 0.0, 300.0, 10.0, 5.0, 0.0, "A")  # 105 px card, gentle tilt: whole-pixel corners pass
@@ -148,7 +140,7 @@ def test_resemblance_with_the_solver(tmp_path, camera_vga):
     res = result["resemblance"]
     assert res is not None, result["resemblance_reason"]
     assert [r["simulation_pass"] for r in res["per_row"]] == [True, True, False, False]
-    assert "outside the image" in res["per_row"][2]["simulation_reason"]
+    assert "outside the 640x480 image" in res["per_row"][2]["simulation_reason"]
     assert "turned away" in res["per_row"][3]["simulation_reason"]
     assert (res["matches"], res["compared"]) == (2, 4)
     assert res["percent"] == pytest.approx(50.0)

@@ -429,8 +429,8 @@ def test_notes_can_be_updated(tmp_path, camera_vga):
     session.close()
 
 
-def test_solver_settings_are_checked_when_the_solvers_are_installed(tmp_path, camera_vga):
-    solvers = pytest.importorskip("qrfield.solvers", reason="qrfield.solvers is not merged yet")
+def test_solver_settings_are_checked(tmp_path, camera_vga):
+    from qrfield import solvers
     from qrfield.settings import to_dict
 
     session = Session.create(tmp_path, "x", camera=camera_vga, side_mm=60, solver="ippe")

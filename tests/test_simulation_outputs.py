@@ -10,8 +10,6 @@ import cv2
 import numpy as np
 import pytest
 
-pytest.importorskip("qrfield.solvers", reason="the solvers (issue 3) are not merged yet")
-
 from qrfield.cli import main
 from qrfield.simulation import heatmap
 from qrfield.simulation.progress import TerminalProgress

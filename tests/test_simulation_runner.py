@@ -11,8 +11,6 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-pytest.importorskip("qrfield.solvers", reason="the solvers (issue 3) are not merged yet")
-
 from qrfield.geometry import Pose, angle_difference
 from qrfield.render import RenderError, check_view
 from qrfield.simulation import load_study, run_study, runner

@@ -12,13 +12,11 @@ import numpy as np
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from qrfield.geometry import Pose, angle_difference
+from qrfield.sessions.criteria import AcceptanceCriteria
 
 ROWS = (("x", "mm"), ("y", "mm"), ("z", "mm"), ("α", "°"), ("β", "°"), ("γ", "°"))
 #: Style of the "+- std" beside a value: small and grey, so the value stays the thing to read.
 STD_STYLE = "font-size: 11pt; font-weight: normal; color: #888;"
-#: The seed's acceptance criteria (docs/conventions.md).
-MAX_ANGLE_ERROR_DEG = 2.0
-MAX_POSITION_ERROR_MM = 5.0
 TRUTH = "true"
 
 
@@ -54,7 +52,7 @@ def solver_status_text(result: Any) -> tuple[str, bool]:
         f"reproj {result.reprojection_px:.2f} px" if math.isfinite(result.reprojection_px) else "reproj —",
     ]
     warn = not result.converged
-    if getattr(result, "ambiguous", False):
+    if result.ambiguous:
         ambiguity = getattr(result, "ambiguity", None)
         ratio = f" (ambiguity {ambiguity:.2f})" if ambiguity is not None and math.isfinite(ambiguity) else ""
         parts.append(f"⚠ the mirror pose also fits the corners{ratio}: flip risk")
@@ -86,7 +84,13 @@ class PosePanel(QtWidgets.QWidget):
         self._big.setPointSize(22)
         self._big.setBold(True)
         self._big.setStyleHint(QtGui.QFont.StyleHint.Monospace)
+        #: What the verdict against the true pose judges by (the session's; the seed's by default).
+        self.criteria = AcceptanceCriteria()
         self.set_columns(("numerical",), truth=False)
+
+    def set_criteria(self, criteria: AcceptanceCriteria) -> None:
+        """Judge against ``criteria`` from the next result on."""
+        self.criteria = criteria
 
     def set_columns(self, methods: tuple[str, ...], truth: bool) -> None:
         """One column per method, plus the true pose when ``truth``."""
@@ -188,10 +192,11 @@ class PosePanel(QtWidgets.QWidget):
                 parts.append(f"{name}: —")
                 continue
             position_error, angle_errors = pose_errors(pose, result.truth)
-            ok = position_error < MAX_POSITION_ERROR_MM and max(angle_errors) <= MAX_ANGLE_ERROR_DEG
+            ok = bool(self.criteria.meets(position_error, max(angle_errors)))
+            label = self.criteria.label()
             parts.append(
                 f"{name}: Δpos {position_error:.2f} mm, Δangle ≤ {max(angle_errors):.2f}° "
-                + ("✔ meets 2°/5 mm" if ok else "✘ fails 2°/5 mm")
+                + (f"✔ meets {label}" if ok else f"✘ fails {label}")
             )
         return "vs true pose — " + "; ".join(parts)
 

@@ -74,7 +74,7 @@ TEXT_LABELS = {
         "comma-separated: numerical, numerical-<guess> (e.g. numerical-parallelogram), ippe",
     ),
 }
-#: Section of the app's config file (ui/config.py ConfigStore) holding this tab's settings.
+#: Section of the app's config file (qrfield.runconfig.ConfigStore) holding this tab's settings.
 CONFIG_KEY = "simulation"
 ERROR_STYLE = "color: #b00020;"
 

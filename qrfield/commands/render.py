@@ -6,13 +6,13 @@ import argparse
 import json
 import sys
 
-from qrfield.camera import add_camera_arguments
+from qrfield.camera import DEFAULT_CAMERA, add_camera_arguments
 
 HELP = "render a QR card at a known pose through a camera model (test images with exact corners)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    add_camera_arguments(parser, default="picam-v2@640x480")
+    add_camera_arguments(parser, default=DEFAULT_CAMERA)
     parser.add_argument(
         "--side-mm", type=float, required=True, metavar="L", help="QR symbol side without quiet zone, mm"
     )

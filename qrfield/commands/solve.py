@@ -8,6 +8,7 @@ import math
 import sys
 
 from qrfield.camera import add_camera_arguments
+from qrfield.methods import BOTH, METHOD_CHOICES, methods_from_choice
 
 HELP = "compute a QR code's position (mm) and orientation (degrees) from images or its four corner pixels"
 DESCRIPTION = (
@@ -47,9 +48,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--side-mm", type=float, required=True, metavar="L", help="QR symbol side without quiet zone, mm"
     )
-    parser.add_argument(
-        "--method", choices=("numerical", "ippe", "both"), default="both", help="solver (default: both)"
-    )
+    parser.add_argument("--method", choices=METHOD_CHOICES, default=BOTH, help="solver (default: both)")
     parser.add_argument(
         "--json",
         action="store_true",
@@ -146,7 +145,7 @@ def run(args: argparse.Namespace) -> int:
             "--corner-std-px goes with --corners; with IMAGE the corner uncertainty comes from the detector"
         )
     camera = camera_from_args(args)
-    methods = ("numerical", "ippe") if args.method == "both" else (args.method,)
+    methods = methods_from_choice(args.method)
     settings = {
         "numerical": from_arguments(NumericalSettings, args),
         "ippe": from_arguments(IppeSettings, args),

@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from qrfield.methods import METHODS
 from qrfield.sessions.averaging import judge
 from qrfield.sessions.groundtruth import GroundTruth
 from qrfield.sessions.store import LoggedRow, SessionInfo, read_session
@@ -94,23 +95,17 @@ def summarize(rows: Sequence[LoggedRow]) -> dict[str, Any]:
 
 # ------------------------------------------------------------------------------- simulation
 def simulated_verdict(truth: GroundTruth, info: SessionInfo) -> tuple[bool, str]:
-    """The simulation's pass/fail at a ground-truth pose with the session's camera, side and solver.
-
-    Raises ImportError when qrfield.solvers is not available.
-    """
+    """The simulation's pass/fail at a ground-truth pose with the session's camera, side and solver."""
     from qrfield import solvers
     from qrfield.geometry import Pose
     from qrfield.settings import from_dict
+    from qrfield.visibility import view_problem
 
     pose = Pose(truth.position_mm, truth.angles_deg)
-    if not pose.faces_camera():
-        return False, "the card's face is turned away from the camera"
+    problem = view_problem(info.camera, info.side_mm, pose.rotation, pose.position_mm)
+    if problem:
+        return False, problem
     corners = pose.corners_px(info.camera, info.side_mm)
-    w, h = info.camera.width, info.camera.height
-    if not np.all(
-        (corners[:, 0] >= 0) & (corners[:, 0] <= w - 1) & (corners[:, 1] >= 0) & (corners[:, 1] <= h - 1)
-    ):
-        return False, "a vertex falls outside the image"
     rounded = np.round(corners)
     settings = from_dict(solvers.settings_class(info.solver), info.solver_settings, strict=False)
     try:
@@ -125,11 +120,7 @@ def simulated_verdict(truth: GroundTruth, info: SessionInfo) -> tuple[bool, str]
 
 def resemblance(rows: Sequence[LoggedRow], info: SessionInfo) -> tuple[dict[str, Any] | None, str]:
     """({share, percent, matches, compared, seed_percent, solver, per_row}, "") or (None, reason)."""
-    try:
-        import qrfield.solvers  # noqa: F401
-    except ImportError as exc:
-        return None, f"the pose solvers (qrfield.solvers) are not available: {exc}"
-    if info.solver not in ("numerical", "ippe"):
+    if info.solver not in METHODS:
         return None, f"the session names no known solver ({info.solver!r})"
     per_row = []
     matches = compared = 0

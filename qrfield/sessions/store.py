@@ -43,6 +43,7 @@ from typing import Any
 
 import qrfield
 from qrfield.camera import CameraModel, CameraModelError
+from qrfield.methods import METHODS, settings_class
 from qrfield.sessions.averaging import Measurement
 from qrfield.sessions.criteria import AcceptanceCriteria, SessionSettings
 from qrfield.sessions.files import FileOps, atomic_write, fsync_dir, unique_path
@@ -106,8 +107,6 @@ COLUMNS = REQUIRED_COLUMNS + EXTRA_COLUMNS
 SESSION_FILE = "session.json"
 ROWS_FILE = "rows.csv"
 FORMAT = "qrfield-session/1"
-#: Solver methods a session may name (docs/conventions.md: the thesis' model and OpenCV IPPE).
-SOLVER_METHODS = ("numerical", "ippe")
 #: Decimals written for mm and degree values.
 DECIMALS = 3
 _STAMP = "%Y%m%d-%H%M%S"
@@ -485,8 +484,8 @@ class Session:
             raise SessionError(f"QR side must be a length in mm, got {side_mm!r}") from None
         if not math.isfinite(side) or side <= 0:
             raise SessionError(f"QR side must be a positive length in mm, got {side_mm!r}")
-        if solver not in SOLVER_METHODS:
-            raise SessionError(f"solver {solver!r} is not one of {', '.join(SOLVER_METHODS)}")
+        if solver not in METHODS:
+            raise SessionError(f"solver {solver!r} is not one of {', '.join(METHODS)}")
         if solver_settings is None:
             settings_dict: dict[str, Any] = {}
         elif isinstance(solver_settings, dict):
@@ -629,10 +628,6 @@ class Session:
         """Write what is pending, in order."""
         return self._flush(None, "pending records")
 
-    def active_rows(self) -> list[LoggedRow]:
-        """Rows not withdrawn (confirmed or pending), in order."""
-        return [r for r in self.rows if not r.withdrawn]
-
     # ------------------------------------------------------------------ internals
     def _flush(self, row: int | None, what: str) -> LogOutcome:
         logged: list[str] = []
@@ -728,11 +723,7 @@ class Session:
 
 
 def _checked_solver_settings(solver: str, settings: dict[str, Any]) -> dict[str, Any]:
-    """The solver's settings validated by its own declaration when qrfield.solvers is installed."""
-    try:
-        from qrfield.solvers import settings_class
-    except ImportError:
-        return settings  # saved as given; checked again by whoever solves with them
+    """The solver's settings validated by its own declaration."""
     try:
         return to_dict(from_dict(settings_class(solver), settings))
     except SettingError as exc:

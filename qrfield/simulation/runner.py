@@ -230,7 +230,7 @@ def judge(
         ang_err = np.max(np.abs(angle_difference(angles, truth_angles)), axis=1)
         c = config.criteria
         within = np.asarray(result.converged, bool) | (np.asarray(result.iterations) < c.n_max)
-        passed = (ang_err <= c.angle_deg) & (pos_err < c.position_mm) & within
+        passed = c.acceptance.meets(pos_err, ang_err) & within
     return passed & np.isfinite(pos_err) & np.isfinite(ang_err), pos_err, ang_err
 
 

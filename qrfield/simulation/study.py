@@ -39,6 +39,8 @@ from typing import Any
 
 import numpy as np
 
+from qrfield.methods import METHODS
+from qrfield.sessions.criteria import AcceptanceCriteria
 from qrfield.settings import SettingError, SettingSpec
 from qrfield.simulation.combinations import DEFAULT_NAME, Combination, load_combinations
 
@@ -116,9 +118,14 @@ class Criteria:
     """The seed's acceptance criteria: angle error <= angle_deg on each angle, position error
     < position_mm (Euclidean), within n_max iterations."""
 
-    angle_deg: float = 2.0
-    position_mm: float = 5.0
+    angle_deg: float = AcceptanceCriteria().max_angle_error_deg
+    position_mm: float = AcceptanceCriteria().max_position_error_mm
     n_max: int = 30
+
+    @property
+    def acceptance(self) -> AcceptanceCriteria:
+        """The pose part of these criteria as the one rule (qrfield.sessions.criteria)."""
+        return AcceptanceCriteria(max_angle_error_deg=self.angle_deg, max_position_error_mm=self.position_mm)
 
 
 @dataclass(frozen=True)
@@ -225,7 +232,7 @@ def range_values(rng: Sequence[float]) -> np.ndarray:
 def solver_method(key: str) -> str:
     """ "numerical" or "ippe" from a solver key (the key itself or its prefix before '-')."""
     head = key.split("-", 1)[0]
-    if head not in ("numerical", "ippe") or key.endswith("-"):
+    if head not in METHODS or key.endswith("-"):
         raise StudyError(
             f"field 'solvers': unknown solver {key!r}; use numerical, numerical-<guess> "
             "(e.g. numerical-parallelogram) or ippe"

@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from qrfield.camera import CameraModel
+from qrfield.methods import METHODS, settings_class  # the method registry (re-exported)
 from qrfield.solvers.checks import check_camera, check_corners_batch, check_corners_single, check_side
 from qrfield.solvers.ippe import IppeSettings, solve_ippe, solve_ippe_batch
 from qrfield.solvers.numerical import SEED_SETTINGS, NumericalSettings, solve_numerical
@@ -38,18 +39,6 @@ __all__ = [
     "solve",
     "solve_batch",
 ]
-
-#: Solver names accepted by :func:`solve` and :func:`solve_batch`.
-METHODS = ("numerical", "ippe")
-
-
-def settings_class(method: str) -> type:
-    """The settings dataclass of a method: NumericalSettings or IppeSettings."""
-    if method == "numerical":
-        return NumericalSettings
-    if method == "ippe":
-        return IppeSettings
-    raise SolverError(f"unknown solver method {method!r}; choose one of {', '.join(METHODS)}")
 
 
 def solve(

@@ -17,9 +17,9 @@ from PySide6 import QtCore
 from qrfield.camera import CameraModel, resolve_camera
 from qrfield.chessboard import Board, render_chessboard
 from qrfield.geometry import Pose
+from qrfield.runconfig import ConfigStore
 from qrfield.sources import Frame, FrameSource
 from qrfield.sources.base import Pacer
-from ui.config import ConfigStore
 from ui.main_window import MainWindow
 
 pytestmark = pytest.mark.gui

@@ -96,3 +96,38 @@ def test_each_value_shows_its_uncertainty_beside_it(qtbot) -> None:
     result.poses["numerical"] = pose_result("numerical", [1.0, 2.0, 300.0], [1.0, 2.0, 3.0])
     panel.show_result(result, ("numerical",))
     assert np.all(np.isnan(panel.displayed_std("numerical")))
+
+
+def test_the_verdict_uses_the_criteria_it_is_given(qtbot) -> None:
+    from qrfield.sessions import AcceptanceCriteria
+
+    panel = PosePanel()
+    qtbot.addWidget(panel)
+    truth = Pose([10.0, -5.0, 300.0], [15.0, -20.0, 10.0])
+    # 1.10 mm and 1.00 deg off the truth (worked out in the test above).
+    poses = {"numerical": pose_result("numerical", [10.4, -5.2, 301.0], [15.5, -19.0, 10.2])}
+    detection = SimpleNamespace(text="", corners_px=np.zeros((4, 2)))
+    result = FrameResult(3, 100, "OK", detection=detection, poses=poses, truth=truth)
+    panel.show_result(result, ("numerical",))
+    assert "✔ meets 2°/5 mm" in panel.verdict.text()  # the seed's, by default
+    panel.set_criteria(AcceptanceCriteria(max_angle_error_deg=0.5, max_position_error_mm=5.0))
+    panel.show_result(result, ("numerical",))
+    assert "✘ fails 0.5°/5 mm" in panel.verdict.text()
+    panel.set_criteria(AcceptanceCriteria(max_angle_error_deg=2.0, max_position_error_mm=1.0))
+    panel.show_result(result, ("numerical",))
+    assert "✘ fails 2°/1 mm" in panel.verdict.text()
+
+
+def test_the_window_judges_by_the_open_sessions_criteria(make_window, tmp_path, monkeypatch) -> None:
+    from qrfield.sessions import AcceptanceCriteria
+
+    monkeypatch.setenv("QRFIELD_SESSIONS_DIR", str(tmp_path / "sessions"))
+    window = make_window({"source": "virtual"})
+    panel = window.session_panel
+    panel.criteria_form.widgets["max_angle_error_deg"].setValue(1.0)
+    assert window.pose_panel.criteria == AcceptanceCriteria(max_angle_error_deg=1.0)  # the form's, no session
+    panel.name_edit.setText("strict")
+    session = panel.create_from_form()
+    panel.criteria_form.widgets["max_angle_error_deg"].setValue(3.0)  # for the next session, not this one
+    assert session is not None and window.pose_panel.criteria == session.info.criteria
+    assert window.pose_panel.criteria.max_angle_error_deg == 1.0

@@ -238,7 +238,7 @@ def test_the_camera_follows_the_app_unless_unticked_and_settings_round_trip(make
 
 
 def test_the_main_window_has_the_tab_and_persists_it(qtbot, tmp_path: Path) -> None:
-    from ui.config import ConfigStore
+    from qrfield.runconfig import ConfigStore
     from ui.main_window import MainWindow
 
     def window() -> MainWindow:
