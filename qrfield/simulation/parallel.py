@@ -2,8 +2,9 @@
 
 A study is cut into tasks (:func:`qrfield.simulation.runner.plan_tasks`: whole sweeps of grid
 points of one or more combinations); each worker computes whole tasks
-(:func:`qrfield.simulation.runner.compute_task`) and the calling process merges them as they
-come back, reports progress, and stops handing out work when asked to.
+(:func:`qrfield.simulation.runner.compute_task`). The calling process is one of the workers: it
+computes tasks itself between handing them out, merges the results as they come back, reports
+progress, and stops handing out work when asked to.
 
 Processes, not threads: the solvers are numpy code holding the GIL between many small operations.
 Workers start from a fork server (Linux: cheap forks of a process that has already imported numpy
@@ -20,6 +21,7 @@ a stop means (see ``qrfield simulate``).
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import multiprocessing
 import os
@@ -121,36 +123,77 @@ def run_tasks(
     merge: Callable[[TaskResult], None],
     should_stop: Callable[[], bool],
 ) -> bool:
-    """Compute ``tasks`` on ``workers`` processes, calling ``merge`` (here) as each one completes.
+    """Compute ``tasks`` on ``workers`` processes, this one included, calling ``merge`` here.
 
-    Returns True when ``should_stop`` became true first: tasks not yet started are cancelled,
-    those running are waited for and dropped (a worker cannot be interrupted midway; a task is
-    at most runner.CHUNK_POSES poses). A worker's exception is raised here; a worker that died
-    (killed, out of memory) raises RuntimeError saying so.
+    This process is one of the workers: it computes a task itself whenever the others are busy,
+    so a run is never slower than in this process alone by more than the hand-over of results,
+    even when the worker processes are still starting or the machine's other cores are taken.
+    The other ``workers - 1`` processes each keep one task queued ahead. Returns True when
+    ``should_stop`` became true first: tasks not yet handed out are dropped, those running are
+    waited for and dropped (a task is at most runner.CHUNK_POSES poses). A worker's exception is
+    raised here; a worker that died (killed, out of memory) raises RuntimeError saying so.
     """
+    queue = collections.deque(tasks)
+    helpers = min(workers - 1, len(tasks) - 1)
+    if helpers < 1:
+        return _run_here(config, queue, merge, should_stop)
     ctx = _context()
     with starting_workers():
-        executor = ProcessPoolExecutor(
-            max_workers=min(workers, len(tasks)), mp_context=ctx, initializer=_init_worker
-        )
-        # With the fork server or spawn, the pool starts its processes inside submit().
-        pending: set[Future[TaskResult]] = {executor.submit(_run, config, task) for task in tasks}
+        executor = ProcessPoolExecutor(max_workers=helpers, mp_context=ctx, initializer=_init_worker)
+    in_flight: set[Future[TaskResult]] = set()
+
+    def hand_out() -> None:
+        while queue and len(in_flight) < 2 * helpers:
+            task = queue.popleft()
+            with starting_workers():  # the pool starts its processes inside submit()
+                in_flight.add(executor.submit(_run, config, task))
+
+    def collect(done: set[Future[TaskResult]]) -> None:
+        for future in done:
+            in_flight.discard(future)
+            try:
+                merge(future.result())
+            except BrokenProcessPool as exc:
+                raise RuntimeError(
+                    f"a simulation worker process died ({exc}); the study was not finished"
+                ) from None
+
     stopped = False
     try:
-        while pending:
+        hand_out()
+        while queue or in_flight:
             if should_stop():
                 stopped = True
                 break
-            done, pending = wait(pending, timeout=POLL_S, return_when=FIRST_COMPLETED)
-            for future in done:
-                try:
-                    merge(future.result())
-                except BrokenProcessPool as exc:
-                    raise RuntimeError(
-                        f"a simulation worker process died ({exc}); the study was not finished"
-                    ) from None
+            collect({f for f in in_flight if f.done()})
+            hand_out()
+            if queue:
+                result = compute_task(config, queue.popleft(), stop=should_stop)
+                if result is None:
+                    stopped = True
+                    break
+                merge(result)
+            elif in_flight:
+                done, _ = wait(in_flight, timeout=POLL_S, return_when=FIRST_COMPLETED)
+                collect(done)
     finally:
-        for future in pending:
+        for future in in_flight:
             future.cancel()
         executor.shutdown(wait=True, cancel_futures=True)
     return stopped
+
+
+def _run_here(
+    config: StudyConfig,
+    queue: collections.deque[list[Block]],
+    merge: Callable[[TaskResult], None],
+    should_stop: Callable[[], bool],
+) -> bool:
+    while queue:
+        if should_stop():
+            return True
+        result = compute_task(config, queue.popleft(), stop=should_stop)
+        if result is None:
+            return True
+        merge(result)
+    return False

@@ -4,18 +4,27 @@ For each combination the tilt magnitude t is swept 0, step, ... up to the limit;
 are t times the combination's multipliers and its centre is at each grid point (x, y, z) of the
 camera frame. The four vertices are projected through the camera model (exact pixels, the truth),
 optionally rounded to whole pixels or given Gaussian noise, and each solver finds the pose from
-them (its batch path: numpy-vectorised for the numerical model). A sample passes when the pose
-meets the acceptance criteria: |error| <= angle_deg on each of alpha, beta, gamma (wrapped), the
-Euclidean position error < position_mm, and the solver stopped within n_max iterations (it met its
-tolerance, or settled at its optimum earlier: a run that reaches n_max without meeting its
-tolerance fails). Counting a settled run as "within n_max" is our reading, not the seed's: with
-rounded or noisy corners no depths meet a 0.01 mm tolerance, and the pose criteria then decide.
-Out-of-view poses (see :mod:`qrfield.simulation.view`) are neither passes nor
-failures.
+them (its batch path: the numerical model and IPPE, both vectorised in numpy).
 
-Work is done in chunks of whole sweeps (a few grid points, all angles, all solvers), so a stop
-request (Ctrl-C, the app's Stop button) loses at most the chunk in progress and every kept grid
-point has complete sweeps.
+Two readings of "solved" (both reported: :meth:`StudyResult.coverage`):
+
+- **within criteria** (status PASSED): the pose meets the acceptance criteria (|error| <= angle_deg
+  on each of alpha, beta, gamma, wrapped; Euclidean position error < position_mm) and the solver
+  stopped before n_max: it met its tolerance, or it *settled* earlier, i.e. its Gauss-Newton step
+  fell below STALL_MM at a least-squares optimum whose largest side/diagonal error is still above
+  the tolerance. A run that reaches n_max without meeting its tolerance fails. This is our reading:
+  with rounded or noisy corners no four depths fit all six lengths to 0.01 mm, so the thesis'
+  model settles above its tolerance, and the pose criteria decide;
+- **converged and within criteria**: the solver's own converged flag holds as well (the
+  numerical model met its tolerance; IPPE found a pose in front of the camera facing it, so for
+  IPPE both readings are the same).
+
+Out-of-view poses (see :mod:`qrfield.simulation.view`) are neither passes nor failures.
+
+Work is cut into tasks of whole sweeps (:func:`plan_tasks`: some grid points of one or more
+combinations, all angles, all solvers), computed in this process or spread over every core
+(:mod:`qrfield.simulation.parallel`), so a stop request (Ctrl-C, the app's Stop button) loses at
+most the tasks in progress and every kept grid point has complete sweeps.
 """
 
 from __future__ import annotations

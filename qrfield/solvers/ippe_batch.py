@@ -45,7 +45,7 @@ from qrfield.solvers.result import BatchResult, SolverError
 LM_MAX_ITER = 100
 #: A row stops when a step predicts less than this share of its squared error as gain (the minimum
 #: to rounding), or when its squared error is below COST_FLOOR_PX2 (exact corners).
-LM_RELATIVE_GAIN = 1e-14
+LM_RELATIVE_GAIN = 1e-11
 COST_FLOOR_PX2 = 1e-18
 #: Damping (relative to diag(J^T J)): the start, its factors on a rejected / accepted step, and the
 #: value beyond which no step lowers the error any more (the row has settled).
@@ -143,78 +143,147 @@ def least_squares_translation(rotation: np.ndarray, x: np.ndarray, y: np.ndarray
     """(N, 3) t minimising the algebraic error of the four lines of sight for a given rotation.
 
     Vertex i is R q_i + t; on its line of sight x_i (R q_i + t)_z = (R q_i + t)_x, and the same
-    for y: two equations linear in t per vertex, solved by the 3 x 3 normal equations.
+    for y: two equations linear in t per vertex (OpenCV's computeTranslation). Their 3 x 3 normal
+    equations [[4, 0, -Sx], [0, 4, -Sy], [-Sx, -Sy, S2]] t = (Bx, By, Bz) (Sx = sum x_i, S2 =
+    sum x_i^2 + y_i^2) are solved in closed form: eliminating tx, ty leaves tz over the spread of
+    the points, sum |(x_i, y_i) - mean|^2, which is positive for any usable corner set.
     """
-    q = marker_vertices(side)
-    w = np.matmul(q, rotation.transpose(0, 2, 1))  # (N, 4, 3): R q_i
-    n = x.shape[0]
-    a = np.zeros((n, 8, 3))
-    a[:, 0::2, 0] = 1.0
-    a[:, 0::2, 2] = -x
-    a[:, 1::2, 1] = 1.0
-    a[:, 1::2, 2] = -y
-    b = np.empty((n, 8))
-    b[:, 0::2] = x * w[..., 2] - w[..., 0]
-    b[:, 1::2] = y * w[..., 2] - w[..., 1]
-    ata = np.einsum("nki,nkj->nij", a, a)
-    atb = np.einsum("nki,nk->ni", a, b)
-    return np.linalg.solve(ata, atb[..., None])[..., 0]
+    w = np.matmul(marker_vertices(side), rotation.transpose(0, 2, 1))  # (N, 4, 3): R q_i
+    bx = x * w[..., 2] - w[..., 0]
+    by = y * w[..., 2] - w[..., 1]
+    sx, sy = x.sum(axis=1), y.sum(axis=1)
+    big_x, big_y = bx.sum(axis=1), by.sum(axis=1)
+    big_z = -(x * bx + y * by).sum(axis=1)
+    spread = (x * x + y * y).sum(axis=1) - (sx * sx + sy * sy) / 4.0
+    tz = (big_z + (sx * big_x + sy * big_y) / 4.0) / spread
+    return np.stack([(big_x + sx * tz) / 4.0, (big_y + sy * tz) / 4.0, tz], axis=1)
 
 
-def _rotation_step(omega: np.ndarray) -> np.ndarray:
-    """exp([omega]x) for (M, 3) rotation vectors (radians), by Rodrigues' formula."""
-    theta2 = np.einsum("ni,ni->n", omega, omega)
-    theta = np.sqrt(theta2)
-    small = theta < 1e-8
-    safe = np.where(small, 1.0, theta)
-    s = np.where(small, 1.0 - theta2 / 6.0, np.sin(safe) / safe)
-    c = np.where(small, 0.5 - theta2 / 24.0, (1.0 - np.cos(safe)) / (safe * safe))
-    k = np.zeros((omega.shape[0], 3, 3))
-    k[:, 0, 1], k[:, 0, 2] = -omega[:, 2], omega[:, 1]
-    k[:, 1, 0], k[:, 1, 2] = omega[:, 2], -omega[:, 0]
-    k[:, 2, 0], k[:, 2, 1] = -omega[:, 1], omega[:, 0]
-    return np.eye(3) + s[:, None, None] * k + c[:, None, None] * (k @ k)
+class _State:
+    """Poses under refinement as structure-of-arrays: every quantity an (M,) or (4, M) array.
 
-
-def _residuals(
-    rotation: np.ndarray, t: np.ndarray, x: np.ndarray, y: np.ndarray, q: np.ndarray, fx: float, fy: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(M, 8) pixel residuals u_model - u, the camera-frame vertices (M, 4, 3) and R q (M, 4, 3)."""
-    w = np.matmul(q, rotation.transpose(0, 2, 1))
-    p = w + t[:, None, :]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        r = np.empty((p.shape[0], 8))
-        r[:, 0::2] = fx * (p[..., 0] / p[..., 2] - x)
-        r[:, 1::2] = fy * (p[..., 1] / p[..., 2] - y)
-    return r, p, w
-
-
-def _jacobian(p: np.ndarray, w: np.ndarray, fx: float, fy: float) -> np.ndarray:
-    """(M, 8, 6) d residual / d (w, t): the rotation update w (rad, camera frame), then t (mm).
-
-    d(X/Z)/dp = (1, 0, -u) / Z and d(Y/Z)/dp = (0, 1, -v) / Z with u = X/Z, v = Y/Z;
-    dp/dw = -[R q]x and dp/dt = I. Filled in a (u or v, parameter, M, vertex) layout, so that
-    every write is contiguous, then reordered once.
+    r: the 9 entries of R row by row; t: tx, ty, tz; x, y: (4, M) normalised corners (vertex
+    first, so that sums over the vertices are sums of contiguous rows); the squared pixel error
+    ``cost`` and, per vertex, the rotated marker points w = R q and the camera-frame vertices
+    p = w + t. Elementwise arithmetic on contiguous arrays is several times faster in numpy than
+    stacks of 3 x 3 or 6 x 6 matrices.
     """
-    inv_z = 1.0 / p[..., 2]
-    u = p[..., 0] * inv_z
-    v = p[..., 1] * inv_z
-    wx, wy, wz = w[..., 0], w[..., 1], w[..., 2]
+
+    def __init__(self, r: list[np.ndarray], t: list[np.ndarray], x: np.ndarray, y: np.ndarray) -> None:
+        self.r, self.t, self.x, self.y = r, t, x, y
+
+    def take(self, keep: np.ndarray) -> _State:
+        out = _State([v[keep] for v in self.r], [v[keep] for v in self.t], self.x[:, keep], self.y[:, keep])
+        out.cost = self.cost[keep]
+        for name in ("w", "p", "res"):
+            setattr(out, name, [v[:, keep] for v in getattr(self, name)])
+        return out
+
+    def evaluate(self, qx: np.ndarray, qy: np.ndarray, fx: float, fy: float) -> None:
+        """Vertices, residuals (fx (X/Z - x), fy (Y/Z - y)) and squared error at the current pose."""
+        r00, r01, _, r10, r11, _, r20, r21, _ = self.r
+        qx, qy = qx[:, None], qy[:, None]
+        wx = qx * r00 + qy * r01
+        wy = qx * r10 + qy * r11
+        wz = qx * r20 + qy * r21
+        px, py, pz = wx + self.t[0], wy + self.t[1], wz + self.t[2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ru = fx * (px / pz - self.x)
+            rv = fy * (py / pz - self.y)
+            cost = (ru * ru + rv * rv).sum(axis=0)
+        self.w, self.p, self.res = [wx, wy, wz], [px, py, pz], [ru, rv]
+        self.cost = np.where(np.all(pz > 0.0, axis=0), cost, np.inf)
+
+
+def _normal_equations(st: _State, fx: float, fy: float) -> tuple[list[list[np.ndarray]], list[np.ndarray]]:
+    """J^T J (6 x 6, upper triangle filled) and J^T r of the pixel residuals, each entry (M,).
+
+    Parameters: the rotation update w (rad, camera frame, R <- exp([w]x) R), then t (mm).
+    With u = X/Z, v = Y/Z: d(X/Z)/dp = (1, 0, -u) / Z, d(Y/Z)/dp = (0, 1, -v) / Z, dp/dw = -[R q]x,
+    dp/dt = I; per vertex the rows are fx / Z (-u wy, wz + u wx, -wy, 1, 0, -u) and
+    fy / Z (-(wz + v wy), v wx, wx, 0, 1, -v).
+    """
+    wx, wy, wz = st.w
+    px, py, pz = st.p
+    inv_z = 1.0 / pz
+    u, v = px * inv_z, py * inv_z
     fu, fv = fx * inv_z, fy * inv_z
-    jac = np.empty((2, 6, p.shape[0], 4))
-    jac[0, 0] = -fu * u * wy
-    jac[0, 1] = fu * (wz + u * wx)
-    jac[0, 2] = -fu * wy
-    jac[0, 3] = fu
-    jac[0, 4] = 0.0
-    jac[0, 5] = -fu * u
-    jac[1, 0] = -fv * (wz + v * wy)
-    jac[1, 1] = fv * v * wx
-    jac[1, 2] = fv * wx
-    jac[1, 3] = 0.0
-    jac[1, 4] = fv
-    jac[1, 5] = -fv * v
-    return jac.transpose(2, 3, 0, 1).reshape(p.shape[0], 8, 6)
+    ju = [-fu * u * wy, fu * (wz + u * wx), -fu * wy, fu, None, -fu * u]
+    jv = [-fv * (wz + v * wy), fv * v * wx, fv * wx, None, fv, -fv * v]
+    ru, rv = st.res
+    a: list[list[np.ndarray]] = [[None] * 6 for _ in range(6)]  # type: ignore[list-item]
+    for i in range(6):
+        for j in range(i, 6):
+            total = 0.0
+            if ju[i] is not None and ju[j] is not None:
+                total = total + ju[i] * ju[j]
+            if jv[i] is not None and jv[j] is not None:
+                total = total + jv[i] * jv[j]
+            # d(u)/d(ty) and d(v)/d(tx) are zero: J^T J[3][4] is zero.
+            a[i][j] = total.sum(axis=0) if isinstance(total, np.ndarray) else np.zeros(pz.shape[1])
+    g = []
+    for i in range(6):
+        total = 0.0
+        if ju[i] is not None:
+            total = total + ju[i] * ru
+        if jv[i] is not None:
+            total = total + jv[i] * rv
+        g.append(total.sum(axis=0))
+    return a, g
+
+
+def _solve6(a: list[list[np.ndarray]], b: list[np.ndarray]) -> list[np.ndarray]:
+    """Solve the symmetric positive definite 6 x 6 systems a x = b (upper triangle of a given) by
+    Cholesky, elementwise over the rows; a row that is not positive definite comes out NaN."""
+    n = 6
+    low: list[list[np.ndarray]] = [[None] * n for _ in range(n)]  # type: ignore[list-item]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        for j in range(n):
+            d = a[j][j]
+            for k in range(j):
+                d = d - low[j][k] * low[j][k]
+            low[j][j] = np.sqrt(d)
+            inv = 1.0 / low[j][j]
+            for i in range(j + 1, n):
+                e = a[j][i]
+                for k in range(j):
+                    e = e - low[i][k] * low[j][k]
+                low[i][j] = e * inv
+        y = []
+        for i in range(n):
+            e = b[i]
+            for k in range(i):
+                e = e - low[i][k] * y[k]
+            y.append(e / low[i][i])
+        x: list[np.ndarray] = [None] * n  # type: ignore[list-item]
+        for i in reversed(range(n)):
+            e = y[i]
+            for k in range(i + 1, n):
+                e = e - low[k][i] * x[k]
+            x[i] = e / low[i][i]
+    return x
+
+
+def _rotated(r: list[np.ndarray], w0: np.ndarray, w1: np.ndarray, w2: np.ndarray) -> list[np.ndarray]:
+    """The 9 entries of exp([w]x) R (Rodrigues' formula, the series for tiny angles)."""
+    theta2 = w0 * w0 + w1 * w1 + w2 * w2
+    small = theta2 < 1e-16
+    theta = np.sqrt(np.where(small, 1.0, theta2))
+    s = np.where(small, 1.0 - theta2 / 6.0, np.sin(theta) / theta)
+    c = np.where(small, 0.5 - theta2 / 24.0, (1.0 - np.cos(theta)) / (theta * theta))
+    # E = I + s K + c K^2 with K = [w]x; K^2 = w w^T - |w|^2 I.
+    e00 = 1.0 + c * (w0 * w0 - theta2)
+    e11 = 1.0 + c * (w1 * w1 - theta2)
+    e22 = 1.0 + c * (w2 * w2 - theta2)
+    e01, e10 = c * w0 * w1 - s * w2, c * w0 * w1 + s * w2
+    e02, e20 = c * w0 * w2 + s * w1, c * w0 * w2 - s * w1
+    e12, e21 = c * w1 * w2 - s * w0, c * w1 * w2 + s * w0
+    e = ((e00, e01, e02), (e10, e11, e12), (e20, e21, e22))
+    out = []
+    for i in range(3):
+        for j in range(3):
+            out.append(e[i][0] * r[j] + e[i][1] * r[3 + j] + e[i][2] * r[6 + j])
+    return out
 
 
 def refine(
@@ -226,49 +295,62 @@ def refine(
     x, y (M, 4) of V1..V4; the side (mm); the focal lengths (px). The error is measured on ideal
     (undistorted) pixels, fx (X/Z - x_i) and fy (Y/Z - y_i), as cv2.solvePnPRefineLM does on the
     undistorted corners. Rotation updates are applied on the left, R <- exp([w]x) R (w in the
-    camera frame). Returns the refined (R, t). A row stops when its error is at the rounding floor,
-    when the decrease a step predicts is negligible (the minimum, to rounding), when damping can
-    no longer lower its error, or after LM_MAX_ITER updates.
+    camera frame); Marquardt's damping, proportional to diag(J^T J) (rotation and translation
+    differ in units). Returns the refined (R, t). A row stops when its error is at the rounding
+    floor, when the decrease a step predicts (or brings) is a negligible share of its error (the
+    minimum, to rounding), when damping can no longer lower its error, or after LM_MAX_ITER updates.
     """
     rotation, t = rotation.copy(), t.copy()
     q = marker_vertices(side)
-    r, p, w = _residuals(rotation, t, x, y, q, fx, fy)
-    cost = np.einsum("ni,ni->n", r, r)
-    active = np.flatnonzero(np.isfinite(cost) & np.all(p[..., 2] > 0.0, axis=1) & (cost > COST_FLOOR_PX2))
-    lam = np.full(active.size, LM_LAMBDA0)
+    qx, qy = q[:, 0], q[:, 1]
+    st = _State([np.ascontiguousarray(rotation[:, i, j]) for i in range(3) for j in range(3)],
+                [np.ascontiguousarray(t[:, k]) for k in range(3)],
+                np.ascontiguousarray(x.T), np.ascontiguousarray(y.T))  # fmt: skip
+    st.evaluate(qx, qy, fx, fy)
+    rows = np.arange(x.shape[0])
+    keep = np.isfinite(st.cost) & (st.cost > COST_FLOOR_PX2)
+    st, rows = st.take(keep), rows[keep]
+    lam = np.full(rows.size, LM_LAMBDA0)
+
+    def write_back(done: np.ndarray) -> None:
+        idx = rows[done]
+        for k in range(9):
+            rotation[idx, k // 3, k % 3] = st.r[k][done]
+        for k in range(3):
+            t[idx, k] = st.t[k][done]
+
     for _ in range(LM_MAX_ITER):
-        if active.size == 0:
+        if rows.size == 0:
             break
-        ra = r[active]
-        jac = _jacobian(p[active], w[active], fx, fy)
-        jac_t = jac.transpose(0, 2, 1)
-        jtj = jac_t @ jac
-        jtr = (jac_t @ ra[..., None])[..., 0]
-        diag = np.maximum(jtj.reshape(-1, 36)[:, ::7], 1e-300)
-        # Marquardt's scaling: damping proportional to diag(J^T J) (rotation and translation differ in units).
-        damped = jtj.copy()
-        damped.reshape(-1, 36)[:, ::7] += lam[:, None] * diag
-        step = -np.linalg.solve(damped, jtr[..., None])[..., 0]
-        # The decrease of the squared error the linear model predicts for this step (>= 0).
-        predicted = -(2.0 * np.einsum("ni,ni->n", jtr, step) + np.einsum("ni,nij,nj->n", step, jtj, step))
-        new_rot = _rotation_step(step[:, :3]) @ rotation[active]
-        new_t = t[active] + step[:, 3:]
-        nr, npts, nw = _residuals(new_rot, new_t, x[active], y[active], q, fx, fy)
-        new_cost = np.einsum("ni,ni->n", nr, nr)
-        old_cost = cost[active]
-        better = np.isfinite(new_cost) & (new_cost <= old_cost) & np.all(npts[..., 2] > 0.0, axis=1)
-        rows = active[better]
-        rotation[rows], t[rows] = new_rot[better], new_t[better]
-        r[rows], p[rows], w[rows] = nr[better], npts[better], nw[better]
-        cost[rows] = new_cost[better]
+        a, g = _normal_equations(st, fx, fy)
+        diag = [np.maximum(a[i][i], 1e-300) for i in range(6)]
+        damped = [[a[i][j] + lam * diag[i] if i == j else a[i][j] for j in range(6)] for i in range(6)]
+        step = _solve6(damped, [-v for v in g])
+        # The decrease of the squared error the linear model predicts for this step (>= 0):
+        # -(2 g.d + d' J'J d), and (J'J + lam D) d = -g gives d' J'J d = -g.d - lam d' D d.
+        predicted = sum(-g[i] * step[i] + lam * diag[i] * step[i] * step[i] for i in range(6))
+        trial = _State(
+            _rotated(st.r, step[0], step[1], step[2]), [st.t[k] + step[3 + k] for k in range(3)], st.x, st.y
+        )
+        trial.evaluate(qx, qy, fx, fy)
+        old_cost = st.cost
+        better = np.isfinite(trial.cost) & (trial.cost <= old_cost)
+        for name in ("r", "t", "w", "p", "res"):
+            current, new = getattr(st, name), getattr(trial, name)
+            setattr(st, name, [np.where(better, n, v) for v, n in zip(current, new, strict=True)])
+        st.cost = np.where(better, trial.cost, old_cost)
         lam = np.where(better, lam / LM_LAMBDA_DOWN, lam * LM_LAMBDA_UP)
-        gained = old_cost - new_cost
-        settled = ~(predicted > LM_RELATIVE_GAIN * old_cost)  # also NaN
-        settled |= better & ~(gained > LM_RELATIVE_GAIN * old_cost)
-        settled |= cost[active] <= COST_FLOOR_PX2
+        with np.errstate(invalid="ignore"):
+            settled = ~(predicted > LM_RELATIVE_GAIN * old_cost)  # also NaN
+            settled |= better & ~(old_cost - trial.cost > LM_RELATIVE_GAIN * old_cost)
+        settled |= st.cost <= COST_FLOOR_PX2
         settled |= ~better & (lam > LM_LAMBDA_MAX)
-        keep = ~settled
-        active, lam = active[keep], lam[keep]
+        if settled.any():
+            write_back(settled)
+            keep = ~settled
+            st, rows, lam = st.take(keep), rows[keep], lam[keep]
+    if rows.size:
+        write_back(np.ones(rows.size, bool))
     return rotation, t
 
 
@@ -378,6 +460,18 @@ def _solve_chunk(
     )
 
 
+def _squared_error(
+    rotation: np.ndarray, t: np.ndarray, x: np.ndarray, y: np.ndarray, side: float, fx: float, fy: float
+) -> np.ndarray:
+    """(M,) squared pixel error of poses (R (M, 3, 3), t (M, 3)) on normalised corners x, y (M, 4)."""
+    q = marker_vertices(side)
+    st = _State(
+        [rotation[:, i, j] for i in range(3) for j in range(3)], [t[:, k] for k in range(3)], x.T, y.T
+    )
+    st.evaluate(q[:, 0], q[:, 1], fx, fy)
+    return st.cost
+
+
 def _closed_form_candidates(
     h: np.ndarray,
     finite: np.ndarray,
@@ -401,11 +495,10 @@ def _closed_form_candidates(
     t_a = least_squares_translation(rot_a, x[ok], y[ok], side)
     t_b = least_squares_translation(rot_b, x[ok], y[ok], side)
     if refined:
-        q = marker_vertices(side)
-        res_a, _, _ = _residuals(rot_a, t_a, x[ok], y[ok], q, camera.fx, camera.fy)
-        res_b, _, _ = _residuals(rot_b, t_b, x[ok], y[ok], q, camera.fx, camera.fy)
-        exact_a = np.einsum("ni,ni->n", res_a, res_a) <= COST_FLOOR_PX2
-        exact_b = ~exact_a & (np.einsum("ni,ni->n", res_b, res_b) <= COST_FLOOR_PX2)
+        exact_a = _squared_error(rot_a, t_a, x[ok], y[ok], side, camera.fx, camera.fy) <= COST_FLOOR_PX2
+        exact_b = ~exact_a & (
+            _squared_error(rot_b, t_b, x[ok], y[ok], side, camera.fx, camera.fy) <= COST_FLOOR_PX2
+        )
         rot_b[exact_a], t_b[exact_a] = rot_a[exact_a], t_a[exact_a]
         rot_a[exact_b], t_a[exact_b] = rot_b[exact_b], t_b[exact_b]
     return np.concatenate([ok, ok]), np.concatenate([rot_a, rot_b]), np.concatenate([t_a, t_b])

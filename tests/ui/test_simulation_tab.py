@@ -205,6 +205,27 @@ def test_stop_keeps_what_is_done_as_a_partial_result(make_tab, qtbot, monkeypatc
     assert tab.combo_choice.count() == len(done_combos) and tab.heatmap_shown() is not None
 
 
+def test_stop_during_a_run_on_every_core_keeps_the_finished_tasks(make_tab, qtbot, monkeypatch) -> None:
+    import numpy as np
+
+    from qrfield.simulation import parallel, runner
+
+    monkeypatch.setattr(parallel, "PARALLEL_MIN_POSES", 0)  # this study on worker processes
+    monkeypatch.setattr(runner, "CHUNK_POSES", 1395)
+    tab = make_tab()
+    fill(qtbot, tab, {"z_range": "250, 450, 100"}, {"sweep_step_deg": 2.0})  # 16740 poses
+    with qtbot.waitSignal(tab.progressed, timeout=WAIT_MS):
+        qtbot.mouseClick(tab.run_button, QtCore.Qt.MouseButton.LeftButton)
+    with qtbot.waitSignal(tab.finished, timeout=WAIT_MS):
+        qtbot.mouseClick(tab.stop_button, QtCore.Qt.MouseButton.LeftButton)
+    result = tab.result
+    assert result.partial and 0 < result.done.sum() < result.done.size
+    assert "PARTIAL" in tab.status.text() and (tab.outcome.out_dir / "summary.json").is_file()
+    full = run_study(tab.config, workers=1)
+    done = result.done
+    np.testing.assert_array_equal(result.status[:, done], full.status[:, done])
+
+
 def test_a_change_after_a_run_runs_the_study_again_as_a_preview(make_tab, qtbot, tmp_path: Path) -> None:
     tab = make_tab()
     fill(qtbot, tab, SMALL, {"sweep_step_deg": 20.0})
