@@ -72,12 +72,13 @@ def _load() -> str:
     return f"load average {one:.2f} / {five:.2f} / {fifteen:.2f} (1 / 5 / 15 min)"
 
 
-def _run(config: Any, **kwargs: Any) -> tuple[float, Any]:
+def _run(config: Any, **kwargs: Any) -> tuple[float, float, Any]:
+    """(wall seconds, CPU seconds of this process, result)."""
     from qrfield.simulation import run_study
 
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     result = run_study(config, **kwargs)
-    return time.perf_counter() - t0, result
+    return time.perf_counter() - t0, time.process_time() - c0, result
 
 
 def _compare_study(label: str, config: Any, skip_old: bool) -> None:
@@ -90,20 +91,23 @@ def _compare_study(label: str, config: Any, skip_old: bool) -> None:
     print(f"\n{label}: {config.describe_size()}")
     rows = []
     auto = parallel.auto_workers(size)
-    new_s, new = _run(config)
-    rows.append((f"new (batch, {auto} process{'es' if auto > 1 else ''})", new_s, new))
-    serial_s, serial = _run(config, workers=1)
-    rows.append(("new, this process only", serial_s, serial))
+    rows.append((f"new (batch, {auto} process{'es' if auto > 1 else ''})", *_run(config)))
+    rows.append(("new, this process only", *_run(config, workers=1)))
     if not skip_old:
-        old_s, old = _run(config, workers=1, solve_fn=old_solve, chunk_poses=OLD_CHUNK_POSES)
-        rows.append(("old (per-pose OpenCV IPPE, one process)", old_s, old))
-    print(f"  {'path':<44}{'seconds':>9}{'poses/s':>10}{'old / this':>12}")
-    for name, seconds, _ in rows:
+        old_path = _run(config, workers=1, solve_fn=old_solve, chunk_poses=OLD_CHUNK_POSES)
+        rows.append(("old (per-pose OpenCV IPPE, one process)", *old_path))
+    print(f"  {'path':<44}{'seconds':>9}{'poses/s':>10}{'old / this':>12}{'CPU s here':>12}")
+    for name, seconds, cpu, _ in rows:
         ratio = f"{rows[-1][1] / seconds:.1f}x" if not skip_old else "-"
-        print(f"  {name:<44}{seconds:>9.2f}{size / seconds:>10.0f}{ratio:>12}")
+        print(f"  {name:<44}{seconds:>9.2f}{size / seconds:>10.0f}{ratio:>12}{cpu:>12.2f}")
+    print(
+        "  (wall seconds; 'CPU s here' is this process's CPU time: with other work on the machine a "
+        "run waits for the CPU, and with several processes the workers' time is not in it)"
+    )
+    new = rows[0][3]
     keys = new.solvers
     print("  mean coverage (within criteria / converged and within criteria):")
-    for name, _, result in rows:
+    for name, _, _, result in rows:
         cells = "  ".join(
             f"{k} {percent(result.mean_coverage(k))} / "
             f"{percent(result.mean_coverage(k, converged_only=True))}"
@@ -111,7 +115,7 @@ def _compare_study(label: str, config: Any, skip_old: bool) -> None:
         )
         print(f"    {name[:24]:<26}{cells}")
     if not skip_old:
-        old = rows[-1][2]
+        old = rows[-1][3]
         for s, key in enumerate(keys):
             differ = int(np.count_nonzero(new.status[s] != old.status[s]))
             print(f"  samples whose verdict differs, new vs old, {key}: {differ} of {new.status[s].size}")
