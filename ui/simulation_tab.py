@@ -42,20 +42,9 @@ from qrfield.simulation.outputs import (
     new_run_folder,
     write_outputs,
 )
-from qrfield.simulation.study import field_specs, parse_override
+from qrfield.simulation.study import SMALL_STUDY, field_specs, parse_override
 from ui.settings_form import set_widget_value, widget_for, widget_value
 
-#: The study the tab starts with ("Small study"): 5 x 3 x 2 grid points x 12 combinations x 13
-#: swept angles (0..60 deg, 5 deg steps) = 4680 poses, each solved by the shipped study's solvers
-#: (numerical, numerical-parallelogram, ippe); about 0.3 s on a loaded 2-core machine
-#: (``qrfield bench simulation``).
-SMALL_STUDY: dict[str, Any] = {
-    "x_range": [-80.0, 80.0, 40.0],
-    "y_range": [-40.0, 40.0, 40.0],
-    "z_range": [250.0, 400.0, 150.0],
-    "sweep_limit_deg": 60.0,
-    "sweep_step_deg": 5.0,
-}
 RANGE_FIELDS = ("x_range", "y_range", "z_range")
 #: Fields edited as text and read with the study's override parser.
 TEXT_FIELDS = (*RANGE_FIELDS, "solvers")

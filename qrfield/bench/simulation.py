@@ -28,25 +28,12 @@ HELP = "time the simulation study: batch solvers on every core beside the old pe
 
 #: Poses per task of the old path (runner.CHUNK_POSES before issue 17).
 OLD_CHUNK_POSES = 2048
-#: The app's small study (ui/simulation_tab.py's SMALL_STUDY; the core does not import the ui).
-SMALL_STUDY: dict[str, Any] = {
-    "x_range": [-80.0, 80.0, 40.0],
-    "y_range": [-40.0, 40.0, 40.0],
-    "z_range": [250.0, 400.0, 150.0],
-    "sweep_limit_deg": 60.0,
-    "sweep_step_deg": 5.0,
-}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="FIELD=VALUE",
-        help="override a field of the default study (e.g. degradation=round), as for qrfield simulate",
-    )
+    from qrfield.commands.simulate import add_override_argument
+
+    add_override_argument(parser, "override a field of the default study (e.g. degradation=round)")
     parser.add_argument("--no-old", action="store_true", help="skip the old path (it takes 30-70 s)")
     parser.add_argument("--poses", type=int, default=3000, help="seeded poses for the IPPE comparison")
     parser.add_argument("--noise-px", type=float, default=0.5, help="corner noise of the IPPE comparison")
@@ -172,6 +159,7 @@ def _compare_ippe(args: argparse.Namespace) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from qrfield.simulation import config_from_dict, load_study, parallel
+    from qrfield.simulation.study import SMALL_STUDY
 
     print(f"qrfield bench simulation: {parallel.cpu_count()} cores; {_load()} before the runs")
     default = load_study(overrides=args.overrides)

@@ -20,19 +20,23 @@ DESCRIPTION = (
 )
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "study", nargs="?", metavar="STUDY.toml", help="study file (default: the shipped study)"
-    )
+def add_override_argument(parser: argparse.ArgumentParser, help_text: str) -> None:
+    """``--set FIELD=VALUE`` (repeatable) into ``args.overrides``, as load_study takes them."""
     parser.add_argument(
         "--set",
         dest="overrides",
         action="append",
         default=[],
         metavar="FIELD=VALUE",
-        help="override a study field (repeatable); tables with dots: criteria.n_max=20, "
-        "solver.ippe.refine=none",
+        help=f"{help_text} (repeatable); tables with dots: criteria.n_max=20, solver.ippe.refine=none",
     )
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "study", nargs="?", metavar="STUDY.toml", help="study file (default: the shipped study)"
+    )
+    add_override_argument(parser, "override a study field")
     parser.add_argument(
         "--out",
         metavar="DIR",

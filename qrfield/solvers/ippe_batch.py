@@ -33,6 +33,8 @@ corners (both reach the truth) and to the LM stopping rules on noisy ones (tests
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from qrfield.camera import CameraModel
@@ -376,20 +378,12 @@ def solve_ippe_vectorised(
         )
         for i in range(0, count, BATCH_CHUNK)
     ] or [_solve_chunk(corners, valid, camera, side, s.refine != "none")]
-    fields = (
-        "position_mm",
-        "angles_deg",
-        "rotation",
-        "converged",
-        "iterations",
-        "residual_mm",
-        "reprojection_px",
-    )
-    return BatchResult(
-        method="ippe",
-        valid=valid.copy(),
-        **{name: np.concatenate([getattr(p, name) for p in parts]) for name in fields},
-    )
+    arrays = {
+        f.name: np.concatenate([getattr(p, f.name) for p in parts])
+        for f in dataclasses.fields(BatchResult)
+        if f.name != "method"
+    }
+    return BatchResult(method="ippe", **arrays)
 
 
 def _candidate_errors(
