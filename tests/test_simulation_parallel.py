@@ -99,3 +99,16 @@ def test_ctrl_c_in_a_terminal_writes_the_partial_study(tmp_path):
     summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     assert summary["partial"] is True and 0 < summary["samples"] < 7 * 5 * 3 * 12 * 91
     assert "Traceback" not in err
+
+
+def test_the_benchmark_prints_both_paths_and_the_ippe_agreement(capsys):
+    from qrfield.cli import main
+
+    tiny = ["--set", "x_range=0", "--set", "y_range=0", "--set", "z_range=300", "--set", "sweep_step_deg=30"]
+    assert main(["bench", "simulation", *tiny, "--poses", "40"]) == 0
+    out = capsys.readouterr().out
+    assert "load average" in out and "old (per-pose OpenCV IPPE, one process)" in out
+    assert "samples whose verdict differs, new vs old, ippe: 0 of" in out
+    assert out.count("mean coverage (within criteria / converged and within criteria)") == 2
+    exact = next(line for line in out.splitlines() if line.strip().startswith("exact"))
+    assert float(exact.split()[1]) < 1e-6 and float(exact.split()[2]) < 1e-6  # mm, deg

@@ -233,9 +233,9 @@ def test_a_change_after_a_run_runs_the_study_again_as_a_preview(make_tab, qtbot,
     saved = tab.outcome.out_dir
     assert saved is not None and (saved / "summary.json").is_file()
     # Typing a new z range re-runs the study by itself (debounced), without a click.
-    with qtbot.waitSignal(tab.finished, timeout=WAIT_MS):
-        type_into(qtbot, tab, "z_range", "350")
-    assert tab.result.config == tab.config and tab.config.z_range == (350.0, 350.0, 1.0)
+    type_into(qtbot, tab, "z_range", "350")
+    qtbot.waitUntil(lambda: tab.run is None and tab.result.config == tab.config, timeout=WAIT_MS)
+    assert tab.config.z_range == (350.0, 350.0, 1.0)
     expected = run_study(tab.config)
     cells = table_cells(tab)
     for key in ("numerical", "ippe"):
@@ -254,14 +254,18 @@ def test_a_change_during_a_run_supersedes_it(make_tab, qtbot, monkeypatch) -> No
     tab = make_tab()
     fill(qtbot, tab, SMALL, {"sweep_step_deg": 20.0})
     run_by_click(qtbot, tab)
+    tab.auto_run.setChecked(False)
+    fill(qtbot, tab, {"z_range": "250, 450, 100"}, {"sweep_step_deg": 1.0})  # 45 x 12 x 61 poses
+    tab.auto_run.setChecked(True)
+    tab._rerun_timer.setInterval(10)  # re-run at once: the change below must land during the run
     finished: list[object] = []
     tab.finished.connect(finished.append)
-    fill(qtbot, tab, {"z_range": "250, 450, 100"}, {"sweep_step_deg": 2.0})  # a larger study
-    qtbot.waitUntil(lambda: tab.run is not None, timeout=WAIT_MS)
+    tab.start(save=False)
     first = tab.run
+    assert first is not None
     type_into(qtbot, tab, "y_range", "0")  # changed while it runs
     qtbot.waitUntil(lambda: bool(finished) and tab.run is None, timeout=WAIT_MS)
-    assert first.superseded
+    assert first.superseded and first.config.y_range == (-40.0, 40.0, 40.0)
     assert len(finished) == 1 and tab.result.config == tab.config and not tab.result.partial
     assert tab.config.y_range == (0.0, 0.0, 1.0)
 
