@@ -10,7 +10,7 @@ import pytest
 
 from qrfield.cli import main
 from qrfield.sessions import GroundTruth, Session, measure
-from qrfield.sessions.analysis import SEED_RESEMBLANCE_PERCENT, analyze
+from qrfield.sessions.analysis import SEED_RESEMBLANCE_PERCENT, analyze, format_report
 from qrfield.sessions.plotting import nice_ticks
 
 
@@ -145,6 +145,37 @@ def test_resemblance_with_the_solver(tmp_path, camera_vga):
     assert (res["matches"], res["compared"]) == (2, 4)
     assert res["percent"] == pytest.approx(50.0)
     assert res["seed_percent"] == 73.15
+    # The session's solver (defaults: settled stop, 1 mm) converges on the easy rows: both readings agree.
+    assert [r["simulation_pass_converged"] for r in res["per_row"]] == [True, True, False, False]
+    assert (res["matches_converged"], res["percent_converged"]) == (2, 50.0)
+
+
+def test_resemblance_in_both_readings_when_the_solver_settles_above_its_tolerance(tmp_path, camera_vga):
+    # The study's numerical-parallelogram (seed stop rule, 0.01 mm): whole-pixel corners fit no
+    # four depths to 0.01 mm, so it settles (stalls) above the tolerance, here with a pose within
+    # 2 deg / 5 mm. Within criteria, the simulation passes the row; converged and within, it fails.
+    from qrfield.solvers import NumericalSettings, solve
+
+    settings = NumericalSettings(initial_guess="parallelogram", stop="seed", tolerance_mm=0.01)
+    s = Session.create(tmp_path, "settled", camera=camera_vga, side_mm=60.0, solver="numerical",
+                       solver_settings=settings)  # fmt: skip
+    pose = (30.0, 20.0, 400.0, -15.0, 10.0, 30.0, "A")
+    log(s, pose, pose[:3], pose[3:6])  # logged as a pass
+    s.close()
+    # Independent check of the premise, by the single solver on the rounded corners.
+    from qrfield.geometry import Pose
+
+    corners = np.round(Pose(pose[:3], pose[3:6]).corners_px(camera_vga, 60.0))
+    r = solve(corners, camera_vga, 60.0, "numerical", settings)
+    assert not r.converged and r.iterations < settings.n_max
+    assert np.linalg.norm(r.position_mm - pose[:3]) < 5.0
+    res = analyze(s.path)["resemblance"]
+    row = res["per_row"][0]
+    assert (row["simulation_pass"], row["simulation_pass_converged"]) == (True, False)
+    assert "not converged" in row["simulation_reason"]
+    assert (res["percent"], res["percent_converged"]) == (100.0, 0.0)
+    text = format_report(analyze(s.path))
+    assert "within criteria 100.00%" in text and "converged and within criteria 0.00%" in text
 
 
 def test_sessions_pull_in_no_qt():

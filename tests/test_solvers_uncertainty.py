@@ -212,10 +212,14 @@ def test_batch_std_equals_the_single_solve(camera_name, method):
     noisy[3] = np.nan  # an unusable row stays unknown
     batch = solve_batch(noisy, camera, SIDE_MM, method=method, corners_cov=covs)
     assert np.all(np.isnan(batch.position_std_mm[3])) and not batch.valid[3]
+    # numerical: the same iterations bit for bit; ippe: the vectorised IPPE's LM and OpenCV's stop
+    # at slightly different points of the same minimum (up to 3e-3 mm apart on noisy corners), so
+    # the stds, evaluated there, agree to about 1e-4 (an uncertainty needs no more).
+    rtol = 1e-9 if method == "numerical" else 1e-3
     for i in np.flatnonzero(batch.converged):
         single = solve(noisy[i], camera, SIDE_MM, method, corners_cov=covs[i])
-        np.testing.assert_allclose(batch.position_std_mm[i], single.position_std_mm, rtol=1e-9)
-        np.testing.assert_allclose(batch.angles_std_deg[i], single.angles_std_deg, rtol=1e-9)
+        np.testing.assert_allclose(batch.position_std_mm[i], single.position_std_mm, rtol=rtol)
+        np.testing.assert_allclose(batch.angles_std_deg[i], single.angles_std_deg, rtol=rtol)
     np.testing.assert_allclose(batch.corners_std_px, np.sqrt(covs[..., 0, 0] + covs[..., 1, 1]))
     plain = solve_batch(noisy, camera, SIDE_MM, method=method)
     assert np.all(np.isnan(plain.angles_std_deg))

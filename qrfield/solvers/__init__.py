@@ -2,7 +2,7 @@
 
 Entry points:
   - :func:`solve` one corner set -> :class:`PoseResult`;
-  - :func:`solve_batch` N corner sets -> :class:`BatchResult` (vectorised for "numerical").
+  - :func:`solve_batch` N corner sets -> :class:`BatchResult` (vectorised in numpy for both).
 
 Conventions (docs/conventions.md): corners are pixels (u, v), OpenCV convention, in the order V1 top-left,
 V2 top-right, V3 bottom-right, V4 bottom-left of the code (clockwise on screen); the side L is the
@@ -21,7 +21,8 @@ import numpy as np
 from qrfield.camera import CameraModel
 from qrfield.methods import METHODS, settings_class  # the method registry (re-exported)
 from qrfield.solvers.checks import check_camera, check_corners_batch, check_corners_single, check_side
-from qrfield.solvers.ippe import IppeSettings, solve_ippe, solve_ippe_batch
+from qrfield.solvers.ippe import IppeSettings, solve_ippe
+from qrfield.solvers.ippe_batch import solve_ippe_vectorised
 from qrfield.solvers.numerical import SEED_SETTINGS, NumericalSettings, solve_numerical
 from qrfield.solvers.numerical_batch import solve_numerical_batch
 from qrfield.solvers.result import BatchResult, PoseResult, SolverError
@@ -92,7 +93,9 @@ def solve_batch(
     """Poses of N QR codes at once from corners (N, 4, 2) (pixels, V1..V4 each).
 
     "numerical" is vectorised in numpy and gives, row by row, the same numbers as :func:`solve`
-    (depths and iteration counts bit for bit; the mirror search is not run). "ippe" loops.
+    (depths and iteration counts bit for bit; the mirror search is not run). "ippe" is the
+    vectorised IPPE of :mod:`qrfield.solvers.ippe_batch` (rows agree with :func:`solve` to far
+    below 1e-6 mm and 1e-6 deg on exact corners; ``refine="vvs"`` runs as "lm" there).
     ``corners_cov`` (N, 4, 2, 2), or one (4, 2, 2) for every row, in px^2: propagated to the std
     fields as :func:`solve` does (vectorised; no mirror test, so no ``ambiguous`` flag).
     Raises SolverError for a wrong overall shape, side, camera or settings (SettingError, also a
@@ -106,4 +109,4 @@ def solve_batch(
     cov = None if corners_cov is None else check_corners_cov(corners_cov, batch=corners.shape[0])
     if method == "numerical":
         return solve_numerical_batch(corners, valid, cam, side, settings, cov)  # type: ignore[arg-type]
-    return solve_ippe_batch(corners, valid, cam, side, settings, cov)  # type: ignore[arg-type]
+    return solve_ippe_vectorised(corners, valid, cam, side, settings, cov)  # type: ignore[arg-type]
