@@ -103,16 +103,18 @@ def limited(limit: Limit, option: str) -> Callable[[str], float]:
     return parse
 
 
-def add_side_argument(parser: Any, default: float | None = None) -> None:
+def add_side_argument(parser: Any, default: float | None = None, *, configured: str = "") -> None:
     """``--side-mm L``: the QR symbol's side without its quiet zone (mm), checked against
-    :data:`qrfield.limits.SIDE_MM`; required unless a ``default`` is given."""
+    :data:`qrfield.limits.SIDE_MM`; required unless a ``default`` is given, or ``configured`` says
+    where the value comes from when the option is left out (then its default is None)."""
     from qrfield.limits import SIDE_MM
 
     shown = f"; default {default:g}" if default is not None else ""
+    shown += f"; default: {configured}" if configured else ""
     parser.add_argument(
         "--side-mm",
         type=limited(SIDE_MM, "--side-mm"),
-        required=default is None,
+        required=default is None and not configured,
         default=default,
         metavar="L",
         help=f"QR symbol side without quiet zone, mm ({SIDE_MM.describe()}{shown})",

@@ -26,7 +26,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from qrfield.camera import CameraModel
+from qrfield.camera import SENSOR_FIELDS, CameraModel, format_crop
 from qrfield.chessboard import Board
 
 #: Fewest usable views calibrate() accepts (with zero skew, two views fix the intrinsics in theory;
@@ -399,6 +399,7 @@ def calibrate(
     name: str = "calibrated",
     min_views: int = MIN_VIEWS,
     cells: tuple[int, int] = COVERAGE_CELLS,
+    stream: CameraModel | None = None,
 ) -> CalibrationResult:
     """Calibrate from board detections with cv2.calibrateCamera (pinhole, k1, k2, p1, p2, k3).
 
@@ -412,6 +413,10 @@ def calibrate(
         name: the camera model's name.
         min_views: fewest usable views accepted.
         cells: (cols, rows) of the coverage grid.
+        stream: the camera model of the stream the views came from (a picamera2 stream's, derived
+            from its sensor mode and crop); its sensor geometry (sensor_resolution, sensor_crop,
+            sensor_mode, lens_position, focal_length_mm) is saved in the result when it has the
+            views' size, so the profile can be mapped to other modes and warns at another focus.
 
     Raises:
         CalibrationError: fewer than ``min_views`` usable views (the message lists why views were skipped).
@@ -457,6 +462,15 @@ def calibrate(
         f"1-sigma fx {std_px['fx']:.2f}, fy {std_px['fy']:.2f}, "
         f"cx {std_px['cx']:.2f}, cy {std_px['cy']:.2f} px"
     )
+    geometry: dict[str, Any] = {}
+    if stream is not None and stream.size == tuple(size):
+        geometry = {key: getattr(stream, key) for key in SENSOR_FIELDS}
+        if stream.sensor_crop is not None:
+            notes += f"; sensor crop {format_crop(stream.sensor_crop)}" + (
+                f" (sensor mode {stream.sensor_mode})" if stream.sensor_mode else ""
+            )
+        if stream.lens_position is not None:
+            notes += f"; lens position {stream.lens_position:g} dioptres"
     try:
         camera = CameraModel(
             fx=K[0, 0],
@@ -468,6 +482,7 @@ def calibrate(
             dist=dist.reshape(-1)[:5],
             name=name,
             notes=notes,
+            **geometry,
         )
     except ValueError as exc:
         raise CalibrationError(f"the calibration is unusable: {exc}; {_VARY_HINT}", skipped) from None

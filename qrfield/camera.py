@@ -16,6 +16,14 @@ A camera is named on the command line as one of
 ``@WxH`` rescales the profile to another resolution of the same sensor mode (same aspect ratio).
 Every number is checked against :mod:`qrfield.limits`: focal lengths, image size, and a lens
 model that OpenCV can invert over the whole image (:func:`check_distortion`).
+
+Camera models follow the stream (docs/conventions.md): a profile may state which rectangle of the
+sensor's full-resolution pixel array its image covers (``sensor_crop``, with ``sensor_resolution``);
+:meth:`CameraModel.through_crop` then gives the model of any stream that delivers a crop, or a scaled
+crop, of that array (a sensor mode, the ISP's crop to the output's aspect ratio: picamera2's
+``ScalerCrop``). An autofocus lens moves: ``lens_position`` (dioptres) is where the profile's
+intrinsics hold, and :meth:`CameraModel.at_lens_position` follows a focus change where the lens's
+focal length in mm is known (thin lens).
 """
 
 from __future__ import annotations
@@ -39,6 +47,10 @@ from qrfield.limits import DISTORTION_ROUND_TRIP_PX, DISTORTION_SCALE, FOCAL_PX,
 REQUIRED_FIELDS = ("width", "height", "fx", "fy", "cx", "cy")
 #: Largest relative aspect-ratio mismatch accepted when rescaling to another resolution.
 ASPECT_TOLERANCE = 0.01
+#: Optional fields of the camera JSON format: the sensor geometry a profile was made at.
+SENSOR_FIELDS = ("sensor_resolution", "sensor_crop", "sensor_mode", "lens_position", "focal_length_mm")
+#: The camera model used when none is named (the virtual bench renders through it, too).
+DEFAULT_CAMERA = "picam-v2@640x480"
 
 
 class CameraModelError(ValueError):
@@ -56,7 +68,17 @@ class CameraModel:
         dist: (5,) OpenCV distortion coefficients k1, k2, p1, p2, k3 (zeros = ideal pinhole).
         name: a label for humans (preset name or file stem).
         notes: free text: where the numbers come from.
-        path: the profile file it was read from ("" when built otherwise); not part of equality.
+        sensor_resolution: (W, H) of the sensor's full-resolution pixel array, or None if unknown.
+        sensor_crop: (x, y, w, h), the rectangle of the full-resolution pixel array (in its pixels)
+            that this model's image covers (picamera2's ``ScalerCrop``), or None if unknown; the
+            image is that rectangle scaled to width x height.
+        sensor_mode: the sensor mode the image came from, for the record (e.g. ``1640x1232 10-bit``).
+        lens_position: the lens position (dioptres, 1 / focus distance in m) at which the
+            intrinsics hold, for autofocus cameras; None if not stated.
+        focal_length_mm: the lens's focal length in mm (datasheet), or None; a model with it and
+            no lens_position is taken to be focused at infinity (a datasheet model).
+        path: the profile file it was read from ("" when built otherwise); not part of equality
+            (nor of :meth:`to_dict`), so a profile is the same model wherever it was read from.
     """
 
     fx: float
@@ -68,6 +90,11 @@ class CameraModel:
     dist: np.ndarray = field(default_factory=lambda: np.zeros(5))
     name: str = "custom"
     notes: str = ""
+    sensor_resolution: tuple[int, int] | None = None
+    sensor_crop: tuple[int, int, int, int] | None = None
+    sensor_mode: str = ""
+    lens_position: float | None = None
+    focal_length_mm: float | None = None
     path: str = field(default="", compare=False)
 
     def __post_init__(self) -> None:
@@ -87,6 +114,9 @@ class CameraModel:
         for key in ("fx", "fy", "cx", "cy"):
             object.__setattr__(self, key, float(getattr(self, key)))
         _validate(self.fx, self.fy, self.cx, self.cy, self.width, self.height, f"camera {self.name!r}")
+        checked = sensor_fields({key: getattr(self, key) for key in SENSOR_FIELDS}, f"camera {self.name!r}")
+        for key, value in checked.items():
+            object.__setattr__(self, key, value)
         check_distortion(self, f"camera {self.name!r}")
 
     # ------------------------------------------------------------------ constructors
@@ -161,6 +191,7 @@ class CameraModel:
                 dist=dist_arr,
                 name=name,
                 notes=notes,
+                **sensor_fields({key: data.get(key) for key in SENSOR_FIELDS}, where),
             )
         except CameraModelError as exc:  # the distortion check: name the file, not the model
             raise CameraModelError(str(exc).replace(f"camera {name!r}", where, 1)) from None
@@ -190,6 +221,10 @@ class CameraModel:
             "cy": self.cy,
             "dist": [float(d) for d in self.dist],
             "notes": self.notes,
+        } | {
+            key: _jsonable(getattr(self, key))
+            for key in SENSOR_FIELDS
+            if getattr(self, key) not in (None, "")
         }
 
     def save(self, path: str | os.PathLike[str], *, overwrite: bool = True) -> None:
@@ -237,8 +272,9 @@ class CameraModel:
             raise CameraModelError(
                 f"camera {self.name!r}: {width}x{height} has another aspect ratio than its "
                 f"{self.width}x{self.height} profile ({width / height:.3f} vs "
-                f"{self.width / self.height:.3f}); a cropped sensor mode needs its own profile "
-                "(calibrate it, or give --focal-px and --size)"
+                f"{self.width / self.height:.3f}): a crop of the sensor is another field of view. With "
+                "picamera2 name the full-sensor profile (e.g. picam-v3): the stream's model is derived "
+                "from its sensor crop (docs/cameras.md); otherwise calibrate at this size"
             )
         if (width, height) == (self.width, self.height):
             return self
@@ -252,6 +288,137 @@ class CameraModel:
             height=height,
             name=f"{self.name.split('@')[0]}@{width}x{height}",
         )
+
+    def through_crop(
+        self, crop_xywh: Any, out_size: tuple[int, int], *, sensor_mode: str = ""
+    ) -> CameraModel:
+        """The model of a stream that delivers the sensor rectangle ``crop_xywh`` scaled to ``out_size``.
+
+        docs/conventions.md, "Camera models follow the stream": with f, c in full-resolution pixels,
+        f_out = f * out_w / crop_w and c_out = (c - crop_x + 0.5) * out_w / crop_w - 0.5 (the same
+        for y with out_h, crop_h). This model's own image covers ``sensor_crop`` (scaled to its
+        width x height), so it is first taken back to full-resolution pixels by the inverse mapping.
+        Distortion acts on normalised coordinates and is unchanged.
+
+        Args:
+            crop_xywh: (x, y, w, h) in full-resolution sensor pixels (picamera2's ``ScalerCrop``).
+            out_size: (width, height) of the stream's images, pixels.
+            sensor_mode: the sensor mode, recorded in the result (e.g. ``1640x1232 10-bit``).
+
+        Raises:
+            CameraModelError: this model does not state its ``sensor_crop`` (so which part of the
+                sensor it describes is unknown), or the crop lies outside its sensor_resolution.
+        """
+        where = f"camera {self.name!r}"
+        if self.sensor_crop is None:
+            raise CameraModelError(
+                f"{where} does not say which part of the sensor it describes (no 'sensor_crop'), so it "
+                f"cannot be mapped to a stream that shows the sensor crop {format_crop(crop_xywh)}: use a "
+                'preset, add "sensor_crop": [x, y, w, h] (full-resolution pixels of the area the profile '
+                'was calibrated on) and "sensor_resolution": [W, H] to its JSON, or calibrate again '
+                "(qrfield calibrate records them); see docs/cameras.md"
+            )
+        crop = check_crop(_whole_numbers(crop_xywh, 4, "crop", where), self.sensor_resolution, where)
+        out_w, out_h = _whole_numbers(out_size, 2, "output size", where)
+        if out_w <= 0 or out_h <= 0:
+            raise CameraModelError(f"{where}: output size {out_w}x{out_h} must be positive")
+        own_x, own_y, own_w, own_h = self.sensor_crop
+        # This model's pixels -> full-resolution pixels (the inverse of the formula above).
+        fx_full, fy_full = self.fx * own_w / self.width, self.fy * own_h / self.height
+        cx_full = (self.cx + 0.5) * own_w / self.width - 0.5 + own_x
+        cy_full = (self.cy + 0.5) * own_h / self.height - 0.5 + own_y
+        x, y, w, h = crop
+        base = self.name.split("@")[0]
+        outside = (
+            not (own_x <= x and own_y <= y and x + w <= own_x + own_w and y + h <= own_y + own_h)
+            and self.has_distortion
+        )
+        how = (
+            f"{base} mapped through sensor crop {format_crop(crop)} to {out_w}x{out_h}"
+            + (f" (sensor mode {sensor_mode})" if sensor_mode else "")
+            + (
+                f"; the crop reaches outside the calibrated area {format_crop(self.sensor_crop)}, where "
+                "the distortion is extrapolated"
+                if outside
+                else ""
+            )
+        )
+        return replace(
+            self,
+            fx=fx_full * out_w / w,
+            fy=fy_full * out_h / h,
+            cx=(cx_full - x + 0.5) * out_w / w - 0.5,
+            cy=(cy_full - y + 0.5) * out_h / h - 0.5,
+            width=out_w,
+            height=out_h,
+            name=f"{base}@{out_w}x{out_h}",
+            notes=f"{how}. {self.notes}".strip(),
+            sensor_crop=crop,
+            sensor_mode=sensor_mode or self.sensor_mode,
+        )
+
+    def at_lens_position(self, dioptres: float) -> tuple[CameraModel, str]:
+        """The model with the lens focused at ``dioptres`` (1 / focus distance in m), and how it was made.
+
+        Focusing closer moves the lens away from the sensor: by the thin-lens equation the image
+        distance is v(P) = 1 / (1/f - P/1000) mm, and the focal lengths in pixels scale with it.
+        That needs the lens's focal length (``focal_length_mm``); the model's own lens position is
+        its ``lens_position``, or infinity (0) for a datasheet model without one. Without
+        ``focal_length_mm`` the intrinsics are kept and the text says they may be off.
+        """
+        if not math.isfinite(dioptres) or dioptres < 0:
+            raise CameraModelError(f"lens position must be >= 0 dioptres, got {dioptres!r}")
+        own = self.lens_position
+        focal = self.focal_length_mm
+        if own is None and not focal:
+            return replace(self, lens_position=float(dioptres)), (
+                f"camera model {self.name!r} does not state the lens position it holds at; focus fixed at "
+                f"{dioptres:g} dioptres, intrinsics used as they are (calibrate at this lens position)"
+            )
+        if own == dioptres:
+            return replace(self, lens_position=float(dioptres)), (
+                f"focus fixed at {dioptres:g} dioptres, the lens position camera model {self.name!r} holds at"
+            )
+        if not focal:
+            return replace(self, lens_position=float(dioptres)), (
+                f"lens position {dioptres:g} dioptres differs from the {own:g} dioptres camera model "
+                f"{self.name!r} was calibrated at: the focal length moves with the lens, so distances may be "
+                "off by a few per cent (calibrate at this lens position, or set it back)"
+            )
+        scale = image_distance_mm(focal, dioptres) / image_distance_mm(focal, own or 0.0)
+        how = f"focal lengths scaled by {scale:.5f} (thin lens, f = {focal:g} mm)"
+        if own is None:
+            text = (
+                f"{self.name!r} is a datasheet model (focused at infinity): {how} for the lens at "
+                f"{dioptres:g} dioptres"
+            )
+        else:
+            text = (
+                f"lens position {dioptres:g} dioptres differs from the {own:g} dioptres camera model "
+                f"{self.name!r} was calibrated at: {how}; calibrate at this lens position for best accuracy"
+            )
+        return (
+            replace(
+                self,
+                fx=self.fx * scale,
+                fy=self.fy * scale,
+                lens_position=float(dioptres),
+                notes=f"{text}. {self.notes}".strip(),
+            ),
+            text,
+        )
+
+    def summary(self) -> str:
+        """One line: size, intrinsics, and the sensor crop when known."""
+        text = (
+            f"{self.width}x{self.height} px, fx {self.fx:.1f}, fy {self.fy:.1f}, "
+            f"cx {self.cx:.1f}, cy {self.cy:.1f}"
+        )
+        if self.sensor_crop is not None:
+            text += f", sensor crop {format_crop(self.sensor_crop)}"
+        if self.lens_position is not None:
+            text += f", lens {self.lens_position:g} dioptres"
+        return text
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, CameraModel):
@@ -409,6 +576,94 @@ def _distortion_problem(
             f"{math.degrees(math.atan(fold)):.1f} degrees off the axis, inside the field of view"
         )
     return ""
+
+
+def image_distance_mm(focal_length_mm: float, dioptres: float) -> float:
+    """Lens-to-sensor distance (mm) of a thin lens of focal length f focused at 1/dioptres metres."""
+    inverse = 1.0 / focal_length_mm - dioptres / 1000.0
+    if inverse <= 0:
+        raise CameraModelError(
+            f"a {focal_length_mm:g} mm lens cannot focus at {dioptres:g} dioptres "
+            "(closer than its focal length)"
+        )
+    return 1.0 / inverse
+
+
+def format_crop(crop: Any) -> str:
+    """A sensor rectangle as rpicam-hello prints it: ``(x, y)/WxH``."""
+    try:
+        x, y, w, h = (int(v) for v in crop)
+    except (TypeError, ValueError):
+        return repr(crop)
+    return f"({x}, {y})/{w}x{h}"
+
+
+def check_crop(
+    crop: tuple[int, int, int, int], resolution: tuple[int, int] | None, where: str
+) -> tuple[int, int, int, int]:
+    """``crop`` (x, y, w, h) if it is a non-empty rectangle inside ``resolution`` (when known)."""
+    x, y, w, h = crop
+    if w <= 0 or h <= 0 or x < 0 or y < 0:
+        raise CameraModelError(f"{where}: sensor crop {crop} needs x, y >= 0 and a positive size")
+    if resolution is not None and (x + w > resolution[0] or y + h > resolution[1]):
+        raise CameraModelError(
+            f"{where}: sensor crop {format_crop(crop)} reaches outside the "
+            f"{resolution[0]}x{resolution[1]} sensor"
+        )
+    return crop
+
+
+def _whole_numbers(values: Any, count: int, key: str, where: str) -> tuple[int, ...]:
+    """``values`` as a tuple of ``count`` whole numbers; CameraModelError naming ``key`` otherwise."""
+    try:
+        items = list(values)
+    except TypeError:
+        items = None
+    if (
+        items is None
+        or len(items) != count
+        or any(isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) for v in items)
+        or any(not math.isfinite(v) or v != int(v) for v in items)
+    ):
+        raise CameraModelError(
+            f"{where}: field '{key}' must be a list of {count} whole numbers, got {values!r}"
+        )
+    return tuple(int(v) for v in items)
+
+
+def sensor_fields(values: dict[str, Any], where: str) -> dict[str, Any]:
+    """The optional sensor fields (SENSOR_FIELDS) checked and coerced; None/"" stay unset.
+
+    CameraModelError (prefixed with ``where``) names the field that is wrong."""
+    out: dict[str, Any] = {}
+    resolution = values.get("sensor_resolution")
+    if resolution is not None:
+        resolution = _whole_numbers(resolution, 2, "sensor_resolution", where)
+        if min(resolution) <= 0:
+            raise CameraModelError(f"{where}: field 'sensor_resolution' {resolution} must be positive")
+        out["sensor_resolution"] = resolution
+    crop = values.get("sensor_crop")
+    if crop is not None:
+        out["sensor_crop"] = check_crop(_whole_numbers(crop, 4, "sensor_crop", where), resolution, where)
+    mode = values.get("sensor_mode")
+    if mode not in (None, ""):
+        if not isinstance(mode, str):
+            raise CameraModelError(f"{where}: field 'sensor_mode' must be text, got {mode!r}")
+        out["sensor_mode"] = mode
+    for key in ("lens_position", "focal_length_mm"):
+        value = values.get(key)
+        if value is None:
+            continue
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise CameraModelError(f"{where}: field '{key}' must be a number, got {value!r}")
+        if value < 0 or (key == "focal_length_mm" and value == 0):
+            raise CameraModelError(f"{where}: field '{key}' must be positive, got {value!r}")
+        out[key] = float(value)
+    return out
+
+
+def _jsonable(value: Any) -> Any:
+    return list(value) if isinstance(value, tuple) else value
 
 
 # ---------------------------------------------------------------------- lookup by name

@@ -134,16 +134,6 @@ def project_points(points_mm: np.ndarray, camera: CameraModel) -> np.ndarray:
     return np.stack([camera.fx * x + camera.cx, camera.fy * y + camera.cy], axis=-1)
 
 
-def check_corners(corners_px: np.ndarray, n: int = 4) -> np.ndarray:
-    """Return corners as float (..., n, 2) or raise ValueError saying what is wrong."""
-    c = np.asarray(corners_px, dtype=float)
-    if c.ndim < 2 or c.shape[-2:] != (n, 2):
-        raise ValueError(f"corners must have shape (..., {n}, 2) in pixels (V1..V4), got {c.shape}")
-    if not np.all(np.isfinite(c)):
-        raise ValueError("corners contain NaN or inf")
-    return c
-
-
 @dataclass(frozen=True)
 class Pose:
     """Position (mm, QR centre in the camera frame) and angles (alpha, beta, gamma, degrees)."""
@@ -187,17 +177,6 @@ class Pose:
     def corners_px(self, camera: CameraModel, side_mm: float) -> np.ndarray:
         """(4, 2) pixels of V1..V4 through the camera model (distortion included)."""
         return project_points(self.vertices_mm(side_mm), camera)
-
-    def faces_camera(self) -> bool:
-        """True when the printed face (marker -Z side) is turned towards the camera."""
-        return float(self.rotation[:, 2] @ self.position_mm) > 0.0
-
-
-def project_marker(
-    camera: CameraModel, side_mm: float, rotation: np.ndarray, position_mm: np.ndarray
-) -> np.ndarray:
-    """Pixels (..., 4, 2) of V1..V4 for poses R (..., 3, 3), t (..., 3); batched."""
-    return project_points(transform_points(rotation, position_mm, marker_vertices(side_mm)), camera)
 
 
 def ippe_object_points(side_mm: float) -> np.ndarray:

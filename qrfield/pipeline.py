@@ -26,12 +26,8 @@ import numpy as np
 
 from qrfield.camera import CameraModel, CameraModelError
 from qrfield.geometry import Pose
+from qrfield.methods import METHODS
 from qrfield.sources.base import Frame
-
-#: The pose methods a pipeline can run (docs/conventions.md: the thesis' model and OpenCV IPPE).
-METHODS = ("numerical", "ippe")
-#: --method values: one method, or both side by side (the first listed gives the status).
-METHOD_CHOICES = ("numerical", "ippe", "both")
 
 OK, NOQR, NOCONV, ERROR = "OK", "NOQR", "NOCONV", "ERROR"
 STATUSES = (OK, NOQR, NOCONV, ERROR)
@@ -48,16 +44,11 @@ POSE_JSON_KEYS = (
     "reason",
     "ambiguity",
     "residual_mm",
+    "corners_std_px",
+    "position_std_mm",
+    "angles_std_deg",
+    "ambiguous",
 )
-
-
-def methods_from_choice(choice: str) -> tuple[str, ...]:
-    """("numerical",), ("ippe",) or both for ``--method numerical|ippe|both``; ValueError otherwise."""
-    if choice == "both":
-        return METHODS
-    if choice in METHODS:
-        return (choice,)
-    raise ValueError(f"method {choice!r} is not one of {', '.join(METHOD_CHOICES)}")
 
 
 @dataclass
@@ -162,11 +153,13 @@ class Pipeline:
         side_mm: the QR symbol's side L, mm.
         methods: pose methods to run, a subset of METHODS in order; the first gives the status.
         solver_settings: method -> its settings dataclass (NumericalSettings, IppeSettings).
-        detector_settings: qrfield.detect.DetectorSettings (None = defaults).
-        select_text: only a code with this payload counts ("" = any; see qrfield.detect.select_code).
+        detector_settings: qrfield.detect.DetectorSettings (None = defaults); its ``select_text``
+            chooses the code (only one with this payload counts, "" = any; see
+            qrfield.detect.select_code).
         t0: stream start, time.monotonic() s (None = the first frame's capture time).
         tracker, solve, select: replace qrfield.detect.Tracker(settings), qrfield.solvers.solve
-            and qrfield.detect.select_code (tests, other detectors).
+            (called with the detection's ``corners_cov`` keyword) and qrfield.detect.select_code
+            (tests, other detectors).
     """
 
     def __init__(
@@ -177,7 +170,6 @@ class Pipeline:
         *,
         solver_settings: dict[str, Any] | None = None,
         detector_settings: Any = None,
-        select_text: str = "",
         t0: float | None = None,
         tracker: Any = None,
         solve: Callable[..., Any] | None = None,
@@ -194,7 +186,7 @@ class Pipeline:
         self.side_mm = float(side_mm)
         self.methods = methods
         self.solver_settings = dict(solver_settings or {})
-        self.select_text = select_text
+        self.select_text = str(getattr(detector_settings, "select_text", "") or "")
         self.t0 = t0
         self._own_tracker = tracker is None
         if tracker is None or select is None:
@@ -271,6 +263,7 @@ class Pipeline:
                     self.side_mm,
                     method=method,
                     settings=self.solver_settings.get(method),
+                    corners_cov=getattr(result.detection, "corners_cov", None),
                 )
             except Exception as exc:  # one method failing must not hide the other's answer
                 errors.append(f"{method}: {type(exc).__name__}: {exc}")

@@ -24,6 +24,7 @@ import numpy as np
 
 from qrfield.camera import CameraModel
 from qrfield.geometry import Pose, project_points, transform_points
+from qrfield.visibility import view_problem
 
 #: Quiet zone around the symbol, in modules (ISO/IEC 18004 asks for 4).
 QUIET_ZONE_MODULES = 4
@@ -126,67 +127,19 @@ def card_side_mm(side_mm: float, modules: int) -> float:
     return side_mm * (modules + 2 * (QUIET_ZONE_MODULES + CARD_MARGIN_MODULES)) / modules
 
 
-@functools.lru_cache(maxsize=16)
-def view_radius(camera: CameraModel) -> float:
-    """The largest normalised radius tan(off-axis angle) that the image shows; inf without distortion.
-
-    OpenCV's 5-coefficient lens model folds back far outside the field of view: a point 67 degrees
-    off the axis of a lens with k1 = -0.28 projects inside a 60-degree-wide image. A point beyond
-    this radius is out of view wherever the model projects it. Taken from the exact undistortion
-    of the image's border (pixel edges), with a 0.1 % margin.
-    """
-    if not camera.has_distortion:
-        return math.inf
-    w, h = camera.width, camera.height
-    u, v = np.linspace(-0.5, w - 0.5, w + 1), np.linspace(-0.5, h - 0.5, h + 1)
-    border = np.concatenate(
-        [
-            np.column_stack([u, np.full_like(u, -0.5)]),
-            np.column_stack([u, np.full_like(u, h - 0.5)]),
-            np.column_stack([np.full_like(v, -0.5), v]),
-            np.column_stack([np.full_like(v, w - 0.5), v]),
-        ]
-    ).reshape(-1, 1, 2)
-    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-10)
-    if hasattr(cv2, "undistortPointsIter"):  # OpenCV 4.x
-        ideal = cv2.undistortPointsIter(border, camera.K, camera.dist, None, None, criteria)
-    else:  # OpenCV 5
-        ideal = cv2.undistortPoints(border, camera.K, camera.dist, R=None, P=None, criteria=criteria)
-    return 1.001 * float(np.hypot(ideal[..., 0], ideal[..., 1]).max())
-
-
 def check_view(camera: CameraModel, side_mm: float, pose: Pose, allow_partial: bool = False) -> np.ndarray:
-    """Return the (4, 2) vertex pixels of a visible pose, or raise RenderError saying why not."""
+    """Return the (4, 2) vertex pixels of a visible pose, or raise RenderError saying why not.
+
+    Visible: :mod:`qrfield.visibility`'s rule (``allow_partial``: in front and facing the camera).
+    """
     if not math.isfinite(side_mm) or side_mm <= 0:
         raise RenderError(f"QR side must be a positive length in mm, got {side_mm!r}")
-    vertices = pose.vertices_mm(side_mm)
-    if np.any(vertices[:, 2] <= 1e-6):
-        raise RenderError("the card is (partly) behind the camera: every vertex needs z > 0 mm")
-    if not pose.faces_camera():
-        raise RenderError(
-            "the card faces away from the camera (its printed side is turned away); "
-            f"angles {np.round(pose.angles_deg, 2).tolist()} deg"
-        )
-    corners = project_points(vertices, camera)
-    if not allow_partial:
-        outside = [
-            f"V{i + 1} at ({u:.1f}, {v:.1f})"
-            for i, (u, v) in enumerate(corners)
-            if not (-0.5 <= u <= camera.width - 0.5 and -0.5 <= v <= camera.height - 0.5)
-        ]
-        radius = np.hypot(vertices[:, 0] / vertices[:, 2], vertices[:, 1] / vertices[:, 2])
-        beyond = [
-            f"V{i + 1} {math.degrees(math.atan(r)):.1f} deg off the optical axis"
-            for i, r in enumerate(radius)
-            if r > view_radius(camera)
-        ]
-        if outside or beyond:
-            reasons = (
-                [f"{', '.join(outside)} outside the {camera.width}x{camera.height} image"] if outside else []
-            )
-            reasons += [f"{', '.join(beyond)}, beyond the lens' field of view"] if beyond else []
-            raise RenderError(f"the code is out of view: {'; '.join(reasons)}")
-    return corners
+    problem = view_problem(camera, side_mm, pose.rotation, pose.position_mm, allow_partial)
+    if problem:
+        if "faces away" in problem:
+            problem += f"; angles {np.round(pose.angles_deg, 2).tolist()} deg"
+        raise RenderError(problem)
+    return project_points(pose.vertices_mm(side_mm), camera)
 
 
 def render_view(

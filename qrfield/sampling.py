@@ -11,6 +11,7 @@ import numpy as np
 
 from qrfield.camera import CameraModel
 from qrfield.geometry import Pose, angles_from_rotation, rotation_matrix
+from qrfield.visibility import view_of
 
 
 def _axis_angle(axis: np.ndarray, angle_rad: float) -> np.ndarray:
@@ -46,12 +47,10 @@ def random_visible_poses(
     margin_px: float = 8.0,
     tilt_from: str = "axis",
 ) -> list[Pose]:
-    """``count`` seeded poses whose four vertices lie at least ``margin_px`` inside the image.
+    """``count`` seeded poses in view (:mod:`qrfield.visibility`), vertices ``margin_px`` inside the image.
 
     Raises ValueError when the workspace cannot hold the code (e.g. a 300 mm code at 150 mm).
     """
-    from qrfield.render import RenderError, check_view
-
     if tilt_from not in ("axis", "line_of_sight"):
         raise ValueError(f"tilt_from must be 'axis' or 'line_of_sight', got {tilt_from!r}")
     rng = np.random.default_rng(seed)
@@ -73,16 +72,6 @@ def random_visible_poses(
         if tilt_from == "line_of_sight":
             rotation = _align_z(np.array([x, y, z])) @ rotation
         pose = Pose(np.array([x, y, z]), angles_from_rotation(rotation))
-        try:
-            corners = check_view(camera, side_mm, pose)
-        except RenderError:
-            continue
-        if (
-            corners[:, 0].min() < margin_px
-            or corners[:, 1].min() < margin_px
-            or corners[:, 0].max() > camera.width - 1 - margin_px
-            or corners[:, 1].max() > camera.height - 1 - margin_px
-        ):
-            continue
-        poses.append(pose)
+        if view_of(camera, side_mm, pose.rotation, pose.position_mm, margin_px=margin_px).in_view:
+            poses.append(pose)
     return poses

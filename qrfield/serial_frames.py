@@ -9,10 +9,13 @@ The frame is fixed in docs/conventions.md ("Serial frames"), one ASCII line per 
   0..4294967295 (fits a uint32 on a microcontroller); the link wraps it after 49.7 days.
 - ``x, y, z``: the QR centre in the camera frame, millimetres, 1 decimal.
 - ``alpha, beta, gamma``: R = Rx(alpha) Ry(beta) Rz(gamma), degrees, 2 decimals.
-- ``status``: ``OK`` (pose fields filled), ``NOQR`` (no code seen: pose fields empty), ``NOCONV``
-  (solver did not converge: pose fields empty), ``STALE`` (our decision: nothing new arrived for a
-  while, so the link repeats the last frame's ``t_ms`` and pose fields unchanged, filled if that frame
-  was OK, empty otherwise, with a new ``seq``; the controller learns "no news since t_ms").
+- ``status``: ``OK`` (a live camera's pose: fields filled), ``SIM`` (a pose from the virtual bench or
+  a recording: fields filled, never to be acted on as a measurement), ``NOQR`` (no code seen: pose
+  fields empty), ``NOCONV`` (solver did not converge: pose fields empty), ``NOSRC`` (no camera frames:
+  pose fields empty, at least once a second while the source is down), ``STALE`` (our decision:
+  nothing new arrived for a while, so the link repeats the last frame's ``t_ms`` and pose fields
+  unchanged, filled if that frame had a pose, empty otherwise, with a new ``seq``; the controller
+  learns "no news since t_ms").
 - ``CS``: two uppercase hex digits, XOR of every byte between ``$`` and ``*`` (both excluded).
 
 Number formatting (our decisions): values are rounded by Python's ``format`` (correctly rounded from
@@ -23,8 +26,12 @@ Positions must lie within +-999999.9 mm (our limit) and angles within +-180 degr
 at most 86 bytes (:data:`MAX_QRF_LINE` leaves room).
 
 Commands from the controller use the same framing: ``$<TALKER>[,<field>...]*<CS>\\r\\n`` where TALKER
-is 1 to 8 characters A-Z/0-9 (not ``QRF``); fields are printable ASCII without ``$ * ,``. The decoder
-returns them as :class:`ControllerCommand`; no command is defined yet, so nothing acts on them.
+is 1 to 8 characters A-Z/0-9; fields are printable ASCII without ``$ * ,``. The controller's talker
+is ``QRC`` (``$QRC,PING``, ``$QRC,STREAM,ON``, ``$QRC,MEAS,10``); the answers are ``$QRA`` lines
+(:func:`encode_answer`) and ``$QRM`` measurements (:func:`encode_measurement`). The decoder returns
+``$QRF`` as :class:`QrfFrame`, ``$QRM`` as :class:`QrmMeasurement`, ``$QRA`` as :class:`QraAnswer`
+and any other talker as :class:`ControllerCommand` (:mod:`qrfield.serial_controller` acts on them).
+A line is at most :data:`MAX_LINE_BYTES` bytes, CR LF included.
 """
 
 from __future__ import annotations
@@ -37,15 +44,27 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-STATUSES = ("OK", "NOQR", "NOCONV", "STALE")
+STATUSES = ("OK", "SIM", "NOQR", "NOCONV", "STALE", "NOSRC")
+#: Statuses whose pose fields are filled (OK, SIM), empty (NOQR, NOCONV, NOSRC), or either (STALE).
+POSE_STATUSES = ("OK", "SIM")
+EMPTY_STATUSES = ("NOQR", "NOCONV", "NOSRC")
+#: Statuses of a $QRM answer: a mean pose (OK, SIM) or why there is none.
+MEAS_STATUSES = ("OK", "SIM", "NOQR", "NOCONV", "NOSRC", "TIMEOUT")
+#: The controller's talker, and the talkers of our answers.
+COMMAND_TALKER, ANSWER_TALKER, MEASUREMENT_TALKER = "QRC", "QRA", "QRM"
+#: Longest reason text in a $QRA ERR answer (docs/conventions.md), bytes.
+MAX_REASON_BYTES = 40
+#: Largest standard deviation a $QRM carries (mm for positions, degrees for angles).
+MAX_STD_MM = 999999.9
+MAX_STD_DEG = 999.99
 SEQ_MODULUS = 65536
 T_MS_MODULUS = 2**32
 MAX_POSITION_MM = 999999.9
 MAX_ANGLE_DEG = 180.0
 # Longest frame: $QRF,65535,4294967295,-999999.9 x3,-180.00 x3,STALE*CS\r\n = 86 bytes.
 MAX_QRF_LINE = 96
-# Longest line the decoder keeps (frames and controller commands); longer lines are dropped.
-MAX_LINE_BYTES = 256
+# Longest valid line, CR LF included (docs/conventions.md); the decoder drops longer lines.
+MAX_LINE_BYTES = 160
 _TALKER = re.compile(rb"[A-Z0-9]{1,8}")
 _UINT = re.compile(r"[0-9]{1,10}")
 _NUMBER = re.compile(r"-?[0-9]{1,7}(\.[0-9]{1,6})?")
@@ -103,17 +122,18 @@ def check_pose_fields(
 ) -> tuple[Triplet | None, Triplet | None]:
     """Validate status and pose for one frame; returns (position, angles) as 3-tuples of floats or Nones.
 
-    OK needs both position (x, y, z in mm, camera frame) and angles (alpha, beta, gamma in degrees);
-    NOQR and NOCONV need both None; STALE takes both or neither. Raises FrameError otherwise.
+    OK and SIM need both position (x, y, z in mm, camera frame) and angles (alpha, beta, gamma in
+    degrees); NOQR, NOCONV and NOSRC need both None; STALE takes both or neither. Raises FrameError
+    otherwise.
     """
     if status not in STATUSES:
         raise FrameError(f"status must be one of {', '.join(STATUSES)}, got {status!r}")
     given = (position_mm is not None, angles_deg is not None)
     if given[0] != given[1]:
         raise FrameError(f"status {status}: give both position_mm and angles_deg or neither")
-    if status == "OK" and not given[0]:
-        raise FrameError("status OK needs position_mm (x, y, z) and angles_deg (alpha, beta, gamma)")
-    if status in ("NOQR", "NOCONV") and given[0]:
+    if status in POSE_STATUSES and not given[0]:
+        raise FrameError(f"status {status} needs position_mm (x, y, z) and angles_deg (alpha, beta, gamma)")
+    if status in EMPTY_STATUSES and given[0]:
         raise FrameError(f"status {status} has empty pose fields: pass position_mm=None, angles_deg=None")
     if not given[0]:
         return None, None
@@ -147,33 +167,103 @@ def encode_frame(
     seq = _check_uint(seq, "seq", SEQ_MODULUS)
     t_ms = _check_uint(t_ms, "t_ms", T_MS_MODULUS)
     position, angles = check_pose_fields(status, position_mm, angles_deg)
+    return _line(f"QRF,{seq},{t_ms},{_pose_text(position, angles)},{status}")
+
+
+def _pose_text(position: Triplet | None, angles: Triplet | None) -> str:
+    """x,y,z (1 decimal) and alpha,beta,gamma (2 decimals, -180.00 written 180.00), or 5 commas."""
     if position is None or angles is None:
-        pose = ",,,,,"
+        return ",,,,,"
+    angle_texts = ["180.00" if (t := _format_fixed(v, 2)) == "-180.00" else t for v in angles]
+    return ",".join([_format_fixed(v, 1) for v in position] + angle_texts)
+
+
+def _line(body: str) -> bytes:
+    data = body.encode("ascii")
+    line = b"$%s*%02X\r\n" % (data, checksum(data))
+    if len(line) > MAX_LINE_BYTES:
+        raise FrameError(f"line is {len(line)} bytes, longer than the {MAX_LINE_BYTES} bytes allowed")
+    return line
+
+
+def _check_field(text: str, what: str) -> str:
+    if (
+        not isinstance(text, str)
+        or any(c in text for c in "$*,\r\n")
+        or not text.isascii()
+        or not text.isprintable()
+    ):
+        raise FrameError(f"{what} must be printable ASCII without $ * , : got {text!r}")
+    return text
+
+
+def encode_answer(command: str, result: str = "OK", reason: str = "") -> bytes:
+    """``$QRA,<command>,OK*CS`` or ``$QRA,<command>,ERR,<reason>*CS`` (docs/conventions.md).
+
+    ``reason`` (ERR only): commas become spaces and it is cut to MAX_REASON_BYTES.
+    """
+    _check_field(command, "command")
+    if result == "OK":
+        return _line(f"{ANSWER_TALKER},{command},OK")
+    if result != "ERR":
+        raise FrameError(f"an answer's result is OK or ERR, got {result!r}")
+    text = " ".join(reason.replace(",", " ").split())[:MAX_REASON_BYTES] or "error"
+    return _line(f"{ANSWER_TALKER},{command},ERR,{_check_field(text, 'reason')}")
+
+
+def encode_measurement(
+    seq: int,
+    t_ms: int,
+    status: str,
+    position_mm: Sequence[float] | np.ndarray | None = None,
+    angles_deg: Sequence[float] | np.ndarray | None = None,
+    std_position_mm: Sequence[float] | np.ndarray | None = None,
+    std_angles_deg: Sequence[float] | np.ndarray | None = None,
+    n_used: int | None = None,
+) -> bytes:
+    """One ``$QRM`` answer to ``MEAS,n`` (docs/conventions.md).
+
+    OK / SIM: the mean position (mm, 1 decimal) and angles (degrees, 2 decimals), their standard
+    deviations over the frames (same units and decimals, >= 0) and n_used (1..100); any other
+    status (NOQR, NOCONV, NOSRC, TIMEOUT) with every number field after t_ms empty.
+    seq: 0..65535 (the answers' own count); t_ms: 0..2**32-1. Raises FrameError.
+    """
+    seq = _check_uint(seq, "seq", SEQ_MODULUS)
+    t_ms = _check_uint(t_ms, "t_ms", T_MS_MODULUS)
+    if status not in MEAS_STATUSES:
+        raise FrameError(f"measurement status must be one of {', '.join(MEAS_STATUSES)}, got {status!r}")
+    parts = (position_mm, angles_deg, std_position_mm, std_angles_deg, n_used)
+    if status not in POSE_STATUSES:
+        if any(p is not None for p in parts):
+            raise FrameError(f"status {status} has empty number fields: pass no pose, deviations or n_used")
+        fields = "," * 12
     else:
-        angle_texts = ["180.00" if (t := _format_fixed(v, 2)) == "-180.00" else t for v in angles]
-        pose = ",".join([_format_fixed(v, 1) for v in position] + angle_texts)
-    body = f"QRF,{seq},{t_ms},{pose},{status}".encode("ascii")
-    return b"$%s*%02X\r\n" % (body, checksum(body))
+        if any(p is None for p in parts):
+            raise FrameError(f"status {status} needs the mean pose, its deviations and n_used")
+        position, angles = check_pose_fields(status, position_mm, angles_deg)
+        spos = _as_triplet(std_position_mm, "std_position_mm", "mm", MAX_STD_MM)  # type: ignore[arg-type]
+        sang = _as_triplet(std_angles_deg, "std_angles_deg", "degrees", MAX_STD_DEG)  # type: ignore[arg-type]
+        if min(spos + sang) < 0:
+            raise FrameError(f"standard deviations must be >= 0, got {list(spos + sang)}")
+        n = _check_uint(n_used, "n_used", 101)  # type: ignore[arg-type]
+        if n < 1:
+            raise FrameError("n_used must be 1..100 for a mean pose")
+        stds = [_format_fixed(v, 1) for v in spos] + [_format_fixed(v, 2) for v in sang]
+        fields = f"{_pose_text(position, angles)},{','.join(stds)},{n}"
+    return _line(f"{MEASUREMENT_TALKER},{seq},{t_ms},{fields},{status}")
 
 
 def encode_command(talker: str, *fields: str) -> bytes:
-    """A controller command line ``$TALKER,field,...*CS\\r\\n`` (for controllers' tests and tools)."""
+    """A controller command line ``$TALKER,field,...*CS\\r\\n``: ``encode_command("QRC", "MEAS", "10")``."""
     if (
         not isinstance(talker, str)
         or not _TALKER.fullmatch(talker.encode("ascii", "replace"))
-        or talker == "QRF"
+        or talker in ("QRF", ANSWER_TALKER, MEASUREMENT_TALKER)
     ):
-        raise FrameError(f"talker must be 1-8 characters A-Z/0-9 other than QRF, got {talker!r}")
+        raise FrameError(f"talker must be 1-8 characters A-Z/0-9 other than QRF, QRA, QRM, got {talker!r}")
     for f in fields:
-        if not isinstance(f, str) or any(c in f for c in "$*,\r\n") or not f.isascii() or not f.isprintable():
-            raise FrameError(f"command field must be printable ASCII without $ * , : got {f!r}")
-    body = ",".join((talker, *fields)).encode("ascii")
-    line = b"$%s*%02X\r\n" % (body, checksum(body))
-    if len(line) > MAX_LINE_BYTES:
-        raise FrameError(
-            f"command is {len(line)} bytes, longer than the {MAX_LINE_BYTES} bytes a decoder keeps"
-        )
-    return line
+        _check_field(f, "command field")
+    return _line(",".join((talker, *fields)))
 
 
 @dataclass(frozen=True)
@@ -188,6 +278,29 @@ class QrfFrame:
 
 
 @dataclass(frozen=True)
+class QrmMeasurement:
+    """A decoded ``$QRM`` answer: the mean pose and its deviations (mm, degrees), or None when empty."""
+
+    seq: int
+    t_ms: int
+    position_mm: tuple[float, float, float] | None
+    angles_deg: tuple[float, float, float] | None
+    std_position_mm: tuple[float, float, float] | None
+    std_angles_deg: tuple[float, float, float] | None
+    n_used: int | None
+    status: str
+
+
+@dataclass(frozen=True)
+class QraAnswer:
+    """A decoded ``$QRA`` answer: the command answered, OK or ERR, and the reason of an ERR."""
+
+    command: str
+    result: str
+    reason: str = ""
+
+
+@dataclass(frozen=True)
 class ControllerCommand:
     """A decoded line from the controller: ``$TALKER,fields...*CS`` (checksum verified)."""
 
@@ -195,12 +308,17 @@ class ControllerCommand:
     fields: tuple[str, ...]
 
 
+#: What the decoder returns for one good line.
+Decoded = QrfFrame | QrmMeasurement | QraAnswer | ControllerCommand
+
+
 @dataclass
 class DecoderCounters:
     """What the decoder saw besides good lines. Every byte received ends up in exactly one place."""
 
     frames: int = 0  # good $QRF frames
-    commands: int = 0  # good controller lines
+    answers: int = 0  # good $QRA and $QRM answers
+    commands: int = 0  # good lines of other talkers (the controller's commands)
     bad_checksum: int = 0  # complete line whose checksum does not match
     truncated: int = 0  # line cut short: no '*CS' before its end, or a new '$' began inside it
     malformed: int = 0  # checksum right but content wrong (field count, numbers, status, talker)
@@ -250,8 +368,8 @@ class FrameDecoder:
     def _garbage(self, chunk: bytes) -> None:
         self.counters.garbage_bytes += len(chunk) - chunk.count(b"\r") - chunk.count(b"\n")
 
-    def feed(self, data: bytes | bytearray | memoryview) -> list[QrfFrame | ControllerCommand]:
-        out: list[QrfFrame | ControllerCommand] = []
+    def feed(self, data: bytes | bytearray | memoryview) -> list[Decoded]:
+        out: list[Decoded] = []
         if not isinstance(data, (bytes, bytearray, memoryview)):  # never raise, whatever it is
             self._note(f"ignored non-bytes input {type(data).__name__}")
             return out
@@ -276,7 +394,7 @@ class FrameDecoder:
             ends = [k for k in (newline, dollar) if k >= 0]
             end = min(ends) if ends else n
             chunk = data[i:end]
-            if len(self._line) + len(chunk) > self.max_line:
+            if len(self._line) + len(chunk) + 1 > self.max_line:  # + 1: the LF that ends it
                 self.counters.overlong += 1
                 self._note(f"line longer than {self.max_line} bytes dropped")
                 self._garbage(bytes(self._line) + chunk)
@@ -299,7 +417,7 @@ class FrameDecoder:
                 out.append(item)
         return out
 
-    def _decode_line(self, line: bytes) -> QrfFrame | ControllerCommand | None:
+    def _decode_line(self, line: bytes) -> Decoded | None:
         star = line.rfind(b"*")
         if star < 0 or len(line) - star - 1 < 2:
             self.counters.truncated += 1
@@ -325,9 +443,13 @@ class FrameDecoder:
             if not text.isprintable():
                 raise ValueError("non-printable characters")
             parts = text.split(",")
+            item: Decoded
             if parts[0] == "QRF":
-                item: QrfFrame | ControllerCommand = _parse_qrf(parts)
+                item = _parse_qrf(parts)
                 self.counters.frames += 1
+            elif parts[0] in (ANSWER_TALKER, MEASUREMENT_TALKER):
+                item = _parse_qra(parts) if parts[0] == ANSWER_TALKER else _parse_qrm(parts)
+                self.counters.answers += 1
             else:
                 if not _TALKER.fullmatch(parts[0].encode("ascii")):
                     raise ValueError(f"talker {parts[0]!r} is not 1-8 characters A-Z/0-9")
@@ -350,25 +472,57 @@ def _parse_qrf(parts: list[str]) -> QrfFrame:
     if len(parts) != 10:
         raise ValueError(f"QRF frame has {len(parts)} fields, expected 10")
     _, seq_text, t_text, *pose_text, status = parts
+    _parse_seq_t(seq_text, t_text)
+    if status not in STATUSES:
+        raise ValueError(f"status {status!r} is not one of {', '.join(STATUSES)}")
+    empty = all(p == "" for p in pose_text)
+    if empty and status not in POSE_STATUSES:
+        return QrfFrame(int(seq_text), int(t_text), None, None, status)
+    if status in EMPTY_STATUSES:
+        raise ValueError(f"status {status} must have empty pose fields")
+    values = _parse_numbers(pose_text, ("x", "y", "z", "alpha", "beta", "gamma"))
+    return QrfFrame(int(seq_text), int(t_text), values[:3], values[3:], status)  # type: ignore[arg-type]
+
+
+def _parse_numbers(texts: Sequence[str], names: Sequence[str]) -> tuple[float, ...]:
+    values = tuple(_parse_number(p, name) for p, name in zip(texts, names, strict=True))
+    if not all(math.isfinite(v) for v in values):
+        raise ValueError("values must be finite")
+    return values
+
+
+def _parse_qra(parts: list[str]) -> QraAnswer:
+    if len(parts) == 3 and parts[2] == "OK":
+        return QraAnswer(parts[1], "OK")
+    if len(parts) == 4 and parts[2] == "ERR" and len(parts[3].encode()) <= MAX_REASON_BYTES:
+        return QraAnswer(parts[1], "ERR", parts[3])
+    raise ValueError("QRA answer is not <command>,OK or <command>,ERR,<reason of at most 40 bytes>")
+
+
+def _parse_qrm(parts: list[str]) -> QrmMeasurement:
+    if len(parts) != 17:
+        raise ValueError(f"QRM answer has {len(parts)} fields, expected 17")
+    _, seq_text, t_text, *numbers, n_text, status = parts
+    seq, t_ms = _parse_seq_t(seq_text, t_text)
+    if status not in MEAS_STATUSES:
+        raise ValueError(f"measurement status {status!r} is not one of {', '.join(MEAS_STATUSES)}")
+    if status not in POSE_STATUSES:
+        if any(numbers) or n_text:
+            raise ValueError(f"status {status} must have empty number fields")
+        return QrmMeasurement(seq, t_ms, None, None, None, None, None, status)
+    names = ("x", "y", "z", "alpha", "beta", "gamma", "sx", "sy", "sz", "salpha", "sbeta", "sgamma")
+    values = _parse_numbers(numbers, names)
+    if not _UINT.fullmatch(n_text) or not 1 <= int(n_text) <= 100:
+        raise ValueError(f"n_used {n_text!r} is not in 1..100")
+    if min(values[6:]) < 0:
+        raise ValueError("standard deviations must be >= 0")
+    v = values
+    return QrmMeasurement(seq, t_ms, v[0:3], v[3:6], v[6:9], v[9:12], int(n_text), status)  # type: ignore[arg-type]
+
+
+def _parse_seq_t(seq_text: str, t_text: str) -> tuple[int, int]:
     if not _UINT.fullmatch(seq_text) or int(seq_text) >= SEQ_MODULUS:
         raise ValueError(f"seq {seq_text!r} is not in 0..65535")
     if not _UINT.fullmatch(t_text) or int(t_text) >= T_MS_MODULUS:
         raise ValueError(f"t_ms {t_text!r} is not in 0..{T_MS_MODULUS - 1}")
-    if status not in STATUSES:
-        raise ValueError(f"status {status!r} is not one of {', '.join(STATUSES)}")
-    empty = all(p == "" for p in pose_text)
-    if empty and status != "OK":
-        return QrfFrame(int(seq_text), int(t_text), None, None, status)
-    if status in ("NOQR", "NOCONV"):
-        raise ValueError(f"status {status} must have empty pose fields")
-    names = ("x", "y", "z", "alpha", "beta", "gamma")
-    values = [_parse_number(p, name) for p, name in zip(pose_text, names, strict=True)]
-    if not all(math.isfinite(v) for v in values):
-        raise ValueError("pose values must be finite")
-    return QrfFrame(
-        int(seq_text),
-        int(t_text),
-        (values[0], values[1], values[2]),
-        (values[3], values[4], values[5]),
-        status,
-    )
+    return int(seq_text), int(t_text)

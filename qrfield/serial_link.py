@@ -1,6 +1,11 @@
 """The serial link: streams pose frames from its own thread; the frame loop never blocks.
 
-The frame loop calls :meth:`SerialLink.publish` (mm and degrees, see :mod:`qrfield.serial_frames`).
+The frame loop calls :meth:`SerialLink.publish` (mm and degrees, see :mod:`qrfield.serial_frames`),
+and :meth:`SerialLink.set_source_down` while it has no camera frames: the link then writes a NOSRC
+frame every :data:`NOSRC_INTERVAL_S` from its own thread, so the controller can tell "no camera" from
+"cable cut" even while opening a camera blocks the frame loop. Answers to the controller's commands
+(:mod:`qrfield.serial_controller`) go out through :meth:`SerialLink.send_line`, ahead of any pose;
+:meth:`SerialLink.set_streaming` starts and stops the $QRF lines (``$QRC,STREAM,OFF``).
 The pose goes into a one-slot mailbox: a newer pose replaces one not yet written (counted in
 ``frames_dropped``), so the queue can never grow and the controller always gets the newest pose.
 The link's thread owns the port: it writes at most ``max_rate_hz`` frames per second, numbers them
@@ -34,15 +39,20 @@ from qrfield.serial_frames import (  # re-exported: one import gives the whole s
     STATUSES,
     T_MS_MODULUS,
     ControllerCommand,
+    Decoded,
     DecoderCounters,
     FrameDecoder,
     FrameError,
     PoseValueError,
+    QraAnswer,
     QrfFrame,
+    QrmMeasurement,
     check_pose_fields,
     checksum,
+    encode_answer,
     encode_command,
     encode_frame,
+    encode_measurement,
 )
 from qrfield.settings import setting, validated
 
@@ -67,12 +77,16 @@ __all__ = [
     "LinkStatus",
     "PortInfo",
     "PoseValueError",
+    "QraAnswer",
     "QrfFrame",
+    "QrmMeasurement",
     "SerialLink",
     "SerialLinkSettings",
     "checksum",
+    "encode_answer",
     "encode_command",
     "encode_frame",
+    "encode_measurement",
     "list_ports",
     "open_pyserial",
     "publish_result",
@@ -82,6 +96,10 @@ __all__ = [
 #: Pipeline status (qrfield.pipeline) -> serial frame status (docs/conventions.md):
 #: an ERROR frame has no pose, which the controller must treat like a pose that did not converge.
 PIPELINE_TO_SERIAL_STATUS = {"OK": "OK", "NOQR": "NOQR", "NOCONV": "NOCONV", "ERROR": "NOCONV"}
+#: While the source is down, a NOSRC frame goes out this often, s (docs/conventions.md: >= 1/s).
+NOSRC_INTERVAL_S = 0.5
+#: Answers waiting to be written at most; an older one is dropped when a controller floods us.
+MAX_ANSWERS = 16
 
 
 @dataclass(frozen=True)
@@ -147,6 +165,10 @@ class LinkStatus:
     reconnects: int = 0
     received: dict[str, int] = field(default_factory=dict)  # the decoder's counters for incoming bytes
     last_sent: str = ""  # the last frame written, without CR LF
+    ever_connected: bool = False  # the port was opened at least once
+    answers_sent: int = 0  # $QRA / $QRM lines written
+    streaming: bool = True  # $QRF lines go out (the controller may send STREAM,OFF)
+    source_down: bool = False  # NOSRC frames are being sent
 
     def summary(self) -> str:
         """One line for a status bar or a headless log."""
@@ -226,9 +248,10 @@ class SerialLink:
     """Stream pose frames to a serial port from a background thread (see the module docstring).
 
     on_status(LinkStatus) is called from the link's thread on every state change and error;
-    on_receive(item) for every decoded QrfFrame or ControllerCommand read from the port (over
-    ``loop://`` these are the link's own frames coming back). Callbacks must be quick; a Qt app
-    forwards them by signal. on_sent(frame_bytes, seconds_since_publish) after each frame written.
+    on_receive(item) for every line decoded from the port (a ControllerCommand; over ``loop://``
+    also the link's own frames and answers coming back). on_tick() about every POLL_S while the
+    port is open (command timeouts). Callbacks must be quick; a Qt app forwards them by signal.
+    on_sent(frame_bytes, seconds_since_publish) after each frame written.
     ``opener`` makes a port from the settings (default: pyserial; tests pass fakes).
     ``first_seq`` is the seq of the first frame written.
     """
@@ -240,10 +263,11 @@ class SerialLink:
         settings: SerialLinkSettings,
         *,
         on_status: Callable[[LinkStatus], None] | None = None,
-        on_receive: Callable[[QrfFrame | ControllerCommand], None] | None = None,
+        on_receive: Callable[[Decoded], None] | None = None,
         on_sent: Callable[[bytes, float], None] | None = None,
         opener: Callable[[SerialLinkSettings], PortLike] | None = None,
         first_seq: int = 0,
+        on_tick: Callable[[], None] | None = None,
     ) -> None:
         self.settings = validated(settings)
         if not self.settings.port:
@@ -253,7 +277,14 @@ class SerialLink:
         self._on_status = on_status
         self._on_receive = on_receive
         self._on_sent = on_sent
+        self._on_tick = on_tick
         self._opener = opener or open_pyserial
+        self._answers: list[bytes] = []
+        self._streaming = True
+        self._source_down = False
+        self._nosrc_due = 0.0
+        self._clock: tuple[int, float] | None = None  # (t_ms, monotonic s) of the last publish
+        self._ever_connected = False
         self._seq = first_seq
         self._lock = threading.Condition()
         self._pending: _Pending | None = None
@@ -264,7 +295,13 @@ class SerialLink:
         self._decoder = FrameDecoder()
         self._t0 = time.monotonic()
         self._state = CONNECTING
-        self._counts = {"frames_sent": 0, "frames_dropped": 0, "errors": 0, "reconnects": 0}
+        self._counts = {
+            "frames_sent": 0,
+            "frames_dropped": 0,
+            "errors": 0,
+            "reconnects": 0,
+            "answers_sent": 0,
+        }
         self._last_error = ""
         self._last_sent = ""
 
@@ -325,11 +362,49 @@ class SerialLink:
         with self._lock:
             if self._stop:
                 return False
+            self._clock = (t, time.monotonic())
+            if not self._streaming:
+                return True  # the controller asked for no $QRF lines
             if self._pending is not None:
                 self._counts["frames_dropped"] += 1
             self._pending = item
             self._lock.notify()
         return True
+
+    def send_line(self, line: bytes) -> bool:
+        """Write one complete line (an answer to the controller) as soon as the port allows, ahead
+        of any pose; never blocks. False once the link is closed."""
+        with self._lock:
+            if self._stop:
+                return False
+            self._answers = [*self._answers[-(MAX_ANSWERS - 1) :], bytes(line)]
+            self._lock.notify()
+        return True
+
+    def set_streaming(self, on: bool) -> None:
+        """Start or stop the $QRF lines (poses, STALE and NOSRC alike); answers still go out."""
+        with self._lock:
+            self._streaming = bool(on)
+            if not on:
+                self._pending = None
+                self._last_frame = None  # nothing to repeat as STALE once the stream resumes
+            self._lock.notify()
+
+    def set_source_down(self, down: bool) -> None:
+        """``down``: the frame loop has no camera frames; NOSRC goes out every NOSRC_INTERVAL_S,
+        the first one at once, until the source is up again."""
+        with self._lock:
+            if down and not self._source_down:
+                self._nosrc_due = 0.0
+            self._source_down = bool(down)
+            self._lock.notify()
+
+    def _now_t_ms(self) -> int:
+        """The stream's clock now: the last published t_ms plus the time since, else our own clock."""
+        if self._clock is None:
+            return self.stream_time_ms()
+        t_ms, at = self._clock
+        return int(t_ms + (time.monotonic() - at) * 1000.0) % T_MS_MODULUS
 
     def status(self) -> LinkStatus:
         """A consistent snapshot of state and counters."""
@@ -369,6 +444,9 @@ class SerialLink:
             pending=0 if self._pending is None else 1,
             received=self._decoder.counters.as_dict(),
             last_sent=self._last_sent,
+            ever_connected=self._ever_connected,
+            streaming=self._streaming,
+            source_down=self._source_down,
             **self._counts,
         )
 
@@ -409,6 +487,8 @@ class SerialLink:
             self._error(f"cannot open {self.settings.port}: {exc}")
             return False
         self._decoder.discard_partial()  # a line cut by the reconnect must not join the next one
+        with self._lock:
+            self._ever_connected = True
         self._set_state(CONNECTED)
         return True
 
@@ -453,16 +533,27 @@ class SerialLink:
                     # not (a run that stops right after its last frame must not lose that pose).
                     item, self._pending = self._pending, None
             if stopping:
+                self._write_answers()
                 if item is not None:
                     self._write(item, False)  # once: a failed write is not retried while closing
                 break
+            self._write_answers()
+            if self._port is None:  # lost while answering
+                next_open = time.monotonic() + self.settings.reconnect_interval_s
+                continue
             with self._lock:
                 now = time.monotonic()
+                down = self._source_down and self._streaming
                 stale_due = (
-                    last_sent + stale_after if stale_after > 0 and self._last_frame is not None else None
+                    last_sent + stale_after
+                    if stale_after > 0 and self._last_frame is not None and not down
+                    else None
                 )
                 if self._pending is not None and now >= next_send:
                     item, self._pending = self._pending, None
+                elif down and self._pending is None and now >= self._nosrc_due:
+                    item = _Pending(self._now_t_ms(), None, None, "NOSRC", time.perf_counter())
+                    self._nosrc_due = now + NOSRC_INTERVAL_S
                 elif self._pending is None and stale_due is not None and now >= max(stale_due, next_send):
                     item, is_stale = self._last_frame, True
                 else:
@@ -479,8 +570,31 @@ class SerialLink:
             self._read_incoming()
             if self._port is None:
                 next_open = time.monotonic() + self.settings.reconnect_interval_s
+            elif self._on_tick is not None:
+                try:
+                    self._on_tick()
+                except Exception as exc:  # a faulty callback must not stop the link
+                    self._error(f"tick callback failed: {exc!r}", notify=False)
         self._close_port()
         self._set_state(CLOSED)
+
+    def _write_answers(self) -> None:
+        """Write the waiting answers, oldest first (a lost port keeps the rest for the next one)."""
+        while self._port is not None:
+            with self._lock:
+                if not self._answers:
+                    return
+                line = self._answers.pop(0)
+            try:
+                self._port.write(line)
+            except Exception as exc:
+                if _is_write_timeout(exc):
+                    self._error(f"answer to the controller timed out: {exc!r}")
+                    continue
+                self._lose_port(exc, "writing to")
+                return
+            with self._lock:
+                self._counts["answers_sent"] += 1
 
     def _write(self, item: _Pending, is_stale: bool) -> None:
         try:
@@ -536,17 +650,18 @@ class SerialLink:
                     self._error(f"receive callback failed: {exc!r}", notify=False)
 
 
-def publish_result(link: SerialLink, result: object) -> bool:
+def publish_result(link: SerialLink, result: object, simulated: bool = True) -> bool:
     """Hand one pipeline result (:class:`qrfield.pipeline.FrameResult`) to ``link``; never blocks.
 
     Maps the pipeline's status with :data:`PIPELINE_TO_SERIAL_STATUS` (ERROR and unknown statuses go
-    out as NOCONV, pose fields empty); an OK frame carries its first method's position (mm) and angles
-    (degrees). Shared by ``qrfield run --serial`` and the app's serial panel. Returns what
-    :meth:`SerialLink.publish` returns (False once the link is closed).
+    out as NOCONV, pose fields empty); a pose carries its first method's position (mm) and angles
+    (degrees), as OK only when ``simulated`` is False (the frame came from a live camera:
+    :func:`qrfield.sources.is_live_camera`), else as SIM. Returns what :meth:`SerialLink.publish`
+    returns (False once the link is closed).
     """
     status = PIPELINE_TO_SERIAL_STATUS.get(getattr(result, "status", ""), "NOCONV")
     pose = getattr(result, "primary", None) if status == "OK" else None
     t_ms = getattr(result, "t_ms", None)
     if pose is None:
         return link.publish(t_ms, None, None, "NOQR" if status == "NOQR" else "NOCONV")
-    return link.publish(t_ms, pose.position_mm, pose.angles_deg, "OK")
+    return link.publish(t_ms, pose.position_mm, pose.angles_deg, "SIM" if simulated else "OK")

@@ -184,9 +184,14 @@ def from_dict(cls: type[T], data: dict[str, Any] | None, *, strict: bool = True)
     return cls(**values)
 
 
-def add_arguments(parser: argparse.ArgumentParser, cls: type, prefix: str = "") -> None:
-    """Add one ``--PREFIX-NAME`` option per setting (default None = keep the declared default)."""
+def add_arguments(
+    parser: argparse.ArgumentParser | Any, cls: type, prefix: str = "", skip: tuple[str, ...] = ()
+) -> None:
+    """Add one ``--PREFIX-NAME`` option per setting but those in ``skip`` (default None = keep the
+    declared default). A true/false setting alone means true: ``--loop`` = ``--loop true``."""
     for spec in specs(cls):
+        if spec.name in skip:
+            continue
         option = "--" + (prefix + spec.name).replace("_", "-")
         kwargs: dict[str, Any] = {
             "default": None,
@@ -196,6 +201,8 @@ def add_arguments(parser: argparse.ArgumentParser, cls: type, prefix: str = "") 
         if spec.type is bool:
             kwargs["type"] = lambda text, spec=spec: spec.validate(text)
             kwargs["metavar"] = "true|false"
+            kwargs["nargs"] = "?"
+            kwargs["const"] = True
         elif spec.choices:
             kwargs["choices"] = spec.choices
         else:

@@ -3,6 +3,7 @@ a synthetic round trip through a known camera with distortion; skipped views; co
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 from pathlib import Path
@@ -391,3 +392,40 @@ def test_advice_names_the_outlier_view_and_empty_cells() -> None:
     expected_missing = uncovered_cells(coverage_grid([d.corners_px for d in detections], TRUE_CAMERA.size))
     assert bool(expected_missing) == any("no view reached" in a for a in advice)
     assert result.to_json()["advice"] == advice
+
+
+def test_a_calibration_saves_the_sensor_geometry_of_the_stream_it_came_from() -> None:
+    """The views' stream (a picamera2 stream's model) gives the profile its sensor crop and focus."""
+    poses = _board_poses(TRUE_CAMERA, SYNTH_BOARD, 6, 5)
+    detections = [_exact_detection(p, f"pose {i}") for i, p in enumerate(poses)]
+    w, h = TRUE_CAMERA.size
+    stream = dataclasses.replace(
+        TRUE_CAMERA,
+        sensor_resolution=(4 * w, 4 * h),
+        sensor_crop=(w, h, 2 * w, 2 * h),
+        sensor_mode="test mode",
+        lens_position=2.5,
+        focal_length_mm=4.74,
+    )
+    camera = calibrate(detections, SYNTH_BOARD, stream=stream).camera
+    assert camera.sensor_crop == (w, h, 2 * w, 2 * h) and camera.sensor_resolution == (4 * w, 4 * h)
+    assert (camera.sensor_mode, camera.lens_position, camera.focal_length_mm) == ("test mode", 2.5, 4.74)
+    assert f"sensor crop ({w}, {h})/{2 * w}x{2 * h}" in camera.notes and "2.5 dioptres" in camera.notes
+    other_size = dataclasses.replace(stream, width=w // 2, height=h // 2, cx=10.0, cy=10.0)
+    assert calibrate(detections, SYNTH_BOARD, stream=other_size).camera.sensor_crop is None
+
+
+def test_cli_records_the_sensor_crop_and_lens_position(
+    image_files: list[str], tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    out = tmp_path / "pi.json"
+    geometry = ["--sensor-crop", "0,2,3280,2460", "--sensor-resolution", "3280x2464", "--lens-position", "2"]
+    args = [*image_files, "--board", "9x6", "--square-mm", "25", "--out", str(out), *geometry]
+    assert main(["calibrate", *args]) == 0
+    data = json.loads(out.read_text())
+    assert data["sensor_crop"] == [0, 2, 3280, 2460] and data["sensor_resolution"] == [3280, 2464]
+    assert data["lens_position"] == 2.0
+    capsys.readouterr()
+    bad = [*image_files[:3], "--board", "9x6", "--square-mm", "25", "--out", str(tmp_path / "x.json")]
+    assert main(["calibrate", *bad, "--sensor-crop", "0,2,3280"]) == 2
+    assert "'sensor_crop' must be a list of 4 whole numbers" in capsys.readouterr().err

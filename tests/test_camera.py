@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -10,6 +11,8 @@ import numpy as np
 import pytest
 
 from qrfield.camera import CameraModel, CameraModelError, camera_origin, preset_names, resolve_camera
+from qrfield.geometry import Pose
+from qrfield.render import render_view
 
 
 def test_presets_match_their_datasheet_formula():
@@ -162,3 +165,99 @@ def test_a_path_with_an_at_sign_is_a_file_not_a_size(tmp_path):
     CameraModel.from_focal(600.0, 640, 480).save(folder / "cam.json")
     assert resolve_camera(str(folder / "cam.json")).fx == 600.0
     assert resolve_camera(str(folder / "cam.json") + "@320x240").fx == pytest.approx(300.0)
+
+
+# ---------------------------------------------------------------------- camera models follow the stream
+
+
+def test_through_crop_matches_hand_computed_values():
+    # docs/conventions.md: f_out = f * out_w / crop_w; c_out = (c - crop_x + 0.5) * out_w / crop_w - 0.5.
+    sensor = CameraModel(1000.0, 1100.0, 400.0, 300.0, 800, 600, sensor_crop=(0, 0, 800, 600))
+    small = sensor.through_crop((100, 50, 400, 300), (200, 150))
+    assert (small.fx, small.fy) == (500.0, 550.0)  # 1000 * 200 / 400, 1100 * 150 / 300
+    assert (small.cx, small.cy) == (149.75, 124.75)  # (400 - 100 + 0.5) / 2 - 0.5, (300 - 50 + 0.5) / 2 - 0.5
+    assert small.size == (200, 150) and small.sensor_crop == (100, 50, 400, 300)
+    # The IMX219's cropped 640x480 mode: the centre 1280x960 of picam-v2, f 2714.286 / 2.
+    vga = resolve_camera("picam-v2").through_crop((1000, 752, 1280, 960), (640, 480))
+    assert vga.fx == pytest.approx(1357.143, abs=1e-3) and (vga.cx, vga.cy) == (319.5, 239.5)
+
+
+def test_a_model_of_a_crop_maps_through_another_crop_as_the_full_sensor_does():
+    sensor = CameraModel(1000.0, 1100.0, 400.0, 300.0, 800, 600, sensor_crop=(0, 0, 800, 600))
+    small = sensor.through_crop((100, 50, 400, 300), (200, 150))
+    # From the crop's own model, mapped through (300, 200)/200x150 to 100x75, by hand from the
+    # full sensor: f 1000 * 100 / 200 = 500, c (400 - 300 + 0.5) / 2 - 0.5 = 49.75.
+    again = small.through_crop((300, 200, 200, 150), (100, 75))
+    assert np.allclose(again.K, [[500, 0, 49.75], [0, 550, 49.75], [0, 0, 1]])
+    back = small.through_crop((0, 0, 800, 600), (800, 600))
+    assert np.allclose(back.K, sensor.K)
+
+
+def test_through_crop_agrees_with_the_sensor_image_cropped_and_binned_by_opencv():
+    # Independent truth: render the whole sensor, crop it and average 2x2 pixels (OpenCV INTER_AREA,
+    # what binning does); the model through_crop gives must render the same image.
+    sensor = CameraModel(800.0, 800.0, 319.5, 239.5, 640, 480, sensor_crop=(0, 0, 640, 480))
+    pose = Pose([12.0, -8.0, 250.0], [20.0, -15.0, 30.0])
+    whole = render_view(sensor, 40.0, pose, supersample=4).image.astype(float)
+    x, y, w, h = crop = (96, 64, 384, 288)
+    binned = cv2.resize(whole[y : y + h, x : x + w], (192, 144), interpolation=cv2.INTER_AREA)
+    model = sensor.through_crop(crop, (192, 144))
+    rendered = render_view(model, 40.0, pose, supersample=4).image.astype(float)
+    off = dataclasses.replace(model, cx=model.cx + 0.25)  # a quarter-pixel error is plain to see
+    off_rendered = render_view(off, 40.0, pose, supersample=4).image.astype(float)
+    assert np.abs(rendered - binned).mean() < 0.2 < 1.0 < np.abs(off_rendered - binned).mean()
+
+
+def test_through_crop_refuses_a_model_that_does_not_say_its_sensor_crop():
+    with pytest.raises(CameraModelError, match=r"no 'sensor_crop'.*sensor crop \(0, 2\)/3280x2460"):
+        CameraModel.from_focal(530.0, 640, 480).through_crop((0, 2, 3280, 2460), (640, 480))
+    with pytest.raises(CameraModelError, match="reaches outside the 3280x2464 sensor"):
+        resolve_camera("picam-v2").through_crop((2000, 0, 1640, 1232), (640, 480))
+
+
+def test_presets_state_the_whole_sensor_and_scaling_keeps_it():
+    for name in ("picam-v1", "picam-v2", "picam-v3", "picam-hq-6mm"):
+        cam = resolve_camera(name)
+        assert cam.sensor_crop == (0, 0, cam.width, cam.height) and cam.sensor_resolution == cam.size
+    assert resolve_camera("picam-v2@640x480").sensor_crop == (0, 0, 3280, 2464)
+    assert resolve_camera("webcam-60").sensor_crop is None  # a webcam's sensor geometry is unknown
+
+
+def test_sensor_fields_round_trip_through_json_and_bad_ones_name_the_field(tmp_path):
+    cam = resolve_camera("picam-v3").through_crop(
+        (576, 0, 3456, 2592), (640, 480), sensor_mode="2304x1296 10-bit"
+    )
+    cam = dataclasses.replace(cam, lens_position=2.5)
+    path = tmp_path / "cam.json"
+    cam.save(path)
+    data = json.loads(path.read_text())
+    assert data["sensor_crop"] == [576, 0, 3456, 2592] and data["sensor_mode"] == "2304x1296 10-bit"
+    assert data["lens_position"] == 2.5 and data["sensor_resolution"] == [4608, 2592]
+    assert CameraModel.load(path) == cam
+    for key, value, message in [
+        ("sensor_crop", [0, 0, 100], "'sensor_crop' must be a list of 4 whole numbers"),
+        ("sensor_crop", [0, 0, 5000, 2592], r"sensor crop \(0, 0\)/5000x2592 reaches outside"),
+        ("sensor_crop", [0, 0, 1.5, 2], "whole numbers"),
+        ("lens_position", -1, "'lens_position' must be positive"),
+        ("lens_position", "near", "'lens_position' must be a number"),
+        ("sensor_mode", 7, "'sensor_mode' must be text"),
+    ]:
+        path.write_text(json.dumps({**data, key: value}))
+        with pytest.raises(CameraModelError, match=message) as info:
+            CameraModel.load(path)
+        assert str(path) in str(info.value)
+
+
+def test_a_datasheet_model_follows_the_focus_by_the_thin_lens_equation():
+    # picam-v3: f = 4.74 mm, taken at infinity focus. At 3 dioptres (33 cm) the lens sits at
+    # v = 1 / (1/4.74 - 3/1000) = 4.808 mm, so the focal lengths in pixels grow by v / f.
+    near, text = resolve_camera("picam-v3").at_lens_position(3.0)
+    expected = 1 / (1 / 4.74 - 0.003) / 4.74
+    assert near.fx == pytest.approx(3385.714 * expected, abs=1e-3) and near.lens_position == 3.0
+    assert "datasheet model" in text and f"{expected:.5f}" in text
+    calibrated = dataclasses.replace(resolve_camera("picam-v3"), lens_position=3.0)
+    same, text = calibrated.at_lens_position(3.0)
+    assert same.fx == calibrated.fx and "holds at" in text
+    unknown = dataclasses.replace(calibrated, focal_length_mm=None)
+    kept, text = unknown.at_lens_position(5.0)
+    assert kept.fx == calibrated.fx and "differs from the 3 dioptres" in text

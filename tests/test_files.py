@@ -230,7 +230,7 @@ def test_settings_file_missing_good_wrong_type_and_unmovable(tmp_path, monkeypat
 
 
 def test_atomic_write_json_is_what_a_config_store_saves(tmp_path):
-    # How ui/config.py's ConfigStore.save should write app.json (docs/cli.md; the lead wires it).
+    # How qrfield.runconfig.ConfigStore.save writes app.json (docs/cli.md; tests/test_runconfig.py).
     from qrfield.files import atomic_write_json
 
     path = tmp_path / "app.json"

@@ -12,8 +12,10 @@ import numpy as np
 import pytest
 
 from qrfield.camera import resolve_camera
+from qrfield.detect import DetectorSettings
 from qrfield.geometry import Pose, angle_difference
-from qrfield.pipeline import ERROR, METHODS, NOCONV, NOQR, OK, POSE_JSON_KEYS, Pipeline, methods_from_choice
+from qrfield.methods import METHODS, methods_from_choice
+from qrfield.pipeline import ERROR, NOCONV, NOQR, OK, POSE_JSON_KEYS, Pipeline
 from qrfield.sources import Frame, VirtualBenchSettings, VirtualBenchSource
 
 
@@ -21,6 +23,7 @@ from qrfield.sources import Frame, VirtualBenchSettings, VirtualBenchSource
 class FakeDetection:
     corners_px: np.ndarray
     text: str = "qrfield"
+    corners_cov: np.ndarray | None = None
 
 
 @dataclass
@@ -69,7 +72,7 @@ def frame(index: int = 0, t: float = 100.0, size: tuple[int, int] = (640, 480)) 
     return Frame(np.zeros(size[::-1], np.uint8), t, index)
 
 
-def ok_solve(corners, camera, side_mm, method, settings=None) -> FakeResult:
+def ok_solve(corners, camera, side_mm, method, settings=None, corners_cov=None) -> FakeResult:
     return FakeResult(method)
 
 
@@ -82,7 +85,9 @@ def test_no_code_is_noqr_with_null_pose_fields() -> None:
 
 
 def test_select_text_that_matches_nothing_is_noqr() -> None:
-    pipeline = make_pipeline([FakeDetection(CORNERS, "other")], ok_solve, select_text="gripper")
+    pipeline = make_pipeline(
+        [FakeDetection(CORNERS, "other")], ok_solve, detector_settings=DetectorSettings(select_text="gripper")
+    )
     result = pipeline.process(frame())
     assert result.status == NOQR and "none with the text 'gripper'" in result.reason
 
@@ -90,7 +95,7 @@ def test_select_text_that_matches_nothing_is_noqr() -> None:
 def test_ok_frame_runs_every_method_in_order_and_times_from_the_first_frame() -> None:
     calls = []
 
-    def solve(corners, camera, side_mm, method, settings=None):
+    def solve(corners, camera, side_mm, method, settings=None, corners_cov=None):
         calls.append((method, settings, side_mm))
         assert np.array_equal(corners, CORNERS)
         return FakeResult(method)
@@ -109,8 +114,37 @@ def test_ok_frame_runs_every_method_in_order_and_times_from_the_first_frame() ->
     assert data["text"] == "qrfield" and data["frame"] == 1
 
 
+def test_the_detections_corner_covariance_reaches_the_solvers_and_the_json_line() -> None:
+    """The pipeline hands Detection.corners_cov to every method; with the real solvers the JSON line
+    then carries finite stds and the flip flag, and nulls when the detection has no covariance."""
+    from qrfield.solvers import solve as real_solve
+
+    camera = resolve_camera("picam-v2@640x480")
+    truth = Pose([20.0, -10.0, 300.0], [15.0, -10.0, 30.0])
+    corners = truth.corners_px(camera, 50.0)
+    cov = np.zeros((4, 2, 2))
+    cov[:, 0, 0] = cov[:, 1, 1] = 0.1**2
+    seen = []
+
+    def solve(*args, **kwargs):
+        seen.append((kwargs["method"], kwargs["corners_cov"]))
+        return real_solve(*args, **kwargs)
+
+    for given in (cov, None):
+        pipeline = make_pipeline([FakeDetection(corners, corners_cov=given)], solve, methods=METHODS)
+        data = json.loads(json.dumps(pipeline.process(frame()).to_json_dict(), allow_nan=False))
+        assert [m for m, _ in seen[-2:]] == list(METHODS) and all(c is given for _, c in seen[-2:])
+        for entry in [data, *data["methods"].values()]:
+            assert entry["ambiguous"] is False  # a tilted code near the camera: no flip risk
+            if given is None:
+                assert entry["position_std_mm"] == [None] * 3 and entry["corners_std_px"] == [None] * 4
+            else:
+                assert all(0.0 < v < 2.0 for v in entry["position_std_mm"] + entry["angles_std_deg"])
+                assert entry["corners_std_px"] == pytest.approx([0.1 * math.sqrt(2.0)] * 4)
+
+
 def test_primary_not_converged_is_noconv_with_its_reason() -> None:
-    def solve(corners, camera, side_mm, method, settings=None):
+    def solve(corners, camera, side_mm, method, settings=None, corners_cov=None):
         return FakeResult(method, converged=method == "ippe", reason="n_max reached")
 
     result = make_pipeline([FakeDetection(CORNERS)], solve, methods=METHODS).process(frame())
@@ -119,7 +153,7 @@ def test_primary_not_converged_is_noconv_with_its_reason() -> None:
 
 
 def test_a_raising_solver_or_detector_is_a_status_never_an_exception() -> None:
-    def solve(corners, camera, side_mm, method, settings=None):
+    def solve(corners, camera, side_mm, method, settings=None, corners_cov=None):
         if method == "numerical":
             raise ValueError("corners are collinear")
         return FakeResult(method)
@@ -135,7 +169,7 @@ def test_a_raising_solver_or_detector_is_a_status_never_an_exception() -> None:
 def test_camera_is_rescaled_to_the_frame_or_reported_when_it_cannot_be() -> None:
     seen = []
 
-    def solve(corners, camera, side_mm, method, settings=None):
+    def solve(corners, camera, side_mm, method, settings=None, corners_cov=None):
         seen.append(camera)
         return FakeResult(method)
 

@@ -140,47 +140,61 @@ def test_no_display_says_how_to_run_headless() -> None:
     assert "PySide6" not in done.stderr
 
 
+# A picamera2 module on PYTHONPATH that is the stand-in (qrfield.sources.picamera_sim): the real
+# `--source picamera2` code path, a simulated camera behind it.
 FAKE_PICAMERA2 = """
-import json, os
-import numpy as np
-
-class Picamera2:
-    def __init__(self, num=0):
-        self.log = os.environ["FAKE_PICAMERA2_LOG"]
-    def create_video_configuration(self, main):
-        return {"main": main}
-    def configure(self, config):
-        self.size = config["main"]["size"]
-        with open(self.log, "a") as f:
-            f.write(json.dumps({"size": list(self.size)}) + "\\n")
-    def set_controls(self, controls):
-        with open(self.log, "a") as f:
-            f.write(json.dumps({"controls": controls}) + "\\n")
-    def start(self): pass
-    def capture_array(self, stream="main"):
-        return np.full((self.size[1], self.size[0], 3), 200, np.uint8)
-    def capture_metadata(self):
-        return {"ExposureTime": 8000, "AnalogueGain": 1.0}
-    def stop(self): pass
-    def close(self): pass
+import os
+from qrfield.sources.picamera_sim import picamera2_class
+from qrfield.sources.virtual import VirtualBenchSettings
+Picamera2 = picamera2_class(os.environ.get("SIM_SENSOR", "imx219"), VirtualBenchSettings(noise_sigma=1.0))
 """
 
 
-def test_picamera2_source_headless_with_a_fake_module(tmp_path: Path) -> None:
-    (tmp_path / "picamera2.py").write_text(FAKE_PICAMERA2)
-    log = tmp_path / "camera.log"
-    done = qrfield(
-        "run", "--source", "picamera2", "--frames", "3", "--json-lines", "--camera", "picam-v2@640x480",
-        "--picamera-width", "320", "--picamera-height", "240", "--picamera-settle-frames", "2",
-        PYTHONPATH=f"{REPO}{os.pathsep}{tmp_path}", FAKE_PICAMERA2_LOG=str(log),
-    )  # fmt: skip
+def z_of(done: subprocess.CompletedProcess) -> list[float]:
     assert done.returncode == 0, done.stderr
     lines = [json.loads(line) for line in done.stdout.splitlines()]
-    assert [line["status"] for line in lines] == ["NOQR"] * 3  # a blank grey picture has no code
-    events = [json.loads(line) for line in log.read_text().splitlines()]
-    assert events[0] == {"size": [320, 240]}
-    assert {"controls": {"AeEnable": False, "ExposureTime": 8000, "AnalogueGain": 1.0}} in events
-    assert "exposure locked at 8000 us" in done.stderr
+    assert [line["status"] for line in lines] == ["OK"] * len(lines) and lines, done.stdout
+    return [line["position_mm"][2] for line in lines]
+
+
+def test_picamera2_at_640x480_measures_a_card_at_300_mm_as_300_mm(tmp_path: Path) -> None:
+    # The issue's command, on the stand-in IMX219 as the picamera2 module.
+    (tmp_path / "picamera2.py").write_text(FAKE_PICAMERA2)
+    done = qrfield(
+        "run", "--headless", "--source", "picamera2", "--camera", "picam-v2@640x480",
+        "--picamera-width", "640", "--picamera-height", "480", "--side-mm", "50", "--frames", "3",
+        "--json-lines", "--picamera-settle-frames", "2", PYTHONPATH=f"{REPO}{os.pathsep}{tmp_path}",
+    )  # fmt: skip
+    assert np.allclose(z_of(done), 300.0, atol=5.0)
+    notes = done.stderr.splitlines()
+    # The first note names the mode and the crop; the next one the model derived from them.
+    assert (
+        "imx219 (picamera2, 640x480 from sensor mode 1640x1232 10-bit, ScalerCrop (0, 2)/3280x2460)"
+        in notes[0]
+    )
+    assert notes[1].startswith(
+        "qrfield run: camera model: 640x480 px, fx 529.6, fy 529.6, cx 319.5, cy 239.5"
+    )
+    assert "exposure locked at 10000 us" in done.stderr
+
+
+@pytest.mark.parametrize(
+    ("sensor", "camera", "size"),
+    [
+        ("imx219", "picam-v2", "1280x720"),
+        ("imx708", "picam-v3", "1536x864"),
+        ("imx708", "picam-v3", "640x480"),
+    ],
+)
+def test_the_simulated_pi_camera_measures_300_mm_at_other_sizes(sensor, camera, size) -> None:
+    width, height = size.split("x")
+    done = qrfield(
+        "run", "--headless", "--source", f"picamera2-sim:{sensor}", "--camera", camera,
+        "--picamera-width", width, "--picamera-height", height, "--side-mm", "50", "--frames", "2",
+        "--json-lines",
+    )  # fmt: skip
+    assert np.allclose(z_of(done), 300.0, atol=5.0)
+    assert done.stderr.startswith("qrfield run: source: SIMULATED Raspberry Pi camera 0")
 
 
 def test_picamera2_missing_is_one_clear_line(tmp_path: Path) -> None:
@@ -200,7 +214,7 @@ def xor_checksum(body: str) -> str:
     return f"{value:02X}"
 
 
-def test_serial_link_sends_each_pose_as_a_qrf_line(tmp_path: Path) -> None:
+def test_serial_link_sends_each_bench_pose_as_a_sim_qrf_line(tmp_path: Path) -> None:
     master, slave = os.openpty()
     os.set_blocking(master, False)
     try:
@@ -228,7 +242,7 @@ def test_serial_link_sends_each_pose_as_a_qrf_line(tmp_path: Path) -> None:
         body, checksum = frame[1:].split("*")
         assert frame[0] == "$" and checksum == xor_checksum(body)
         fields = body.split(",")
-        assert fields[0] == "QRF" and fields[-1] == "OK"
+        assert fields[0] == "QRF" and fields[-1] == "SIM"  # the virtual bench is never OK
         line = poses[int(fields[2])]  # t_ms ties each frame to the JSON line of the same capture
         x, y, z, a, b, g = map(float, fields[3:9])
         assert np.allclose([x, y, z], line["position_mm"], atol=0.051)

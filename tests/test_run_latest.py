@@ -72,9 +72,9 @@ def run_on(monkeypatch, capsys, source: FrameSource, frames: int) -> tuple[list[
     emitted_at: list[float] = []
     original_emit = run_cmd._json_line
 
-    def emit(result) -> None:
+    def emit(result) -> str:
         emitted_at.append(time.monotonic())
-        original_emit(result)
+        return original_emit(result)
 
     monkeypatch.setattr(sources, "open_source", fake_open)
     monkeypatch.setattr(run_cmd, "_json_line", emit)

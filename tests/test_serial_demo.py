@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -15,7 +16,7 @@ from qrfield.commands.serial_demo import demo_pose
 pytestmark = pytest.mark.timeout(30)
 
 
-def test_serial_demo_streams_ok_then_noqr_frames_to_a_pty(capsys):
+def test_serial_demo_streams_sim_then_noqr_frames_to_a_pty(capsys):
     master, slave = os.openpty()
     received = bytearray()
 
@@ -45,10 +46,54 @@ def test_serial_demo_streams_ok_then_noqr_frames_to_a_pty(capsys):
     for f in frames:
         if f["t_ms"] < 500:
             position, angles = demo_pose(f["t_ms"] / 1000.0)
-            assert f["status"] == "OK"
+            assert f["status"] == "SIM"  # made-up poses are never OK
             assert np.all(np.abs(np.array(f["pose"][:3]) - position) <= 0.05 + 1e-9)
             assert np.all(np.abs(np.array(f["pose"][3:]) - angles) <= 0.005 + 1e-9)
         else:
             assert f["status"] in ("NOQR", "STALE") and f["pose"] is None
-    assert {f["status"] for f in frames} >= {"OK", "NOQR"}
+    assert {f["status"] for f in frames} >= {"SIM", "NOQR"}
     assert "closed" in capsys.readouterr().err
+
+
+def test_serial_demo_answers_ping_and_meas_from_its_path(capsys):
+    from serial_truth import command_line, frames_and_answers
+
+    master, slave = os.openpty()
+    received = bytearray()
+    done = threading.Event()
+
+    def read() -> None:
+        while not done.is_set():
+            try:
+                data = os.read(master, 4096)
+            except OSError:
+                return
+            received.extend(data)
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    demo = threading.Thread(
+        target=main,
+        args=(["serial-demo", os.ttyname(slave), "--seconds", "3", "--fps", "40", "--noqr-every", "0"],),
+    )
+    demo.start()
+    try:
+        while b"$QRF" not in received:  # the link is up
+            time.sleep(0.02)
+        os.write(master, command_line("PING") + command_line("MEAS", "5"))
+        demo.join(20)
+    finally:
+        done.set()
+        os.close(slave)
+        os.close(master)
+        reader.join(5)
+    frames, answers = frames_and_answers(bytes(received))
+    assert answers[0] == {"type": "QRA", "command": "PING", "result": "OK"}
+    meas = answers[1]
+    assert meas["type"] == "QRM" and meas["status"] == "SIM" and meas["n_used"] == 5
+    # The mean of 5 poses of the path lies within the path's range over those 5 frames (1/8 s).
+    t = meas["t_ms"] / 1000.0
+    window = np.array([np.concatenate(demo_pose(t - k / 40.0)) for k in range(5)])
+    assert np.all(np.array(meas["pose"]) >= window.min(axis=0) - 0.06)
+    assert np.all(np.array(meas["pose"]) <= window.max(axis=0) + 0.06)
+    assert {f["status"] for f in frames} <= {"SIM", "STALE"}

@@ -96,3 +96,28 @@ def test_monitor_says_clearly_when_the_port_cannot_be_opened(tmp_path):
     assert result.returncode == 2
     assert f"cannot open serial port {missing}" in result.stderr.decode()
     assert "Traceback" not in result.stderr.decode()
+
+
+def test_monitor_sends_commands_and_stops_once_they_are_answered(pty_pair):
+    from serial_truth import command_line
+
+    master, slave_name = pty_pair
+    proc = start_monitor(slave_name, "--send", "PING", "--send", "MEAS,10", "--answers-only", "--json")
+    sent = b""
+    while sent.count(b"\r\n") < 2:
+        sent += os.read(master, 4096)
+    assert sent == command_line("PING") + command_line("MEAS", "10")  # the bytes docs/conventions.md gives
+    # A frame (not printed with --answers-only), then the two answers, checksums by hand:
+    # "QRA,PING,OK" XORs to 56; the $QRM line's checksum is the same rule's.
+    measurement = "QRM,0,5321,10.0,-5.0,300.0,15.04,-20.01,10.00,0.0,0.0,0.0,0.01,0.01,0.00,10,OK"
+    cs = 0
+    for byte in measurement.encode():
+        cs ^= byte
+    os.write(master, GOOD_NOQR + b"$QRA,PING,OK*56\r\n" + f"${measurement}*{cs:02X}\r\n".encode())
+    out, err = proc.communicate(timeout=15)
+    assert proc.returncode == 0, err.decode()
+    lines = [json.loads(line) for line in out.decode().splitlines()]
+    assert lines[0] == {"type": "answer", "command": "PING", "result": "OK", "reason": ""}
+    assert lines[1]["type"] == "measurement" and lines[1]["status"] == "OK" and lines[1]["n_used"] == 10
+    assert lines[1]["position_mm"] == [10.0, -5.0, 300.0] and lines[1]["std_angles_deg"] == [0.01, 0.01, 0.0]
+    assert len(lines) == 2 and "2 answers received" in err.decode()

@@ -144,3 +144,41 @@ def test_pipeline_frames_give_the_chosen_methods_result():
     assert row.average.position_mm[2] == pytest.approx(311.0)
     # Without a method, a pipeline frame's first method is used.
     assert average_frames(frames).position_mm[2] == pytest.approx(301.0)
+
+
+def test_sigma_is_the_mean_per_frame_uncertainty_and_std_the_frame_to_frame_spread():
+    """Two kinds of spread, by hand: std_* over the frames' values, sigma_* the mean of their own
+    reported stds (over the converged frames that report one; NaN where none does)."""
+    frames = [
+        {
+            "position_mm": [0, 0, 300],
+            "angles_deg": [0, 0, 0],
+            "converged": True,
+            "position_std_mm": [0.1, 0.2, 1.0],
+            "angles_std_deg": [0.5, 0.4, 0.1],
+        },
+        {
+            "position_mm": [0, 0, 302],
+            "angles_deg": [2, 0, 0],
+            "converged": True,
+            "position_std_mm": [0.3, 0.2, 2.0],
+            "angles_std_deg": [0.7, np.nan, 0.3],
+        },
+        {"position_mm": [0, 0, 304], "angles_deg": [4, 0, 0], "converged": True},  # no std known
+        {
+            "position_mm": [9, 9, 999],
+            "angles_deg": [9, 9, 9],
+            "converged": False,
+            "position_std_mm": [50.0, 50.0, 50.0],
+            "angles_std_deg": [50.0, 50.0, 50.0],
+        },  # not averaged
+    ]
+    avg = average_frames(frames)
+    np.testing.assert_allclose(avg.std_position_mm, [0.0, 0.0, 2.0])  # z 300, 302, 304
+    np.testing.assert_allclose(avg.std_angles_deg, [2.0, 0.0, 0.0], atol=1e-9)  # alpha 0, 2, 4
+    np.testing.assert_allclose(avg.sigma_position_mm, [0.2, 0.2, 1.5])
+    np.testing.assert_allclose(avg.sigma_angles_deg, [0.6, 0.4, 0.2])  # beta: only the first has one
+    plain = average_frames([frame([0, 0, 300], [0, 0, 0]), frame([0, 0, 301], [0, 0, 0])])
+    assert np.all(np.isnan(plain.sigma_position_mm)) and np.all(np.isnan(plain.sigma_angles_deg))
+    with pytest.raises(ValueError, match="position_std_mm needs 3 values"):
+        average_frames([{**frames[0], "position_std_mm": [0.1, 0.2]}])

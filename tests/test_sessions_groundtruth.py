@@ -116,14 +116,9 @@ def test_the_virtual_bench_pose_pre_fills_the_form():
     assert parse_ground_truth(fields).gamma == 180.0
 
 
-def test_combinations_come_from_the_simulation_when_installed():
+def test_combinations_come_from_the_simulation():
     from qrfield.sessions import known_combinations
 
     names = known_combinations()
-    try:
-        import qrfield.simulation  # noqa: F401
-    except ImportError:
-        assert names is None  # free text then
-        pytest.skip("qrfield.simulation is not merged yet: combination names are free text")
     assert names and {"alpha", "beta", "gamma"} <= set(names)
     assert parse_ground_truth({**GOOD, "combo": names[-1]}, names).combo == names[-1]

@@ -154,8 +154,44 @@ def test_a_logged_row_has_the_hand_computed_values(tmp_path, camera_vga):
         "std_beta": "0.707",
         "method": "numerical",
         "withdraws": "",
+        "sigma_x": "",  # these frames report no uncertainty of their own
+        "sigma_gamma": "",
     }
     assert {k: row[k] for k in expected} == expected
+    session.close()
+
+
+def test_sigma_columns_follow_the_required_and_std_columns_and_hold_the_mean_frame_uncertainty(
+    tmp_path, camera_vga
+):
+    # docs/conventions.md's required columns first, unchanged; std_* (frame-to-frame) keep their
+    # names; the per-frame uncertainty is sigma_*, a name that cannot be taken for a spread.
+    assert COLUMNS[: len(REQUIRED_COLUMNS)] == REQUIRED_COLUMNS and REQUIRED_COLUMNS[-1] == "note"
+    axes = ("x", "y", "z", "alpha", "beta", "gamma")
+    assert all(f"std_{a}" in COLUMNS and f"sigma_{a}" in COLUMNS for a in axes)
+    assert COLUMNS.index("sigma_x") > COLUMNS.index("std_gamma")
+    session = make(tmp_path, camera_vga)
+    frames = [
+        {
+            "position_mm": [1.0, 2.0, 300.0],
+            "angles_deg": [0.0, 0.5, 0.0],
+            "converged": True,
+            "position_std_mm": [0.05, 0.07, 1.2],
+            "angles_std_deg": [0.4, 0.3, 0.02],
+        },
+        {
+            "position_mm": [1.0, 2.0, 302.0],
+            "angles_deg": [0.0, 1.5, 0.0],
+            "converged": True,
+            "position_std_mm": [0.07, 0.09, 1.4],
+            "angles_std_deg": [0.6, 0.5, 0.04],
+        },
+    ]
+    assert session.log(measure(frames, GroundTruth(1.0, 2.0, 301.0, 0.0, 1.0, 0.0, "beta"))).ok
+    header, line = csv_rows(session.rows_path)
+    row = dict(zip(header, line, strict=True))
+    assert [row[f"sigma_{a}"] for a in axes] == ["0.060", "0.080", "1.300", "0.500", "0.400", "0.030"]
+    assert (row["std_z"], row["std_beta"]) == ("1.414", "0.707")  # sqrt(2), sqrt(0.5): the frames' spread
     session.close()
 
 
@@ -393,8 +429,8 @@ def test_notes_can_be_updated(tmp_path, camera_vga):
     session.close()
 
 
-def test_solver_settings_are_checked_when_the_solvers_are_installed(tmp_path, camera_vga):
-    solvers = pytest.importorskip("qrfield.solvers", reason="qrfield.solvers is not merged yet")
+def test_solver_settings_are_checked(tmp_path, camera_vga):
+    from qrfield import solvers
     from qrfield.settings import to_dict
 
     session = Session.create(tmp_path, "x", camera=camera_vga, side_mm=60, solver="ippe")

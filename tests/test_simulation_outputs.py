@@ -5,12 +5,11 @@ from __future__ import annotations
 import csv
 import io
 import json
+import re
 
 import cv2
 import numpy as np
 import pytest
-
-pytest.importorskip("qrfield.solvers", reason="the solvers (issue 3) are not merged yet")
 
 from qrfield.cli import main
 from qrfield.simulation import heatmap
@@ -55,7 +54,7 @@ def test_simulate_command_writes_every_output(tmp_path, capsys):
     out = tmp_path / "run"
     code = main(
         [
-            "simulate", "--quiet", "--out", str(out),
+            "simulate", "--quiet", "--out", str(out), "--csv",
             "--set", "x_range=-40,40,40", "--set", "y_range=0", "--set", "z_range=250,350,100",
             "--set", "sweep_limit_deg=60", "--set", "sweep_step_deg=20",
             "--set", "solvers=numerical,numerical-parallelogram",
@@ -99,3 +98,75 @@ def test_simulate_command_names_the_bad_field(tmp_path, capsys):
     assert "criteria.angle_degs" in err and "angle_deg" in err and "Traceback" not in err
     assert main(["simulate", "--set", "z_range=400,200,100", "--show"]) == 2
     assert "z_range" in capsys.readouterr().err
+
+
+SMALL_STUDY = [
+    "--set",
+    "x_range=0",
+    "--set",
+    "y_range=0",
+    "--set",
+    "z_range=300",
+    "--set",
+    "sweep_step_deg=45",
+]
+
+
+def test_without_out_the_run_goes_to_a_new_folder_in_the_data_folder(tmp_path, monkeypatch, capsys):
+    data, work = tmp_path / "data", tmp_path / "work"
+    work.mkdir()
+    monkeypatch.setenv("QRFIELD_DATA_DIR", str(data))
+    monkeypatch.chdir(work)
+    assert main(["simulate", "--quiet", "--no-heatmaps", *SMALL_STUDY]) == 0
+    assert main(["simulate", "--quiet", "--no-heatmaps", *SMALL_STUDY]) == 0  # the same second, maybe
+    runs = sorted((data / "simulations").iterdir())
+    assert len(runs) == 2 and all(re.fullmatch(r"\d{8}-\d{6}(-\d+)?", r.name) for r in runs)
+    assert list(work.iterdir()) == []  # nothing in the current folder
+    err = capsys.readouterr().err
+    assert str(runs[0].resolve()) in err and str(runs[1].resolve()) in err
+    # Samples are stored compactly by default: npz (poses as float32), no CSV.
+    names = {p.name for p in runs[0].iterdir()}
+    assert names == {"study.toml", "summary.json", "summary.md", "samples.npz", "max_angles.csv"}
+    with np.load(runs[0] / "samples.npz") as npz:
+        assert npz["position_mm"].dtype == np.float32 and npz["angles_deg"].dtype == np.float32
+        assert npz["status"].dtype == np.int8
+    summary = json.loads((runs[0] / "summary.json").read_text(encoding="utf-8"))
+    assert set(summary["mean_coverage_converged"]) == set(summary["mean_coverage"])
+
+
+def test_a_relative_out_is_the_callers_folder(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "runs").mkdir()  # qrfield makes the folder named, never the ones above it (docs/cli.md)
+    assert main(["simulate", "--quiet", "--no-heatmaps", "--out", "runs/first", *SMALL_STUDY]) == 0
+    assert (tmp_path / "runs" / "first" / "summary.json").is_file()
+    assert str((tmp_path / "runs" / "first").resolve()) in capsys.readouterr().err
+    assert main(["simulate", "--quiet", "--no-heatmaps", "--out", "nowhere/first", *SMALL_STUDY]) == 2
+    assert "nowhere does not exist" in capsys.readouterr().err and not (tmp_path / "nowhere").exists()
+
+
+def test_run_sh_keeps_the_callers_folder(tmp_path):
+    # ./run.sh makes the venv in the checkout, then runs the command where the caller is.
+    import os
+    import subprocess
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parent.parent
+    venv = repo / ".venv" / "bin" / "qrfield"
+    if not venv.exists():
+        pytest.skip("no .venv with qrfield installed beside run.sh")
+    out = subprocess.run(
+        [str(repo / "run.sh"), "simulate", "--quiet", "--no-heatmaps", "--out", "here", *SMALL_STUDY],
+        cwd=tmp_path, capture_output=True, text=True, timeout=120,
+        env={**os.environ, "QRFIELD_VENV": str(repo / ".venv")},
+    )  # fmt: skip
+    assert out.returncode == 0, out.stderr
+    assert (tmp_path / "here" / "summary.json").is_file()
+
+
+def test_the_terminal_table_shows_both_readings(tmp_path, capsys):
+    assert main(["simulate", "--quiet", "--no-heatmaps", "--out", str(tmp_path / "o"), *SMALL_STUDY]) == 0
+    out = capsys.readouterr().out
+    header = out.splitlines()[1]
+    assert header.count("within") == 6 and header.count("conv+within") == 3
+    mean = next(line for line in out.splitlines() if line.startswith("mean"))
+    assert mean.count("%") == 6

@@ -11,8 +11,6 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-pytest.importorskip("qrfield.solvers", reason="the solvers (issue 3) are not merged yet")
-
 from qrfield.geometry import Pose, angle_difference
 from qrfield.render import RenderError, check_view
 from qrfield.simulation import load_study, run_study, runner
@@ -185,8 +183,11 @@ def test_vectorised_study_equals_a_plain_loop_over_the_single_solver(tmp_path):
                     except SolverError:  # rounding made the corners unusable: no pose, a failure
                         assert status == FAILED and np.isnan(result.position_mm[si, ci, gi, ai]).all()
                         continue
-                    np.testing.assert_allclose(result.position_mm[si, ci, gi, ai], r.position_mm, atol=1e-9)
-                    np.testing.assert_allclose(result.angles_deg[si, ci, gi, ai], r.angles_deg, atol=1e-9)
+                    # The numerical batch is the single path's arithmetic; the batch IPPE is its own
+                    # LM, which stops elsewhere than OpenCV's on rounded corners (a few micrometres).
+                    tol = 1e-9 if spec.method == "numerical" else 1e-2
+                    np.testing.assert_allclose(result.position_mm[si, ci, gi, ai], r.position_mm, atol=tol)
+                    np.testing.assert_allclose(result.angles_deg[si, ci, gi, ai], r.angles_deg, atol=tol)
                     assert result.converged[si, ci, gi, ai] == r.converged
                     assert result.iterations[si, ci, gi, ai] == r.iterations
                     ang_err = np.max(np.abs(angle_difference(r.angles_deg, truth.angles_deg)))
@@ -286,13 +287,73 @@ def test_summary_json_has_exactly_the_agreed_keys(tmp_path):
     out = tmp_path / "out"
     write_outputs(result, out)
     summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
-    assert set(summary) == {"combinations", "mean_coverage", "samples", "seconds", "partial"}
+    assert set(summary) == {
+        "combinations", "mean_coverage", "mean_coverage_converged", "samples", "seconds", "partial"
+    }  # fmt: skip
     assert [c["name"] for c in summary["combinations"]] == ["gamma", "alpha"]
     keys = {"numerical", "numerical-parallelogram", "ippe"}
     for entry in summary["combinations"]:
-        assert set(entry) == {"name", "coverage"} and set(entry["coverage"]) == keys
+        assert set(entry) == {"name", "coverage", "coverage_converged"}
+        assert set(entry["coverage"]) == set(entry["coverage_converged"]) == keys
         assert all(v == 1.0 for v in entry["coverage"].values())
-    assert set(summary["mean_coverage"]) == keys
+        assert all(v == 1.0 for v in entry["coverage_converged"].values())
+    assert set(summary["mean_coverage"]) == set(summary["mean_coverage_converged"]) == keys
     assert summary["samples"] == 6 and summary["partial"] is False and summary["seconds"] >= 0
     md = (out / "summary.md").read_text(encoding="utf-8")
-    assert "77.28 %" in md and "| gamma | 100.00 % | 100.00 % | 100.00 % |" in md
+    assert (
+        "77.28 %" in md
+        and "| gamma | 100.00 % | 100.00 % | 100.00 % | 100.00 % | 100.00 % | 100.00 % |" in md
+    )
+    assert "numerical: within criteria | numerical: converged and within criteria" in md
+
+
+def test_the_two_coverage_readings_by_hand_count(tmp_path):
+    # Stand-in solver: every pose right (within criteria) but its converged flag is False where
+    # beta >= 10 (it settled above its tolerance at 3 iterations, before n_max = 30).
+    # beta swept 0, 10, 20 at x = -30, 0, 30: 9 samples in view, all within criteria; the
+    # converged reading keeps t = 0 only: 3 of 9.
+    config = _study(tmp_path, "beta,0,1,0\n", "x_range=-30,30,30", "y_range=0", "z_range=300",
+                    "sweep_limit_deg=20", "sweep_step_deg=10", "solvers=numerical")  # fmt: skip
+    poses = _poses([-30, 0, 30], [0], [300], [(0, 1, 0)], [0, 10, 20])
+    stand_in = TruthLookup(config.camera_model(), poses)
+
+    def settles(spec, corners, camera, side_mm):
+        res = stand_in(spec, corners, camera, side_mm)
+        res.converged = res.angles_deg[:, 1] < 5.0
+        return res
+
+    result = run_study(config, solve_fn=settles)
+    assert result.coverage("numerical", 0) == 1.0
+    assert result.coverage("numerical", 0, converged_only=True) == pytest.approx(3 / 9)
+    assert result.mean_coverage("numerical", converged_only=True) == pytest.approx(3 / 9)
+    summary = result.summary()
+    assert summary["combinations"][0]["coverage_converged"]["numerical"] == pytest.approx(3 / 9, abs=1e-6)
+    assert summary["mean_coverage"]["numerical"] == 1.0
+
+
+def test_rounded_corners_reproduce_the_issues_converged_figures():
+    # Issue 17: with corners rounded to whole pixels the default study printed 53.66 % and 88.70 %
+    # (within criteria), while the thesis' model and its parallelogram variant report converged
+    # on 2.79 % and 4.50 %. A quarter of the default grid (z = 300 mm) shows the same split.
+    config = load_study(overrides=["degradation=round", "z_range=300", "sweep_step_deg=6"])
+    result = run_study(config)
+    for key in ("numerical", "numerical-parallelogram"):
+        within = result.mean_coverage(key)
+        converged = result.mean_coverage(key, converged_only=True)
+        assert within > 0.4 and converged < 0.1, (key, within, converged)
+    # IPPE's converged flag means "a pose was found": both readings are the same.
+    assert result.mean_coverage("ippe") == result.mean_coverage("ippe", converged_only=True)
+
+
+def test_tasks_pack_whole_sweeps_up_to_the_chunk():
+    from qrfield.simulation.runner import plan_tasks
+
+    # 3 combinations x 10 grid points x 4 angles, 8 poses per task: blocks of 2 grid points.
+    tasks = plan_tasks(3, 10, 4, 8)
+    assert all(sum((g1 - g0) * 4 for _, g0, g1 in t) <= 8 for t in tasks)
+    covered = sorted((c, g) for t in tasks for c, g0, g1 in t for g in range(g0, g1))
+    assert covered == [(c, g) for c in range(3) for g in range(10)]  # each grid point once
+    # A small study packs several combinations into one task (one solver call each).
+    assert plan_tasks(12, 30, 13, 8192) == [[(c, 0, 30) for c in range(12)]]
+    # One grid point's sweep is never split, even when it is larger than the chunk.
+    assert plan_tasks(1, 2, 50, 8) == [[(0, 0, 1)], [(0, 1, 2)]]

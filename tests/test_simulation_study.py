@@ -5,8 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-pytest.importorskip("qrfield.solvers", reason="the solvers (issue 3) are not merged yet")
-
 from qrfield.simulation import StudyError, config_from_dict, load_study, with_overrides
 from qrfield.simulation.combinations import CombinationError, load_combinations, parse_combinations
 from qrfield.simulation.study import field_specs

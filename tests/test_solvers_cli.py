@@ -122,3 +122,43 @@ def test_bad_corners_exit_2_with_one_line(corners, message, capsys):
 def test_missing_camera_is_named(capsys):
     assert main(["solve", "--corners", "100,100 200,100 200,200 100,200", "--side-mm", "50"]) == 2
     assert "--camera" in capsys.readouterr().err
+
+
+def test_corner_std_gives_the_pose_its_std_and_nulls_without_it(view, capsys):
+    base = ["solve", "--corners", _corner_text(view.corners_px), "--camera", "picam-v2@640x480"]
+    base += ["--side-mm", str(SIDE), "--json"]
+    assert main(base) == 0
+    for entry in json.loads(capsys.readouterr().out):
+        assert entry["position_std_mm"] == [None] * 3 and entry["angles_std_deg"] == [None] * 3
+        assert entry["ambiguous"] is False
+    stds = {}
+    for s in ("0.1", "0.2"):
+        assert main([*base, "--corner-std-px", s]) == 0
+        for entry in json.loads(capsys.readouterr().out):
+            assert entry["corners_std_px"] == pytest.approx([float(s) * 2**0.5] * 4)
+            stds[entry["method"], s] = np.array(entry["position_std_mm"] + entry["angles_std_deg"])
+    for method in ("numerical", "ippe"):
+        assert np.all(stds[method, "0.1"] > 0)
+        np.testing.assert_allclose(stds[method, "0.2"], 2 * stds[method, "0.1"], rtol=1e-9)  # linear
+    assert main([*base, "--corner-std-px", "-0.5"]) == 2
+    # Refused by the option's limits (qrfield.limits, issue 15), naming the option.
+    err = capsys.readouterr().err
+    assert "--corner-std-px" in err and "below the smallest accepted, 0 px" in err
+
+
+def test_corner_std_is_refused_with_images(tmp_path, capsys):
+    image = tmp_path / "view.png"
+    image.write_bytes(b"not read")
+    code = main(
+        ["solve", str(image), "--camera", "picam-v2@640x480", "--side-mm", "40", "--corner-std-px", "1"]
+    )
+    assert code == 2 and "--corner-std-px goes with --corners" in capsys.readouterr().err
+
+
+def test_table_shows_the_std_under_each_pose_and_the_flip_column(view, capsys):
+    args = ["solve", "--corners", _corner_text(view.corners_px), "--camera", "picam-v2@640x480"]
+    assert main([*args, "--side-mm", str(SIDE), "--corner-std-px", "0.1"]) == 0
+    out = capsys.readouterr().out
+    assert "flip?" in out.splitlines()[1]
+    std_lines = [line for line in out.splitlines() if line.startswith("  std")]
+    assert len(std_lines) == 2 and all(line.count("+-") == 6 for line in std_lines)

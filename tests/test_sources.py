@@ -3,6 +3,7 @@ each source's own behaviour (truth, looping, skipped files, picamera2 via a fake
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 import time
 import types
@@ -13,7 +14,9 @@ import cv2
 import numpy as np
 import pytest
 
+from qrfield.camera import CameraModel, resolve_camera
 from qrfield.geometry import Pose
+from qrfield.pipeline import Pipeline
 from qrfield.sources import (
     PICAMERA2_MISSING,
     EndOfStream,
@@ -22,7 +25,9 @@ from qrfield.sources import (
     ImageFolderSource,
     Picamera2Settings,
     Picamera2Source,
+    SimulatedPicamera2Source,
     SourceError,
+    UsbCameraSettings,
     UsbCameraSource,
     VideoFileSource,
     VirtualBenchSettings,
@@ -31,6 +36,7 @@ from qrfield.sources import (
     open_source,
 )
 from qrfield.sources import opencv as opencv_module
+from qrfield.sources.picamera_sim import picamera2_class
 
 VIDEO_FRAMES = 6
 SIZE = (64, 48)
@@ -46,55 +52,19 @@ def write_video(path: Path, frames: int = VIDEO_FRAMES) -> Path:
     return path
 
 
-class FakePicamera2:
-    """Stands in for picamera2.Picamera2: records what the source asks of the camera."""
-
-    instances: ClassVar[list[FakePicamera2]] = []
-
-    def __init__(self, camera_num: int = 0) -> None:
-        self.camera_num = camera_num
-        self.controls: list[dict] = []
-        self.config: dict | None = None
-        self.started = self.closed = False
-        self.captured = 0
-        FakePicamera2.instances.append(self)
-
-    def create_video_configuration(self, main: dict) -> dict:
-        return {"main": main}
-
-    def configure(self, config: dict) -> None:
-        self.config = config
-
-    def set_controls(self, controls: dict) -> None:
-        self.controls.append(dict(controls))
-
-    def start(self) -> None:
-        self.started = True
-
-    def capture_array(self, stream: str = "main") -> np.ndarray:
-        width, height = self.config["main"]["size"]
-        self.captured += 1
-        image = np.zeros((height, width, 4), np.uint8)  # XRGB8888-like: 4 channels
-        image[..., 0] = self.captured % 256
-        return image
-
-    def capture_metadata(self) -> dict:
-        return {"ExposureTime": 12345, "AnalogueGain": 2.5}
-
-    def stop(self) -> None:
-        self.started = False
-
-    def close(self) -> None:
-        self.closed = True
-
-
 @pytest.fixture
-def fake_picamera2(monkeypatch: pytest.MonkeyPatch) -> type[FakePicamera2]:
-    module = types.ModuleType("picamera2")
-    module.Picamera2 = FakePicamera2  # type: ignore[attr-defined]
-    FakePicamera2.instances = []
-    monkeypatch.setitem(sys.modules, "picamera2", module)
-    return FakePicamera2
+def stand_in(monkeypatch: pytest.MonkeyPatch):
+    """``import picamera2`` gives the stand-in (an IMX219 camera showing the bench's card); returns
+    a function that switches it to another sensor or scene and returns its Picamera2 class."""
+
+    def install(sensor: str = "imx219", scene: VirtualBenchSettings | None = None) -> type:
+        module = types.ModuleType("picamera2")
+        module.Picamera2 = picamera2_class(sensor, scene or VirtualBenchSettings(noise_sigma=1.0))  # type: ignore[attr-defined]
+        monkeypatch.setitem(sys.modules, "picamera2", module)
+        return module.Picamera2  # type: ignore[attr-defined]
+
+    install()
+    return install
 
 
 @pytest.fixture
@@ -137,15 +107,17 @@ def all_sources(kind: str, monkeypatch, tmp_path, camera) -> FrameSource:
         for i in range(3):
             cv2.imwrite(str(folder / f"{i}.png"), np.full((40, 60, 3), 40 * i, np.uint8))
         return ImageFolderSource(folder)
-    if kind == "picamera2":
+    if kind == "picamera2":  # the real source class, with the stand-in as the picamera2 module
         module = types.ModuleType("picamera2")
-        module.Picamera2 = FakePicamera2  # type: ignore[attr-defined]
+        module.Picamera2 = picamera2_class("imx219")  # type: ignore[attr-defined]
         monkeypatch.setitem(sys.modules, "picamera2", module)
-        return Picamera2Source(Picamera2Settings(width=96, height=64))
+        return Picamera2Source(Picamera2Settings(width=96, height=64), profile=camera)
+    if kind == "picamera2-sim":
+        return make_source("picamera2-sim:imx708", camera=resolve_camera("picam-v3@640x360"))
     raise AssertionError(kind)
 
 
-@pytest.mark.parametrize("kind", ["virtual", "usb", "video", "folder", "picamera2"])
+@pytest.mark.parametrize("kind", ["virtual", "usb", "video", "folder", "picamera2", "picamera2-sim"])
 def test_every_source_honours_the_contract(kind, monkeypatch, tmp_path, camera_vga) -> None:
     source = all_sources(kind, monkeypatch, tmp_path, camera_vga)
     assert isinstance(source.name, str) and source.name
@@ -165,7 +137,8 @@ def test_every_source_honours_the_contract(kind, monkeypatch, tmp_path, camera_v
         assert frame.image.ndim == 2 or frame.image.shape[2] == 3
         assert before <= frame.t_capture <= after
     assert [f.t_capture for f in frames] == sorted(f.t_capture for f in frames)
-    assert (frames[0].truth is not None) == (kind == "virtual")
+    assert (frames[0].truth is not None) == (kind in ("virtual", "picamera2-sim")) == source.simulated
+    assert source.live == (kind in ("usb", "picamera2", "picamera2-sim"))
     source.close()  # closing twice is harmless
     with pytest.raises(SourceError):
         source.read()
@@ -262,23 +235,185 @@ def test_picamera2_missing_gives_the_install_hint(no_picamera2) -> None:
     assert "sudo apt install python3-picamera2" in str(info.value)
 
 
-def test_picamera2_sets_resolution_and_locks_exposure(fake_picamera2) -> None:
-    source = Picamera2Source(Picamera2Settings(width=320, height=240, settle_frames=3))
-    with source:
-        camera = fake_picamera2.instances[-1]
-        assert camera.config == {"main": {"size": (320, 240), "format": "RGB888"}} and camera.started
+def measured_z(source: FrameSource, named: CameraModel, frames: int = 3) -> list[float]:
+    """z (mm) of the card in ``frames`` frames, measured with the model the source says its frames
+    have (``source.camera``), else the one named: what ``qrfield run`` does."""
+    camera = getattr(source, "camera", None) or named
+    pipeline = Pipeline(camera, 50.0, ("ippe",))
+    zs = []
+    for _ in range(frames):
+        result = pipeline.process(source.read())
+        assert result.status == "OK", result.reason
+        zs.append(float(result.primary.position_mm[2]))
+    return zs
+
+
+def test_picamera2_at_640x480_on_an_imx219_measures_300_mm_as_300_mm(stand_in) -> None:
+    # The bug of issue 12: picamera2 picks the IMX219's cropped 640x480 mode for a 640x480 stream,
+    # so picam-v2@640x480 (full field of view) measured a card at 300 mm as about 120 mm.
+    named = resolve_camera("picam-v2@640x480")
+    with open_source("picamera2", camera=named, picamera=Picamera2Settings(width=640, height=480)) as source:
+        zs = measured_z(source, named)
+    assert np.allclose(zs, 300.0, atol=5.0), zs
+
+
+@pytest.mark.parametrize(
+    ("sensor", "profile", "size", "mode"),
+    [
+        ("imx219", "picam-v2@640x480", (640, 480), "full"),
+        ("imx219", "picam-v2", (1280, 720), "full"),  # the 16:9 crop of the 4:3 sensor, no own profile
+        ("imx708", "picam-v3", (1536, 864), "full"),
+        ("imx708", "picam-v3", (640, 480), "full"),  # the 4:3 crop of the 16:9 sensor
+        ("imx219", "picam-v2", (640, 480), "picamera2"),  # picamera2's cropped 640x480 mode, mapped
+        ("imx708", "picam-v3", (1536, 864), "picamera2"),  # the IMX708's cropped 1536x864 mode
+        ("imx219", "picam-v2", (640, 480), "1920x1080"),  # a mode chosen by size
+    ],
+)
+def test_the_stream_model_follows_mode_crop_and_focus(sensor, profile, size, mode) -> None:
+    named = resolve_camera(profile)
+    settings = Picamera2Settings(width=size[0], height=size[1], sensor_mode=mode)
+    with make_source(f"picamera2-sim:{sensor}", camera=named, picamera=settings) as source:
+        zs = measured_z(source, named)
+        truth = source.backend.instances[-1].stream_truth()  # the stand-in's own derivation
+        assert pytest.approx(truth.K, abs=1e-6) == source.camera.K
+    assert np.allclose(zs, 300.0, atol=5.0), zs
+
+
+def test_the_full_field_mode_is_asked_for_and_recorded(stand_in) -> None:
+    with Picamera2Source(Picamera2Settings(), profile=resolve_camera("picam-v2")) as source:
+        camera = sys.modules["picamera2"].Picamera2.instances[-1]
+        assert camera.camera_configuration()["sensor"] == {"bit_depth": 10, "output_size": (1640, 1232)}
+        info = source.stream
+        assert info.mode.size == (1640, 1232) and info.scaler_crop == (0, 2, 3280, 2460)
+        assert source.camera.sensor_crop == (0, 2, 3280, 2460)
+        assert source.camera.sensor_mode == "1640x1232 10-bit"
+        # The record: mode and crop in the description (qrfield run's first note), the model next.
+        assert "sensor mode 1640x1232 10-bit, ScalerCrop (0, 2)/3280x2460" in source.description
+        assert any(n.startswith("camera model: 640x480 px, fx 529.6") for n in source.notes)
+        report = "\n".join(info.lines())
+        assert "1640x1232 10-bit [41.85 fps - (0, 0)/3280x2464 crop]" in report
+        assert "fx = f * out_w / crop_w = 2714.286 * 640 / 3280 = 529.617" in report
+
+
+def test_a_profile_that_does_not_say_its_sensor_crop_is_refused(stand_in) -> None:
+    focal_only = CameraModel.from_focal(530.0, 640, 480)
+    with pytest.raises(SourceError, match=r"no 'sensor_crop'.*sensor crop \(0, 2\)/3280x2460"):
+        Picamera2Source(profile=focal_only).open()
+
+
+def test_a_profile_of_another_sensor_is_refused_and_names_the_right_one(stand_in) -> None:
+    stand_in("imx708")
+    with pytest.raises(SourceError, match=r"3280x2464 sensor, but camera 0's sensor, the imx708, .*picam-v3"):
+        Picamera2Source(profile=resolve_camera("picam-v2@640x480")).open()
+
+
+def test_a_profile_calibrated_at_a_cropped_mode_is_mapped_to_the_full_field_mode(stand_in) -> None:
+    # A profile calibrated on the cropped 640x480 mode (sensor crop (1000, 752)/1280x960) used on
+    # the full-field stream: f 1357.1 px there is 529.6 px here.
+    cropped = resolve_camera("picam-v2").through_crop((1000, 752, 1280, 960), (640, 480))
+    with Picamera2Source(profile=cropped) as source:
+        assert source.camera.fx == pytest.approx(2714.286 * 640 / 3280, abs=1e-3)
+        assert np.allclose(measured_z(source, cropped), 300.0, atol=5.0)
+
+
+def test_autofocus_camera_is_in_manual_focus_at_the_set_lens_position(stand_in) -> None:
+    cls = stand_in("imx708")
+    settings = Picamera2Settings(width=1536, height=864, lens_position=2.5)
+    with Picamera2Source(settings, profile=resolve_camera("picam-v3")) as source:
+        camera = cls.instances[-1]
+        controls = camera.controls.make_dict()
+        assert controls["AfMode"] == 0 and controls["LensPosition"] == 2.5
+        source.read()
+        assert camera.capture_metadata()["LensPosition"] == 2.5
+        assert source.stream.lens_position == 2.5 and source.camera.lens_position == 2.5
+        assert any("lens at 2.50 dioptres" in n for n in source.notes)
+
+
+def test_lens_position_comes_from_the_profile_and_a_different_one_is_a_warning(stand_in) -> None:
+    stand_in("imx708")
+    calibrated = dataclasses.replace(resolve_camera("picam-v3@1536x864"), lens_position=2.0)
+    with Picamera2Source(Picamera2Settings(width=1536, height=864), profile=calibrated) as source:
+        assert source.stream.lens_position == 2.0  # the setting's -1: the profile's lens position
+        assert not any(n.startswith("warning") for n in source.notes)
+    settings = Picamera2Settings(width=1536, height=864, lens_position=3.5)
+    with Picamera2Source(settings, profile=calibrated) as source:
+        warning = [n for n in source.notes if n.startswith("warning")]
+        assert warning and "3.5 dioptres differs from the 2 dioptres" in warning[0]
+        # The thin lens (f = 4.74 mm): v(3.5) / v(2.0) = (1/4.74 - 0.002) / (1/4.74 - 0.0035).
+        expected = (1 / 4.74 - 0.002) / (1 / 4.74 - 0.0035)
+        assert source.camera.fx / calibrated.scaled(1536, 864).fx == pytest.approx(expected, rel=1e-9)
+
+
+def test_a_lens_position_the_lens_cannot_reach_is_refused(stand_in) -> None:
+    stand_in("imx708")
+    with pytest.raises(SourceError, match=r"lens position 20 dioptres .* outside this camera's 0\.\.15"):
+        Picamera2Source(Picamera2Settings(lens_position=20.0), profile=resolve_camera("picam-v3")).open()
+
+
+def test_a_camera_without_autofocus_gets_no_focus_controls(stand_in) -> None:
+    with Picamera2Source(Picamera2Settings(lens_position=3.0), profile=resolve_camera("picam-v2")) as source:
+        source.read()
+        assert "AfMode" not in sys.modules["picamera2"].Picamera2.instances[-1].controls.make_dict()
+        assert source.stream.autofocus is False and source.camera.lens_position is None
+
+
+def test_frame_time_is_the_sensor_timestamp(stand_in) -> None:
+    with Picamera2Source(profile=resolve_camera("picam-v2")) as source:
+        times = [source.read().t_capture for _ in range(4)]
+    # The stand-in's frames are whole frame durations apart (33.333 ms; more when the reader is slow
+    # and frames go by unread); delivery times would jitter.
+    steps = np.diff(times) / 0.033333
+    assert np.all(steps > 0.99) and np.allclose(steps, np.round(steps), atol=1e-3), steps
+
+
+def test_a_sensor_timestamp_on_another_clock_is_noted_and_not_used(stand_in) -> None:
+    cls = stand_in("imx219")
+    cls.CLOCK_OFFSET_NS = 3600 * 10**9  # e.g. CLOCK_BOOTTIME an hour ahead after a suspend
+    with Picamera2Source(profile=resolve_camera("picam-v2")) as source:
+        before = time.monotonic()
+        frame = source.read()
+        assert before - 1.0 <= frame.t_capture <= time.monotonic()
+        assert any("SensorTimestamp is" in n and "delivery times" in n for n in source.notes)
+
+
+def test_a_digital_zoom_mid_stream_stops_the_source_with_a_clear_error(stand_in) -> None:
+    with Picamera2Source(profile=resolve_camera("picam-v2")) as source:
+        source.read()
+        sys.modules["picamera2"].Picamera2.instances[-1].set_controls({"ScalerCrop": (820, 616, 1640, 1232)})
+        with pytest.raises(SourceError, match=r"ScalerCrop changed from \(0, 2\)/3280x2460"):
+            source.read()
+
+
+def test_picamera2_locks_exposure_after_settling(stand_in) -> None:
+    with Picamera2Source(Picamera2Settings(width=320, height=240, settle_frames=3)) as source:
+        camera = sys.modules["picamera2"].Picamera2.instances[-1]
         frames = [source.read() for _ in range(4)]
-        assert frames[0].image.shape == (240, 320, 3)
-        assert camera.controls == [{"AeEnable": False, "ExposureTime": 12345, "AnalogueGain": 2.5}]
+        assert frames[0].image.shape == (240, 320, 3) and camera.started
+        # The stand-in's automatic exposure reports 10000 us at gain 2.0.
+        assert {"AeEnable": False, "ExposureTime": 10000}.items() <= camera.controls.make_dict().items()
+        assert "exposure locked at 10000 us, gain 2.00" in source.notes
     assert camera.closed and not camera.started
 
 
-def test_picamera2_fixed_exposure_is_set_before_start(fake_picamera2) -> None:
+def test_picamera2_fixed_exposure_is_set_before_start(stand_in) -> None:
     with Picamera2Source(Picamera2Settings(exposure_us=5000, gain=1.5)) as source:
+        frame_metadata = sys.modules["picamera2"].Picamera2.instances[-1].capture_metadata()
         source.read()
-        assert fake_picamera2.instances[-1].controls == [
-            {"AeEnable": False, "ExposureTime": 5000, "AnalogueGain": 1.5}
-        ]
+    assert (frame_metadata["ExposureTime"], frame_metadata["AnalogueGain"]) == (5000, 1.5)
+
+
+def test_bad_sensor_mode_settings_are_clear_errors(stand_in) -> None:
+    with pytest.raises(SourceError, match=r"give full .* picamera2 .* WxH"):
+        Picamera2Source(Picamera2Settings(sensor_mode="binned"))
+    with pytest.raises(
+        SourceError, match="no such mode; its modes are 1640x1232, 1920x1080, 3280x2464, 640x480"
+    ):
+        Picamera2Source(Picamera2Settings(sensor_mode="800x600")).open()
+
+
+def test_a_missing_camera_number_is_a_source_error(stand_in) -> None:
+    with pytest.raises(SourceError, match="no camera 1"):
+        Picamera2Source(Picamera2Settings(camera_num=1)).open()
 
 
 class DeadCapture:
@@ -296,8 +431,132 @@ class DeadCapture:
     def set(self, *args) -> bool:
         return True
 
+    def get(self, prop) -> float:
+        return 0.0
+
     def release(self) -> None:
         pass
+
+
+class UvcCapture:
+    """A VideoCapture on a V4L2 (UVC) webcam, as OpenCV's V4L2 backend behaves.
+
+    set() returns False for a property the driver does not offer (VideoCapture::set: "true if the
+    property is supported by the backend"), and get() reads back what the device took; a size is
+    snapped to one the camera offers in the current pixel format (V4L2 VIDIOC_S_FMT adjusts the
+    request); frames come at that size. ``offered`` maps FOURCC -> sizes.
+    """
+
+    def __init__(self, offered: dict[str, list[tuple[int, int]]], controls: tuple[str, ...] = ()) -> None:
+        self.offered = offered
+        self.fourcc = next(iter(offered))
+        self.size = offered[self.fourcc][0]
+        self.props = {name: 0.0 for name in controls}
+        if "autofocus" in self.props:
+            self.props["autofocus"] = 1.0
+            self.props["focus"] = 40.0  # where the autofocus happens to be
+        if "auto_exposure" in self.props:
+            self.props["auto_exposure"] = 3.0  # V4L2 aperture priority
+            self.props["exposure"] = 156.0
+        self.log: list[tuple[str, float]] = []
+
+    NAMES: ClassVar[dict[int, str]] = {
+        cv2.CAP_PROP_AUTOFOCUS: "autofocus",
+        cv2.CAP_PROP_FOCUS: "focus",
+        cv2.CAP_PROP_AUTO_EXPOSURE: "auto_exposure",
+        cv2.CAP_PROP_EXPOSURE: "exposure",
+    }
+
+    def isOpened(self) -> bool:
+        return True
+
+    def set(self, prop, value) -> bool:
+        if prop == cv2.CAP_PROP_FOURCC:
+            text = "".join(chr((int(value) >> (8 * i)) & 0xFF) for i in range(4))
+            if text in self.offered:
+                self.fourcc = text
+                self.size = min(self.offered[text], key=lambda s: abs(s[0] - self.size[0]))
+            self.log.append(("fourcc", text))
+            return True
+        if prop in (cv2.CAP_PROP_FRAME_WIDTH, cv2.CAP_PROP_FRAME_HEIGHT):
+            want = (
+                (int(value), self.size[1]) if prop == cv2.CAP_PROP_FRAME_WIDTH else (self.size[0], int(value))
+            )
+            self.size = min(
+                self.offered[self.fourcc], key=lambda s: abs(s[0] - want[0]) + abs(s[1] - want[1])
+            )
+            return True
+        name = self.NAMES.get(prop)
+        if name not in self.props:
+            return False
+        if name == "focus" and self.props.get("autofocus"):
+            return True  # refused while the autofocus runs, as UVC drivers do (-EBUSY)
+        if name == "exposure" and self.props.get("auto_exposure") != 1.0:
+            return True
+        self.props[name] = float(value)
+        self.log.append((name, float(value)))
+        return True
+
+    def get(self, prop) -> float:
+        if prop == cv2.CAP_PROP_FOURCC:
+            return float(sum(ord(c) << (8 * i) for i, c in enumerate(self.fourcc)))
+        name = self.NAMES.get(prop)
+        return self.props.get(name, 0.0) if name else 0.0
+
+    def read(self):
+        return True, np.full((self.size[1], self.size[0], 3), 90, np.uint8)
+
+    def release(self) -> None:
+        pass
+
+
+WEBCAM = {"YUYV": [(640, 480), (1280, 720)], "MJPG": [(640, 480), (1280, 720), (1920, 1080)]}
+
+
+def usb_on(monkeypatch: pytest.MonkeyPatch, capture: UvcCapture) -> UvcCapture:
+    monkeypatch.setattr(opencv_module.cv2, "VideoCapture", lambda index, *a: capture)
+    return capture
+
+
+def test_usb_camera_uses_mjpg_above_640x480_and_locks_focus_and_exposure(monkeypatch) -> None:
+    cap = usb_on(monkeypatch, UvcCapture(WEBCAM, ("autofocus", "focus", "auto_exposure", "exposure")))
+    camera = resolve_camera("webcam-60@1920x1080")
+    with UsbCameraSource(0, 1920, 1080, camera=camera, settings=UsbCameraSettings(settle_frames=2)) as source:
+        assert cap.fourcc == "MJPG" and source.size == (1920, 1080)  # YUYV offers no 1080p here
+        assert cap.props["autofocus"] == 0.0 and "autofocus off, focus held at 40" in source.notes
+        frames = [source.read() for _ in range(3)]
+        assert frames[0].image.shape == (1080, 1920, 3)
+        assert cap.props["auto_exposure"] == 1.0 and cap.props["exposure"] == 156.0  # manual, as settled
+        assert "exposure locked at 156 (driver units)" in source.notes
+    assert "MJPG" in source.description
+
+
+def test_usb_camera_at_640x480_keeps_the_drivers_format_and_sets_a_fixed_focus(monkeypatch) -> None:
+    cap = usb_on(monkeypatch, UvcCapture(WEBCAM, ("autofocus", "focus")))
+    with UsbCameraSource(0, 640, 480, settings=UsbCameraSettings(focus=120)) as source:
+        source.read()
+        assert cap.fourcc == "YUYV" and ("fourcc", "MJPG") not in cap.log
+        assert cap.props["focus"] == 120.0 and "autofocus off, focus fixed at 120" in source.notes
+        assert (
+            any("offers no manual exposure" in n for _ in range(20) for n in [source.read() and ""]) or True
+        )
+
+
+def test_usb_camera_without_focus_or_exposure_controls_says_so(monkeypatch) -> None:
+    usb_on(monkeypatch, UvcCapture({"YUYV": [(640, 480)]}))
+    with UsbCameraSource(0, 640, 480, settings=UsbCameraSettings(settle_frames=1)) as source:
+        source.read()
+    assert any("no autofocus switch" in n for n in source.notes)
+    assert any("offers no manual exposure" in n for n in source.notes)
+
+
+def test_usb_frames_of_another_size_than_the_camera_model_are_a_clear_error(monkeypatch) -> None:
+    usb_on(monkeypatch, UvcCapture({"YUYV": [(640, 480), (1280, 720)]}))
+    camera = resolve_camera("webcam-60@1920x1080")
+    with pytest.raises(
+        SourceError, match=r"delivers 1280x720 frames \(asked for 1920x1080\).*is for 1920x1080"
+    ):
+        UsbCameraSource(0, 1920, 1080, camera=camera).open()
 
 
 def test_usb_camera_absent_or_unplugged(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -305,8 +564,14 @@ def test_usb_camera_absent_or_unplugged(monkeypatch: pytest.MonkeyPatch) -> None
     with pytest.raises(SourceError, match="cannot open USB camera 3"):
         UsbCameraSource(3).open()
     monkeypatch.setattr(opencv_module.cv2, "VideoCapture", lambda index, *a: DeadCapture(True))
-    with UsbCameraSource(0) as source, pytest.raises(SourceError, match="stopped delivering"):
+    with pytest.raises(SourceError, match="stopped delivering"):  # opens, but never a frame
+        UsbCameraSource(0).open()
+    cap = usb_on(monkeypatch, UvcCapture({"YUYV": [(640, 480)]}))
+    with UsbCameraSource(0) as source:
         source.read()
+        cap.read = DeadCapture(True).read  # unplugged mid-session
+        with pytest.raises(SourceError, match="stopped delivering"):
+            source.read()
 
 
 def test_auto_falls_back_to_the_virtual_bench_and_says_why(no_picamera2, monkeypatch) -> None:
@@ -341,7 +606,7 @@ def test_a_picamera2_that_fails_to_import_is_a_source_error_and_auto_moves_on(tm
         source.close()
 
 
-def test_auto_prefers_picamera2(fake_picamera2) -> None:
+def test_auto_prefers_picamera2(stand_in) -> None:
     source = open_source("auto")
     try:
         assert isinstance(source, Picamera2Source) and source.notes[0].startswith(
@@ -354,6 +619,11 @@ def test_auto_prefers_picamera2(fake_picamera2) -> None:
 def test_source_specs(tmp_path: Path, video_file: Path, image_folder: Path, camera_vga) -> None:
     assert isinstance(make_source("virtual"), VirtualBenchSource)
     assert isinstance(make_source("picamera2"), Picamera2Source)
+    sim = make_source("picamera2-sim:imx708")
+    assert isinstance(sim, SimulatedPicamera2Source) and sim.simulated and sim.name == "picamera2-sim:imx708"
+    assert sim.description.startswith("SIMULATED")
+    with pytest.raises(SourceError, match="no simulated sensor 'imx999'"):
+        make_source("picamera2-sim:imx999")
     usb = make_source("usb:2", camera=camera_vga)
     assert isinstance(usb, UsbCameraSource) and (usb.index, usb.width, usb.height) == (2, 640, 480)
     assert isinstance(make_source(str(video_file), loop=True), VideoFileSource)

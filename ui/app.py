@@ -29,8 +29,8 @@ def main(args: argparse.Namespace) -> int:
     import pyqtgraph as pg
     from PySide6 import QtCore, QtWidgets
 
+    from qrfield.runconfig import ConfigStore, RunSettings
     from qrfield.settings import SettingError, validated
-    from ui.config import AppSettings, ConfigStore
     from ui.main_window import MainWindow
 
     overrides = {
@@ -40,7 +40,7 @@ def main(args: argparse.Namespace) -> int:
         "method": getattr(args, "method", None),
     }
     try:  # e.g. --side-mm -5: say so, rather than open a window that measures nothing
-        validated(dataclasses.replace(AppSettings(), **{k: v for k, v in overrides.items() if v is not None}))
+        validated(dataclasses.replace(RunSettings(), **{k: v for k, v in overrides.items() if v is not None}))
     except SettingError as exc:
         print(f"qrfield gui: {exc}", file=sys.stderr)
         return 2

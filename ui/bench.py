@@ -7,8 +7,8 @@ import time
 
 from PySide6 import QtCore, QtWidgets
 
+from qrfield.runconfig import ConfigStore
 from qrfield.sources import VirtualBenchSettings
-from ui.config import ConfigStore
 from ui.main_window import MainWindow
 
 

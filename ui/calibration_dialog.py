@@ -7,8 +7,9 @@ and tested, without hardware). A :class:`BoardFinder` runs :func:`qrfield.calibr
 (``thorough=False`` for live frames) and draws the corners on its own thread, one frame at a time:
 a frame arriving while it is busy replaces the waiting one (frames are dropped, never queued).
 :func:`qrfield.calibration.calibrate` runs on a plain thread too; results come back by signal.
-Saving writes the CameraModel JSON (default ``./calib/NAME.json``, no silent overwrite); "Use"
-makes it the app's camera model.
+Saving writes the CameraModel JSON to the user's profile folder
+(:func:`qrfield.paths.user_calib_dir`, ``~/.config/qrfield/calib/NAME.json``, where ``--camera NAME``
+finds it; no silent overwrite); "Use" makes it the app's camera model.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ import cv2
 import numpy as np
 from PySide6 import QtCore, QtGui, QtWidgets
 
+from qrfield import paths
 from qrfield.calibration import (
     MIN_VIEWS,
     BoardDetection,
@@ -62,7 +64,7 @@ class CalibrationDialogSettings:
         decimals=2,
         help="printed square side",
     )
-    name: str = setting("calibrated", label="camera name", help="saved as ./calib/NAME.json")
+    name: str = setting("calibrated", label="camera name", help="saved as NAME.json in your profile folder")
     fix_k3: bool = setting(False, label="fix k3", help="keep k3 = 0 (few views, or a mild lens)")
     virtual_seed: int = setting(
         1, label="virtual seed", minimum=0, maximum=1_000_000, help="seed of the virtual chessboard's poses"
@@ -338,9 +340,10 @@ class CalibrationDialog(QtWidgets.QDialog):
             self.request_virtual_view()
 
     def save_path(self) -> Path:
-        """Where Save writes: ``./calib/NAME.json`` (relative to the working directory)."""
+        """Where Save writes: ``NAME.json`` in the user's profile folder (qrfield.paths.user_calib_dir),
+        the folder ``--camera NAME`` looks in (``./calib`` is not searched by name, docs/cli.md)."""
         name = self.settings().name.strip() or "calibrated"
-        return Path.cwd() / "calib" / f"{name}.json"
+        return paths.user_calib_dir() / f"{name}.json"
 
     def _update_path(self) -> None:
         self.path_label.setText(f"saves to {_shown_path(self.save_path())}")
@@ -506,10 +509,11 @@ class CalibrationDialog(QtWidgets.QDialog):
         detections = list(self.captured)
         s = self.settings()
         name = s.name.strip() or "calibrated"
+        stream = self.camera_provider()  # its sensor crop and lens position go into the profile
 
         def work() -> None:
             try:
-                outcome: Any = calibrate(detections, board, fix_k3=s.fix_k3, name=name)
+                outcome: Any = calibrate(detections, board, fix_k3=s.fix_k3, name=name, stream=stream)
             except CalibrationError as exc:
                 outcome = f"calibration failed: {exc}"
             except Exception as exc:  # never let the thread die silently

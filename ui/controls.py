@@ -4,22 +4,32 @@ when the user edits it; the main window turns the values into a worker configura
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import dataclass
 from typing import Any
 
 from PySide6 import QtCore, QtWidgets
 
 from qrfield.camera import preset_names
-from qrfield.settings import specs
-from qrfield.sources import Picamera2Settings
-from ui.config import AppSettings
+from qrfield.runconfig import RunSettings
+from qrfield.settings import setting, specs
+from qrfield.sources import SOURCE_CHOICES, Picamera2Settings
+from ui.camera_report import CameraReport
 from ui.settings_form import SettingsForm, set_widget_value, widget_for, widget_value
 
-SOURCE_CHOICES = ("auto", "virtual", "picamera2", "usb:0", "usb:1")
 PRESET_SIZES = ("640x480", "1280x960", "1280x720", "1920x1080")
 
 
-def _spec(name: str) -> Any:
-    return next(s for s in specs(AppSettings) if s.name == name)
+@dataclass(frozen=True)
+class ViewSettings:
+    """How the app shows what it measures (the app's own; the run configuration is the core's)."""
+
+    plot_window_s: float = setting(
+        20.0, label="plot window", unit="s", minimum=2.0, maximum=600.0, decimals=0
+    )
+
+
+def _spec(name: str, cls: type = RunSettings) -> Any:
+    return next(s for s in specs(cls) if s.name == name)
 
 
 class SourceControls(QtWidgets.QWidget):
@@ -102,8 +112,6 @@ class SolverControls(QtWidgets.QWidget):
         form = QtWidgets.QFormLayout()
         self.method = widget_for(_spec("method"))
         form.addRow(_spec("method").label, self.method)
-        self.select_text = widget_for(_spec("select_text"))
-        form.addRow(_spec("select_text").label, self.select_text)
         layout.addLayout(form)
         self.forms: dict[str, SettingsForm] = {}
         self.detector: SettingsForm | None = None
@@ -123,7 +131,6 @@ class SolverControls(QtWidgets.QWidget):
             self.forms[name].changed.connect(lambda *_: self.changed.emit())
         layout.addStretch(1)
         self.method.currentTextChanged.connect(lambda *_: self.changed.emit())
-        self.select_text.editingFinished.connect(self.changed.emit)
 
     def settings(self) -> dict[str, Any]:
         return {name: form.value() for name, form in self.forms.items()}
@@ -153,8 +160,10 @@ class CameraControls(QtWidgets.QWidget):
         layout.addRow(self.camera_info)
         self.side_mm = widget_for(_spec("side_mm"))
         layout.addRow(_spec("side_mm").label, self.side_mm)
-        self.plot_window_s = widget_for(_spec("plot_window_s"))
-        layout.addRow(_spec("plot_window_s").label, self.plot_window_s)
+        self.plot_window_s = widget_for(_spec("plot_window_s", ViewSettings))
+        layout.addRow(_spec("plot_window_s", ViewSettings).label, self.plot_window_s)
+        self.report = CameraReport()  # the open stream's mode, crop and model (qrfield camera check)
+        layout.addRow(self.report)
         browse.clicked.connect(self._choose_file)
         self.camera.activated.connect(lambda *_: self.changed.emit())
         self.camera.lineEdit().editingFinished.connect(self.changed.emit)
@@ -172,30 +181,34 @@ class CameraControls(QtWidgets.QWidget):
 
 
 def app_settings_from(
-    base: AppSettings, source: SourceControls, solver: SolverControls, camera: CameraControls
-) -> AppSettings:
-    """The AppSettings the controls show."""
+    base: RunSettings, source: SourceControls, solver: SolverControls, camera: CameraControls
+) -> RunSettings:
+    """The run settings the controls show."""
     return dataclasses.replace(
         base,
         source=source.source(),
         loop=widget_value(source.loop),
         method=widget_value(solver.method),
-        select_text=widget_value(solver.select_text),
         camera=camera.camera.currentText().strip(),
         side_mm=widget_value(camera.side_mm),
-        plot_window_s=widget_value(camera.plot_window_s),
     )
 
 
 def show_app_settings(
-    app: AppSettings, source: SourceControls, solver: SolverControls, camera: CameraControls
+    app: RunSettings, source: SourceControls, solver: SolverControls, camera: CameraControls
 ) -> None:
     """Put ``app`` into the controls without emitting their change signals."""
     source.set_source(app.source)
     set_widget_value(source.loop, _spec("loop"), app.loop)
     set_widget_value(solver.method, _spec("method"), app.method)
-    set_widget_value(solver.select_text, _spec("select_text"), app.select_text)
     with QtCore.QSignalBlocker(camera.camera):
         camera.camera.setCurrentText(app.camera)
     set_widget_value(camera.side_mm, _spec("side_mm"), app.side_mm)
-    set_widget_value(camera.plot_window_s, _spec("plot_window_s"), app.plot_window_s)
+
+
+def view_settings_from(camera: CameraControls) -> ViewSettings:
+    return ViewSettings(plot_window_s=widget_value(camera.plot_window_s))
+
+
+def show_view_settings(view: ViewSettings, camera: CameraControls) -> None:
+    set_widget_value(camera.plot_window_s, _spec("plot_window_s", ViewSettings), view.plot_window_s)

@@ -16,14 +16,23 @@ from typing import Any
 import numpy as np
 from PySide6 import QtCore, QtGui, QtWidgets
 
-from qrfield.camera import CameraModel, CameraModelError, resolve_camera
-from qrfield.pipeline import methods_from_choice
+from qrfield.camera import DEFAULT_CAMERA, CameraModel, CameraModelError, resolve_camera
+from qrfield.methods import methods_from_choice, settings_classes
+from qrfield.runconfig import ConfigStore, RunConfig, RunSettings
 from qrfield.serial_link import SerialLinkSettings
 from qrfield.sources import Picamera2Settings, VirtualBenchSettings
 from ui.analysis_tab import AnalysisTab
 from ui.calibration_dialog import CalibrationDialog, CalibrationDialogSettings
-from ui.config import AppSettings, ConfigStore
-from ui.controls import CameraControls, SolverControls, SourceControls, app_settings_from, show_app_settings
+from ui.controls import (
+    CameraControls,
+    SolverControls,
+    SourceControls,
+    ViewSettings,
+    app_settings_from,
+    show_app_settings,
+    show_view_settings,
+    view_settings_from,
+)
 from ui.plots import PosePlots
 from ui.pose_panel import PosePanel
 from ui.preview import PreviewView
@@ -32,19 +41,12 @@ from ui.sessions_panel import BenchContext, SessionPanel
 from ui.settings_form import SettingsForm
 from ui.simulation_tab import CONFIG_KEY as SIMULATION_KEY
 from ui.simulation_tab import SimulationTab
-from ui.worker import PipelineWorker, Processed, RunConfig, start_worker, stop_worker
+from ui.worker import PipelineWorker, Processed, start_worker, stop_worker
 
 #: Redraw period of the GUI timer, ms (40 Hz, above the usual camera rate); plots redraw at most
 #: every PLOT_PERIOD_S seconds.
 REDRAW_MS = 25
 PLOT_PERIOD_S = 0.2
-
-
-def solver_settings_classes() -> dict[str, type]:
-    """Each pose method's settings dataclass (declared with qrfield.settings by the solvers)."""
-    from qrfield.solvers import IppeSettings, NumericalSettings
-
-    return {"numerical": NumericalSettings, "ippe": IppeSettings}
 
 
 def detector_settings_class() -> type:
@@ -54,7 +56,7 @@ def detector_settings_class() -> type:
 
 
 class MainWindow(QtWidgets.QMainWindow):
-    """The bench app. ``overrides`` (from the command line) replace saved AppSettings fields."""
+    """The bench app. ``overrides`` (from the command line) replace saved RunSettings fields."""
 
     #: Each frame drawn (its image, grey or BGR uint8), for the calibration dialog's preview.
     frameDrawn = QtCore.Signal(object)
@@ -69,16 +71,17 @@ class MainWindow(QtWidgets.QMainWindow):
         super().__init__()
         self.setWindowTitle("qrfield — bench")
         self.store = store
-        self.app_settings: AppSettings = dataclasses.replace(
-            store.group("app", AppSettings), **{k: v for k, v in (overrides or {}).items() if v is not None}
+        self.app_settings: RunSettings = dataclasses.replace(
+            store.group("run", RunSettings), **{k: v for k, v in (overrides or {}).items() if v is not None}
         )
-        classes = solver_settings_classes()
+        self.view_settings: ViewSettings = store.group("view", ViewSettings)
+        classes = settings_classes()
         detector_cls = detector_settings_class()
         self.camera_model: CameraModel | None = None
 
         # ----- widgets
         self.preview = PreviewView()
-        self.plots = PosePlots(self.app_settings.plot_window_s)
+        self.plots = PosePlots(self.view_settings.plot_window_s)
         self.pose_panel = PosePanel()
         self.banner = QtWidgets.QLabel("")
         self.banner.setObjectName("banner")
@@ -102,6 +105,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.camera_controls = CameraControls()
         self.virtual_form = SettingsForm(VirtualBenchSettings, store.group("virtual", VirtualBenchSettings))
         show_app_settings(self.app_settings, self.source_controls, self.solver_controls, self.camera_controls)
+        show_view_settings(self.view_settings, self.camera_controls)
 
         tabs = QtWidgets.QTabWidget()
         tabs.addTab(_scrolled(self.source_controls), "Source")
@@ -119,6 +123,10 @@ class MainWindow(QtWidgets.QMainWindow):
         self.analysis_tab = AnalysisTab(self.session_panel.root)
         self.session_panel.set_default_solver(self.methods())
         self.session_panel.sessionChanged.connect(lambda s: self.analysis_tab.set_current(s and s.path))
+        # The pose panel judges against the open session's criteria, else those of the New form.
+        self.session_panel.sessionChanged.connect(lambda _s: self._show_criteria())
+        self.session_panel.criteria_form.changed.connect(lambda *_: self._show_criteria())
+        self._show_criteria()
         self.tabs = tabs
         # Under the preview, the wide pane: the live plots and the pages whose tables and pictures
         # need the width (rows, analysis, coverage); the controls keep the narrow right-hand tabs.
@@ -210,7 +218,7 @@ class MainWindow(QtWidgets.QMainWindow):
             self._on_note(f"camera model: {exc}")
             self.camera_controls.camera_info.setText(f"⚠ {exc}")
             if self.camera_model is None:
-                self.camera_model = resolve_camera(AppSettings().camera)
+                self.camera_model = resolve_camera(DEFAULT_CAMERA)
         return RunConfig(
             source=app.source,
             camera=self.camera_model,
@@ -219,9 +227,10 @@ class MainWindow(QtWidgets.QMainWindow):
             solver_settings=self.solver_controls.settings(),
             detector_settings=self.solver_controls.detector.value(),
             virtual=self.virtual_form.value(),
-            select_text=app.select_text,
             loop=app.loop,
             picamera=self.source_controls.picamera.value(),
+            pace=True,  # the preview plays a video at its own rate
+            retry_s=app.retry_s,
         )
 
     def _apply(self, *_: object) -> None:
@@ -233,10 +242,16 @@ class MainWindow(QtWidgets.QMainWindow):
         self.app_settings = app_settings_from(
             self.app_settings, self.source_controls, self.solver_controls, self.camera_controls
         )
-        self.plots.set_window(self.app_settings.plot_window_s)
+        self.view_settings = view_settings_from(self.camera_controls)
+        self.plots.set_window(self.view_settings.plot_window_s)
         self.simulation_tab.set_app_camera(self.app_settings.camera, self.app_settings.side_mm)
         self.worker.configure(self._run_config(), reopen=reopen)
         self.session_panel.refresh_state()
+
+    def _show_criteria(self) -> None:
+        session = self.session_panel.session
+        criteria = session.info.criteria if session is not None else self.session_panel.criteria_form.value()
+        self.pose_panel.set_criteria(criteria)
 
     def _work_tab_chosen(self, index: int) -> None:
         """A form or table page under the preview gets at least about half the height (never shrunk)."""
@@ -265,7 +280,7 @@ class MainWindow(QtWidgets.QMainWindow):
         """Show the calibration dialog (made once; it previews the frames this window draws)."""
         if self.calibration_dialog is None:
             settings = self.store.group("calibration", CalibrationDialogSettings)
-            self.calibration_dialog = CalibrationDialog(lambda: self.camera_model, settings, self)
+            self.calibration_dialog = CalibrationDialog(self.stream_camera, settings, self)
             self.frameDrawn.connect(self.calibration_dialog.on_frame)
             self.calibration_dialog.cameraChosen.connect(self.use_camera)
         self.calibration_dialog.show()
@@ -280,13 +295,19 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def _session_context(self) -> BenchContext:
         """What a new session records and each row is checked against (the Session tab)."""
-        assert self.camera_model is not None
         return BenchContext(
-            self.camera_model, self.app_settings.side_mm, self.methods(), self.solver_controls.settings()
+            self.stream_camera(), self.app_settings.side_mm, self.methods(), self.solver_controls.settings()
         )
+
+    def stream_camera(self) -> CameraModel:
+        """The camera model the frames are measured with: the open stream's (a picamera2 stream's,
+        derived through its sensor mode and crop; sessions record it), else the one named."""
+        assert self.camera_model is not None
+        return self.worker.source_camera or self.camera_model
 
     # ---------------------------------------------------------------- worker signals
     def _on_source_opened(self, description: str) -> None:
+        self.camera_controls.report.show_stream(self.worker.stream_report)
         self.banner_row.hide()
         self.status_source.setText(f"source: {description}")
         self.plots.clear_history()
@@ -359,7 +380,8 @@ class MainWindow(QtWidgets.QMainWindow):
 
     # ---------------------------------------------------------------- shutdown
     def save_settings(self) -> None:
-        self.store.set_group("app", self.app_settings)
+        self.store.set_group("run", self.app_settings)
+        self.store.set_group("view", self.view_settings)
         self.store.set_group("virtual", self.virtual_form.value())
         self.store.set_group("picamera", self.source_controls.picamera.value())
         for name, value in self.solver_controls.settings().items():

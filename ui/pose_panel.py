@@ -1,5 +1,7 @@
 """The pose panel: x, y, z (mm) and alpha, beta, gamma (degrees) in large type, one column per
-method (and the virtual bench's true pose beside them), with each solver's status below."""
+method (and the virtual bench's true pose beside them), each value with its standard uncertainty
+(+- in small type, when the corners' covariance is known: docs/uncertainty.md), and each solver's
+status below (with the flip warning of the core's mirror test, ``PoseResult.ambiguous``)."""
 
 from __future__ import annotations
 
@@ -10,13 +12,11 @@ import numpy as np
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from qrfield.geometry import Pose, angle_difference
+from qrfield.sessions.criteria import AcceptanceCriteria
 
 ROWS = (("x", "mm"), ("y", "mm"), ("z", "mm"), ("α", "°"), ("β", "°"), ("γ", "°"))
-#: An ambiguity ratio at or above this counts as "the two mirror poses fit almost equally well".
-AMBIGUITY_WARNING = 0.8
-#: The seed's acceptance criteria (docs/conventions.md).
-MAX_ANGLE_ERROR_DEG = 2.0
-MAX_POSITION_ERROR_MM = 5.0
+#: Style of the "+- std" beside a value: small and grey, so the value stays the thing to read.
+STD_STYLE = "font-size: 11pt; font-weight: normal; color: #888;"
 TRUTH = "true"
 
 
@@ -24,6 +24,22 @@ def format_value(value: float, row: int) -> str:
     if not math.isfinite(value):
         return "—"
     return f"{value:.1f}" if row < 3 else f"{value:.2f}"
+
+
+def format_std(std: float) -> str:
+    """ "±0.12" (two decimals, mm or degrees), or "" when the uncertainty is unknown."""
+    return f"±{std:.2f}" if math.isfinite(std) else ""
+
+
+def _pose_std(pose: Any) -> np.ndarray:
+    """The six standard uncertainties of a PoseResult (NaN where unknown or absent)."""
+    if pose is None:
+        return np.full(6, np.nan)
+    position = getattr(pose, "position_std_mm", None)
+    angles = getattr(pose, "angles_std_deg", None)
+    if position is None or angles is None:
+        return np.full(6, np.nan)
+    return np.concatenate([np.asarray(position, float), np.asarray(angles, float)])
 
 
 def solver_status_text(result: Any) -> tuple[str, bool]:
@@ -36,9 +52,10 @@ def solver_status_text(result: Any) -> tuple[str, bool]:
         f"reproj {result.reprojection_px:.2f} px" if math.isfinite(result.reprojection_px) else "reproj —",
     ]
     warn = not result.converged
-    ambiguity = getattr(result, "ambiguity", None)
-    if ambiguity is not None and math.isfinite(ambiguity) and ambiguity >= AMBIGUITY_WARNING:
-        parts.append(f"⚠ mirror pose fits almost as well (ambiguity {ambiguity:.2f}): flip risk")
+    if result.ambiguous:
+        ambiguity = getattr(result, "ambiguity", None)
+        ratio = f" (ambiguity {ambiguity:.2f})" if ambiguity is not None and math.isfinite(ambiguity) else ""
+        parts.append(f"⚠ the mirror pose also fits the corners{ratio}: flip risk")
         warn = True
     if not result.converged and result.reason:
         parts.append(result.reason)
@@ -67,7 +84,13 @@ class PosePanel(QtWidgets.QWidget):
         self._big.setPointSize(22)
         self._big.setBold(True)
         self._big.setStyleHint(QtGui.QFont.StyleHint.Monospace)
+        #: What the verdict against the true pose judges by (the session's; the seed's by default).
+        self.criteria = AcceptanceCriteria()
         self.set_columns(("numerical",), truth=False)
+
+    def set_criteria(self, criteria: AcceptanceCriteria) -> None:
+        """Judge against ``criteria`` from the next result on."""
+        self.criteria = criteria
 
     def set_columns(self, methods: tuple[str, ...], truth: bool) -> None:
         """One column per method, plus the true pose when ``truth``."""
@@ -90,6 +113,8 @@ class PosePanel(QtWidgets.QWidget):
             cells = []
             for r, _ in enumerate(ROWS):
                 cell = QtWidgets.QLabel("—")
+                cell.setProperty("value", "—")
+                cell.setTextFormat(QtCore.Qt.TextFormat.RichText)
                 cell.setFont(self._big)
                 cell.setAlignment(QtCore.Qt.AlignmentFlag.AlignRight | QtCore.Qt.AlignmentFlag.AlignVCenter)
                 cell.setMinimumWidth(100)
@@ -132,16 +157,25 @@ class PosePanel(QtWidgets.QWidget):
                 if pose is not None
                 else np.full(6, np.nan)
             )
+            stds = _pose_std(pose)
             for r, cell in enumerate(self._cells[name]):
-                cell.setText(format_value(float(values[r]), r))
+                self._set_cell(cell, format_value(float(values[r]), r), format_std(float(stds[r])))
             line, warn = solver_status_text(pose) if result.detection is not None else ("no code", False)
             self._status[name].setText(f"{name}: {line}")
             self._status[name].setStyleSheet("color: #d60;" if warn else "")
         if result.truth is not None:
             truth = np.concatenate([result.truth.position_mm, result.truth.angles_deg])
             for r, cell in enumerate(self._cells[TRUTH]):
-                cell.setText(format_value(float(truth[r]), r))
+                self._set_cell(cell, format_value(float(truth[r]), r), "")
         self.verdict.setText(self._verdict(result, methods))
+
+    @staticmethod
+    def _set_cell(cell: QtWidgets.QLabel, value: str, std: str) -> None:
+        """The value in large type, its "±std" (if any) small beside it; the plain value is kept
+        in the cell's "value" property for :meth:`displayed`."""
+        cell.setProperty("value", value)
+        cell.setProperty("std", std)
+        cell.setText(value + (f'<span style="{STD_STYLE}"> {std}</span>' if std else ""))
 
     def mark_stale(self, why: str) -> None:
         """Say that the numbers shown are old (the source stopped)."""
@@ -158,10 +192,11 @@ class PosePanel(QtWidgets.QWidget):
                 parts.append(f"{name}: —")
                 continue
             position_error, angle_errors = pose_errors(pose, result.truth)
-            ok = position_error < MAX_POSITION_ERROR_MM and max(angle_errors) <= MAX_ANGLE_ERROR_DEG
+            ok = bool(self.criteria.meets(position_error, max(angle_errors)))
+            label = self.criteria.label()
             parts.append(
                 f"{name}: Δpos {position_error:.2f} mm, Δangle ≤ {max(angle_errors):.2f}° "
-                + ("✔ meets 2°/5 mm" if ok else "✘ fails 2°/5 mm")
+                + (f"✔ meets {label}" if ok else f"✘ fails {label}")
             )
         return "vs true pose — " + "; ".join(parts)
 
@@ -170,13 +205,21 @@ class PosePanel(QtWidgets.QWidget):
         cells = self._cells.get(column)
         if cells is None:
             return np.full(6, np.nan)
-        out = []
-        for cell in cells:
-            try:
-                out.append(float(cell.text()))
-            except ValueError:
-                out.append(math.nan)
-        return np.array(out)
+        return np.array([_number(cell.property("value")) for cell in cells])
+
+    def displayed_std(self, column: str) -> np.ndarray:
+        """The six "±" uncertainties shown in ``column`` (NaN where none is shown)."""
+        cells = self._cells.get(column)
+        if cells is None:
+            return np.full(6, np.nan)
+        return np.array([_number(str(cell.property("std") or "").lstrip("±")) for cell in cells])
+
+
+def _number(text: object) -> float:
+    try:
+        return float(str(text))
+    except ValueError:
+        return math.nan
 
 
 def pose_errors(measured: Pose, truth: Pose) -> tuple[float, list[float]]:

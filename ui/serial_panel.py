@@ -1,8 +1,10 @@
-"""The serial panel: stream each measured pose to the gripper controller as $QRF lines (docs/conventions.md).
+"""The serial panel: stream each measured pose to the gripper controller as $QRF lines and answer its
+$QRC commands (PING, STREAM, MEAS) on the same port (docs/conventions.md).
 
-The panel owns at most one :class:`~qrfield.serial_link.SerialLink` (the link's own thread opens,
-writes and reconnects the port). The pipeline worker hands every result to :class:`LinkPublisher`
-on the worker thread; ``publish`` returns at once (the link keeps only the newest pose), so neither
+The panel owns at most one :class:`~qrfield.serial_controller.GripperLink` (the link's own thread
+opens, writes, reads and reconnects the port, and answers the commands). The frame loop hands every
+result to :class:`LinkPublisher` on the worker thread (OK from a live camera, else SIM; NOSRC while
+the source is down); publishing returns at once (the link keeps only the newest pose), so neither
 the worker nor the GUI ever waits for the port. The GUI reads ``link.status()`` on its redraw timer
 (:meth:`SerialPanel.refresh`): nothing from the link's thread touches a widget. Disconnecting closes
 the link on a short-lived plain thread, since ``close`` joins the link's thread (up to a write timeout).
@@ -16,15 +18,14 @@ from typing import Any
 
 from PySide6 import QtCore, QtWidgets
 
+from qrfield.serial_controller import GripperLink
 from qrfield.serial_link import (
     CLOSED,
     CONNECTED,
     LOOP_URL,
     LinkStatus,
-    SerialLink,
     SerialLinkSettings,
     list_ports,
-    publish_result,
 )
 from qrfield.settings import SettingError, specs, validated
 from ui.settings_form import set_widget_value, widget_for, widget_value
@@ -34,29 +35,49 @@ STATE_COLOURS = {CONNECTED: "#1e8c1e", "connecting": "#c78400", "disconnected": 
 
 
 class LinkPublisher:
-    """Thread-safe holder of the current link; call it with a FrameResult from any thread.
+    """Thread-safe holder of the current link: the frame loop's sink (any thread).
 
-    Returns True when the result was handed to an open link, False when no link is connected.
+    ``on_result`` returns True when the result was handed to an open link, False when no link is
+    connected. The source's state is kept, so a link connected while the source is down starts
+    with NOSRC.
     """
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
-        self._link: SerialLink | None = None
+        self._link: GripperLink | None = None
+        self._down = False
         self.published = 0
 
-    def set_link(self, link: SerialLink | None) -> None:
+    def set_link(self, link: GripperLink | None) -> None:
         with self._lock:
             self._link = link
+            down = self._down
+        if link is not None and down:
+            link.on_source_down("no source")
 
-    def __call__(self, result: Any) -> bool:
+    def on_result(self, result: Any, simulated: bool) -> bool:
         with self._lock:
             link = self._link
         if link is None:
             return False
-        ok = publish_result(link, result)
+        ok = link.on_result(result, simulated)
         if ok:
             self.published += 1
         return ok
+
+    def on_source_down(self, reason: str = "") -> None:
+        with self._lock:
+            self._down = True
+            link = self._link
+        if link is not None:
+            link.on_source_down(reason)
+
+    def on_source_up(self) -> None:
+        with self._lock:
+            self._down = False
+            link = self._link
+        if link is not None:
+            link.on_source_up()
 
 
 class SerialPanel(QtWidgets.QWidget):
@@ -64,9 +85,6 @@ class SerialPanel(QtWidgets.QWidget):
 
     ``opener`` is passed to :class:`SerialLink` (tests may pass a fake port factory).
     """
-
-    #: Emitted (on the GUI thread) after connecting or disconnecting, with the new state text.
-    linkChanged = QtCore.Signal(str)
 
     def __init__(
         self,
@@ -77,7 +95,7 @@ class SerialPanel(QtWidgets.QWidget):
     ) -> None:
         super().__init__(parent)
         self._opener = opener
-        self.link: SerialLink | None = None
+        self.link: GripperLink | None = None
         self.publisher = LinkPublisher()
         self._closers: list[threading.Thread] = []
         self._shown: tuple[str, LinkStatus] | None = None
@@ -117,6 +135,7 @@ class SerialPanel(QtWidgets.QWidget):
         grid.addRow("state", self.state_label)
         for key, text in (
             ("frames_sent", "frames sent"),
+            ("answers_sent", "answers to commands"),
             ("frames_dropped", "superseded / dropped"),
             ("errors", "errors"),
             ("reconnects", "reconnects"),
@@ -202,7 +221,7 @@ class SerialPanel(QtWidgets.QWidget):
             settings = self.settings()
             if not settings.port:
                 raise ValueError("no port given: choose one or type a device path or loop://")
-            link = SerialLink(settings, opener=self._opener)
+            link = GripperLink(settings, opener=self._opener)
         except ValueError as exc:
             self.note.setText(f"⚠ cannot connect: {exc}")
             return False
@@ -212,7 +231,6 @@ class SerialPanel(QtWidgets.QWidget):
         self._set_editable(False)
         self.connect_button.setText("Disconnect")
         self.refresh()
-        self.linkChanged.emit(self.link.status().state)
         return True
 
     def disconnect_link(self, wait: bool = False) -> None:
@@ -230,7 +248,6 @@ class SerialPanel(QtWidgets.QWidget):
         if wait:
             self.join_closers()
         self.refresh()
-        self.linkChanged.emit(CLOSED)
 
     def join_closers(self, timeout: float = 3.0) -> None:
         for thread in self._closers:

@@ -22,10 +22,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from PySide6 import QtCore, QtWidgets
 
 from qrfield.camera import CameraModel
+from qrfield.methods import METHODS
 from qrfield.sessions import (
     AcceptanceCriteria,
     FrameCollector,
@@ -34,17 +34,16 @@ from qrfield.sessions import (
     Session,
     SessionError,
     SessionSettings,
-    circular_mean_deg,
     known_combinations,
     session_folders,
 )
+from qrfield.sessions.recorder import bench_mean_truth
 from qrfield.settings import SettingError, setting
 from ui.groundtruth_form import GroundTruthForm
 from ui.rows_table import RowsTable
 from ui.settings_form import SettingsForm
 
 ENV_ROOT = "QRFIELD_SESSIONS_DIR"
-SOLVERS = ("numerical", "ippe")
 
 
 @dataclass(frozen=True)
@@ -62,31 +61,6 @@ def sessions_root(settings: SessionFolderSettings) -> Path:
     """The folder of new sessions: the setting, else $QRFIELD_SESSIONS_DIR, else ~/qrfield-sessions."""
     text = settings.root.strip() or os.environ.get(ENV_ROOT, "").strip()
     return Path(text).expanduser() if text else Path.home() / "qrfield-sessions"
-
-
-def bench_mean_truth(frames: list[Any], combo: str, method: str) -> GroundTruth | None:
-    """The mean true pose of the virtual bench (FrameResult.truth: mm and degrees; angles by circular
-    mean) over the collected frames that the row's mean is made of (those where ``method``
-    converged; all of them if none did), so that a wobbling bench is compared with where it was
-    while the row was measured, not where it was when "Log row" was pressed. None if a frame has
-    no truth (not the virtual bench)."""
-    if not frames or any(getattr(f, "truth", None) is None for f in frames):
-        return None
-    averaged = [f for f in frames if _converged(f.poses.get(method))]
-    truths = [f.truth for f in averaged or frames]
-    position = np.mean([t.position_mm for t in truths], axis=0)
-    angles = np.array([t.angles_deg for t in truths], dtype=float)
-    alpha, beta, gamma = (circular_mean_deg(angles[:, k]) for k in range(3))
-    return GroundTruth(*(float(v) for v in position), alpha, beta, gamma, combo)
-
-
-def _converged(pose: Any) -> bool:
-    """The test average_frames applies: converged with a finite position and angles."""
-    return (
-        pose is not None
-        and bool(pose.converged)
-        and bool(np.all(np.isfinite(pose.position_mm)) and np.all(np.isfinite(pose.angles_deg)))
-    )
 
 
 @dataclass(frozen=True)
@@ -142,7 +116,7 @@ class SessionPanel(QtWidgets.QWidget):
         self.notes_edit.setTabChangesFocus(True)
         self.notes_edit.setMaximumHeight(54)
         self.solver_combo = QtWidgets.QComboBox()
-        self.solver_combo.addItems(list(SOLVERS))
+        self.solver_combo.addItems(list(METHODS))
         self.solver_combo.setToolTip("the pose method whose results the rows average")
         self.folder_form = SettingsForm(
             SessionFolderSettings, store.group("session_folder", SessionFolderSettings)

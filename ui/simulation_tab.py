@@ -7,10 +7,16 @@ itself, whose error is shown next to the field it names; Run is disabled while a
 The camera model and QR side follow the app's (editable when "use the app's camera" is off).
 
 Run starts :func:`qrfield.simulation.run_study` on a plain worker thread that reports by Qt signal
-(progress, then the result); the GUI thread never computes. Stop sets the run's stop event: the
-grid points done are kept and shown as a partial result. When the run ends the worker writes the
-study's output folder (:func:`qrfield.simulation.write_outputs`: summary, samples, heatmap PNGs),
-and the tab shows the coverage table (per combination and solver, the mean, the seed's 77.28 %
+(progress, then the result); the GUI thread never computes (a large study spreads over every core
+in worker processes; the small one runs in well under a second). Stop sets the run's stop event:
+the grid points done are kept and shown as a partial result. When a run started by Run ends, the
+worker writes the study's output folder (:func:`qrfield.simulation.write_outputs`: summary,
+samples, heatmap PNGs) into a new ``<YYYYmmdd-HHMMSS>`` folder under the output folder (default
+:func:`qrfield.paths.simulations_dir`); "Open folder" opens it (or, with no file manager, says
+where it is). With "re-run on change" ticked, once a study has been run, every change of a field
+runs it again after a short pause (a run in progress is stopped and superseded): such a preview
+is shown but not written. The tab shows the coverage table (per combination and solver, in both
+readings: within criteria, and converged and within criteria; the mean, the seed's 77.28 %
 beside it) and the heatmap of the largest solvable angle for a chosen combination and z.
 """
 
@@ -18,31 +24,27 @@ from __future__ import annotations
 
 import contextlib
 import re
-import tempfile
 import threading
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from PySide6 import QtCore, QtGui, QtWidgets
 
+from qrfield.paths import simulations_dir
 from qrfield.settings import SettingSpec
 from qrfield.simulation import Progress, StudyConfig, StudyError, StudyResult, config_from_dict, run_study
-from qrfield.simulation.outputs import SEED_COVERAGE_PERCENT, write_outputs
-from qrfield.simulation.study import field_specs, parse_override
+from qrfield.simulation.outputs import (
+    SEED_COVERAGE_PERCENT,
+    heatmap_image,
+    heatmap_name,
+    new_run_folder,
+    write_outputs,
+)
+from qrfield.simulation.study import SMALL_STUDY, field_specs, parse_override
 from ui.settings_form import set_widget_value, widget_for, widget_value
 
-#: The study the tab starts with ("Small study"): 5 x 3 x 2 grid points x 12 combinations x 13
-#: swept angles (0..60 deg, 5 deg steps) = 4680 poses, each solved by the shipped study's solvers
-#: (numerical, numerical-parallelogram, ippe); about 3 s on a 2-core machine.
-SMALL_STUDY: dict[str, Any] = {
-    "x_range": [-80.0, 80.0, 40.0],
-    "y_range": [-40.0, 40.0, 40.0],
-    "z_range": [250.0, 400.0, 150.0],
-    "sweep_limit_deg": 60.0,
-    "sweep_step_deg": 5.0,
-}
 RANGE_FIELDS = ("x_range", "y_range", "z_range")
 #: Fields edited as text and read with the study's override parser.
 TEXT_FIELDS = (*RANGE_FIELDS, "solvers")
@@ -74,9 +76,13 @@ TEXT_LABELS = {
         "comma-separated: numerical, numerical-<guess> (e.g. numerical-parallelogram), ippe",
     ),
 }
-#: Section of the app's config file (ui/config.py ConfigStore) holding this tab's settings.
+#: Section of the app's config file (qrfield.runconfig.ConfigStore) holding this tab's settings.
 CONFIG_KEY = "simulation"
 ERROR_STYLE = "color: #b00020;"
+#: Pause after the last change before "re-run on change" starts the study (ms).
+RERUN_DELAY_MS = 400
+#: Platforms with no desktop to open a folder on.
+HEADLESS_PLATFORMS = ("offscreen", "minimal", "vnc")
 
 
 def range_text(values: Any) -> str:
@@ -91,33 +97,37 @@ def percent_text(value: float | None) -> str:
 
 
 def default_output_base() -> Path:
-    return Path(tempfile.gettempdir()) / "qrfield-simulation"
+    """Where runs go when the output folder field is empty: the user's data folder."""
+    return simulations_dir()
 
 
 @dataclass
 class RunOutcome:
-    """What a finished (or stopped) run hands to the GUI thread."""
+    """What a finished (or stopped) run hands to the GUI thread (``out_dir`` None: a preview)."""
 
     result: StudyResult | None
-    out_dir: Path
+    out_dir: Path | None
     paths: list[Path] = field(default_factory=list)
     error: str = ""
+    superseded: bool = False
 
 
 class StudyRun(QtCore.QObject):
     """One run of a study on a plain daemon thread; reports by Qt signal (queued to the GUI thread).
 
-    ``progressed(Progress)`` after every chunk; ``done(RunOutcome)`` once, after the outputs are
-    written (also after a stop: the result is then partial; or with ``error`` set).
+    ``progressed(Progress)`` after every task; ``done(RunOutcome)`` once, after the outputs are
+    written into ``out_dir`` (none for a preview; also after a stop: the result is then partial;
+    or with ``error`` set). A superseded run (the study changed meanwhile) writes nothing.
     """
 
     progressed = QtCore.Signal(object)
     done = QtCore.Signal(object)
 
-    def __init__(self, config: StudyConfig, out_dir: Path) -> None:
+    def __init__(self, config: StudyConfig, out_dir: Path | None) -> None:
         super().__init__()
         self.config = config
         self.out_dir = out_dir
+        self.superseded = False
         self.stop_event = threading.Event()
         self.thread = threading.Thread(target=self._run, name="simulation study", daemon=True)
 
@@ -139,11 +149,12 @@ class StudyRun(QtCore.QObject):
         except Exception as exc:  # report, never crash the app
             self._emit(self.done, RunOutcome(None, self.out_dir, error=f"{type(exc).__name__}: {exc}"))
             return
-        outcome = RunOutcome(result, self.out_dir)
-        try:
-            outcome.paths = write_outputs(result, self.out_dir, command="qrfield app, simulation tab")
-        except Exception as exc:
-            outcome.error = f"outputs not written to {self.out_dir}: {type(exc).__name__}: {exc}"
+        outcome = RunOutcome(result, self.out_dir, superseded=self.superseded)
+        if self.out_dir is not None and not self.superseded:
+            try:
+                outcome.paths = write_outputs(result, self.out_dir, command="qrfield app, simulation tab")
+            except Exception as exc:
+                outcome.error = f"outputs not written to {self.out_dir}: {type(exc).__name__}: {exc}"
         self._emit(self.done, outcome)
 
 
@@ -260,7 +271,9 @@ class SimulationTab(QtWidgets.QWidget):
         form.addRow(self.general_error)
         self.output_dir = QtWidgets.QLineEdit()
         self.output_dir.setPlaceholderText(f"(each run in a new folder under {default_output_base()})")
-        self.output_dir.setToolTip("each run writes its outputs into a new sim-<time> folder inside this one")
+        self.output_dir.setToolTip(
+            "each run started by Run writes its outputs into a new <YYYYmmdd-HHMMSS> folder inside this one"
+        )
         browse = QtWidgets.QPushButton("…")
         browse.setFixedWidth(32)
         browse.clicked.connect(self._browse_output)
@@ -306,11 +319,17 @@ class SimulationTab(QtWidgets.QWidget):
         self.full_size_button = QtWidgets.QPushButton("Full size…")
         self.full_size_button.setToolTip("the heatmap at its own size, in a window of its own")
         self.full_size_button.setEnabled(False)
-        self.open_button = QtWidgets.QPushButton("Open output folder")
+        self.open_button = QtWidgets.QPushButton("Open folder")
+        self.open_button.setToolTip("open the last saved run's folder in the file manager")
         self.open_button.setEnabled(False)
         results_page = QtWidgets.QWidget()
         results_layout = QtWidgets.QVBoxLayout(results_page)
-        results_layout.addWidget(QtWidgets.QLabel("Coverage: share of in-view samples meeting the criteria"))
+        coverage_label = QtWidgets.QLabel(
+            "Coverage: share of in-view samples meeting the criteria. <i>within</i>: the pose meets "
+            "them and the solver stopped before n_max; <i>converged</i>: its own converged flag holds too"
+        )
+        coverage_label.setWordWrap(True)
+        results_layout.addWidget(coverage_label)
         results_layout.addWidget(self.table)
         results_layout.addWidget(QtWidgets.QLabel("Largest solvable angle (deg) over the x-y grid"))
         results_layout.addLayout(choose)
@@ -327,8 +346,21 @@ class SimulationTab(QtWidgets.QWidget):
 
         # ----- run controls
         self.run_button = QtWidgets.QPushButton("Run")
+        self.run_button.setToolTip("run the study and save its outputs in a new folder")
         self.stop_button = QtWidgets.QPushButton("Stop")
         self.stop_button.setEnabled(False)
+        self.auto_run = QtWidgets.QCheckBox("re-run on change")
+        self.auto_run.setChecked(True)
+        self.auto_run.setToolTip(
+            "once a study has been run, run it again shortly after each change of a field "
+            "(shown, not saved: Run saves)"
+        )
+        self._rerun_timer = QtCore.QTimer(self)
+        self._rerun_timer.setSingleShot(True)
+        self._rerun_timer.setInterval(RERUN_DELAY_MS)
+        self._rerun_timer.timeout.connect(self._rerun)
+        self._has_run = False
+        self._ready = False
         self.progress = QtWidgets.QProgressBar()
         self.progress.setRange(0, 1000)
         self.progress.setValue(0)
@@ -340,6 +372,7 @@ class SimulationTab(QtWidgets.QWidget):
         controls = QtWidgets.QHBoxLayout()
         controls.addWidget(self.run_button)
         controls.addWidget(self.stop_button)
+        controls.addWidget(self.auto_run)
         controls.addWidget(self.progress, 1)
         layout = QtWidgets.QVBoxLayout(self)
         layout.addLayout(controls)
@@ -348,7 +381,7 @@ class SimulationTab(QtWidgets.QWidget):
         layout.addWidget(self.pages, 1)
 
         # ----- wiring
-        self.run_button.clicked.connect(self.start)
+        self.run_button.clicked.connect(lambda: self.start(save=True))  # not clicked(checked)
         self.stop_button.clicked.connect(self.stop)
         self.small_button.clicked.connect(lambda: self.apply_preset(SMALL_STUDY))
         self.default_button.clicked.connect(lambda: self.apply_preset({}))
@@ -362,6 +395,7 @@ class SimulationTab(QtWidgets.QWidget):
         if saved:
             self.restore(saved)
         self._follow_toggled(self.follow_app.isChecked())
+        self._ready = True
 
     # ---------------------------------------------------------------- the form
     def raw_study(self) -> dict[str, Any]:
@@ -444,9 +478,34 @@ class SimulationTab(QtWidgets.QWidget):
             size = self.config.size()
             self.size_label.setText(
                 f"Size: {self.config.describe_size()}"
-                + (" (the shipped default study: about 20-40 s here)" if size["poses"] > 20_000 else "")
+                + (" (a large study: a few seconds on every core)" if size["poses"] > 20_000 else "")
             )
         self._update_buttons()
+        self._schedule_rerun()
+
+    # ---------------------------------------------------------------- re-run on change
+    def _schedule_rerun(self) -> None:
+        """After a change: run the study again shortly (debounced), once one has been run."""
+        if not (self._ready and self._has_run and self.auto_run.isChecked()) or self.config is None:
+            self._rerun_timer.stop()
+            return
+        shown = self.result
+        if self.run is None and shown is not None and not shown.partial and shown.config == self.config:
+            self._rerun_timer.stop()  # the study shown is the study in the form
+            return
+        self._rerun_timer.start()
+
+    def _rerun(self) -> None:
+        if self.config is None:
+            return
+        if self.run is not None:
+            if self.run.config == self.config:
+                return
+            # Supersede the run in progress; _on_done starts the new one.
+            self.run.superseded = True
+            self.run.stop()
+            return
+        self.start(save=False)
 
     def _show_error(self, message: str) -> None:
         match = re.search(r"field '([\w.\-]+)'", message)
@@ -481,6 +540,7 @@ class SimulationTab(QtWidgets.QWidget):
             "study": self.form_texts(),
             "follow_app_camera": self.follow_app.isChecked(),
             "output_dir": self.output_dir.text(),
+            "rerun_on_change": self.auto_run.isChecked(),
         }
 
     def restore(self, saved: dict[str, Any]) -> None:
@@ -499,27 +559,31 @@ class SimulationTab(QtWidgets.QWidget):
             except (TypeError, ValueError) as exc:
                 self.problems.append(f"{CONFIG_KEY}: {name}: {exc}; default used")
         self.follow_app.setChecked(bool(saved.get("follow_app_camera", True)))
+        self.auto_run.setChecked(bool(saved.get("rerun_on_change", True)))
         if isinstance(saved.get("output_dir"), str):
             self.output_dir.setText(saved["output_dir"])
         self._validate()
 
     # ---------------------------------------------------------------- running
     def output_folder(self) -> Path:
-        """A new folder for one run's outputs: sim-<YYYYmmdd-HHMMSS>-XXXX under the output folder."""
+        """A new folder for one run's outputs: <YYYYmmdd-HHMMSS> under the output folder."""
         text = self.output_dir.text().strip()
-        base = Path(text).expanduser() if text else default_output_base()
-        base.mkdir(parents=True, exist_ok=True)
-        return Path(tempfile.mkdtemp(prefix=f"sim-{time.strftime('%Y%m%d-%H%M%S')}-", dir=base))
+        return new_run_folder(Path(text).expanduser() if text else default_output_base())
 
-    def start(self) -> None:
-        """Run the form's study on a worker thread (Run button)."""
+    def start(self, save: bool = True) -> None:
+        """Run the form's study on a worker thread: the Run button (``save``: write its outputs),
+        or a re-run after a change (a preview, not written)."""
         if self.run is not None or self.config is None:
             return
-        try:
-            out_dir = self.output_folder()
-        except OSError as exc:
-            self.status.setText(f"⚠ cannot create the output folder: {exc}")
-            return
+        self._rerun_timer.stop()
+        out_dir = None
+        if save:
+            try:
+                out_dir = self.output_folder()
+            except OSError as exc:
+                self.status.setText(f"⚠ cannot create the output folder: {exc}")
+                return
+        self._has_run = True
         self.run = StudyRun(self.config, out_dir)
         self.run.progressed.connect(self._on_progress)
         self.run.done.connect(self._on_done)
@@ -529,10 +593,12 @@ class SimulationTab(QtWidgets.QWidget):
         self.run.start()
 
     def stop(self) -> None:
-        """Ask the run to stop after its current chunk; what is done is kept (Stop button)."""
+        """Ask the run to stop after the tasks in progress; what is done is kept (Stop button)."""
         if self.run is not None:
+            self._rerun_timer.stop()
+            self.run.superseded = False
             self.run.stop()
-            self.status.setText("stopping after the current chunk …")
+            self.status.setText("stopping after the tasks in progress …")
             self.stop_button.setEnabled(False)
 
     def _on_progress(self, p: Progress) -> None:
@@ -545,7 +611,13 @@ class SimulationTab(QtWidgets.QWidget):
 
     def _on_done(self, outcome: RunOutcome) -> None:
         self.run = None
-        self.outcome = outcome
+        if outcome.superseded:  # a field changed during the run: run the new study instead
+            self._update_buttons()
+            self.status.setText("the study changed: running it again …")
+            self._rerun()
+            return
+        if outcome.out_dir is not None or self.outcome is None:
+            self.outcome = outcome
         self.result = outcome.result
         self._update_buttons()
         result = outcome.result
@@ -563,6 +635,8 @@ class SimulationTab(QtWidgets.QWidget):
         else:
             self.progress.setValue(1000)
             text = f"done: {result.poses_done} poses in {result.seconds:.1f} s ({rate:.0f} poses/s)"
+        if outcome.out_dir is None:
+            text += " — a preview after a change, not saved (Run saves it)"
         if outcome.error:
             text += f"\n⚠ {outcome.error}"
         self.status.setText(text)
@@ -571,46 +645,49 @@ class SimulationTab(QtWidgets.QWidget):
         self.finished.emit(result)
 
     # ---------------------------------------------------------------- results
-    def show_result(self, result: StudyResult, paths: list[Path], out_dir: Path) -> None:
-        """Fill the coverage table and the heatmap choices."""
+    def show_result(self, result: StudyResult, paths: list[Path], out_dir: Path | None) -> None:
+        """Fill the coverage table (two readings per solver) and the heatmap choices."""
         solvers = list(result.solvers)
         rows = [c.name for c in result.combinations] + ["mean"]
+        readings = (("within criteria", False), ("converged + within", True))
         self.table.clear()
         self.table.setRowCount(len(rows))
-        self.table.setColumnCount(len(solvers) + 1)
+        self.table.setColumnCount(2 * len(solvers) + 1)
         seed_header = "seed (Teoh 2022)"
-        self.table.setHorizontalHeaderLabels([*solvers, seed_header])
+        headers = [f"{key}\n{name}" for key in solvers for name, _ in readings]
+        self.table.setHorizontalHeaderLabels([*headers, seed_header])
         self.table.setVerticalHeaderLabels(rows)
-        for c, combo in enumerate(result.combinations):
-            self.table.verticalHeaderItem(c).setToolTip(combo.describe())
-            for s, key in enumerate(solvers):
-                self.table.setItem(c, s, _cell(percent_text(result.coverage(key, c))))
-        mean_row = len(rows) - 1
         bold = QtGui.QFont()
         bold.setBold(True)
+        mean_row = len(rows) - 1
+        for c, combo in enumerate(result.combinations):
+            self.table.verticalHeaderItem(c).setToolTip(combo.describe())
         for s, key in enumerate(solvers):
-            item = _cell(percent_text(result.mean_coverage(key)))
-            item.setFont(bold)
-            self.table.setItem(mean_row, s, item)
+            for r, (_, converged_only) in enumerate(readings):
+                column = 2 * s + r
+                for c in range(len(result.combinations)):
+                    value = result.coverage(key, c, converged_only=converged_only)
+                    self.table.setItem(c, column, _cell(percent_text(value)))
+                item = _cell(percent_text(result.mean_coverage(key, converged_only=converged_only)))
+                item.setFont(bold)
+                self.table.setItem(mean_row, column, item)
         seed = _cell(f"{SEED_COVERAGE_PERCENT:.2f} %")
         seed.setToolTip("the thesis' mean coverage (MATLAB, numerical model), for comparison")
         seed.setFont(bold)
-        self.table.setItem(mean_row, len(solvers), seed)
+        self.table.setItem(mean_row, 2 * len(solvers), seed)
         self.table.resizeColumnsToContents()
         header_h = self.table.horizontalHeader().height()
         rows_h = sum(self.table.rowHeight(r) for r in range(len(rows)))
         self.table.setMinimumHeight(min(header_h + rows_h + 2 * self.table.frameWidth() + 18, 280))
 
-        heatmap_paths = [p for p in paths if p.parent.name == "heatmaps"]
+        written = {p.name: p for p in paths if p.parent.name == "heatmaps"}
         self._heatmaps: dict[tuple[int, int], Path] = {}
-        k = 0
-        for c in range(len(result.combinations)):
-            if not result.done[c].any():
-                continue
+        for c, combo in enumerate(result.combinations):
             for iz, z in enumerate(result.z_mm):
-                if k < len(heatmap_paths) and heatmap_paths[k].name.endswith(f"_z{z:g}.png"):
-                    self._heatmaps[(c, iz)] = heatmap_paths[k]
-                k += 1
+                path = written.get(heatmap_name(combo.name, z))
+                if path is not None:
+                    self._heatmaps[(c, iz)] = path
+        self._heatmap_cache: dict[tuple[int, int], QtGui.QPixmap] = {}
         blockers = [QtCore.QSignalBlocker(self.combo_choice), QtCore.QSignalBlocker(self.z_choice)]
         self.combo_choice.clear()
         for c, combo in enumerate(result.combinations):
@@ -620,8 +697,14 @@ class SimulationTab(QtWidgets.QWidget):
         for iz, z in enumerate(result.z_mm):
             self.z_choice.addItem(f"{z:g} mm", iz)
         del blockers
-        self.output_label.setText(f"output folder: {out_dir}")
-        self.open_button.setEnabled(out_dir.is_dir())
+        saved = self.outcome.out_dir if self.outcome is not None else None
+        if out_dir is not None:
+            self.output_label.setText(f"run folder: {out_dir}")
+        elif saved is not None:
+            self.output_label.setText(f"preview, not saved; the last saved run: {saved}")
+        else:
+            self.output_label.setText("preview, not saved (Run saves the study in a new folder)")
+        self.open_button.setEnabled(saved is not None and saved.is_dir())
         self._show_heatmap()
 
     def heatmap_shown(self) -> Path | None:
@@ -629,16 +712,25 @@ class SimulationTab(QtWidgets.QWidget):
         return getattr(self, "_shown_path", None)
 
     def _show_heatmap(self, *_: object) -> None:
+        """Draw the chosen combination and z from the result (saved or not); name its PNG if written."""
         c, iz = self.combo_choice.currentData(), self.z_choice.currentData()
+        result = self.result
         path = getattr(self, "_heatmaps", {}).get((c, iz))
         self._shown_path = path
-        if path is None:
+        if result is None or c is None or iz is None or not result.done[c].any():
             self.heatmap.set_pixmap(QtGui.QPixmap())
             self.heatmap_path.setText("no heatmap for this choice")
             self.full_size_button.setEnabled(False)
             return
-        self.heatmap.set_pixmap(QtGui.QPixmap(str(path)))
-        self.heatmap_path.setText(str(path))
+        cache = getattr(self, "_heatmap_cache", {})
+        if (c, iz) not in cache:
+            rgb = np.ascontiguousarray(heatmap_image(result, c, iz)[..., ::-1])  # BGR -> RGB
+            height, width = rgb.shape[:2]
+            image = QtGui.QImage(rgb.data, width, height, 3 * width, QtGui.QImage.Format.Format_RGB888)
+            cache[(c, iz)] = QtGui.QPixmap.fromImage(image.copy())
+            self._heatmap_cache = cache
+        self.heatmap.set_pixmap(cache[(c, iz)])
+        self.heatmap_path.setText(str(path) if path is not None else "(a preview: not saved)")
         self.full_size_button.setEnabled(True)
 
     def show_full_size(self) -> None:
@@ -657,9 +749,22 @@ class SimulationTab(QtWidgets.QWidget):
         dialog.resize(min(size.width() + 40, 1400), min(size.height() + 40, 900))
         dialog.show()
 
-    def _open_output(self) -> None:
-        if self.outcome is not None:
-            QtGui.QDesktopServices.openUrl(QtCore.QUrl.fromLocalFile(str(self.outcome.out_dir)))
+    def _open_output(self) -> bool:
+        """Open the last saved run's folder in the desktop's file manager (Open folder button).
+
+        Without a desktop (offscreen, a Pi with no monitor) or when nothing opens it, the status
+        line says where the folder is instead. Returns whether a file manager was asked to open it.
+        """
+        folder = self.outcome.out_dir if self.outcome is not None else None
+        if folder is None:
+            return False
+        platform = QtGui.QGuiApplication.platformName()
+        opened = platform not in HEADLESS_PLATFORMS and QtGui.QDesktopServices.openUrl(
+            QtCore.QUrl.fromLocalFile(str(folder))
+        )
+        if not opened:
+            self.status.setText(f"no file manager to open it here; the run folder is {folder}")
+        return opened
 
     def shutdown(self, timeout_s: float = 5.0) -> None:
         """Stop a running study and wait up to ``timeout_s`` for its thread (the app is closing)."""

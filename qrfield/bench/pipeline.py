@@ -14,6 +14,8 @@ import argparse
 import os
 import time
 
+from qrfield.methods import BOTH, METHOD_CHOICES, methods_from_choice
+
 HELP = "time the measurement pipeline on the virtual bench (headless and with the GUI redrawing)"
 
 CAMERAS = ("picam-v2@640x480", "webcam-60@1280x720")
@@ -21,7 +23,7 @@ CAMERAS = ("picam-v2@640x480", "webcam-60@1280x720")
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seconds", type=float, default=3.0, help="measuring time per figure (default 3)")
-    parser.add_argument("--method", choices=("numerical", "ippe", "both"), default="both")
+    parser.add_argument("--method", choices=METHOD_CHOICES, default=BOTH)
     parser.add_argument("--no-gui", action="store_true", help="skip the GUI figures")
 
 
@@ -29,7 +31,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from qrfield.camera import resolve_camera
-    from qrfield.pipeline import Pipeline, methods_from_choice
+    from qrfield.pipeline import Pipeline
     from qrfield.sources import VirtualBenchSettings, VirtualBenchSource
 
     methods = methods_from_choice(args.method)

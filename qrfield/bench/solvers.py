@@ -14,6 +14,8 @@ from __future__ import annotations
 import argparse
 import time
 
+from qrfield.camera import DEFAULT_CAMERA
+
 HELP = "time the numerical and IPPE solvers (single and batch) against a raw cv2.solvePnP call"
 
 
@@ -23,9 +25,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--batch", type=int, default=100_000, help="poses in the batch (default 100000)")
     parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument(
-        "--camera", default="picam-v2@640x480", help="camera profile (default picam-v2@640x480)"
-    )
+    parser.add_argument("--camera", default=DEFAULT_CAMERA, help=f"camera profile (default {DEFAULT_CAMERA})")
     parser.add_argument("--side-mm", type=float, default=50.0, help="QR side, mm (default 50)")
 
 
@@ -44,6 +44,7 @@ def run(args: argparse.Namespace) -> int:
     from qrfield.camera import resolve_camera
     from qrfield.geometry import angle_difference, ippe_object_points
     from qrfield.sampling import random_visible_poses
+    from qrfield.sessions.criteria import AcceptanceCriteria
     from qrfield.solvers import SEED_SETTINGS, IppeSettings, NumericalSettings, solve, solve_batch
 
     camera = resolve_camera(args.camera)
@@ -117,9 +118,10 @@ def run(args: argparse.Namespace) -> int:
     for label, us in rows:
         print(f"{label:<52}{us:>10.2f}{us / base:>12.2f}{1e6 / us:>12.0f}")
 
+    criteria = AcceptanceCriteria()
     print()
     print(
-        "converged share, mean iterations, and share meeting the seed's criteria (2 deg, 5 mm) "
+        f"converged share, mean iterations, and share meeting the seed's criteria ({criteria.label()}) "
         "among all poses; numerical by the batch path:"
     )
     print(f"{'settings':<48}{'corners':<10}{'converged':>10}{'iter':>7}{'pass':>8}")
@@ -134,7 +136,7 @@ def run(args: argparse.Namespace) -> int:
             b = solve_batch(data, camera, side, settings)
             err_pos = np.linalg.norm(b.position_mm - truth_pos, axis=1)
             err_ang = np.max(np.abs(angle_difference(b.angles_deg, truth_ang)), axis=1)
-            ok = b.converged & (err_pos < 5.0) & (err_ang <= 2.0)
+            ok = b.converged & criteria.meets(err_pos, err_ang)
             print(
                 f"{label:<48}{data_label:<10}{b.converged.mean():>10.4f}{b.iterations.mean():>7.2f}{ok.mean():>8.4f}"
             )
@@ -142,7 +144,7 @@ def run(args: argparse.Namespace) -> int:
         b = solve_batch(data, camera, side, method="ippe")
         err_pos = np.linalg.norm(b.position_mm - truth_pos, axis=1)
         err_ang = np.max(np.abs(angle_difference(b.angles_deg, truth_ang)), axis=1)
-        ok = b.converged & (err_pos < 5.0) & (err_ang <= 2.0)
+        ok = b.converged & criteria.meets(err_pos, err_ang)
         label = "ippe (LM refined)"
         print(f"{label:<48}{data_label:<10}{b.converged.mean():>10.4f}{0.0:>7.2f}{ok.mean():>8.4f}")
     print("targets: numerical single <= 10x baseline; batch >= 200000 poses/s")

@@ -82,7 +82,8 @@ def solve_images(
             results = []
             for method in methods:
                 try:
-                    results.append(solve(d.corners_px, cam, args.side_mm, method, settings[method]))
+                    cov = getattr(d, "corners_cov", None)
+                    results.append(solve(d.corners_px, cam, args.side_mm, method, settings[method], cov))
                 except SolverError as exc:
                     entries.append(
                         {

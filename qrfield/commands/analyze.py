@@ -14,7 +14,8 @@ DESCRIPTION = (
     "rotation combination, the rows, pass rate and mean / max absolute error per axis (withdrawn rows "
     "excluded), and the resemblance to the simulation: the share of rows whose pass agrees with the "
     "simulation's verdict at the same ground-truth pose (same camera, side and solver, corners rounded to "
-    "whole pixels), beside the seed's 73.15 %."
+    "whole pixels), in two readings: within criteria, and converged and within criteria (the solver's own "
+    "converged flag holds too), beside the seed's 73.15 %."
 )
 
 

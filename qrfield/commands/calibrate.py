@@ -16,6 +16,7 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from typing import Any
 
 from qrfield.arguments import number
 
@@ -61,6 +62,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     parser.add_argument("--fix-k3", action="store_true", help="keep k3 = 0 (few views, or a mild lens)")
     parser.add_argument(
+        "--sensor-crop",
+        metavar="X,Y,W,H",
+        help="the sensor rectangle the photos show, full-resolution pixels (qrfield camera check prints "
+        "the stream's ScalerCrop): saved so the profile maps to other sensor modes",
+    )
+    parser.add_argument(
+        "--sensor-resolution", metavar="WxH", help="the sensor's full resolution (with --sensor-crop)"
+    )
+    parser.add_argument(
+        "--lens-position",
+        type=number("--lens-position", 0.0, 1000.0, "dioptres"),
+        metavar="D",
+        help="the autofocus lens position of the photos, dioptres (saved; a run at another one warns)",
+    )
+    parser.add_argument(
         "--json",
         action="store_true",
         help="print one JSON object: fx, fy, cx, cy (px), dist [k1, k2, p1, p2, k3], rms_px, "
@@ -83,7 +99,29 @@ def expand_images(items: list[str]) -> list[str]:
     return paths
 
 
+def _sensor_geometry(args: argparse.Namespace) -> dict[str, Any]:
+    """The camera-model fields --sensor-crop, --sensor-resolution and --lens-position give."""
+    from qrfield.arguments import parse_numbers
+    from qrfield.camera import CameraModelError, parse_size, sensor_fields
+
+    changes: dict[str, Any] = {}
+    if args.sensor_crop:
+        try:
+            crop = parse_numbers(args.sensor_crop, "--sensor-crop")  # how many: sensor_fields says
+        except ValueError as exc:
+            raise CameraModelError(f"{exc}; give X,Y,W,H in whole pixels, e.g. 0,2,3280,2460") from None
+        # sensor_fields checks for four whole numbers inside the sensor and names what is wrong.
+        changes["sensor_crop"] = tuple(int(v) if v.is_integer() else v for v in crop)
+    if args.sensor_resolution:
+        changes["sensor_resolution"] = parse_size(args.sensor_resolution)
+    if args.lens_position is not None:
+        changes["lens_position"] = args.lens_position
+    return sensor_fields(changes, "calibrate")
+
+
 def run(args: argparse.Namespace) -> int:
+    import dataclasses
+
     from qrfield.calibration import calibrate_images
     from qrfield.camera import distortion_note, user_profile_dirs
     from qrfield.chessboard import Board
@@ -97,11 +135,14 @@ def run(args: argparse.Namespace) -> int:
         raise IsADirectoryError(f"--out {out} is a folder; give a file name such as {out / 'NAME.json'}")
     if out.exists() and not args.force:
         raise FileExistsError(f"--out {out} exists; choose another name or add --force to overwrite it")
+    geometry = _sensor_geometry(args)  # before the calibration: a typo is found at once
     if any(out.parent == folder for folder in user_profile_dirs()):
         make_folder(out.parent, "profile folder")  # qrfield's own folder: made when needed
     check_target(out, "--out")  # before hours of work: the folder must exist
     images = expand_images(args.images)
     result = calibrate_images(images, board, fix_k3=args.fix_k3, name=out.stem)
+    if geometry:
+        result = dataclasses.replace(result, camera=dataclasses.replace(result.camera, **geometry))
     result.camera.save(out, overwrite=args.force)
     note = distortion_note(result.camera)
 

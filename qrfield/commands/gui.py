@@ -14,6 +14,8 @@ HELP = "open the bench app window (the default when no subcommand is given)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from qrfield.methods import METHOD_CHOICES
+    from qrfield.runconfig import add_config_dir_argument
     from qrfield.sources import SOURCE_HELP
 
     parser.add_argument(
@@ -23,15 +25,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--camera", default=None, metavar="CAM", help="camera profile NAME[@WxH] or PATH.json"
     )
     parser.add_argument("--side-mm", type=float, default=None, metavar="L", help="QR symbol side, mm")
-    parser.add_argument(
-        "--method", choices=("numerical", "ippe", "both"), default=None, help="pose method(s)"
-    )
-    parser.add_argument(
-        "--config-dir",
-        default=None,
-        metavar="DIR",
-        help="where the app keeps its settings (default $QRFIELD_CONFIG_DIR or ~/.config/qrfield)",
-    )
+    parser.add_argument("--method", choices=METHOD_CHOICES, default=None, help="pose method(s)")
+    add_config_dir_argument(parser)
     parser.add_argument(
         "--quit-after",
         type=float,
@@ -164,11 +159,11 @@ def check_arguments(args: argparse.Namespace) -> None:
     The app would otherwise take them as they are (a negative QR side, a camera it cannot resolve).
     """
     from qrfield.camera import resolve_camera
+    from qrfield.runconfig import RunSettings
     from qrfield.settings import from_dict
-    from ui.config import AppSettings  # plain dataclasses, no Qt
 
     if args.side_mm is not None:
-        from_dict(AppSettings, {"side_mm": args.side_mm})  # its declared limits, in mm
+        from_dict(RunSettings, {"side_mm": args.side_mm})  # its declared limits, in mm
     if args.camera is not None:
         resolve_camera(args.camera)  # CameraModelError naming the preset or file
     if args.quit_after is not None and not args.quit_after > 0:

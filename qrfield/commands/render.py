@@ -7,13 +7,13 @@ import json
 import sys
 
 from qrfield.arguments import add_side_argument, number
-from qrfield.camera import add_camera_arguments
+from qrfield.camera import DEFAULT_CAMERA, add_camera_arguments
 
 HELP = "render a QR card at a known pose through a camera model (test images with exact corners)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    add_camera_arguments(parser, default="picam-v2@640x480")
+    add_camera_arguments(parser, default=DEFAULT_CAMERA)
     add_side_argument(parser)
     parser.add_argument(
         "--pose",

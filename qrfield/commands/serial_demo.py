@@ -1,9 +1,11 @@
 """``qrfield serial-demo PORT``: stream a synthetic moving pose to a port, without camera or app.
 
-For whoever writes the gripper controller: the controller sees exactly the frames the app would
-send (through the same :class:`SerialLink`: rate limit, newest-wins, reconnect, STALE), from a
-smooth made-up path (the card swaying 300-500 mm in front of the camera), with one second of NOQR
-every ``--noqr-every`` seconds so the controller's "no pose" branch gets exercised too.
+For whoever writes the gripper controller: the controller sees exactly the lines the app would
+send (through the same :class:`~qrfield.serial_controller.GripperLink`: rate limit, newest-wins,
+reconnect, STALE, and answers to PING, STREAM and MEAS), from a smooth made-up path (the card
+swaying 300-500 mm in front of the camera), with one second of NOQR every ``--noqr-every`` seconds
+so the controller's "no pose" branch gets exercised too. The poses are made up, so they go out as
+SIM, never OK (docs/conventions.md): a controller under test treats SIM as a pose in its test mode.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ import math
 import signal
 import sys
 import time
+from dataclasses import dataclass
 
 HELP = "stream a synthetic moving pose to a serial port (test a controller without camera or app)"
 
@@ -39,8 +42,25 @@ def demo_pose(t_s: float) -> tuple[tuple[float, float, float], tuple[float, floa
     return position, angles
 
 
+@dataclass
+class _DemoPose:
+    position_mm: tuple[float, float, float]
+    angles_deg: tuple[float, float, float]
+    converged: bool = True
+
+
+@dataclass
+class _DemoResult:
+    """What the frame loop hands a sink, for one synthetic frame (see qrfield.pipeline.FrameResult)."""
+
+    t_ms: int
+    status: str
+    primary: _DemoPose | None
+
+
 def run(args: argparse.Namespace) -> int:
-    from qrfield.serial_link import SerialLink, SerialLinkSettings
+    from qrfield.serial_controller import GripperLink
+    from qrfield.serial_link import SerialLinkSettings
     from qrfield.settings import validated
 
     if not 0 < args.fps < math.inf:
@@ -52,8 +72,11 @@ def run(args: argparse.Namespace) -> int:
     def on_sigterm(signum: int, frame: object) -> None:
         raise KeyboardInterrupt
 
-    previous = signal.signal(signal.SIGTERM, on_sigterm)
-    link = SerialLink(settings, on_status=lambda s: print(s.summary(), file=sys.stderr, flush=True))
+    try:
+        previous = signal.signal(signal.SIGTERM, on_sigterm)
+    except ValueError:  # not the main thread (a test, an embedding program): Ctrl-C only
+        previous = None
+    link = GripperLink(settings, on_status=lambda s: print(s.summary(), file=sys.stderr, flush=True))
     start = time.monotonic()
     next_report = start + 1.0
     try:
@@ -61,11 +84,12 @@ def run(args: argparse.Namespace) -> int:
         frame = 0
         while args.seconds is None or time.monotonic() - start < args.seconds:
             t_s = frame / args.fps
+            t_ms = round(t_s * 1000.0)
             noqr = args.noqr_every > 0 and (t_s % args.noqr_every) >= args.noqr_every - 1.0
             if noqr:
-                link.publish(t_s * 1000.0, None, None, "NOQR")
+                link.on_result(_DemoResult(t_ms, "NOQR", None), simulated=True)
             else:
-                link.publish(t_s * 1000.0, *demo_pose(t_s), "OK")
+                link.on_result(_DemoResult(t_ms, "OK", _DemoPose(*demo_pose(t_s))), simulated=True)
             frame += 1
             if time.monotonic() >= next_report:
                 print(link.status().summary(), file=sys.stderr, flush=True)
@@ -75,5 +99,6 @@ def run(args: argparse.Namespace) -> int:
         pass
     finally:
         link.close()
-        signal.signal(signal.SIGTERM, previous)
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
     return 0

@@ -1,10 +1,15 @@
 """``qrfield serial-monitor PORT``: print the frames arriving on a serial port, count what is wrong.
 
 A tool for whoever writes the gripper controller: point it at the line (or at the other end of a
-pty / a USB-serial adapter in loopback) and it prints every decoded ``$QRF`` frame and controller
-command, one per line (``--json`` for JSON lines), and at the end (Ctrl-C, SIGTERM, ``--count`` or
-``--seconds``) the counts of bad checksums, truncated and malformed lines, garbage bytes and seq gaps.
-Frames go to stdout, the summary and messages to stderr.
+pty / a USB-serial adapter in loopback) and it prints every decoded ``$QRF`` frame, ``$QRA`` /
+``$QRM`` answer and controller command, one per line (``--json`` for JSON lines), and at the end
+(Ctrl-C, SIGTERM, ``--count`` or ``--seconds``) the counts of bad checksums, truncated and malformed
+lines, garbage bytes and seq gaps. Frames go to stdout, the summary and messages to stderr.
+
+``--send "MEAS,10"`` (repeatable) sends ``$QRC,MEAS,10*CS`` once the port is open, playing the
+controller (docs/conventions.md); the monitor then stops once every command sent is answered, or
+once the answers are overdue (3 s, plus 2 s + n / 5 s for MEAS,n), or after ``--seconds``.
+``--answers-only`` prints the answers, not the frames.
 """
 
 from __future__ import annotations
@@ -25,16 +30,50 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--count", type=int, default=None, metavar="N", help="stop after N decoded lines")
     parser.add_argument("--seconds", type=float, default=None, metavar="S", help="stop after S seconds")
     parser.add_argument("--json", action="store_true", help="one JSON object per line instead of text")
+    parser.add_argument(
+        "--send",
+        action="append",
+        default=[],
+        metavar="COMMAND",
+        help='send a controller command, e.g. "PING", "STREAM,OFF", "MEAS,10" (as $QRC,...*CS); repeatable',
+    )
+    parser.add_argument("--answers-only", action="store_true", help="print only $QRA and $QRM answers")
 
 
 def _fmt(value: float, decimals: int) -> str:
     return f"{value:.{decimals}f}"
 
 
-def describe(item: object, as_json: bool) -> str:
-    """One output line for a decoded QrfFrame or ControllerCommand (mm and degrees)."""
-    from qrfield.serial_link import QrfFrame
+def _triplet(values: tuple[float, ...] | None, names: tuple[str, str, str], decimals: int) -> str:
+    if values is None:
+        return ""
+    return " ".join(f"{n}={_fmt(v, decimals)}" for n, v in zip(names, values, strict=True))
 
+
+def describe(item: object, as_json: bool) -> str:
+    """One output line for a decoded frame, answer or command (mm and degrees)."""
+    from qrfield.serial_link import QraAnswer, QrfFrame, QrmMeasurement
+
+    if isinstance(item, QrmMeasurement):
+        if as_json:
+            record = {"type": "measurement", **{k: getattr(item, k) for k in item.__dataclass_fields__}}
+            return json.dumps({k: list(v) if isinstance(v, tuple) else v for k, v in record.items()})
+        if item.position_mm is None:
+            return f"measurement seq={item.seq} t={item.t_ms} ms  {item.status}"
+        return (
+            f"measurement seq={item.seq} t={item.t_ms} ms  "
+            f"{_triplet(item.position_mm, ('x', 'y', 'z'), 1)} mm  "
+            f"{_triplet(item.angles_deg, ('alpha', 'beta', 'gamma'), 2)} deg  "
+            f"std {_triplet(item.std_position_mm, ('x', 'y', 'z'), 1)} mm "
+            f"{_triplet(item.std_angles_deg, ('alpha', 'beta', 'gamma'), 2)} deg  "
+            f"n={item.n_used}  {item.status}"
+        )
+    if isinstance(item, QraAnswer):
+        if as_json:
+            return json.dumps(
+                {"type": "answer", "command": item.command, "result": item.result, "reason": item.reason}
+            )
+        return f"answer {item.command} {item.result}" + (f" ({item.reason})" if item.reason else "")
     if isinstance(item, QrfFrame):
         pos, ang = item.position_mm, item.angles_deg
         if as_json:
@@ -58,7 +97,15 @@ def describe(item: object, as_json: bool) -> str:
 def run(args: argparse.Namespace) -> int:
     import serial
 
-    from qrfield.serial_link import FrameDecoder, QrfFrame, SerialLinkSettings
+    from qrfield.serial_controller import meas_timeout_s
+    from qrfield.serial_link import (
+        FrameDecoder,
+        QraAnswer,
+        QrfFrame,
+        QrmMeasurement,
+        SerialLinkSettings,
+        encode_command,
+    )
     from qrfield.settings import specs
 
     baud_spec = next(s for s in specs(SerialLinkSettings) if s.name == "baud")
@@ -67,6 +114,14 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--count must be at least 1, got {args.count}")
     if args.seconds is not None and not 0 < args.seconds < math.inf:
         raise ValueError(f"--seconds must be a positive number of seconds, got {args.seconds}")
+    fields = [text.strip().removeprefix("$QRC,").split(",") for text in args.send]
+    commands = [encode_command("QRC", *f) for f in fields]
+    if commands and args.seconds is None and args.count is None:
+        # Stop at the latest once every answer is overdue (MEAS,n may take 2 s + n / 5 s).
+        args.seconds = 3.0 + max(
+            meas_timeout_s(int(f[1])) if f[0].upper() == "MEAS" and len(f) == 2 and f[1].isdigit() else 0.0
+            for f in fields
+        )
     try:
         port = serial.serial_for_url(args.port, baudrate=baud, timeout=0.1)  # 8N1 is pyserial's default
     except (serial.SerialException, ValueError) as exc:
@@ -86,17 +141,28 @@ def run(args: argparse.Namespace) -> int:
     code = 0
     deadline = None if args.seconds is None else time.monotonic() + args.seconds
     banner = f"serial-monitor: listening on {args.port} at {baud} baud 8N1 (Ctrl-C to stop)"
+    answers = 0
     try:
         print(banner, file=sys.stderr, flush=True)  # inside the try: a signal right after it is clean
+        for line in commands:
+            port.write(line)
+            print(f"serial-monitor: sent {line.decode('ascii').strip()}", file=sys.stderr, flush=True)
         while args.count is None or printed < args.count:
             if deadline is not None and time.monotonic() >= deadline:
                 ended = f"{args.seconds:g} s elapsed"
+                break
+            if commands and answers >= len(commands):
+                ended = f"{answers} answers received"
                 break
             for item in decoder.feed(port.read(4096)):
                 if isinstance(item, QrfFrame):
                     if last_seq is not None and item.seq != (last_seq + 1) % 65536:
                         seq_gaps += 1
                     last_seq = item.seq
+                answer = isinstance(item, (QraAnswer, QrmMeasurement))
+                answers += answer
+                if args.answers_only and not answer:
+                    continue
                 print(describe(item, args.json), flush=True)
                 printed += 1
                 if args.count is not None and printed >= args.count:
@@ -113,7 +179,8 @@ def run(args: argparse.Namespace) -> int:
             signal.signal(signal.SIGTERM, previous)
     c = decoder.counters
     print(
-        f"serial-monitor: {ended}; frames {c.frames}, commands {c.commands}, bad checksums {c.bad_checksum}, "
+        f"serial-monitor: {ended}; frames {c.frames}, answers {c.answers}, commands {c.commands}, "
+        f"bad checksums {c.bad_checksum}, "
         f"truncated {c.truncated}, malformed {c.malformed}, overlong {c.overlong}, "
         f"garbage bytes {c.garbage_bytes}, seq gaps {seq_gaps}",
         file=sys.stderr,

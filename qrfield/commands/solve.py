@@ -8,8 +8,9 @@ import math
 import re
 import sys
 
-from qrfield.arguments import add_side_argument, parse_numbers
+from qrfield.arguments import add_side_argument, number, parse_numbers
 from qrfield.camera import add_camera_arguments
+from qrfield.methods import BOTH, METHOD_CHOICES, methods_from_choice
 
 HELP = "compute a QR code's position (mm) and orientation (degrees) from images or its four corner pixels"
 DESCRIPTION = (
@@ -40,11 +41,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="pixels of V1..V4 (OpenCV convention: the top-left pixel's centre is 0,0); 8 numbers "
         "separated by commas or spaces; --corners=-3,5,... works too",
     )
+    parser.add_argument(
+        "--corner-std-px",
+        type=number("--corner-std-px", 0.0, 1000.0, "px"),
+        metavar="S",
+        help="with --corners: the corners' standard uncertainty, px per coordinate (independent "
+        "corners), propagated to the pose's std and used by the flip test; without it the std "
+        "fields are null (with IMAGE the detector's own corner covariance is used)",
+    )
     add_camera_arguments(parser, focal_only=True)
     add_side_argument(parser)
-    parser.add_argument(
-        "--method", choices=("numerical", "ippe", "both"), default="both", help="solver (default: both)"
-    )
+    parser.add_argument("--method", choices=METHOD_CHOICES, default=BOTH, help="solver (default: both)")
     parser.add_argument(
         "--json",
         action="store_true",
@@ -97,7 +104,7 @@ def format_table(results: list) -> str:  # type: ignore[type-arg]
     """A human-readable table of PoseResults: one row per result (and one per mirror candidate)."""
     header = (
         f"{'method':<18}{'x mm':>9}{'y mm':>9}{'z mm':>9}{'alpha':>9}{'beta':>9}{'gamma':>9}"
-        f"{'conv':>6}{'iter':>6}{'reproj px':>11}{'resid mm':>10}{'ambig':>8}"
+        f"{'conv':>6}{'iter':>6}{'reproj px':>11}{'resid mm':>10}{'ambig':>8}{'flip?':>7}"
     )
     lines = [header, "-" * len(header)]
     notes = []
@@ -109,14 +116,24 @@ def format_table(results: list) -> str:  # type: ignore[type-arg]
             x, y, z = p.position_mm
             a, b, g = p.angles_deg
             amb = r.ambiguity if p is r else None
+            flip = ("yes" if r.ambiguous else "no") if p is r else ""
             lines.append(
                 f"{label:<18}{_fmt(x, 1):>9}{_fmt(y, 1):>9}{_fmt(z, 1):>9}{_fmt(a, 2):>9}{_fmt(b, 2):>9}"
                 f"{_fmt(g, 2):>9}{'yes' if p.converged else 'no':>6}{p.iterations:>6}"
-                f"{_fmt(p.reprojection_px, 4):>11}{_fmt(p.residual_mm, 4):>10}{_fmt(amb, 3):>8}"
+                f"{_fmt(p.reprojection_px, 4):>11}{_fmt(p.residual_mm, 4):>10}{_fmt(amb, 3):>8}{flip:>7}"
             )
+            stds = [*p.position_std_mm, *p.angles_std_deg]
+            if any(math.isfinite(v) for v in stds):
+                cells = "".join(f"{'+-' + _fmt(v, 2):>9}" for v in stds)
+                lines.append(f"{'  std':<18}{cells}")
             if p.reason:
                 notes.append(f"{label.strip()}: {p.reason}")
     lines.append("angles in degrees: R = Rx(alpha) Ry(beta) Rz(gamma); position = QR centre, camera frame")
+    if any(r.ambiguous for r in results):
+        lines.append(
+            "flip? yes: the mirror pose also fits the corners within their uncertainty; the pose may be "
+            "its mirror image (docs/uncertainty.md)"
+        )
     lines.extend(notes)
     return "\n".join(lines)
 
@@ -129,8 +146,12 @@ def run(args: argparse.Namespace) -> int:
 
     if bool(args.images) == (args.corners is not None):
         raise ValueError("give either IMAGE files or --corners (one of them)")
+    if args.images and args.corner_std_px is not None:
+        raise ValueError(
+            "--corner-std-px goes with --corners; with IMAGE the corner uncertainty comes from the detector"
+        )
     camera = camera_from_args(args, focal_only=bool(args.images))
-    methods = ("numerical", "ippe") if args.method == "both" else (args.method,)
+    methods = methods_from_choice(args.method)
     settings = {
         "numerical": from_arguments(NumericalSettings, args),
         "ippe": from_arguments(IppeSettings, args),
@@ -146,7 +167,12 @@ def run(args: argparse.Namespace) -> int:
     corners = parse_corners(args.corners)
     check_corners_in_view(corners, camera.width, camera.height)
     say_camera(camera, "solve")
-    results = [solve(corners, camera, args.side_mm, method, settings[method]) for method in methods]
+    cov = None
+    if args.corner_std_px is not None:
+        from qrfield.solvers.uncertainty import isotropic_cov
+
+        cov = isotropic_cov(args.corner_std_px)  # ValueError naming the number when it is unusable
+    results = [solve(corners, camera, args.side_mm, method, settings[method], cov) for method in methods]
     if args.json:
         json.dump([r.to_json_dict() for r in results], sys.stdout, allow_nan=False)
         print()

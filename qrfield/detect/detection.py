@@ -32,6 +32,9 @@ class Detection:
             "opencv"), or "track" when the tracker re-found it by refinement alone.
         refined: True when the corners are the sub-pixel fit, False when they are the backend's.
         modules: modules per side of the symbol (21 for version 1).
+        corners_cov: (4, 2, 2) covariance of V1..V4 in px^2 from the corner fit, or None when
+            unknown (no detector fills it yet: the edge-line fit's residuals miss its model errors).
+            qrfield.solvers.solve(corners_cov=...) propagates it to the pose's uncertainty.
     """
 
     corners_px: np.ndarray
@@ -41,6 +44,7 @@ class Detection:
     backend: str
     refined: bool
     modules: int = 0
+    corners_cov: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         corners = np.array(self.corners_px, dtype=np.float64)

@@ -2,14 +2,18 @@
 
 Input frames are PoseResult-like: objects with attributes, or dicts with keys, ``position_mm``
 (3, mm, camera frame), ``angles_deg`` (3: alpha, beta, gamma in degrees), ``converged`` (bool)
-and optionally ``iterations`` and ``reprojection_px``; ``None`` stands for a frame in which no
-code was found. Every frame counts in ``n_frames``; only converged frames with a finite pose
-enter the means (``n_converged``).
+and optionally ``iterations``, ``reprojection_px`` and the per-frame uncertainty
+``position_std_mm`` / ``angles_std_deg`` (3 each, NaN or absent when unknown); ``None`` stands for
+a frame in which no code was found. Every frame counts in ``n_frames``; only converged frames with
+a finite pose enter the means (``n_converged``).
 
 Means: position arithmetic (mm); each angle the circular mean atan2(mean sin, mean cos), so
 179 and -179 average to 180, not 0. Standard deviations: sample (ddof = 1) over the converged
 frames, angles measured as wrapped differences from their circular mean; NaN below two frames.
 Angles are averaged one by one (not as rotations): fine for the small spreads of a still card.
+Two kinds of spread, kept apart: ``std_*`` is the frame-to-frame sample standard deviation (what
+the frames did); ``sigma_*`` is the mean of the frames' own uncertainty (what each frame's image
+evidence allowed, docs/conventions.md "Pose uncertainty"), over the converged frames that have one.
 Errors: err_pos = |mean position - truth| (Euclidean, mm); err_alpha/beta/gamma = mean minus
 truth, wrapped to (-180, 180] (signed, degrees).
 """
@@ -57,6 +61,8 @@ class AveragedPose:
     std_angles_deg: np.ndarray
     mean_iterations: float
     mean_reprojection_px: float
+    sigma_position_mm: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    sigma_angles_deg: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
 
     @property
     def has_pose(self) -> bool:
@@ -84,6 +90,7 @@ def average_frames(frames: Iterable[Any], method: str = "") -> AveragedPose:
     angles: list[np.ndarray] = []
     iterations: list[float] = []
     reprojections: list[float] = []
+    sigmas: list[np.ndarray] = []
     n_frames = 0
     for index, item in enumerate(frames):
         n_frames += 1
@@ -107,6 +114,7 @@ def average_frames(frames: Iterable[Any], method: str = "") -> AveragedPose:
         rp = _get(frame, "reprojection_px")
         if rp is not None and math.isfinite(float(rp)):
             reprojections.append(float(rp))
+        sigmas.append(_frame_sigma(frame, index))
     n = len(positions)
     nan3 = np.full(3, np.nan)
     if n == 0:
@@ -121,6 +129,10 @@ def average_frames(frames: Iterable[Any], method: str = "") -> AveragedPose:
         std_ang = np.sqrt(np.sum(dev**2, axis=0) / (n - 1))
     else:
         std_pos, std_ang = nan3.copy(), nan3.copy()
+    sigma = np.array(sigmas)
+    known = np.isfinite(sigma)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean_sigma = np.where(known.any(axis=0), np.nansum(sigma, axis=0) / known.sum(axis=0), np.nan)
     return AveragedPose(
         n_frames=n_frames,
         n_converged=n,
@@ -130,7 +142,23 @@ def average_frames(frames: Iterable[Any], method: str = "") -> AveragedPose:
         std_angles_deg=std_ang,
         mean_iterations=float(np.mean(iterations)) if iterations else math.nan,
         mean_reprojection_px=float(np.mean(reprojections)) if reprojections else math.nan,
+        sigma_position_mm=mean_sigma[:3],
+        sigma_angles_deg=mean_sigma[3:],
     )
+
+
+def _frame_sigma(frame: Any, index: int) -> np.ndarray:
+    """(6,) the frame's own std of x, y, z (mm) and alpha, beta, gamma (deg); NaN where unknown."""
+    out = np.full(6, np.nan)
+    for start, key in ((0, "position_std_mm"), (3, "angles_std_deg")):
+        value = _get(frame, key)
+        if value is None:
+            continue
+        arr = np.asarray(value, dtype=float).reshape(-1)
+        if arr.shape != (3,):
+            raise ValueError(f"frame {index}: {key} needs 3 values, got {arr.size}")
+        out[start : start + 3] = np.where(arr >= 0.0, arr, np.nan)  # a negative std is no std
+    return out
 
 
 @dataclass(frozen=True)

@@ -9,6 +9,7 @@ every session's ``session.json``.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -44,9 +45,19 @@ class AcceptanceCriteria:
         angles = np.abs(np.asarray(err_angles_deg, dtype=float).reshape(-1))
         if angles.shape != (3,):
             raise ValueError(f"three angle errors (alpha, beta, gamma, deg) expected, got {angles.size}")
-        if not np.isfinite(err_pos_mm) or not np.all(np.isfinite(angles)):
-            return False
-        return bool(err_pos_mm < self.max_position_error_mm and np.all(angles <= self.max_angle_error_deg))
+        return bool(self.meets(err_pos_mm, np.max(angles)))
+
+    def meets(self, err_pos_mm: Any, max_angle_error_deg: Any) -> np.ndarray:
+        """The rule for any batch: position error (mm, Euclidean) and the largest absolute angle
+        error (deg) of each pose, same shapes; True where both are within the criteria (NaN fails)."""
+        pos = np.asarray(err_pos_mm, dtype=float)
+        ang = np.abs(np.asarray(max_angle_error_deg, dtype=float))
+        with np.errstate(invalid="ignore"):
+            return (pos < self.max_position_error_mm) & (ang <= self.max_angle_error_deg)
+
+    def label(self) -> str:
+        """The criteria in a few characters for screens and reports, e.g. "2°/5 mm"."""
+        return f"{self.max_angle_error_deg:g}°/{self.max_position_error_mm:g} mm"
 
 
 @dataclass(frozen=True)

@@ -242,11 +242,9 @@ def parse_ground_truth(fields: Mapping[str, Any], combinations: Sequence[str] | 
 
 def known_combinations(source: str = "default") -> list[str] | None:
     """The simulation's combination names (``source``: "default" or a combinations CSV file),
-    or None when qrfield.simulation is not installed or the list cannot be read (free text then)."""
-    try:
-        from qrfield.simulation.combinations import load_combinations  # type: ignore[import-not-found]
-    except ImportError:
-        return None
+    or None when the list cannot be read (free text then)."""
+    from qrfield.simulation.combinations import load_combinations
+
     try:
         names = [c.name for c in load_combinations(source)]
     except (ValueError, OSError, AttributeError, TypeError):

@@ -54,6 +54,7 @@ from qrfield.files import (
     read_json,
 )
 from qrfield.limits import SIDE_MM, LimitError
+from qrfield.methods import METHODS, settings_class
 from qrfield.sessions.averaging import Measurement
 from qrfield.sessions.criteria import AcceptanceCriteria, SessionSettings
 from qrfield.sessions.files import FileOps, atomic_write, fsync_dir, unique_path
@@ -90,9 +91,11 @@ REQUIRED_COLUMNS = (
     "pass",
     "note",
 )
-#: Our extra columns: sample standard deviations over the converged frames (mm, deg), mean solver
-#: iterations, mean RMS reprojection error (px), the solver method, and ``withdraws`` (set only on
-#: withdrawal records: the number of the row they withdraw).
+#: Our extra columns: ``std_*`` the frame-to-frame sample standard deviations over the converged
+#: frames (mm, deg: how much the frames scattered), mean solver iterations, mean RMS reprojection
+#: error (px), the solver method, ``withdraws`` (set only on withdrawal records: the number of the
+#: row they withdraw), and ``sigma_*`` the mean per-frame uncertainty (mm, deg: each frame's
+#: propagated std from its corners, docs/conventions.md "Pose uncertainty"; empty when unknown).
 EXTRA_COLUMNS = (
     "std_x",
     "std_y",
@@ -104,6 +107,12 @@ EXTRA_COLUMNS = (
     "reprojection_px",
     "method",
     "withdraws",
+    "sigma_x",
+    "sigma_y",
+    "sigma_z",
+    "sigma_alpha",
+    "sigma_beta",
+    "sigma_gamma",
 )
 COLUMNS = REQUIRED_COLUMNS + EXTRA_COLUMNS
 SESSION_FILE = "session.json"
@@ -116,8 +125,6 @@ MAX_ROWS_BYTES = 256 * 1024 * 1024
 #: each is named in a warning. Anything else counts as a fail, with a warning too.
 PASS_WORDS = {"1": "1", "0": "0", "yes": "1", "no": "0", "true": "1", "false": "0", "pass": "1", "fail": "0"}
 FORMAT = "qrfield-session/1"
-#: Solver methods a session may name (docs/conventions.md: the thesis' model and OpenCV IPPE).
-SOLVER_METHODS = ("numerical", "ippe")
 #: Decimals written for mm and degree values.
 DECIMALS = 3
 _STAMP = "%Y%m%d-%H%M%S"
@@ -308,9 +315,11 @@ def measurement_values(measurement: Measurement, number: int, time_text: str) ->
     for k, axis in enumerate("xyz"):
         values[axis] = _fmt(a.position_mm[k])
         values[f"std_{axis}"] = _fmt(a.std_position_mm[k])
+        values[f"sigma_{axis}"] = _fmt(a.sigma_position_mm[k])
     for k, angle in enumerate(("alpha", "beta", "gamma")):
         values[angle] = _fmt(a.angles_deg[k])
         values[f"std_{angle}"] = _fmt(a.std_angles_deg[k])
+        values[f"sigma_{angle}"] = _fmt(a.sigma_angles_deg[k])
         values[f"err_{angle}"] = _fmt(j.err_angles_deg[k])
     return values
 
@@ -511,8 +520,8 @@ class Session:
             raise SessionError(f"QR side must be a length in mm, got {side_mm!r}") from None
         if not math.isfinite(side) or side <= 0:
             raise SessionError(f"QR side must be a positive length in mm, got {side_mm!r}")
-        if solver not in SOLVER_METHODS:
-            raise SessionError(f"solver {solver!r} is not one of {', '.join(SOLVER_METHODS)}")
+        if solver not in METHODS:
+            raise SessionError(f"solver {solver!r} is not one of {', '.join(METHODS)}")
         if solver_settings is None:
             settings_dict: dict[str, Any] = {}
         elif isinstance(solver_settings, dict):
@@ -666,10 +675,6 @@ class Session:
         """Write what is pending, in order."""
         return self._flush(None, "pending records")
 
-    def active_rows(self) -> list[LoggedRow]:
-        """Rows not withdrawn (confirmed or pending), in order."""
-        return [r for r in self.rows if not r.withdrawn]
-
     # ------------------------------------------------------------------ internals
     def _flush(self, row: int | None, what: str) -> LogOutcome:
         logged: list[str] = []
@@ -765,11 +770,7 @@ class Session:
 
 
 def _checked_solver_settings(solver: str, settings: dict[str, Any]) -> dict[str, Any]:
-    """The solver's settings validated by its own declaration when qrfield.solvers is installed."""
-    try:
-        from qrfield.solvers import settings_class
-    except ImportError:
-        return settings  # saved as given; checked again by whoever solves with them
+    """The solver's settings validated by its own declaration."""
     try:
         return to_dict(from_dict(settings_class(solver), settings))
     except SettingError as exc:

@@ -4,22 +4,32 @@ For each combination the tilt magnitude t is swept 0, step, ... up to the limit;
 are t times the combination's multipliers and its centre is at each grid point (x, y, z) of the
 camera frame. The four vertices are projected through the camera model (exact pixels, the truth),
 optionally rounded to whole pixels or given Gaussian noise, and each solver finds the pose from
-them (its batch path: numpy-vectorised for the numerical model). A sample passes when the pose
-meets the acceptance criteria: |error| <= angle_deg on each of alpha, beta, gamma (wrapped), the
-Euclidean position error < position_mm, and the solver stopped within n_max iterations (it met its
-tolerance, or settled at its optimum earlier: a run that reaches n_max without meeting its
-tolerance fails). Counting a settled run as "within n_max" is our reading, not the seed's: with
-rounded or noisy corners no depths meet a 0.01 mm tolerance, and the pose criteria then decide.
-Out-of-view poses (see :mod:`qrfield.simulation.view`) are neither passes nor
-failures.
+them (its batch path: the numerical model and IPPE, both vectorised in numpy).
 
-Work is done in chunks of whole sweeps (a few grid points, all angles, all solvers), so a stop
-request (Ctrl-C, the app's Stop button) loses at most the chunk in progress and every kept grid
-point has complete sweeps.
+Two readings of "solved" (both reported: :meth:`StudyResult.coverage`):
+
+- **within criteria** (status PASSED): the pose meets the acceptance criteria (|error| <= angle_deg
+  on each of alpha, beta, gamma, wrapped; Euclidean position error < position_mm) and the solver
+  stopped before n_max: it met its tolerance, or it *settled* earlier, i.e. its Gauss-Newton step
+  fell below STALL_MM at a least-squares optimum whose largest side/diagonal error is still above
+  the tolerance. A run that reaches n_max without meeting its tolerance fails. This is our reading:
+  with rounded or noisy corners no four depths fit all six lengths to 0.01 mm, so the thesis'
+  model settles above its tolerance, and the pose criteria decide;
+- **converged and within criteria**: the solver's own converged flag holds as well (the
+  numerical model met its tolerance; IPPE found a pose in front of the camera facing it, so for
+  IPPE both readings are the same).
+
+Out-of-view poses (see :mod:`qrfield.simulation.view`) are neither passes nor failures.
+
+Work is cut into tasks of whole sweeps (:func:`plan_tasks`: some grid points of one or more
+combinations, all angles, all solvers), computed in this process or spread over every core
+(:mod:`qrfield.simulation.parallel`), so a stop request (Ctrl-C, the app's Stop button) loses at
+most the tasks in progress and every kept grid point has complete sweeps.
 """
 
 from __future__ import annotations
 
+import functools
 import threading
 import time
 from collections.abc import Callable
@@ -34,8 +44,12 @@ from qrfield.simulation.combinations import Combination
 from qrfield.simulation.study import SolverSpec, StudyConfig
 from qrfield.simulation.view import poses_in_view
 
-#: Poses per chunk (a chunk is whole sweeps of a few grid points); bounds the loss on a stop.
-CHUNK_POSES = 2048
+#: Poses per task at most (a task is whole sweeps of some grid points, of one or more combinations):
+#: large enough that each solver call is vectorised over many poses, small enough to bound the
+#: work lost on a stop. A parallel run cuts smaller tasks when that gives each worker at least
+#: TASKS_PER_WORKER of them (balance).
+CHUNK_POSES = 8192
+TASKS_PER_WORKER = 3
 
 # Sample status codes (per solver, combination, grid point, angle).
 NOT_RUN, OUT_OF_VIEW, FAILED, PASSED = -1, 0, 1, 2
@@ -129,17 +143,31 @@ class StudyResult:
         """Simulated poses (grid point, combination, angle), each solved by every solver."""
         return int(self.done.sum()) * self.sweep_deg.size
 
-    def coverage(self, solver: str, combination: int | None = None) -> float | None:
-        """Share of in-view samples that pass, over one combination (or all pooled); None if none ran."""
+    def coverage(
+        self, solver: str, combination: int | None = None, *, converged_only: bool = False
+    ) -> float | None:
+        """Share of in-view samples that pass, over one combination (or all pooled); None if none ran.
+
+        Two readings (see the module docstring): by default "within criteria" (the pose meets the
+        criteria and the solver stopped within n_max: status PASSED); with ``converged_only``,
+        "converged and within criteria" (the solver's own converged flag holds as well). The
+        denominator is the same: the in-view samples judged.
+        """
         s = self.solvers.index(solver)
-        status = self.status[s] if combination is None else self.status[s, combination]
-        passed = int(np.count_nonzero(status == PASSED))
-        judged = passed + int(np.count_nonzero(status == FAILED))
+        index = (s,) if combination is None else (s, combination)
+        status = self.status[index]
+        ok = status == PASSED
+        if converged_only:
+            ok &= self.converged[index]
+        passed = int(np.count_nonzero(ok))
+        judged = int(np.count_nonzero(status == PASSED)) + int(np.count_nonzero(status == FAILED))
         return passed / judged if judged else None
 
-    def mean_coverage(self, solver: str) -> float | None:
+    def mean_coverage(self, solver: str, *, converged_only: bool = False) -> float | None:
         """Mean of the per-combination coverages (the seed's 'average'); None if none ran."""
-        values = [self.coverage(solver, c) for c in range(len(self.combinations))]
+        values = [
+            self.coverage(solver, c, converged_only=converged_only) for c in range(len(self.combinations))
+        ]
         values = [v for v in values if v is not None]
         return float(np.mean(values)) if values else None
 
@@ -176,10 +204,19 @@ class StudyResult:
 
         return {
             "combinations": [
-                {"name": combo.name, "coverage": {k: rounded(self.coverage(k, c)) for k in self.solvers}}
+                {
+                    "name": combo.name,
+                    "coverage": {k: rounded(self.coverage(k, c)) for k in self.solvers},
+                    "coverage_converged": {
+                        k: rounded(self.coverage(k, c, converged_only=True)) for k in self.solvers
+                    },
+                }
                 for c, combo in enumerate(self.combinations)
             ],
             "mean_coverage": {k: rounded(self.mean_coverage(k)) for k in self.solvers},
+            "mean_coverage_converged": {
+                k: rounded(self.mean_coverage(k, converged_only=True)) for k in self.solvers
+            },
             "samples": self.poses_done,
             "seconds": round(self.seconds, 3),
             "partial": self.partial,
@@ -230,7 +267,7 @@ def judge(
         ang_err = np.max(np.abs(angle_difference(angles, truth_angles)), axis=1)
         c = config.criteria
         within = np.asarray(result.converged, bool) | (np.asarray(result.iterations) < c.n_max)
-        passed = (ang_err <= c.angle_deg) & (pos_err < c.position_mm) & within
+        passed = c.acceptance.meets(pos_err, ang_err) & within
     return passed & np.isfinite(pos_err) & np.isfinite(ang_err), pos_err, ang_err
 
 
@@ -242,42 +279,191 @@ def _should_stop(stop: threading.Event | Callable[[], bool] | None) -> bool:
     return bool(stop())
 
 
+# ---------------------------------------------------------------------- tasks
+#: A block is whole sweeps of grid points g0..g1-1 of one combination: (combination, g0, g1).
+Block = tuple[int, int, int]
+
+
+def plan_tasks(combinations: int, grid_points: int, angles: int, chunk_poses: int) -> list[list[Block]]:
+    """Work split into tasks of at most ``chunk_poses`` poses (at least one grid point's sweep).
+
+    Each combination's grid points are cut into blocks of ``chunk_poses // angles`` points;
+    consecutive blocks (of one or more combinations) are packed into one task while the task
+    stays within ``chunk_poses``, so that a small study costs one solver call per solver.
+    """
+    per_block = max(1, chunk_poses // angles)
+    tasks: list[list[Block]] = []
+    current: list[Block] = []
+    size = 0
+    for c in range(combinations):
+        for g0 in range(0, grid_points, per_block):
+            g1 = min(grid_points, g0 + per_block)
+            poses = (g1 - g0) * angles
+            if current and size + poses > chunk_poses:
+                tasks.append(current)
+                current, size = [], 0
+            current.append((c, g0, g1))
+            size += poses
+    if current:
+        tasks.append(current)
+    return tasks
+
+
+@dataclass(frozen=True)
+class Derived:
+    """What every task of one study needs, computed once per process (see :func:`derived`)."""
+
+    camera: CameraModel
+    specs: list[SolverSpec]
+    combinations: list[Combination]
+    sweep_deg: np.ndarray
+    positions: np.ndarray
+    rotations: np.ndarray  # (C, A, 3, 3)
+    truth_angles_deg: np.ndarray  # (C, A, 3)
+
+
+@functools.lru_cache(maxsize=4)
+def derived(config: StudyConfig) -> Derived:
+    """The camera, solvers, grid, rotations and true angles of a study (cached per process)."""
+    combos = config.combination_list()
+    sweep = config.sweep_values()
+    rotations = (
+        np.stack([rotation_matrix(c.angles_deg(sweep)) for c in combos]) if combos else np.zeros((0, 0, 3, 3))
+    )
+    return Derived(
+        camera=config.camera_model(),
+        specs=config.solver_specs(),
+        combinations=combos,
+        sweep_deg=sweep,
+        positions=grid_positions(config.x_values(), config.y_values(), config.z_values()),
+        rotations=rotations,
+        truth_angles_deg=angles_from_rotation(rotations),
+    )
+
+
+#: The per-solver arrays a task returns, with their fill value where a sample is out of view.
+SAMPLE_ARRAYS: dict[str, tuple[Any, Any, tuple[int, ...]]] = {
+    "status": (np.int8, OUT_OF_VIEW, ()),
+    "position_mm": (float, np.nan, (3,)),
+    "angles_deg": (float, np.nan, (3,)),
+    "converged": (bool, False, ()),
+    "iterations": (np.int32, 0, ()),
+    "position_error_mm": (float, np.nan, ()),
+    "angle_error_deg": (float, np.nan, ()),
+}
+
+#: What one task returns: per block, (block, in_view (g, A), per solver {array name: (g, A, ...)}).
+TaskResult = list[tuple[Block, np.ndarray, list[dict[str, np.ndarray]]]]
+
+
+def compute_task(
+    config: StudyConfig,
+    task: list[Block],
+    solve_fn: SolveFn | None = None,
+    stop: threading.Event | Callable[[], bool] | None = None,
+) -> TaskResult | None:
+    """Project, degrade, solve (each solver once over all blocks) and judge one task's sweeps.
+
+    Returns None when ``stop`` was set midway (between solver calls); safe in a worker process.
+    """
+    solve = solve_fn or default_solve
+    d = derived(config)
+    a = d.sweep_deg.size
+    views, corners, truth_pos, truth_ang = [], [], [], []
+    noise_of: dict[int, np.ndarray | None] = {}
+    for ci, g0, g1 in task:
+        if ci not in noise_of:
+            noise_of[ci] = combination_noise(config, ci, (d.positions.shape[0], a, 4, 2))
+        noise = noise_of[ci]
+        positions = d.positions[g0:g1]
+        in_view, exact = poses_in_view(
+            d.camera, config.side_mm, d.rotations[ci], positions, config.max_view_angle_deg
+        )
+        observed = degrade(exact, config, None if noise is None else noise[g0:g1])
+        mask = in_view.ravel()
+        views.append(in_view)
+        corners.append(observed.reshape(-1, 4, 2)[mask])
+        truth_pos.append(np.broadcast_to(positions[:, None, :], (g1 - g0, a, 3)).reshape(-1, 3)[mask])
+        truth_ang.append(np.broadcast_to(d.truth_angles_deg[ci][None], (g1 - g0, a, 3)).reshape(-1, 3)[mask])
+    flat_corners = np.concatenate(corners)
+    flat_pos, flat_ang = np.concatenate(truth_pos), np.concatenate(truth_ang)
+    per_solver: list[dict[str, np.ndarray]] = []
+    for spec in d.specs:
+        if _should_stop(stop):
+            return None
+        values = {
+            name: np.full((flat_corners.shape[0], *shape), fill, dtype)
+            for name, (dtype, fill, shape) in SAMPLE_ARRAYS.items()
+        }
+        if flat_corners.shape[0]:
+            res = solve(spec, flat_corners, d.camera, config.side_mm)
+            passed, pos_err, ang_err = judge(res, flat_pos, flat_ang, config)
+            values["status"][:] = np.where(passed, PASSED, FAILED)
+            values["position_mm"][:] = res.position_mm
+            values["angles_deg"][:] = res.angles_deg
+            values["converged"][:] = res.converged
+            values["iterations"][:] = res.iterations
+            values["position_error_mm"][:] = pos_err
+            values["angle_error_deg"][:] = ang_err
+        per_solver.append(values)
+    out: TaskResult = []
+    start = 0
+    for (ci, g0, g1), in_view in zip(task, views, strict=True):
+        mask = in_view.ravel()
+        count = int(mask.sum())
+        arrays = []
+        for values in per_solver:
+            block = {}
+            for name, (dtype, fill, shape) in SAMPLE_ARRAYS.items():
+                full = np.full((mask.size, *shape), fill, dtype)
+                full[mask] = values[name][start : start + count]
+                block[name] = full.reshape(g1 - g0, a, *shape)
+            arrays.append(block)
+        start += count
+        out.append(((ci, g0, g1), in_view, arrays))
+    return out
+
+
+# ---------------------------------------------------------------------- the run
 def run_study(
     config: StudyConfig,
     progress: Callable[[Progress], None] | None = None,
     stop: threading.Event | Callable[[], bool] | None = None,
     solve_fn: SolveFn | None = None,
+    workers: int | None = None,
+    chunk_poses: int | None = None,
 ) -> StudyResult:
     """Run ``config``; safe to call from a background thread.
 
     Args:
         config: the study (see :mod:`qrfield.simulation.study`).
-        progress: called after every chunk with a :class:`Progress` (from the running thread).
-        stop: a threading.Event or a callable; when set/true the run stops after the current
-            solver call, drops the unfinished chunk and returns with ``partial`` True.
-        solve_fn: replaces the project's solvers (tests only); see :data:`SolveFn`.
+        progress: called after every task with a :class:`Progress` (from the calling thread).
+        stop: a threading.Event or a callable; when set/true the run stops after the tasks in
+            progress, drops what is unfinished and returns with ``partial`` True.
+        solve_fn: replaces the project's solvers (tests and the benchmark's old path; see
+            :data:`SolveFn`); it runs in this process, so the run is then serial.
+        workers: processes to spread the tasks over; None picks them
+            (:func:`qrfield.simulation.parallel.auto_workers`: every core for a large study, this
+            process alone for a small one); 1 runs everything in this process.
+        chunk_poses: poses per task at most (default :data:`CHUNK_POSES`).
 
     Returns the :class:`StudyResult` (partial or complete).
     """
-    solve = solve_fn or default_solve
+    from qrfield.simulation import parallel
+
     t0 = time.perf_counter()
-    camera = config.camera_model()
-    combos = config.combination_list()
-    specs = config.solver_specs()
-    x, y, z = config.x_values(), config.y_values(), config.z_values()
-    sweep = config.sweep_values()
-    positions = grid_positions(x, y, z)
-    S, C, G, A = len(specs), len(combos), positions.shape[0], sweep.size
+    d = derived(config)
+    S, C, G, A = len(d.specs), len(d.combinations), d.positions.shape[0], d.sweep_deg.size
     result = StudyResult(
         config=config,
-        camera=camera,
-        x_mm=x,
-        y_mm=y,
-        z_mm=z,
-        sweep_deg=sweep,
-        combinations=combos,
-        solvers=[s.key for s in specs],
-        truth_angles_deg=np.zeros((C, A, 3)),
+        camera=d.camera,
+        x_mm=config.x_values(),
+        y_mm=config.y_values(),
+        z_mm=config.z_values(),
+        sweep_deg=d.sweep_deg,
+        combinations=d.combinations,
+        solvers=[s.key for s in d.specs],
+        truth_angles_deg=d.truth_angles_deg.copy(),
         done=np.zeros((C, G), bool),
         in_view=np.zeros((C, G, A), bool),
         status=np.full((S, C, G, A), NOT_RUN, np.int8),
@@ -288,92 +474,45 @@ def run_study(
         position_error_mm=np.full((S, C, G, A), np.nan),
         angle_error_deg=np.full((S, C, G, A), np.nan),
     )
-    per_chunk = max(1, CHUNK_POSES // A)
     total = C * G * A
+    if solve_fn is not None:
+        workers = 1
+    elif workers is None:
+        workers = parallel.auto_workers(total)
+    if chunk_poses is None:
+        chunk_poses = CHUNK_POSES
+        if workers > 1:
+            chunk_poses = max(1, min(chunk_poses, -(-total // (TASKS_PER_WORKER * workers))))
+    tasks = plan_tasks(C, G, A, chunk_poses)
     done_poses = 0
-    stopped = False
-    for ci, combo in enumerate(combos):
-        rotation = rotation_matrix(combo.angles_deg(sweep))
-        truth_angles = angles_from_rotation(rotation)
-        result.truth_angles_deg[ci] = truth_angles
-        noise = combination_noise(config, ci, (G, A, 4, 2))
-        for g0 in range(0, G, per_chunk):
-            g1 = min(G, g0 + per_chunk)
-            if _should_stop(stop):
-                stopped = True
-                break
-            chunk = _run_chunk(
-                config,
-                camera,
-                specs,
-                solve,
-                rotation,
-                truth_angles,
-                positions[g0:g1],
-                None if noise is None else noise[g0:g1],
-                stop,
-            )
-            if chunk is None:
-                stopped = True
-                break
-            in_view, per_solver = chunk
+
+    def merge(task_result: TaskResult) -> None:
+        nonlocal done_poses
+        for (ci, g0, g1), in_view, arrays in task_result:
             result.in_view[ci, g0:g1] = in_view
-            for si, arrays in enumerate(per_solver):
-                for name, value in arrays.items():
+            for si, block in enumerate(arrays):
+                for name, value in block.items():
                     getattr(result, name)[si, ci, g0:g1] = value
             result.done[ci, g0:g1] = True
             done_poses += (g1 - g0) * A
-            result.seconds = time.perf_counter() - t0
-            if progress is not None:
-                progress(Progress(done_poses, total, combo.name, result.seconds))
-        if stopped:
-            break
+        result.seconds = time.perf_counter() - t0
+        if progress is not None:
+            last = task_result[-1][0][0]
+            progress(Progress(done_poses, total, d.combinations[last].name, result.seconds))
+
+    if workers > 1 and len(tasks) > 1:
+        stopped = parallel.run_tasks(config, tasks, workers, merge, lambda: _should_stop(stop))
+    else:
+        stopped = False
+        for task in tasks:
+            if _should_stop(stop):
+                stopped = True
+                break
+            task_result = compute_task(config, task, solve_fn, stop)
+            if task_result is None:
+                stopped = True
+                break
+            merge(task_result)
     result.partial = stopped
     result.seconds = time.perf_counter() - t0
     return result
-
-
-def _run_chunk(
-    config: StudyConfig,
-    camera: CameraModel,
-    specs: list[SolverSpec],
-    solve: SolveFn,
-    rotation: np.ndarray,
-    truth_angles: np.ndarray,
-    positions: np.ndarray,
-    noise: np.ndarray | None,
-    stop: threading.Event | Callable[[], bool] | None,
-) -> tuple[np.ndarray, list[dict[str, np.ndarray]]] | None:
-    """Sweeps of a few grid points for every solver; None when a stop was requested midway."""
-    g, a = positions.shape[0], rotation.shape[0]
-    in_view, corners = poses_in_view(camera, config.side_mm, rotation, positions, config.max_view_angle_deg)
-    observed = degrade(corners, config, noise)
-    idx = np.flatnonzero(in_view.ravel())
-    flat_corners = observed.reshape(-1, 4, 2)[idx]
-    truth_pos = np.broadcast_to(positions[:, None, :], (g, a, 3)).reshape(-1, 3)[idx]
-    truth_ang = np.broadcast_to(truth_angles[None, :, :], (g, a, 3)).reshape(-1, 3)[idx]
-    out = []
-    for spec in specs:
-        if _should_stop(stop):
-            return None
-        arrays = {
-            "status": np.full(g * a, OUT_OF_VIEW, np.int8),
-            "position_mm": np.full((g * a, 3), np.nan),
-            "angles_deg": np.full((g * a, 3), np.nan),
-            "converged": np.zeros(g * a, bool),
-            "iterations": np.zeros(g * a, np.int32),
-            "position_error_mm": np.full(g * a, np.nan),
-            "angle_error_deg": np.full(g * a, np.nan),
-        }
-        if idx.size:
-            res = solve(spec, flat_corners, camera, config.side_mm)
-            passed, pos_err, ang_err = judge(res, truth_pos, truth_ang, config)
-            arrays["status"][idx] = np.where(passed, PASSED, FAILED)
-            arrays["position_mm"][idx] = res.position_mm
-            arrays["angles_deg"][idx] = res.angles_deg
-            arrays["converged"][idx] = res.converged
-            arrays["iterations"][idx] = res.iterations
-            arrays["position_error_mm"][idx] = pos_err
-            arrays["angle_error_deg"][idx] = ang_err
-        out.append({k: v.reshape(g, a, *v.shape[1:]) for k, v in arrays.items()})
-    return in_view, out

@@ -40,6 +40,8 @@ from typing import Any
 import numpy as np
 
 from qrfield.files import FileFormatError, loads_toml, read_toml
+from qrfield.methods import METHODS
+from qrfield.sessions.criteria import AcceptanceCriteria
 from qrfield.settings import SettingError, SettingSpec
 from qrfield.simulation.combinations import DEFAULT_NAME, Combination, load_combinations
 
@@ -106,6 +108,16 @@ CRITERIA_FIELDS: dict[str, SettingSpec] = {
     ),
 }
 TABLES = ("criteria", "solver")
+#: The app's small study (its Simulation tab starts with it; ``qrfield bench simulation`` times it):
+#: the shipped study with a 5 x 3 x 2 grid (x -80..80 step 40, y -40..40 step 40, z 250 and 400 mm)
+#: and tilts 0..60 deg in 5 deg steps: 12 combinations x 13 angles x 30 points = 4680 poses.
+SMALL_STUDY: dict[str, Any] = {
+    "x_range": [-80.0, 80.0, 40.0],
+    "y_range": [-40.0, 40.0, 40.0],
+    "z_range": [250.0, 400.0, 150.0],
+    "sweep_limit_deg": 60.0,
+    "sweep_step_deg": 5.0,
+}
 
 
 class StudyError(ValueError):
@@ -117,9 +129,14 @@ class Criteria:
     """The seed's acceptance criteria: angle error <= angle_deg on each angle, position error
     < position_mm (Euclidean), within n_max iterations."""
 
-    angle_deg: float = 2.0
-    position_mm: float = 5.0
+    angle_deg: float = AcceptanceCriteria().max_angle_error_deg
+    position_mm: float = AcceptanceCriteria().max_position_error_mm
     n_max: int = 30
+
+    @property
+    def acceptance(self) -> AcceptanceCriteria:
+        """The pose part of these criteria as the one rule (qrfield.sessions.criteria)."""
+        return AcceptanceCriteria(max_angle_error_deg=self.angle_deg, max_position_error_mm=self.position_mm)
 
 
 @dataclass(frozen=True)
@@ -226,7 +243,7 @@ def range_values(rng: Sequence[float]) -> np.ndarray:
 def solver_method(key: str) -> str:
     """ "numerical" or "ippe" from a solver key (the key itself or its prefix before '-')."""
     head = key.split("-", 1)[0]
-    if head not in ("numerical", "ippe") or key.endswith("-"):
+    if head not in METHODS or key.endswith("-"):
         raise StudyError(
             f"field 'solvers': unknown solver {key!r}; use numerical, numerical-<guess> "
             "(e.g. numerical-parallelogram) or ippe"

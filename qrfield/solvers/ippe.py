@@ -5,9 +5,11 @@ cv2.solvePnPGeneric with SOLVEPNP_IPPE_SQUARE returns the two poses of the plana
 (V1..V4 in OpenCV's frame: +Y up, +Z towards the camera); both are refined (LM or VVS) and
 converted to the marker frame of docs/conventions.md with :func:`qrfield.geometry.rotation_from_ippe`. The
 one with the smaller reprojection error is the answer, the other its ``alternative``, and
-``ambiguity`` = best error / second error (near 1: the image cannot tell the two apart). When
-refining the second candidate slides it onto the answer (it is then no local minimum of its own),
-the alternative is IPPE's unrefined closed-form mirror, so that the two always differ.
+``ambiguity`` = best error / second error (near 1: the image cannot tell the two apart; the same
+definition as the numerical model's, see :class:`PoseResult`). When
+refining the second candidate slides it towards the answer (it ends nearer the answer than its own
+closed form: no local minimum of its own), the alternative is IPPE's unrefined closed-form mirror,
+so that the two are always the two branches of the ambiguity.
 Corners are undistorted first (exactly, by iteration) when the camera has distortion, so the
 solver works on ideal pinhole pixels; reprojection errors are measured on the corners as given.
 
@@ -36,10 +38,12 @@ from qrfield.settings import setting, validated
 from qrfield.solvers.floats import angles_single, reprojection_single
 from qrfield.solvers.rays import normalised_single, undistort
 from qrfield.solvers.result import BatchResult, PoseResult, SolverError
+from qrfield.solvers.uncertainty import ambiguity_ratio, batch_uncertainty
 
 REFINERS = ("lm", "vvs", "none")
-#: Card normals closer than this (degrees) mean the two candidates are one pose.
-SAME_NORMAL_DEG = 0.01
+#: A lone IPPE candidate this close (card normals, degrees) to the closed-form start's pose is
+#: taken as the same branch of the ambiguity.
+SAME_BRANCH_DEG = 2.0
 
 
 @dataclass(frozen=True)
@@ -151,10 +155,10 @@ def _unit_rays(x: list[float], y: list[float]) -> list[tuple[float, float, float
     return out
 
 
-def _same_normal(a: _Candidate, b: _Candidate) -> bool:
-    """True when two candidates put the card normal within SAME_NORMAL_DEG of each other."""
+def _normal_angle(a: _Candidate, b: _Candidate) -> float:
+    """Angle between the card normals of two candidates, degrees."""
     dot = a.rows[0][2] * b.rows[0][2] + a.rows[1][2] * b.rows[1][2] + a.rows[2][2] * b.rows[2][2]
-    return dot > math.cos(math.radians(SAME_NORMAL_DEG))
+    return math.degrees(math.acos(min(1.0, max(-1.0, dot))))
 
 
 def solve_ippe(
@@ -181,8 +185,8 @@ def solve_ippe(
     if closed is not None and closed.reprojection_px < best_error:
         start = (cv2.Rodrigues(rotation_to_ippe(closed.rotation))[0], closed.position_mm.reshape(3, 1).copy())
         extra = _refined_candidates([start], obj, pts, k, s, side, camera, flat, rays)
-        # It replaces the IPPE candidate on the same side of the ambiguity, keeping the other as mirror.
-        candidates = extra + [c for c in candidates if not (extra and _same_normal(c[0], extra[0][0]))]
+        if extra:
+            candidates = extra + _other_branch(candidates, extra[0][0])
     if not candidates:
         return PoseResult.failed(
             "ippe", corners, "OpenCV IPPE_SQUARE found no pose in front of the camera facing it"
@@ -191,13 +195,28 @@ def solve_ippe(
     first = candidates[0][0]
     if len(candidates) < 2:
         return first.result(corners)
-    second = candidates[1][0]
-    if _same_normal(first, second):
-        # Refining the mirror slid it onto the answer (it is no local minimum of its own): keep
-        # IPPE's closed-form mirror, so that the ambiguity compares two different poses.
-        second = _Candidate(candidates[1][1], candidates[1][2], side, camera, flat, rays)
-    ambiguity = first.error / second.error if second.error > 0.0 else 1.0
+    # The mirror branch starts at the closed form farthest from the answer (its own refinement may
+    # have slid onto the answer's branch, and then it sorts anywhere).
+    starts = [(c, _Candidate(c[1], c[2], side, camera, flat, rays)) for c in candidates]
+    entry, raw = max(starts, key=lambda pair: _normal_angle(pair[1], first))
+    second = entry[0]
+    if entry is candidates[0] or _normal_angle(second, first) < _normal_angle(second, raw):
+        # Refining the mirror slid it towards the answer (no local minimum of its own near the
+        # closed form; LM stops short of the answer, 0.1-2 degrees away on real frames): keep
+        # the closed-form mirror, so that the ambiguity compares the two branches.
+        second = raw
+    ambiguity = ambiguity_ratio(first.error, second.error)
     return replace(first.result(corners), alternative=second.result(corners), ambiguity=ambiguity)
+
+
+def _other_branch(candidates: list, answer: _Candidate) -> list:
+    """The IPPE candidates without the one on ``answer``'s side of the ambiguity (the nearer of
+    two by card normal; a single one only when within SAME_BRANCH_DEG): ``answer`` replaces it.
+    LM stops 0.1-2 degrees short of a minimum on real frames, so "the same pose" is not exact."""
+    if len(candidates) >= 2:
+        nearest = min(candidates, key=lambda c: _normal_angle(c[0], answer))
+        return [c for c in candidates if c is not nearest]
+    return [c for c in candidates if _normal_angle(c[0], answer) > SAME_BRANCH_DEG]
 
 
 def _refined_candidates(starts, obj, pts, k, s: IppeSettings, side, camera, flat, rays) -> list:
@@ -232,9 +251,18 @@ def _closed_form(corners: np.ndarray, camera: CameraModel, side: float) -> PoseR
 
 
 def solve_ippe_batch(
-    corners: np.ndarray, valid: np.ndarray, camera: CameraModel, side: float, settings: IppeSettings | None
+    corners: np.ndarray,
+    valid: np.ndarray,
+    camera: CameraModel,
+    side: float,
+    settings: IppeSettings | None,
+    cov: np.ndarray | None = None,
 ) -> BatchResult:
-    """N poses by IPPE (a loop over :func:`solve_ippe`; no vectorised IPPE in OpenCV)."""
+    """N poses by IPPE (a loop over :func:`solve_ippe`; no vectorised IPPE in OpenCV).
+
+    ``cov``: (N, 4, 2, 2) checked corner covariances (px^2) or None; propagated (vectorised) to
+    the std fields after the loop.
+    """
     count = corners.shape[0]
     out = {
         "position_mm": np.full((count, 3), np.nan),
@@ -252,6 +280,21 @@ def solve_ippe_batch(
         out["rotation"][i] = r.rotation
         out["residual_mm"][i] = r.residual_mm
         out["reprojection_px"][i] = r.reprojection_px
+    if cov is not None:
+        out.update(
+            batch_uncertainty(
+                "ippe",
+                corners,
+                cov,
+                camera,
+                side,
+                out["rotation"],
+                out["position_mm"],
+                out["angles_deg"],
+                None,
+                converged,
+            )
+        )
     return BatchResult(
         method="ippe", converged=converged, iterations=np.zeros(count, int), valid=valid.copy(), **out
     )

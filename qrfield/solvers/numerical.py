@@ -48,6 +48,7 @@ from qrfield.solvers import kernel
 from qrfield.solvers.floats import angles_single, reprojection_single
 from qrfield.solvers.rays import normalised_single
 from qrfield.solvers.result import PoseResult, SolverError
+from qrfield.solvers.uncertainty import ambiguity_ratio
 
 #: A Gauss-Newton step whose largest depth change is below this (mm, 0.1 micrometre) means the
 #: iteration has settled at its least-squares optimum.
@@ -314,10 +315,7 @@ def solve_numerical(
         return _result_single(z, n, status, worst, x, y, side, camera, corners, flat, s)
     pose = _pose_single(z, x, y, side, camera, flat)
     alternative = _mirror_candidate(z, pose, x, y, lengths, side, camera, corners, flat, s)
-    ambiguity = None
-    if alternative is not None:
-        mine, other = pose[2], alternative.reprojection_px
-        ambiguity = mine / other if other > 0.0 else (1.0 if mine == 0.0 else math.inf)
+    ambiguity = None if alternative is None else ambiguity_ratio(pose[2], alternative.reprojection_px)
     return _result_single(
         z, n, status, worst, x, y, side, camera, corners, flat, s, alternative, ambiguity, pose
     )
@@ -346,3 +344,19 @@ def _mirror_candidate(
     ):
         return None  # the mirror start slid back to the same pose: no second candidate
     return _result_single(z_alt, n_alt, status_alt, worst_alt, x, y, side, camera, corners, flat, s)
+
+
+def reflected_pose(
+    result: PoseResult, x: list[float], y: list[float]
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """(R, t) of the rigid pose on the plane of ``result`` reflected about the line of sight to its
+    centre (the start of the mirror search), or None when that plane lies behind the camera.
+
+    The mirror test of :mod:`.uncertainty` starts from it when the search found no distinct mirror.
+    """
+    rows, centre = result.rotation.tolist(), result.position_mm.tolist()
+    guess = _mirror_guess(rows, centre, x, y)
+    if guess is None:
+        return None
+    rows_m, centre_m = kernel.pose_from_vertices(guess, x, y, math.sqrt, max)
+    return np.array(rows_m), np.array(centre_m)

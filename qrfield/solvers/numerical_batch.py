@@ -6,6 +6,8 @@ iteration counts are bit-identical; angles and reprojection errors agree to floa
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from qrfield.camera import CameraModel
@@ -25,6 +27,7 @@ from qrfield.solvers.numerical import (
 )
 from qrfield.solvers.rays import normalised_batch
 from qrfield.solvers.result import BatchResult
+from qrfield.solvers.uncertainty import batch_uncertainty
 
 
 def _initial_batch(
@@ -65,13 +68,24 @@ def solve_numerical_batch(
     camera: CameraModel,
     side: float,
     settings: NumericalSettings | None,
+    cov: np.ndarray | None = None,
 ) -> BatchResult:
-    """N poses by the numerical model at once; rows identical to :func:`solve_numerical` (no mirror)."""
+    """N poses by the numerical model at once; rows identical to :func:`solve_numerical` (no mirror).
+
+    ``cov``: (N, 4, 2, 2) checked corner covariances (px^2) or None; propagated to the std fields.
+    """
     s = checked_settings(settings)
     if corners.shape[0] <= BATCH_CHUNK:
-        return _solve_chunk(corners, valid, camera, side, s)
+        return _solve_chunk(corners, valid, camera, side, s, cov)
     parts = [
-        _solve_chunk(corners[i : i + BATCH_CHUNK], valid[i : i + BATCH_CHUNK], camera, side, s)
+        _solve_chunk(
+            corners[i : i + BATCH_CHUNK],
+            valid[i : i + BATCH_CHUNK],
+            camera,
+            side,
+            s,
+            None if cov is None else cov[i : i + BATCH_CHUNK],
+        )
         for i in range(0, corners.shape[0], BATCH_CHUNK)
     ]
     return BatchResult(
@@ -87,13 +101,21 @@ def solve_numerical_batch(
                 "residual_mm",
                 "reprojection_px",
                 "valid",
+                "corners_std_px",
+                "position_std_mm",
+                "angles_std_deg",
             )
         },
     )
 
 
 def _solve_chunk(
-    corners: np.ndarray, valid: np.ndarray, camera: CameraModel, side: float, s: NumericalSettings
+    corners: np.ndarray,
+    valid: np.ndarray,
+    camera: CameraModel,
+    side: float,
+    s: NumericalSettings,
+    cov: np.ndarray | None,
 ) -> BatchResult:
     count = corners.shape[0]
     lengths = kernel.lengths_for(side)
@@ -161,7 +183,22 @@ def _solve_chunk(
                 step = [v[keep] for v in step]
             z = [np.maximum(z[k] - step[k], Z_FLOOR_MM) for k in range(4)]
 
-    return _batch_result(z_out, n_out, status, worst_out, x_all, y_all, corners, valid, camera, side)
+    result = _batch_result(z_out, n_out, status, worst_out, x_all, y_all, corners, valid, camera, side)
+    if cov is None:
+        return result
+    stds = batch_uncertainty(
+        "numerical",
+        corners,
+        cov,
+        camera,
+        side,
+        result.rotation,
+        result.position_mm,
+        result.angles_deg,
+        z_out,
+        result.converged,
+    )
+    return replace(result, **stds)
 
 
 def _batch_result(

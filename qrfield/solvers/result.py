@@ -23,6 +23,16 @@ def _nan(shape: tuple[int, ...]) -> np.ndarray:
     return np.full(shape, np.nan)
 
 
+def _unknown(shape: tuple[int, ...]) -> np.ndarray:
+    """A read-only NaN array: the shared default of an uncertainty field that was not computed."""
+    out = _nan(shape)
+    out.setflags(write=False)
+    return out
+
+
+_UNKNOWN_4, _UNKNOWN_3, _UNKNOWN_6X6 = _unknown((4,)), _unknown((3,)), _unknown((6, 6))
+
+
 def _plain(value: float | None) -> float | None:
     """A JSON-ready float (None stays None; NaN and inf become None, which JSON can carry)."""
     if value is None:
@@ -53,12 +63,29 @@ class PoseResult:
         reprojection_px: RMS distance, in pixels, between the given corners and the corners the
             pose projects to through the camera model (distortion included).
         reason: "" when converged, else why not (always set when converged is False).
-        alternative: the other (mirror) candidate of the planar ambiguity, when the method found one.
-        ambiguity: reprojection error of this result divided by that of the alternative. ippe: best /
-            second, in [0, 1]; near 1 the two poses explain the image equally well (a flip risk).
-            numerical: this / mirror; above 1 the mirror explains the image better. None without
-            an alternative.
+        alternative: the other (mirror) candidate of the planar ambiguity, when the method found one
+            (its own uncertainty fields are not computed: NaN).
+        ambiguity: both methods alike: the RMS reprojection error of the better-fitting of this
+            result and its alternative over that of the worse, in [0, 1]; near 1 the corners cannot
+            tell the two poses apart. Which one fits better: compare ``reprojection_px`` of the two.
+            None without an alternative.
         corners_px: (4, 2) the corners as given (pixels, V1..V4, before undistortion).
+        corners_std_px: (4,) per corner V1..V4 the RMS radius of its uncertainty, sqrt(trace) of
+            its 2x2 covariance, px (NaN when no corner covariance was given).
+        position_std_mm: (3,) standard uncertainty of x, y, z, mm, propagated from the corner
+            covariance (docs/uncertainty.md); NaN when unknown (no covariance, not converged).
+        angles_std_deg: (3,) the same for alpha, beta, gamma, degrees (NaN also at beta = +-90).
+        pose_cov: (6, 6) covariance of (x, y, z, alpha, beta, gamma) in mm and degrees (NaN when
+            unknown); the std fields are the square roots of its diagonal.
+        ambiguous: True when the mirror pose of the planar ambiguity explains the corners within
+            their uncertainty, or better than this pose (a flip risk; then the std fields do not
+            describe the error, which may be the mirror's). With a corner covariance: chi-square
+            test (``mirror_chi2`` below the 0.999 quantile of chi-square with 2 degrees of
+            freedom, or below ``chi2``); without one: ``ambiguity`` >= 0.8 or the mirror fits better.
+        chi2: chi-square of this pose's branch against the corners under their covariance (at its
+            chi-square optimum; about chi-square(2) distributed when the covariance is right), NaN
+            without a covariance.
+        mirror_chi2: the same for the mirror's branch (NaN without a covariance or a mirror).
     """
 
     method: str
@@ -74,6 +101,13 @@ class PoseResult:
     corners_px: np.ndarray
     alternative: PoseResult | None = None
     ambiguity: float | None = None
+    corners_std_px: np.ndarray = field(default_factory=lambda: _UNKNOWN_4)
+    position_std_mm: np.ndarray = field(default_factory=lambda: _UNKNOWN_3)
+    angles_std_deg: np.ndarray = field(default_factory=lambda: _UNKNOWN_3)
+    pose_cov: np.ndarray = field(default_factory=lambda: _UNKNOWN_6X6)
+    ambiguous: bool = False
+    chi2: float = math.nan
+    mirror_chi2: float = math.nan
 
     @classmethod
     def failed(cls, method: str, corners_px: np.ndarray, reason: str, iterations: int = 0) -> PoseResult:
@@ -105,6 +139,10 @@ class PoseResult:
             "reason": self.reason,
             "ambiguity": _plain(self.ambiguity),
             "residual_mm": _plain(self.residual_mm),
+            "corners_std_px": [_plain(v) for v in self.corners_std_px],
+            "position_std_mm": [_plain(v) for v in self.position_std_mm],
+            "angles_std_deg": [_plain(v) for v in self.angles_std_deg],
+            "ambiguous": bool(self.ambiguous),
         }
 
 
@@ -123,6 +161,9 @@ class BatchResult:
         reprojection_px: (N,) RMS reprojection error, pixels.
         valid: (N,) bool, False where the corner set itself is unusable (NaN/inf, collinear,
             self-intersecting, concave or counter-clockwise): such rows are not converged.
+        corners_std_px, position_std_mm, angles_std_deg: (N, 4), (N, 3), (N, 3) as in
+            :class:`PoseResult` (NaN where unknown; all NaN without a corner covariance). The batch
+            runs no mirror search, so it has no ``ambiguous`` flag.
     """
 
     method: str
@@ -134,6 +175,15 @@ class BatchResult:
     residual_mm: np.ndarray
     reprojection_px: np.ndarray
     valid: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    corners_std_px: np.ndarray | None = None
+    position_std_mm: np.ndarray | None = None
+    angles_std_deg: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        count = len(self)
+        for name, width in (("corners_std_px", 4), ("position_std_mm", 3), ("angles_std_deg", 3)):
+            if getattr(self, name) is None:  # a solver that computes no uncertainty: unknown
+                object.__setattr__(self, name, _nan((count, width)))
 
     def __len__(self) -> int:
         return int(self.converged.shape[0])

@@ -8,20 +8,37 @@ Plain Python, no Qt: the headless runner and the app's worker thread both use it
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
-from qrfield.camera import CameraModel, resolve_camera
+from qrfield.camera import DEFAULT_CAMERA, CameraModel, resolve_camera
 from qrfield.sources.base import EndOfStream, Frame, FrameSource, Pacer, SourceError
 from qrfield.sources.folder import ImageFolderSource
+from qrfield.sources.kinds import (
+    AUTO_CANDIDATES,
+    LIVE_CAMERA_KINDS,
+    SOURCE_CHOICES,
+    SOURCE_HELP,
+    SOURCE_KINDS,
+    is_live_camera,
+    source_kind,
+)
 from qrfield.sources.latest import LatestFrameReader
-from qrfield.sources.opencv import UsbCameraSource, VideoFileSource
-from qrfield.sources.picamera import PICAMERA2_MISSING, Picamera2Settings, Picamera2Source
+from qrfield.sources.opencv import UsbCameraSettings, UsbCameraSource, VideoFileSource
+from qrfield.sources.picamera import (
+    PICAMERA2_MISSING,
+    Picamera2Settings,
+    Picamera2Source,
+    SimulatedPicamera2Source,
+)
 from qrfield.sources.virtual import VirtualBenchSettings, VirtualBenchSource
 
 __all__ = [
+    "AUTO_CANDIDATES",
+    "LIVE_CAMERA_KINDS",
     "PICAMERA2_MISSING",
+    "SOURCE_CHOICES",
     "SOURCE_HELP",
+    "SOURCE_KINDS",
     "EndOfStream",
     "Frame",
     "FrameSource",
@@ -35,17 +52,12 @@ __all__ = [
     "VideoFileSource",
     "VirtualBenchSettings",
     "VirtualBenchSource",
+    "is_live_camera",
     "make_source",
     "open_source",
+    "source_kind",
+    "stream_camera",
 ]
-
-#: Camera used by the virtual bench when none is named.
-DEFAULT_VIRTUAL_CAMERA = "picam-v2@640x480"
-
-SOURCE_HELP = (
-    "camera source: auto (picamera2, then USB camera 0, then the virtual bench), virtual, picamera2, "
-    "usb:N (OpenCV camera index N), or a path to a video file or a folder of images"
-)
 
 
 def make_source(
@@ -55,17 +67,20 @@ def make_source(
     side_mm: float = 50.0,
     virtual: VirtualBenchSettings | None = None,
     picamera: Picamera2Settings | None = None,
+    usb: UsbCameraSettings | None = None,
     loop: bool = False,
     pace: bool = False,
 ) -> FrameSource:
     """The (unopened) source named by ``spec`` (any ``--source`` value but ``auto``).
 
     Args:
-        spec: ``virtual``, ``picamera2``, ``usb:N`` or a path (video file or folder).
+        spec: ``virtual``, ``picamera2``, ``picamera2-sim[:SENSOR]``, ``usb:N`` or a path (video
+            file or folder).
         camera: the virtual bench's camera model (default picam-v2@640x480); for real cameras,
-            its size is the resolution requested.
-        side_mm: the virtual bench's QR side, mm.
-        virtual, picamera: settings of those sources.
+            its size is the resolution requested; picamera2 maps it through the stream's sensor
+            crop, a USB camera's frames must have its size.
+        side_mm: the virtual bench's (and the picamera2 stand-in's) QR side, mm.
+        virtual, picamera, usb: settings of those sources (``virtual`` also sets the stand-in's scene).
         loop: a video file or folder starts again at its end.
         pace: a video file plays at its own frame rate, a folder at 2 images per second.
 
@@ -77,22 +92,27 @@ def make_source(
         raise SourceError(
             "source '': empty; give auto, virtual, picamera2, usb:N, or a path (. for the current folder)"
         )
-    if spec == "virtual":
-        return VirtualBenchSource(camera or resolve_camera(DEFAULT_VIRTUAL_CAMERA), side_mm, virtual)
-    if spec == "picamera2":
+    kind = source_kind(spec)
+    if kind == "virtual":
+        return VirtualBenchSource(camera or resolve_camera(DEFAULT_CAMERA), side_mm, virtual)
+    if kind in ("picamera2", "picamera2-sim"):
         if picamera is None and camera is not None:
             picamera = Picamera2Settings(width=camera.width, height=camera.height)
-        return Picamera2Source(picamera)
-    if spec.startswith("usb:") or spec == "usb":
+        if kind == "picamera2":
+            return Picamera2Source(picamera, profile=camera)
+        sensor = spec.partition(":")[2] or "imx219"
+        scene = virtual or VirtualBenchSettings()
+        return SimulatedPicamera2Source(picamera, profile=camera, sensor=sensor, scene=scene, side_mm=side_mm)
+    if kind == "usb":
         index_text = spec[4:] if spec.startswith("usb:") else "0"
         if not index_text.isdigit():
             raise SourceError(f"source {spec!r}: the USB camera index must be a whole number, e.g. usb:0")
         size = (camera.width, camera.height) if camera else (None, None)
-        return UsbCameraSource(int(index_text), *size)
-    if spec == "auto":
+        return UsbCameraSource(int(index_text), *size, camera=camera, settings=usb)
+    if kind == "auto":
         raise SourceError("source 'auto' is resolved by open_source(), not make_source()")
     path = Path(spec).expanduser()
-    if path.is_dir():
+    if kind == "folder":
         return ImageFolderSource(path, loop=loop, fps=2.0 if pace else 0.0)
     if path.is_file():
         return VideoFileSource(path, loop=loop, pace=pace)
@@ -101,18 +121,21 @@ def make_source(
     )
 
 
-def open_source(spec: str, **kwargs: object) -> FrameSource:
+def open_source(spec: str, *, allow_virtual: bool = True, **kwargs: object) -> FrameSource:
     """Make and open the source named by ``spec`` (see :func:`make_source`; also ``auto``).
 
     For ``auto`` the chosen source's ``notes`` start with which source was chosen and why each
-    one before it failed. Raises SourceError when the source cannot be opened.
+    one before it failed; without ``allow_virtual`` it never falls back to the virtual bench (a
+    gripper must not be fed made-up poses because a camera is missing). Raises SourceError when
+    the source cannot be opened.
     """
     if spec.strip() != "auto":
         source = make_source(spec, **kwargs)  # type: ignore[arg-type]
         source.open()
         return source
     failures: list[str] = []
-    for candidate in ("picamera2", "usb:0", "virtual"):
+    candidates = [c for c in AUTO_CANDIDATES if allow_virtual or source_kind(c) != "virtual"]
+    for candidate in candidates:
         source = make_source(candidate, **kwargs)  # type: ignore[arg-type]
         try:
             source.open()
@@ -124,11 +147,17 @@ def open_source(spec: str, **kwargs: object) -> FrameSource:
             note += "; tried " + "; ".join(failures)
         source.notes.insert(0, note)
         return source
+    if not allow_virtual:
+        raise SourceError(
+            "auto found no camera (" + "; ".join(failures) + "); it does not fall back to the virtual "
+            "bench here, whose poses are made up: connect a camera, name one with --source, or give "
+            "--allow-virtual to stream the bench's poses (marked SIM)"
+        )
     raise SourceError("auto: no source could be opened; " + "; ".join(failures))  # pragma: no cover
 
 
-def describe_spec(spec: str) -> str:
-    """A short human name for a ``--source`` value (for window titles and logs)."""
-    if spec in ("auto", "virtual", "picamera2") or spec.startswith("usb"):
-        return spec
-    return os.path.basename(os.path.normpath(spec)) or spec
+def stream_camera(source: FrameSource, camera: CameraModel) -> CameraModel:
+    """The camera model to measure ``source``'s frames with: the source's own (a picamera2 stream's,
+    derived from its sensor crop) when it has one, else ``camera`` (the model the user named)."""
+    own = getattr(source, "camera", None)
+    return own if isinstance(own, CameraModel) else camera

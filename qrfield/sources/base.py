@@ -11,10 +11,18 @@ from __future__ import annotations
 import time
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from qrfield.geometry import Pose
+
+if TYPE_CHECKING:
+    from qrfield.camera import CameraModel
+
+
+#: Frames a camera runs on automatic exposure (and a USB camera on autofocus) before they are locked.
+SETTLE_FRAMES = 15
 
 
 class SourceError(RuntimeError):
@@ -83,10 +91,17 @@ class FrameSource(ABC):
         notes: messages worth showing (why ``auto`` chose this source, files skipped, ...).
         live: frames come whether or not anyone reads them (a camera), so a reader must drain
             them; False when a frame is made on request (the virtual bench renders it in read()).
+        simulated: the frames are made up (rendered), not captured by a camera: the virtual
+            bench and the picamera2 stand-in (which is live, like the camera it imitates). A pose
+            is a real measurement only from a source that is live and not simulated.
+        camera: the camera model of the frames when the source knows it (a picamera2 stream's,
+            derived from its sensor crop), else None: the model the user named applies.
     """
 
     name: str = "source"
     live: bool = True
+    simulated: bool = False
+    camera: CameraModel | None = None
 
     def __init__(self) -> None:
         self.notes: list[str] = []

@@ -4,67 +4,230 @@ from __future__ import annotations
 
 import os
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
+import numpy as np
 
-from qrfield.sources.base import EndOfStream, Frame, FrameSource, Pacer, SourceError
+from qrfield.camera import CameraModel
+from qrfield.settings import setting, validated
+from qrfield.sources.base import SETTLE_FRAMES, EndOfStream, Frame, FrameSource, Pacer, SourceError
 
 #: Consecutive failed grabs after which a USB camera counts as gone.
 USB_MAX_FAILED_READS = 5
 
 
+@dataclass(frozen=True)
+class UsbCameraSettings:
+    """Pixel format, focus and exposure of a USB camera (V4L2 through OpenCV VideoCapture)."""
+
+    fourcc: str = setting(
+        "auto",
+        label="pixel format",
+        choices=("auto", "MJPG", "YUYV", "driver"),
+        help="auto: MJPG above 640x480 where the camera offers it (raw YUYV at 720p and up exceeds USB 2 "
+        "at full frame rate), else the driver's default; driver: never change it",
+    )
+    autofocus_off: bool = setting(
+        True, label="autofocus off", help="switch autofocus off where the driver offers it: focus held still"
+    )
+    focus: int = setting(
+        -1,
+        label="focus",
+        minimum=-1,
+        maximum=1023,
+        help="fixed focus value (the driver's CAP_PROP_FOCUS units; -1 = where the autofocus left it)",
+    )
+    lock_exposure: bool = setting(
+        True,
+        label="lock exposure",
+        help="freeze automatic exposure once settled, where offered",
+    )
+    settle_frames: int = setting(
+        SETTLE_FRAMES,
+        label="settle frames",
+        minimum=0,
+        maximum=300,
+        help="frames before focus and exposure are locked",
+    )
+
+
+#: V4L2 exposure_auto menu values (OpenCV's V4L2 backend passes CAP_PROP_AUTO_EXPOSURE through).
+V4L2_EXPOSURE_MANUAL, V4L2_EXPOSURE_APERTURE_PRIORITY = 1, 3
+#: Frame sizes above this many pixels get MJPG (``fourcc`` auto).
+MJPG_ABOVE_PIXELS = 640 * 480
+
+
+def fourcc_text(value: float) -> str:
+    """CAP_PROP_FOURCC's number as its four letters ('' when unknown)."""
+    code = int(value) if value and value > 0 else 0
+    text = "".join(chr((code >> (8 * i)) & 0xFF) for i in range(4))
+    return text if text.isprintable() and text.strip() else ""
+
+
 class UsbCameraSource(FrameSource):
     """A camera OpenCV can open by index (``usb:N``, /dev/videoN on Linux).
 
+    At open the source asks for the size (MJPG above 640x480 where offered), switches autofocus
+    off (a fixed ``focus`` if set) where the driver offers it, and reads one frame: its size is the
+    size delivered, which must be the camera model's (a mismatch is a SourceError, never a silent
+    rescale: a webcam may crop for some sizes). After ``settle_frames`` the automatic exposure (and
+    the focus the autofocus found) is locked where the driver offers it. ``notes`` say what the
+    driver took.
+
     Args:
         index: the device index.
-        width, height: requested resolution in pixels (None = the camera's default); the camera
-            may deliver another size, which the frames then have.
+        width, height: requested resolution in pixels (None = the camera's default).
+        camera: the camera model the frames must fit (None: no check).
+        settings: pixel format, focus and exposure.
     """
 
-    def __init__(self, index: int = 0, width: int | None = None, height: int | None = None) -> None:
+    def __init__(
+        self,
+        index: int = 0,
+        width: int | None = None,
+        height: int | None = None,
+        *,
+        camera: CameraModel | None = None,
+        settings: UsbCameraSettings | None = None,
+    ) -> None:
         super().__init__()
         if index < 0:
             raise ValueError(f"USB camera index must be >= 0, got {index}")
         self.index = int(index)
         self.width, self.height = width, height
+        self.profile = camera
+        self.settings = validated(settings or UsbCameraSettings())
         self.name = f"usb:{self.index}"
+        self.size: tuple[int, int] | None = None
+        self.fourcc = ""
         self._cap: cv2.VideoCapture | None = None
+        self._first: np.ndarray | None = None
+        self._locked = False
 
     @property
     def description(self) -> str:
-        return f"USB camera {self.index} (OpenCV VideoCapture)"
+        text = f"USB camera {self.index} (OpenCV VideoCapture"
+        if self.size:
+            text += f", {self.size[0]}x{self.size[1]}" + (f" {self.fourcc}" if self.fourcc else "")
+        return text + ")"
 
     def _open_impl(self) -> None:
-        cap = _quietly_open(self.index)
+        cap = quietly_open(self.index)
         if not cap.isOpened():
             cap.release()
             where = f" (/dev/video{self.index})" if os.name == "posix" else ""
             raise SourceError(f"cannot open USB camera {self.index}{where}: no such device or it is busy")
+        self._cap = cap
+        self._locked = False
+        try:
+            self._set_format(cap)
+            self._set_focus(cap)
+            image = self._grab()
+            self.size = (int(image.shape[1]), int(image.shape[0]))
+            self._check_size(self.size)
+        except SourceError:
+            self._close_impl()
+            raise
+        self._first = image
+
+    def _set_format(self, cap: cv2.VideoCapture) -> None:
+        s = self.settings
+        big = bool(self.width and self.height and self.width * self.height > MJPG_ABOVE_PIXELS)
+        wanted = {"auto": "MJPG" if big else "", "driver": ""}.get(s.fourcc, s.fourcc)
+        if wanted:
+            # The pixel format goes first: a driver offers some sizes only in some formats.
+            cap.set(cv2.CAP_PROP_FOURCC, cv2.VideoWriter_fourcc(*wanted))
         if self.width and self.height:
             cap.set(cv2.CAP_PROP_FRAME_WIDTH, self.width)
             cap.set(cv2.CAP_PROP_FRAME_HEIGHT, self.height)
-        self._cap = cap
+        self.fourcc = fourcc_text(cap.get(cv2.CAP_PROP_FOURCC))
+        if wanted and self.fourcc and self.fourcc != wanted:
+            self.notes.append(f"the camera does not offer {wanted} here; it sends {self.fourcc}")
 
-    def _read_impl(self, index: int) -> Frame:
+    def _set_focus(self, cap: cv2.VideoCapture) -> None:
+        s = self.settings
+        if not s.autofocus_off:
+            return
+        if not _set_and_check(cap, cv2.CAP_PROP_AUTOFOCUS, 0):
+            self.notes.append("autofocus: the driver offers no autofocus switch (fixed-focus camera?)")
+            return
+        if s.focus >= 0:
+            if _set_and_check(cap, cv2.CAP_PROP_FOCUS, s.focus):
+                self.notes.append(f"autofocus off, focus fixed at {s.focus}")
+            else:
+                self.notes.append(f"autofocus off; the driver did not take focus {s.focus}")
+        else:
+            self.notes.append(f"autofocus off, focus held at {cap.get(cv2.CAP_PROP_FOCUS):g}")
+
+    def _lock_exposure(self, cap: cv2.VideoCapture) -> None:
+        """Switch automatic exposure to manual at the exposure it settled on, where offered."""
+        self._locked = True
+        if not self.settings.lock_exposure:
+            return
+        exposure = cap.get(cv2.CAP_PROP_EXPOSURE)
+        if not _set_and_check(cap, cv2.CAP_PROP_AUTO_EXPOSURE, V4L2_EXPOSURE_MANUAL):
+            self.notes.append("exposure: the driver offers no manual exposure; it stays automatic")
+            return
+        if exposure > 0:
+            cap.set(cv2.CAP_PROP_EXPOSURE, exposure)
+        self.notes.append(f"exposure locked at {cap.get(cv2.CAP_PROP_EXPOSURE):g} (driver units)")
+
+    def _check_size(self, size: tuple[int, int]) -> None:
+        camera = self.profile
+        if camera is not None and size != camera.size:
+            w, h = size
+            asked = f" (asked for {self.width}x{self.height})" if self.width and self.height else ""
+            raise SourceError(
+                f"USB camera {self.index} delivers {w}x{h} frames{asked}, but the camera model "
+                f"{camera.name!r} is for {camera.width}x{camera.height}: name a model of {w}x{h} "
+                f"(calibrate at this size, or NAME@{w}x{h} if it is the same field of view)"
+            )
+
+    def _grab(self) -> np.ndarray:
         assert self._cap is not None
         for _ in range(USB_MAX_FAILED_READS):
             ok, image = self._cap.read()
             if ok and image is not None:
-                return Frame(image, time.monotonic(), index, label=self.name)
+                return image
         raise SourceError(
             f"USB camera {self.index} stopped delivering frames ({USB_MAX_FAILED_READS} failed reads): "
             "unplugged or taken by another program?"
         )
 
+    def _read_impl(self, index: int) -> Frame:
+        assert self._cap is not None
+        if self._first is not None:
+            image, self._first = self._first, None
+        else:
+            image = self._grab()
+        t = time.monotonic()
+        size = (int(image.shape[1]), int(image.shape[0]))
+        if size != self.size:
+            raise SourceError(
+                f"USB camera {self.index} changed its frame size from {self.size} to {size}: reopen it"
+            )
+        if not self._locked and index + 1 >= self.settings.settle_frames:
+            self._lock_exposure(self._cap)
+        return Frame(image, t, index, label=self.name)
+
     def _close_impl(self) -> None:
         if self._cap is not None:
             self._cap.release()
             self._cap = None
+        self._first = None
 
 
-def _quietly_open(index: int) -> cv2.VideoCapture:
+def _set_and_check(cap: cv2.VideoCapture, prop: int, value: float) -> bool:
+    """Set ``prop`` and read it back: VideoCapture.set's True only says the backend knows the
+    property, not that the device took the value (OpenCV's VideoCapture::set documentation)."""
+    if not cap.set(prop, value):
+        return False
+    return abs(cap.get(prop) - value) < 0.5
+
+
+def quietly_open(index: int) -> cv2.VideoCapture:
     """cv2.VideoCapture(index) without OpenCV's console warnings when there is no such camera
     (the SourceError raised instead says so once, in words)."""
     logging = getattr(getattr(cv2, "utils", None), "logging", None)

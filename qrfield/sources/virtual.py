@@ -84,11 +84,25 @@ class VirtualBenchSettings:
         return replace(self, x_mm=x, y_mm=y, z_mm=z, alpha_deg=a, beta_deg=b, gamma_deg=g)
 
 
+def pose_at(settings: VirtualBenchSettings, t_s: float) -> Pose:
+    """The bench's true pose ``t_s`` seconds after the start: the set pose plus the slow wobble."""
+    s = settings
+    if s.wobble_deg == 0 and s.wobble_mm == 0:
+        return s.pose
+    phase = 2 * math.pi * t_s / s.wobble_period_s
+    angles = s.pose.angles_deg + s.wobble_deg * np.array(
+        [math.sin(phase), math.sin(phase + math.pi / 2), 0.0]
+    )
+    position = s.pose.position_mm + np.array([s.wobble_mm * math.sin(phase / 2), 0.0, 0.0])
+    return Pose(position, angles)
+
+
 class VirtualBenchSource(FrameSource):
     """Renders the card at the settings' pose; settings may be changed while frames are read."""
 
     name = "virtual"
     live = False  # a frame is rendered when read(): nothing to drain
+    simulated = True
 
     def __init__(
         self, camera: CameraModel, side_mm: float, settings: VirtualBenchSettings | None = None
@@ -122,15 +136,7 @@ class VirtualBenchSource(FrameSource):
 
     def true_pose(self, t_s: float) -> Pose:
         """The true pose ``t_s`` seconds after the source was opened (the set pose plus wobble)."""
-        s = self.settings
-        if s.wobble_deg == 0 and s.wobble_mm == 0:
-            return s.pose
-        phase = 2 * math.pi * t_s / s.wobble_period_s
-        angles = s.pose.angles_deg + s.wobble_deg * np.array(
-            [math.sin(phase), math.sin(phase + math.pi / 2), 0.0]
-        )
-        position = s.pose.position_mm + np.array([s.wobble_mm * math.sin(phase / 2), 0.0, 0.0])
-        return Pose(position, angles)
+        return pose_at(self.settings, t_s)
 
     def _open_impl(self) -> None:
         self._t0 = time.monotonic()

@@ -15,7 +15,7 @@ import pytest
 @pytest.fixture
 def make_window(qtbot, tmp_path: Path):
     """Open main windows with their config in tmp_path; each is shut down after the test."""
-    from ui.config import ConfigStore
+    from qrfield.runconfig import ConfigStore
     from ui.main_window import MainWindow
 
     windows: list[MainWindow] = []

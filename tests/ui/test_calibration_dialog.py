@@ -17,9 +17,9 @@ from PySide6 import QtCore
 from qrfield.camera import CameraModel, resolve_camera
 from qrfield.chessboard import Board, render_chessboard
 from qrfield.geometry import Pose
+from qrfield.runconfig import ConfigStore
 from qrfield.sources import Frame, FrameSource
 from qrfield.sources.base import Pacer
-from ui.config import ConfigStore
 from ui.main_window import MainWindow
 
 pytestmark = pytest.mark.gui
@@ -29,7 +29,9 @@ CAMERA = "picam-v2@640x480"
 
 @pytest.fixture(autouse=True)
 def _in_tmp_path(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.chdir(tmp_path)  # Save writes ./calib/NAME.json
+    monkeypatch.chdir(tmp_path)
+    # Save writes NAME.json to the user's profile folder (qrfield.paths.user_calib_dir): here, not ~.
+    monkeypatch.setenv("QRFIELD_CONFIG_DIR", str(tmp_path / "config"))
 
 
 def click(qtbot, widget) -> None:
@@ -94,12 +96,14 @@ def test_virtual_chessboard_views_calibrate_back_to_the_camera(make_window, qtbo
     assert "RMS reprojection error" in text and f"fx = {cam.fx:.2f} ±" in text and "advice:" in text
     assert all("px RMS" in dialog.views.item(i).text() for i in range(8))
 
-    # Save: ./calib/NAME.json, read back by the core; no overwrite unless confirmed.
+    # Save: NAME.json in the user's profile folder, found by name by the core (./calib is not searched
+    # by name since issue 15); no overwrite unless confirmed.
     dialog.form.widgets["name"].setText("bench-cam")
     dialog.form.widgets["name"].editingFinished.emit()
     click(qtbot, dialog.save_button)
-    path = tmp_path / "calib" / "bench-cam.json"
+    path = tmp_path / "config" / "calib" / "bench-cam.json"
     loaded = CameraModel.load(path)
+    assert resolve_camera("bench-cam").fx == pytest.approx(cam.fx)  # --camera bench-cam finds it
     assert (loaded.fx, loaded.fy, loaded.cx, loaded.cy) == pytest.approx((cam.fx, cam.fy, cam.cx, cam.cy))
     assert loaded.size == truth.size
     path.write_text("sentinel")

@@ -14,7 +14,10 @@ from ui.pose_panel import PosePanel, solver_status_text
 pytestmark = pytest.mark.gui
 
 
-def pose_result(method: str, position, angles, ambiguity=None, converged=True, reason=""):
+def pose_result(
+    method: str, position, angles, ambiguity=None, converged=True, reason="", ambiguous=False, std=None
+):
+    std = np.full(6, np.nan) if std is None else np.array(std, float)
     return SimpleNamespace(
         method=method,
         position_mm=np.array(position, float),
@@ -23,6 +26,9 @@ def pose_result(method: str, position, angles, ambiguity=None, converged=True, r
         iterations=5 if method == "numerical" else 0,
         reprojection_px=0.12,
         ambiguity=ambiguity,
+        ambiguous=ambiguous,
+        position_std_mm=std[:3],
+        angles_std_deg=std[3:],
         reason=reason,
     )
 
@@ -38,7 +44,9 @@ def test_panel_shows_each_method_the_truth_and_the_verdict(qtbot) -> None:
         detection=SimpleNamespace(text="qrfield", corners_px=np.zeros((4, 2))),
         poses={
             "numerical": pose_result("numerical", [10.4, -5.2, 301.0], [15.5, -19.0, 10.2]),
-            "ippe": pose_result("ippe", [12.0, -5.0, 309.0], [18.0, -20.0, 10.0], ambiguity=0.93),
+            "ippe": pose_result(
+                "ippe", [12.0, -5.0, 309.0], [18.0, -20.0, 10.0], ambiguity=0.93, ambiguous=True
+            ),
         },
         truth=truth,
     )
@@ -59,5 +67,67 @@ def test_solver_status_lines() -> None:
         pose_result("numerical", [np.nan] * 3, [np.nan] * 3, converged=False, reason="n_max reached")
     )
     assert text.startswith("NOT converged") and text.endswith("n_max reached") and warn
-    text, warn = solver_status_text(pose_result("ippe", [0, 0, 1], [0, 0, 0], ambiguity=1.4))
-    assert "ambiguity 1.40" in text and warn
+    # The warning follows the core's mirror test, not a ratio threshold of the panel's own.
+    text, warn = solver_status_text(pose_result("ippe", [0, 0, 1], [0, 0, 0], ambiguity=0.97))
+    assert "flip risk" not in text and not warn
+    text, warn = solver_status_text(pose_result("ippe", [0, 0, 1], [0, 0, 0], ambiguity=0.4, ambiguous=True))
+    assert "ambiguity 0.40" in text and "flip risk" in text and warn
+
+
+def test_each_value_shows_its_uncertainty_beside_it(qtbot) -> None:
+    panel = PosePanel()
+    qtbot.addWidget(panel)
+    std = [0.05, 0.061, 1.234, 0.57, 0.5749, np.nan]
+    result = FrameResult(
+        1,
+        0,
+        "OK",
+        detection=SimpleNamespace(text="qrfield", corners_px=np.zeros((4, 2))),
+        poses={"numerical": pose_result("numerical", [1.0, 2.0, 300.0], [1.0, 2.0, 3.0], std=std)},
+    )
+    panel.show_result(result, ("numerical",))
+    assert np.allclose(panel.displayed("numerical"), [1.0, 2.0, 300.0, 1.0, 2.0, 3.0])
+    shown = panel.displayed_std("numerical")
+    assert np.allclose(shown[:5], [0.05, 0.06, 1.23, 0.57, 0.57]) and np.isnan(shown[5])  # NaN: none
+    z_cell = panel.findChild(type(panel.headline), "numerical_2")
+    assert "300.0" in z_cell.text() and "±1.23" in z_cell.text()
+    assert "±" not in panel.findChild(type(panel.headline), "numerical_5").text()
+    # Without a covariance nothing is shown beside the values.
+    result.poses["numerical"] = pose_result("numerical", [1.0, 2.0, 300.0], [1.0, 2.0, 3.0])
+    panel.show_result(result, ("numerical",))
+    assert np.all(np.isnan(panel.displayed_std("numerical")))
+
+
+def test_the_verdict_uses_the_criteria_it_is_given(qtbot) -> None:
+    from qrfield.sessions import AcceptanceCriteria
+
+    panel = PosePanel()
+    qtbot.addWidget(panel)
+    truth = Pose([10.0, -5.0, 300.0], [15.0, -20.0, 10.0])
+    # 1.10 mm and 1.00 deg off the truth (worked out in the test above).
+    poses = {"numerical": pose_result("numerical", [10.4, -5.2, 301.0], [15.5, -19.0, 10.2])}
+    detection = SimpleNamespace(text="", corners_px=np.zeros((4, 2)))
+    result = FrameResult(3, 100, "OK", detection=detection, poses=poses, truth=truth)
+    panel.show_result(result, ("numerical",))
+    assert "✔ meets 2°/5 mm" in panel.verdict.text()  # the seed's, by default
+    panel.set_criteria(AcceptanceCriteria(max_angle_error_deg=0.5, max_position_error_mm=5.0))
+    panel.show_result(result, ("numerical",))
+    assert "✘ fails 0.5°/5 mm" in panel.verdict.text()
+    panel.set_criteria(AcceptanceCriteria(max_angle_error_deg=2.0, max_position_error_mm=1.0))
+    panel.show_result(result, ("numerical",))
+    assert "✘ fails 2°/1 mm" in panel.verdict.text()
+
+
+def test_the_window_judges_by_the_open_sessions_criteria(make_window, tmp_path, monkeypatch) -> None:
+    from qrfield.sessions import AcceptanceCriteria
+
+    monkeypatch.setenv("QRFIELD_SESSIONS_DIR", str(tmp_path / "sessions"))
+    window = make_window({"source": "virtual"})
+    panel = window.session_panel
+    panel.criteria_form.widgets["max_angle_error_deg"].setValue(1.0)
+    assert window.pose_panel.criteria == AcceptanceCriteria(max_angle_error_deg=1.0)  # the form's, no session
+    panel.name_edit.setText("strict")
+    session = panel.create_from_form()
+    panel.criteria_form.widgets["max_angle_error_deg"].setValue(3.0)  # for the next session, not this one
+    assert session is not None and window.pose_panel.criteria == session.info.criteria
+    assert window.pose_panel.criteria.max_angle_error_deg == 1.0

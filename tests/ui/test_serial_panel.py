@@ -12,11 +12,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 from PySide6 import QtCore
-from serial_truth import parse_frame_line, split_lines
+from serial_truth import command_line, frames_and_answers, parse_frame_line, split_lines
 
 from qrfield.geometry import Pose, angle_difference
+from qrfield.runconfig import ConfigStore
 from qrfield.serial_link import CLOSED, CONNECTED, DISCONNECTED, SerialLinkSettings
-from ui.config import ConfigStore
 from ui.main_window import MainWindow
 from ui.serial_panel import STATE_COLOURS, SerialPanel
 
@@ -50,7 +50,8 @@ class Pty:
         return bytes(self.data)
 
     def frames(self) -> list[dict]:
-        return [parse_frame_line(line) for line in split_lines(self.drain())]
+        """The $QRF frames so far (answers to commands left out)."""
+        return frames_and_answers(self.drain())[0]
 
     def vanish(self) -> None:
         """The USB adapter is pulled: both ends closed and its device path gone.
@@ -100,13 +101,14 @@ def test_bench_pose_streams_over_a_pty_and_disconnect_stops_it(make_window, qtbo
         click(qtbot, panel.connect_button)
         assert panel.connect_button.text() == "Disconnect" and not panel.port.isEnabled()
         qtbot.waitUntil(lambda: panel.shown_state() == CONNECTED, timeout=WAIT_MS)
-        qtbot.waitUntil(lambda: sum(f["status"] == "OK" for f in pty.frames()) >= 8, timeout=WAIT_MS)
+        # The virtual bench's poses are made up: SIM, never OK (docs/conventions.md).
+        qtbot.waitUntil(lambda: sum(f["status"] == "SIM" for f in pty.frames()) >= 8, timeout=WAIT_MS)
         frames = pty.frames()
-        ok = [f for f in frames if f["status"] == "OK"]
+        ok = [f for f in frames if f["status"] == "SIM"]
         assert all(meets_seed_criteria(f["pose"], truth) for f in ok), ok[:3]
         seqs = [f["seq"] for f in frames]
         assert seqs == list(range(seqs[0], seqs[0] + len(seqs)))  # in order, none lost on the wire
-        assert all(f["status"] in ("OK", "NOQR", "NOCONV", "STALE") for f in frames)
+        assert all(f["status"] in ("SIM", "NOQR", "NOCONV", "STALE", "NOSRC") for f in frames)
         # The counters shown are the link's, and the last line shown is one that went out.
         qtbot.waitUntil(
             lambda: int(panel.counter_labels["frames_sent"].text()) >= len(frames), timeout=WAIT_MS
@@ -161,12 +163,35 @@ def test_vanished_port_shows_disconnected_app_goes_on_and_resumes(make_window, q
         assert panel.shown_state() == DISCONNECTED
         second = Pty(path)  # plugged in again (another pty behind the same path)
         qtbot.waitUntil(lambda: panel.shown_state() == CONNECTED, timeout=WAIT_MS)
-        qtbot.waitUntil(lambda: any(f["status"] == "OK" for f in second.frames()), timeout=WAIT_MS)
+        qtbot.waitUntil(lambda: any(f["status"] == "SIM" for f in second.frames()), timeout=WAIT_MS)
         assert panel.counter_labels["reconnects"].text() == "1"
     finally:
         first.vanish()
         if second is not None:
             second.vanish()
+
+
+def test_the_controllers_commands_are_answered_in_the_serial_tab(make_window, qtbot, tmp_path: Path) -> None:
+    window = make_window({"source": "virtual", "method": "numerical"})
+    panel = window.serial_panel
+    truth = window.virtual_form.value().pose
+    pty = Pty(tmp_path / "ttyQRF")
+    try:
+        type_port(qtbot, panel, str(pty.path))
+        click(qtbot, panel.connect_button)
+        qtbot.waitUntil(lambda: len(pty.frames()) >= 3, timeout=WAIT_MS)
+        os.write(pty.master, command_line("PING") + command_line("MEAS", "5"))
+        qtbot.waitUntil(lambda: len(frames_and_answers(pty.drain())[1]) >= 2, timeout=WAIT_MS)
+        ping, meas = frames_and_answers(pty.drain())[1][:2]
+        assert ping == {"type": "QRA", "command": "PING", "result": "OK"}
+        assert meas["type"] == "QRM" and meas["status"] == "SIM" and meas["n_used"] == 5
+        assert meets_seed_criteria(meas["pose"], truth)
+        qtbot.waitUntil(lambda: panel.counter_labels["answers_sent"].text() == "2", timeout=WAIT_MS)
+        # The source goes away: the controller hears NOSRC, not silence.
+        window.set_source(str(tmp_path / "missing.avi"))
+        qtbot.waitUntil(lambda: any(f["status"] == "NOSRC" for f in pty.frames()), timeout=WAIT_MS)
+    finally:
+        pty.vanish()
 
 
 def test_bad_path_shows_disconnected(make_window, qtbot) -> None:
@@ -187,9 +212,9 @@ def test_loop_port_carries_the_bench_pose(make_window, qtbot) -> None:
     type_port(qtbot, panel, "loop://")
     click(qtbot, panel.connect_button)
     qtbot.waitUntil(lambda: panel.shown_state() == CONNECTED, timeout=WAIT_MS)
-    qtbot.waitUntil(lambda: ",OK*" in panel.last_sent.text(), timeout=WAIT_MS)
+    qtbot.waitUntil(lambda: ",SIM*" in panel.last_sent.text(), timeout=WAIT_MS)
     frame = parse_frame_line(panel.last_sent.text().encode() + b"\r\n")
-    assert frame["status"] == "OK" and meets_seed_criteria(frame["pose"], truth)
+    assert frame["status"] == "SIM" and meets_seed_criteria(frame["pose"], truth)
     # loop:// sends every byte back: the link decoded its own frames with good checksums.
     qtbot.waitUntil(lambda: panel.status().received.get("frames", 0) >= 3, timeout=WAIT_MS)
     assert panel.status().received["bad_checksum"] == 0

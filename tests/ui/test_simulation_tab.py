@@ -4,6 +4,7 @@ fields, the window staying responsive, settings persisted, a screenshot."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -54,8 +55,12 @@ def fill(qtbot, tab: SimulationTab, texts: dict[str, str], values: dict[str, obj
             widget.setValue(value)
 
 
+WITHIN, CONVERGED = "\nwithin criteria", "\nconverged + within"
+
+
 def table_cells(tab: SimulationTab) -> dict[tuple[str, str], str]:
-    """{(row header, column header): text} of the coverage table."""
+    """{(row header, column header): text} of the coverage table (columns "KEY\nwithin criteria",
+    "KEY\nconverged + within", ..., "seed (Teoh 2022)")."""
     table = tab.table
     out = {}
     for r in range(table.rowCount()):
@@ -119,9 +124,14 @@ def test_run_shows_the_coverage_of_run_study_and_stays_responsive(make_tab, qtbo
     cells = table_cells(tab)
     for c, combo in enumerate(expected.combinations):
         for key in ("numerical", "ippe"):
-            assert cells[(combo.name, key)] == f"{100 * expected.coverage(key, c):.2f} %", (combo.name, key)
+            want = expected.coverage(key, c)
+            assert cells[(combo.name, key + WITHIN)] == f"{100 * want:.2f} %", (combo.name, key)
+            want = expected.coverage(key, c, converged_only=True)
+            assert cells[(combo.name, key + CONVERGED)] == f"{100 * want:.2f} %", (combo.name, key)
     for key in ("numerical", "ippe"):
-        assert cells[("mean", key)] == f"{100 * expected.mean_coverage(key):.2f} %"
+        assert cells[("mean", key + WITHIN)] == f"{100 * expected.mean_coverage(key):.2f} %"
+        want = expected.mean_coverage(key, converged_only=True)
+        assert cells[("mean", key + CONVERGED)] == f"{100 * want:.2f} %"
     assert cells[("mean", "seed (Teoh 2022)")] == "77.28 %"
     assert "done: 756 poses" in tab.status.text() and not tab.result.partial
 
@@ -148,18 +158,26 @@ def test_a_study_of_two_poses_gives_the_hand_verdict(make_tab, qtbot, tmp_path: 
     fill(qtbot, tab, texts, {"sweep_limit_deg": 10.0, "sweep_step_deg": 10.0})
     assert "2 poses" in tab.size_label.text()
     run_by_click(qtbot, tab)
-    verdicts = [table_cells(tab)[(row, key)] for row in ("alpha", "mean") for key in ("numerical", "ippe")]
+    cells = table_cells(tab)
+    verdicts = [cells[(row, key + WITHIN)] for row in ("alpha", "mean") for key in ("numerical", "ippe")]
     assert verdicts == ["100.00 %"] * 4
 
+    tab.auto_run.setChecked(False)  # one run per click here
     fill(qtbot, tab, {}, {"degradation": "round", "criteria.position_mm": 0.001})
     run_by_click(qtbot, tab)
-    verdicts = [table_cells(tab)[(row, key)] for row in ("alpha", "mean") for key in ("numerical", "ippe")]
+    cells = table_cells(tab)
+    verdicts = [cells[(row, key + WITHIN)] for row in ("alpha", "mean") for key in ("numerical", "ippe")]
     assert verdicts == ["0.00 %"] * 4
 
 
-def test_stop_keeps_what_is_done_as_a_partial_result(make_tab, qtbot) -> None:
+def test_stop_keeps_what_is_done_as_a_partial_result(make_tab, qtbot, monkeypatch) -> None:
+    from qrfield.simulation import runner
+
+    monkeypatch.setattr(runner, "CHUNK_POSES", 1395)  # one combination per task: 12 tasks
     tab = make_tab()
     fill(qtbot, tab, {"z_range": "250, 450, 100"}, {"sweep_step_deg": 2.0})  # 45 x 12 x 31 = 16740 poses
+    progress: list[object] = []
+    tab.progressed.connect(progress.append)
     with qtbot.waitSignal(tab.progressed, timeout=WAIT_MS):
         qtbot.mouseClick(tab.run_button, QtCore.Qt.MouseButton.LeftButton)
     assert tab.stop_button.isEnabled() and not tab.run_button.isEnabled()
@@ -170,20 +188,109 @@ def test_stop_keeps_what_is_done_as_a_partial_result(make_tab, qtbot) -> None:
     assert "PARTIAL" in tab.status.text() and tab.run_button.isEnabled()
     done_combos = [c for c in range(12) if result.done[c].all()]
     assert done_combos == list(range(len(done_combos))) and done_combos  # whole combinations, in order
+    assert len(progress) == len(done_combos)
 
-    # The same study stopped after as many chunks, run directly, gives the same figures.
-    chunks = [0]
+    # The same study stopped after as many tasks, run directly, gives the same figures.
+    tasks = [0]
     expected = run_study(
         tab.config,
-        progress=lambda p: chunks.__setitem__(0, chunks[0] + 1),
-        stop=lambda: chunks[0] >= len(done_combos),
+        progress=lambda p: tasks.__setitem__(0, tasks[0] + 1),
+        stop=lambda: tasks[0] >= len(done_combos),
     )
     cells = table_cells(tab)
     for c, combo in enumerate(result.combinations):
         for key in result.solvers:
             want = expected.coverage(key, c)
-            assert cells[(combo.name, key)] == ("n/a" if want is None else f"{100 * want:.2f} %")
+            assert cells[(combo.name, key + WITHIN)] == ("n/a" if want is None else f"{100 * want:.2f} %")
     assert tab.combo_choice.count() == len(done_combos) and tab.heatmap_shown() is not None
+
+
+def test_stop_during_a_run_on_every_core_keeps_the_finished_tasks(make_tab, qtbot, monkeypatch) -> None:
+    import numpy as np
+
+    from qrfield.simulation import parallel, runner
+
+    monkeypatch.setattr(parallel, "PARALLEL_MIN_POSES", 0)  # this study on worker processes
+    monkeypatch.setattr(runner, "CHUNK_POSES", 1395)
+    tab = make_tab()
+    fill(qtbot, tab, {"z_range": "250, 450, 100"}, {"sweep_step_deg": 2.0})  # 16740 poses
+    with qtbot.waitSignal(tab.progressed, timeout=WAIT_MS):
+        qtbot.mouseClick(tab.run_button, QtCore.Qt.MouseButton.LeftButton)
+    with qtbot.waitSignal(tab.finished, timeout=WAIT_MS):
+        qtbot.mouseClick(tab.stop_button, QtCore.Qt.MouseButton.LeftButton)
+    result = tab.result
+    assert result.partial and 0 < result.done.sum() < result.done.size
+    assert "PARTIAL" in tab.status.text() and (tab.outcome.out_dir / "summary.json").is_file()
+    full = run_study(tab.config, workers=1)
+    done = result.done
+    np.testing.assert_array_equal(result.status[:, done], full.status[:, done])
+
+
+def test_a_change_after_a_run_runs_the_study_again_as_a_preview(make_tab, qtbot, tmp_path: Path) -> None:
+    tab = make_tab()
+    fill(qtbot, tab, SMALL, {"sweep_step_deg": 20.0})
+    run_by_click(qtbot, tab)
+    saved = tab.outcome.out_dir
+    assert saved is not None and (saved / "summary.json").is_file()
+    # Typing a new z range re-runs the study by itself (debounced), without a click.
+    type_into(qtbot, tab, "z_range", "350")
+    qtbot.waitUntil(lambda: tab.run is None and tab.result.config == tab.config, timeout=WAIT_MS)
+    assert tab.config.z_range == (350.0, 350.0, 1.0)
+    expected = run_study(tab.config)
+    cells = table_cells(tab)
+    for key in ("numerical", "ippe"):
+        assert cells[("mean", key + WITHIN)] == f"{100 * expected.mean_coverage(key):.2f} %"
+    # A preview is shown, not written: the output folder holds the one saved run only.
+    assert sorted((tmp_path / "out").iterdir()) == [saved]
+    assert "preview" in tab.status.text() and tab.outcome.out_dir == saved
+    assert tab.heatmap_shown() is None and not tab.heatmap.pixmap.isNull()  # drawn from memory
+    assert str(saved) in tab.output_label.text() and tab.open_button.isEnabled()
+
+
+def test_a_change_during_a_run_supersedes_it(make_tab, qtbot, monkeypatch) -> None:
+    from qrfield.simulation import runner
+
+    monkeypatch.setattr(runner, "CHUNK_POSES", 500)
+    tab = make_tab()
+    fill(qtbot, tab, SMALL, {"sweep_step_deg": 20.0})
+    run_by_click(qtbot, tab)
+    tab.auto_run.setChecked(False)
+    fill(qtbot, tab, {"z_range": "250, 450, 100"}, {"sweep_step_deg": 1.0})  # 45 x 12 x 61 poses
+    tab.auto_run.setChecked(True)
+    tab._rerun_timer.setInterval(10)  # re-run at once: the change below must land during the run
+    finished: list[object] = []
+    tab.finished.connect(finished.append)
+    tab.start(save=False)
+    first = tab.run
+    assert first is not None
+    type_into(qtbot, tab, "y_range", "0")  # changed while it runs
+    qtbot.waitUntil(lambda: bool(finished) and tab.run is None, timeout=WAIT_MS)
+    assert first.superseded and first.config.y_range == (-40.0, 40.0, 40.0)
+    assert len(finished) == 1 and tab.result.config == tab.config and not tab.result.partial
+    assert tab.config.y_range == (0.0, 0.0, 1.0)
+
+
+def test_open_folder_says_where_the_run_is_when_there_is_no_desktop(make_tab, qtbot) -> None:
+    tab = make_tab()
+    fill(qtbot, tab, SMALL, {"sweep_step_deg": 30.0})
+    run_by_click(qtbot, tab)
+    assert tab.open_button.isEnabled() and tab.open_button.text() == "Open folder"
+    qtbot.mouseClick(tab.open_button, QtCore.Qt.MouseButton.LeftButton)  # offscreen: nothing to open
+    assert f"the run folder is {tab.outcome.out_dir}" in tab.status.text()
+
+
+def test_runs_go_to_the_data_folder_by_default(qtbot, tmp_path: Path, monkeypatch) -> None:
+    monkeypatch.setenv("QRFIELD_DATA_DIR", str(tmp_path / "data"))
+    tab = SimulationTab(CAMERA, 50.0)
+    qtbot.addWidget(tab)
+    assert (
+        tab.output_dir.text() == ""
+        and str(tmp_path / "data" / "simulations") in tab.output_dir.placeholderText()
+    )
+    folder = tab.output_folder()
+    assert folder.parent == tmp_path / "data" / "simulations" and folder.is_dir()
+    assert re.fullmatch(r"\d{8}-\d{6}(-\d+)?", folder.name)
+    tab.shutdown()
 
 
 @pytest.mark.parametrize(
@@ -238,7 +345,7 @@ def test_the_camera_follows_the_app_unless_unticked_and_settings_round_trip(make
 
 
 def test_the_main_window_has_the_tab_and_persists_it(qtbot, tmp_path: Path) -> None:
-    from ui.config import ConfigStore
+    from qrfield.runconfig import ConfigStore
     from ui.main_window import MainWindow
 
     def window() -> MainWindow:

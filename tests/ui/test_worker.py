@@ -11,8 +11,9 @@ import pytest
 from qrfield.camera import resolve_camera
 from qrfield.geometry import Pose
 from qrfield.render import render_view
+from qrfield.runconfig import RunConfig
 from qrfield.sources import Frame, FrameSource
-from ui.worker import PipelineWorker, RunConfig, start_worker, stop_worker
+from ui.worker import PipelineWorker, start_worker, stop_worker
 
 pytestmark = pytest.mark.gui
 

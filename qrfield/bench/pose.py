@@ -1,0 +1,399 @@
+"""``qrfield bench pose``: is the pose's uncertainty honest, and how often is the pose right?
+
+1. Uncertainty calibration with injected corner noise (independent truth): seeded poses (sides
+   30/50/100 mm, z 150-1000 mm, tilt <= 60 deg, pinhole and a distorted lens), the exact vertex
+   pixels plus Gaussian noise of a known, per-corner anisotropic covariance (0.01-1 px), solved
+   with that covariance. Per method and component: RMS of (estimate - truth) / std and the share
+   within 2 (targets 0.7-1.4 and 90-99 %), over the views the mirror test leaves unflagged (near
+   the planar ambiguity the linearisation fails: that is what the flag is for) and over all.
+2. The flip flag on the same views: recall and precision of ``ambiguous`` on flips (an angle more
+   than 10 deg off), for the chi-square test and, for comparison, the fallback without covariance.
+3. End to end on pictures (``--view-set``, default "render": qrfield.render views of payloads of
+   5-200 bytes, noise 0-4, blur 0.3-1.2 px, gradients, pinhole and distorted): share of views that
+   meet the thesis' criteria (2 deg, 5 mm) by module size, for each qrfield method beside OpenCV's
+   QRCodeDetectorAruco + IPPE_SQUARE + RefineLM and zxing-cpp corners + SQPNP, and the ceiling
+   (true corners + 0.05 px noise). Where the detector reports a corner covariance, its calibration.
+4. Real optics: squares of 4 inner corners of the real Bumblebee2 chessboard frames
+   (../shared/data/calibration), solved through BoofCV's calibration, against cv2.solvePnP on the
+   whole board (qrfield/bench/_pose_real.py).
+5. Cost: CPU microseconds per solve with and without a covariance (baseline: without).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+HELP = "pose uncertainty calibration, flip flag recall/precision, end to end vs OpenCV and zxing, real optics"
+
+#: Angle error beyond which a pose counts as a flip (the issue's definition), degrees.
+FLIP_DEG = 10.0
+#: The calibration targets (docs/conventions.md "Pose uncertainty"; issue 13).
+RMS_RANGE = (0.7, 1.4)
+WITHIN_2_RANGE = (0.90, 0.99)
+#: Module-size bands of the end-to-end table, px.
+BANDS = ((0.0, 1.2), (1.2, 2.0), (2.0, 3.0), (3.0, math.inf))
+COMPONENTS = ("x", "y", "z", "alpha", "beta", "gamma")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from qrfield.bench._pose_views import VIEW_SETS
+
+    parser.add_argument("--poses", type=int, default=3000, help="corner-level views for 1-2 (default 3000)")
+    parser.add_argument("--views", type=int, default=300, help="rendered views for 3 (default 300)")
+    parser.add_argument(
+        "--view-set", choices=sorted(VIEW_SETS), default="render", help="picture set for 3 (default render)"
+    )
+    parser.add_argument("--cost-views", type=int, default=400, help="views timed for 5 (default 400)")
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--data", type=Path, default=None, help="shared data folder (default ../shared/data)")
+
+
+# ---------------------------------------------------------------------- helpers
+
+
+def random_corner_cov(rng: np.random.Generator) -> np.ndarray:
+    """(4, 2, 2) px^2: a view's scale log-uniform in 0.02-0.5 px, each corner 0.5-2x that, an aspect
+    up to 3:1 and any orientation (independent corners)."""
+    base = math.exp(rng.uniform(math.log(0.02), math.log(0.5)))
+    cov = np.empty((4, 2, 2))
+    for i in range(4):
+        major = base * rng.uniform(0.5, 2.0)
+        minor = major / rng.uniform(1.0, 3.0)
+        angle = rng.uniform(0.0, math.pi)
+        rot = np.array([[math.cos(angle), -math.sin(angle)], [math.sin(angle), math.cos(angle)]])
+        cov[i] = rot @ np.diag([major**2, minor**2]) @ rot.T
+    return cov
+
+
+def draw_noise(rng: np.random.Generator, cov: np.ndarray) -> np.ndarray:
+    """(4, 2) Gaussian corner noise with covariance ``cov`` (4, 2, 2)."""
+    return np.einsum("kij,kj->ki", np.linalg.cholesky(cov), rng.normal(size=(4, 2)))
+
+
+def pose_errors(result: Any, truth: Any) -> np.ndarray:
+    """(6,) estimate minus truth: x, y, z in mm, alpha, beta, gamma in degrees (wrapped)."""
+    from qrfield.geometry import angle_difference
+
+    return np.concatenate(
+        [result.position_mm - truth.position_mm, angle_difference(result.angles_deg, truth.angles_deg)]
+    )
+
+
+def z_scores(result: Any, truth: Any) -> np.ndarray:
+    """(6,) (estimate - truth) / std per component."""
+    return pose_errors(result, truth) / np.concatenate([result.position_std_mm, result.angles_std_deg])
+
+
+def calibration_line(label: str, z: np.ndarray) -> tuple[str, bool]:
+    """One table line of RMS z and share within 2 per component, and whether both targets hold."""
+    if z.size == 0:
+        return f"{label:<34}{'-':>7}", False
+    rms = np.sqrt(np.nanmean(z**2, axis=0))
+    within = np.nanmean(np.abs(z) < 2.0, axis=0)
+    ok = bool(
+        np.all((rms >= RMS_RANGE[0]) & (rms <= RMS_RANGE[1]))
+        and np.all((within >= WITHIN_2_RANGE[0]) & (within <= WITHIN_2_RANGE[1]))
+    )
+    cells = "".join(f"{r:>6.2f}/{100 * w:>4.1f}" for r, w in zip(rms, within, strict=True))
+    return f"{label:<34}{len(z):>7}{cells}", ok
+
+
+def recall_precision(flag: np.ndarray, flip: np.ndarray) -> tuple[float, float]:
+    hits = float(np.sum(flag & flip))
+    return hits / max(float(np.sum(flip)), 1.0), hits / max(float(np.sum(flag)), 1.0)
+
+
+# ---------------------------------------------------------------------- 1 + 2: injected noise
+
+
+def _methods() -> list[tuple[str, str, Any]]:
+    from qrfield.solvers import SEED_SETTINGS, IppeSettings
+
+    return [
+        ("numerical (defaults)", "numerical", None),
+        ("ippe (LM refined)", "ippe", None),
+        ("numerical, thesis settings", "numerical", SEED_SETTINGS),
+        ("ippe, not refined", "ippe", IppeSettings(refine="none")),
+    ]
+
+
+def injected_noise(count: int, seed: int) -> bool:
+    from qrfield.bench._pose_views import corner_set
+    from qrfield.solvers import solve
+
+    views = corner_set(count, seed)
+    rng = np.random.default_rng(seed + 7)
+    draws = []
+    for _ in views:
+        cov = random_corner_cov(rng)
+        draws.append((cov, draw_noise(rng, cov)))
+    print(
+        f"1. uncertainty calibration, injected noise: {len(views)} seeded poses (sides 30/50/100 mm, "
+        "z 150-1000 mm, tilt <= 60 deg; pinhole picam-v2@640x480 and a distorted lens alternately),\n"
+        "   exact vertex pixels + Gaussian noise of a known per-corner covariance (0.01-1 px, aspect "
+        "<= 3:1), solved with that covariance."
+    )
+    print("   per component: RMS of (estimate - truth) / std / % within 2 (targets 0.70-1.40 / 90-99 %)")
+    header = "".join(f"{c:>12}" for c in COMPONENTS)
+    print(f"{'method, views':<34}{'n':>7}{header}")
+    all_ok = True
+    flips: dict[str, tuple[np.ndarray, ...]] = {}
+    for label, method, settings in _methods():
+        z, flagged, flip, chi2, chi2_m, fallback = [], [], [], [], [], []
+        converged = 0
+        for view, (cov, noise) in zip(views, draws, strict=True):
+            corners = view.corners_px + noise
+            r = solve(corners, view.camera, view.side_mm, method, settings, corners_cov=cov)
+            if not r.converged:
+                continue
+            converged += 1
+            z.append(z_scores(r, view.truth))
+            flagged.append(r.ambiguous)
+            flip.append(np.max(np.abs(pose_errors(r, view.truth)[3:])) > FLIP_DEG)
+            chi2.append(r.chi2)
+            chi2_m.append(r.mirror_chi2)
+            plain = solve(corners, view.camera, view.side_mm, method, settings)
+            fallback.append(plain.ambiguous)
+        zs, amb = np.array(z).reshape(-1, 6), np.array(flagged, dtype=bool)
+        line, ok = calibration_line(f"{label}, unflagged", zs[~amb])
+        print(line + ("  meets" if ok else "  MISSES") + " the targets")
+        print(calibration_line(f"{label}, all converged", zs)[0])
+        share = f"{amb.mean():.1%}" if amb.size else "-"
+        print(f"   converged {converged}/{len(views)}, flagged ambiguous {share}")
+        if settings is None:  # the defaults of each method carry the targets
+            all_ok &= ok
+        flips[label] = (amb, np.array(flip, bool), np.array(chi2), np.array(chi2_m), np.array(fallback, bool))
+    print(
+        "   (thesis settings stop early at the tolerance, not at the least-squares optimum the std "
+        "describes; 'not refined' is the closed form, not the least-squares fit)"
+    )
+    _flip_table(flips)
+    return all_ok
+
+
+def _flip_table(flips: dict[str, tuple[np.ndarray, ...]]) -> None:
+    from qrfield.solvers.uncertainty import AMBIGUITY_FALLBACK, FLIP_DELTA_CHI2
+
+    print(
+        f"\n2. flip flag on the same views: flip = an angle more than {FLIP_DEG:g} deg off; "
+        f"ambiguous = mirror chi-square - answer chi-square < {FLIP_DELTA_CHI2:g} (the default)"
+    )
+    print("   target: recall >= 90 % at precision >= 50 %")
+    print(
+        f"{'method':<30}{'flips':>7}{'flagged':>9}{'recall':>9}{'precision':>11}"
+        "  other thresholds (recall/precision)"
+    )
+    for label, (amb, flip, chi2, chi2_m, fallback) in flips.items():
+        if not flip.any():
+            print(f"{label:<30}{0:>7}{int(amb.sum()):>9}   (no flip among these views)")
+            continue
+        recall, precision = recall_precision(amb, flip)
+        others = []
+        for delta in (2.0, 4.0, 6.0, 16.0):
+            r, p = recall_precision(chi2_m - chi2 < delta, flip)
+            others.append(f"{delta:g}: {100 * r:.0f}/{100 * p:.0f}")
+        r_fb, p_fb = recall_precision(fallback, flip)
+        print(
+            f"{label:<30}{int(flip.sum()):>7}{int(amb.sum()):>9}"
+            f"{100 * recall:>8.1f}%{100 * precision:>10.1f}%  "
+            + ", ".join(others)
+            + f"; no covariance (ratio >= {AMBIGUITY_FALLBACK:g}): {100 * r_fb:.0f}/{100 * p_fb:.0f}"
+        )
+    print(
+        "   The best-fitting branch is the wrong one at most about half the time when both fit (the\n"
+        "   posterior of each branch is exp(-chi2 / 2)), so for a solver that reports the better fit\n"
+        "   no flag can reach a precision of 50 %; the numerical model sometimes reports the worse fit."
+    )
+
+
+# ---------------------------------------------------------------------- 3: end to end
+
+
+def _peer_opencv(grey: np.ndarray, view: Any) -> Any:
+    """OpenCV QRCodeDetectorAruco corners + IPPE_SQUARE + solvePnPRefineLM; (R, t) or None."""
+    import cv2
+
+    from qrfield.geometry import ippe_object_points, rotation_from_ippe
+
+    ok, points = cv2.QRCodeDetectorAruco().detect(grey)
+    if not ok or points is None:
+        return None
+    pts = np.asarray(points, dtype=float).reshape(-1, 1, 2)[:4]
+    obj = ippe_object_points(view.side_mm).reshape(4, 1, 3)
+    cam = view.camera
+    try:
+        ok, rvec, tvec = cv2.solvePnP(obj, pts, cam.K, cam.dist, flags=cv2.SOLVEPNP_IPPE_SQUARE)
+        if not ok:
+            return None
+        rvec, tvec = cv2.solvePnPRefineLM(obj, pts, cam.K, cam.dist, rvec, tvec)
+    except cv2.error:
+        return None
+    return rotation_from_ippe(cv2.Rodrigues(rvec)[0]), tvec.reshape(3)
+
+
+def _peer_zxing(grey: np.ndarray, view: Any) -> Any:
+    """zxing-cpp's corners + cv2.solvePnP SQPNP (marker-frame object points); (R, t) or None."""
+    import cv2
+    import zxingcpp
+
+    from qrfield.geometry import marker_vertices
+
+    codes = zxingcpp.read_barcodes(grey, formats=zxingcpp.BarcodeFormat.QRCode)
+    if not codes:
+        return None
+    p = codes[0].position
+    pts = np.array(
+        [[q.x, q.y] for q in (p.top_left, p.top_right, p.bottom_right, p.bottom_left)], dtype=float
+    ).reshape(4, 1, 2)
+    cam = view.camera
+    try:
+        ok, rvec, tvec = cv2.solvePnP(
+            marker_vertices(view.side_mm).reshape(4, 1, 3), pts, cam.K, cam.dist, flags=cv2.SOLVEPNP_SQPNP
+        )
+    except cv2.error:
+        return None
+    return (cv2.Rodrigues(rvec)[0], tvec.reshape(3)) if ok else None
+
+
+def _band_label(lo: float, hi: float) -> str:
+    if math.isfinite(hi):
+        return f"{lo:g}-{hi:g} px"
+    return f">= {lo:g} px" if lo else "all"
+
+
+def _passes(rotation: np.ndarray, position: np.ndarray, view: Any) -> bool:
+    from qrfield.geometry import angle_difference, angles_from_rotation
+    from qrfield.sessions.criteria import AcceptanceCriteria
+
+    angles = angles_from_rotation(rotation)
+    err_ang = angle_difference(angles, view.truth.angles_deg)
+    return AcceptanceCriteria().passes(float(np.linalg.norm(position - view.truth.position_mm)), err_ang)
+
+
+def end_to_end(count: int, seed: int, view_set: str) -> None:
+    from qrfield.bench._pose_views import VIEW_SETS
+    from qrfield.detect import Detector, DetectorSettings, select_code
+    from qrfield.solvers import METHODS, solve
+    from qrfield.solvers.uncertainty import isotropic_cov
+
+    print(f"\n3. end to end on pictures: view set {view_set!r}, {count} seeded views (seed {seed})")
+    t0 = time.perf_counter()
+    views = VIEW_SETS[view_set](count, seed)
+    print(f"   ({time.perf_counter() - t0:.1f} s to make them)")
+    detector = Detector(DetectorSettings())
+    rng = np.random.default_rng(seed + 11)
+    names = (
+        [f"qrfield {m}" for m in METHODS]
+        + [
+            "OpenCV Aruco + IPPE_SQUARE + LM",
+            "zxing-cpp + SQPNP",
+        ]
+        + [f"ceiling: true + 0.05 px, {m}" for m in METHODS]
+    )
+    passed = {name: np.zeros(len(views), bool) for name in names}
+    z_image: dict[str, list[np.ndarray]] = {m: [] for m in METHODS}
+    # What an interim covariance from the edge fit's residual (Detection.corner_quality, px) would
+    # give, were it used: measured here, not used by the detector (see docs/uncertainty.md).
+    z_residual: dict[str, list[np.ndarray]] = {m: [] for m in METHODS}
+    corner_errors: list[np.ndarray] = []
+    ceiling_cov = isotropic_cov(0.05)
+    for i, view in enumerate(views):
+        grey = view.image
+        detection = select_code(detector.detect(grey))
+        for method in METHODS:
+            if detection is not None:
+                cov = getattr(detection, "corners_cov", None)
+                r = solve(detection.corners_px, view.camera, view.side_mm, method, corners_cov=cov)
+                passed[f"qrfield {method}"][i] = r.converged and _passes(r.rotation, r.position_mm, view)
+                if r.converged and cov is not None and not r.ambiguous:
+                    z_image[method].append(z_scores(r, view.truth))
+                quality = np.asarray(detection.corner_quality, float)
+                if detection.refined and np.all(np.isfinite(quality)):
+                    interim = np.eye(2)[None] * (quality**2)[:, None, None] / 2.0  # RMS radius = quality
+                    q = solve(detection.corners_px, view.camera, view.side_mm, method, corners_cov=interim)
+                    if q.converged and not q.ambiguous:
+                        z_residual[method].append(z_scores(q, view.truth))
+                if method == METHODS[0]:
+                    corner_errors.append(np.linalg.norm(detection.corners_px - view.corners_px, axis=1))
+            noisy = view.corners_px + rng.normal(0.0, 0.05, (4, 2))
+            c = solve(noisy, view.camera, view.side_mm, method, corners_cov=ceiling_cov)
+            passed[f"ceiling: true + 0.05 px, {method}"][i] = c.converged and _passes(
+                c.rotation, c.position_mm, view
+            )
+        for name, peer in (
+            ("OpenCV Aruco + IPPE_SQUARE + LM", _peer_opencv),
+            ("zxing-cpp + SQPNP", _peer_zxing),
+        ):
+            pose = peer(grey, view)
+            passed[name][i] = pose is not None and _passes(pose[0], pose[1], view)
+    module = np.array([v.module_px for v in views])
+    bands = [(lo, hi, (module >= lo) & (module < hi)) for lo, hi in BANDS]
+    bands += [(1.2, math.inf, module >= 1.2), (2.0, math.inf, module >= 2.0), (0.0, math.inf, module >= 0.0)]
+    head = "".join(f"{_band_label(lo, hi) + f' ({int(m.sum())})':>16}" for lo, hi, m in bands)
+    print("   share of views meeting 2 deg / 5 mm, by module size (px per module; views in brackets)")
+    print(f"{'method':<34}{head}")
+    for name in names:
+        cells = "".join(
+            f"{100 * passed[name][m].mean() if m.any() else math.nan:>15.1f}%" for _, _, m in bands
+        )
+        print(f"{name:<34}{cells}")
+    print("   targets (issue 13): qrfield >= 90 % of the views with modules >= 1.2 px, >= 99 % with >= 2 px")
+    for method in METHODS:
+        if z_image[method]:
+            print(calibration_line(f"   on pictures, qrfield {method}", np.array(z_image[method]))[0])
+        else:
+            print(
+                f"   on pictures, qrfield {method}: the detector reports no corner covariance: not measured"
+            )
+    if corner_errors:
+        err = np.concatenate(corner_errors)
+        print(
+            f"   detected corners vs truth: median {np.median(err):.3f} px, 90th percentile "
+            f"{np.percentile(err, 90):.3f} px, max {err.max():.3f} px over {len(corner_errors)} codes"
+        )
+    for method in METHODS:
+        if z_residual[method]:
+            line = calibration_line(f"   edge-fit residual as std, {method}", np.array(z_residual[method]))[0]
+            print(line + "  (not used)")
+
+
+# ---------------------------------------------------------------------- 5: cost
+
+
+def cost(count: int, seed: int) -> None:
+    from qrfield.bench._pose_views import corner_set
+    from qrfield.solvers import METHODS, solve
+
+    views = corner_set(count, seed)
+    rng = np.random.default_rng(seed)
+    covs = [random_corner_cov(rng) for _ in views]
+    noisy = [v.corners_px + draw_noise(rng, c) for v, c in zip(views, covs, strict=True)]
+    print(f"\n5. CPU time per solve (time.process_time; {count} seeded noisy views; the machine is shared)")
+    for method in METHODS:
+        times = []
+        for with_cov in (False, True):
+            t0 = time.process_time()
+            for view, corners, cov in zip(views, noisy, covs, strict=True):
+                solve(corners, view.camera, view.side_mm, method, corners_cov=cov if with_cov else None)
+            times.append((time.process_time() - t0) * 1e6 / len(views))
+        print(
+            f"   {method:<10} without covariance {times[0]:7.1f} us (baseline), with {times[1]:7.1f} us "
+            f"({times[1] / times[0]:.2f}x)"
+        )
+
+
+def run(args: argparse.Namespace) -> int:
+    from qrfield.bench._pose_real import real_optics
+
+    ok = injected_noise(args.poses, args.seed)
+    end_to_end(args.views, args.seed, args.view_set)
+    real_optics(args.data)
+    cost(args.cost_views, args.seed)
+    print(f"\ninjected-noise calibration of the default methods: {'meets' if ok else 'MISSES'} the targets")
+    return 0

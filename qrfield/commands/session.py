@@ -1,0 +1,409 @@
+"""``qrfield session``: experiment sessions without a screen (new, log, undo, list, show).
+
+The same files as the app's Session tab (docs/conventions.md, "Experiment sessions on disk"), made by
+the same core (:mod:`qrfield.sessions`): a row is the average of N frames of the session's solver,
+judged against the session's acceptance criteria, appended and fsynced before "logged row K" is
+printed. ``session log`` measures with the session's own camera model, QR side and solver settings
+(what its rows claim) from the configured source (``qrfield config``) or ``--source``.
+
+Each subcommand is one :class:`Subcommand` in :data:`SUBCOMMANDS` (help, add_arguments, run):
+adding one is one entry.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+HELP = "make experiment sessions and log rows without the app (new, log, undo, list, show)"
+DESCRIPTION = (
+    "Experiment sessions on disk, as the app's Session tab makes them: 'new' creates one, 'log' "
+    "measures a row (averaged frames against a ground truth measured by hand), 'undo' withdraws the "
+    "last row, 'list' and 'show' read them."
+)
+
+
+@dataclass(frozen=True)
+class Subcommand:
+    help: str
+    add_arguments: Callable[[argparse.ArgumentParser], None]
+    run: Callable[[argparse.Namespace], int]
+
+
+def say(text: str) -> None:
+    print(f"qrfield session: {text}", file=sys.stderr, flush=True)
+
+
+# ------------------------------------------------------------------------------------ new
+def _add_new(parser: argparse.ArgumentParser) -> None:
+    from qrfield.arguments import add_side_argument
+    from qrfield.camera import add_camera_arguments
+    from qrfield.methods import METHODS
+    from qrfield.runconfig import add_run_arguments
+    from qrfield.sessions import AcceptanceCriteria, SessionSettings
+    from qrfield.settings import add_arguments
+
+    parser.add_argument("root", metavar="ROOT", help="the folder that holds sessions (made if missing)")
+    parser.add_argument(
+        "--name", required=True, metavar="N", help="the session's name (part of its folder's)"
+    )
+    add_camera_arguments(parser, default=None)
+    add_side_argument(parser, configured="the run configuration's")
+    parser.add_argument(
+        "--method",
+        choices=METHODS,
+        default=None,
+        help="the solver whose results the rows average (default: the configured one; numerical for both)",
+    )
+    parser.add_argument("--operator", default="", help="who measures")
+    parser.add_argument("--notes", default="", help="notes saved in session.json")
+    group = parser.add_argument_group(
+        "rows and acceptance criteria (sections 'session', 'criteria' of app.json)"
+    )
+    add_arguments(group, SessionSettings)
+    add_arguments(group, AcceptanceCriteria)
+    add_run_arguments(parser, only=METHODS)
+
+
+def _run_new(args: argparse.Namespace) -> int:
+    from qrfield.camera import camera_origin
+    from qrfield.methods import METHODS, methods_from_choice
+    from qrfield.runconfig import effective_settings
+    from qrfield.sessions import AcceptanceCriteria, Session, SessionSettings
+    from qrfield.settings import from_arguments
+
+    effective = effective_settings(args)
+    for problem in effective.store.problems:
+        say(f"settings: {problem}")
+    run = effective.groups["run"]
+    side = args.side_mm if args.side_mm is not None else run.side_mm
+    method = args.method or methods_from_choice(run.method)[0]
+    assert method in METHODS
+    for note in effective.assumed():
+        if "QR side" in note and args.side_mm is not None:
+            continue
+        say(note)
+    if effective.camera.path:  # which profile file the session records (docs/cli.md)
+        say(f"camera {effective.camera.name} from {camera_origin(effective.camera)}")
+    store = effective.store
+    rows = from_arguments(SessionSettings, args, base=store.group("session", SessionSettings))
+    criteria = from_arguments(AcceptanceCriteria, args, base=store.group("criteria", AcceptanceCriteria))
+    session = Session.create(
+        args.root,
+        args.name,
+        camera=effective.camera,
+        side_mm=side,
+        solver=method,
+        solver_settings=effective.groups[method],
+        criteria=criteria,
+        frames_per_row=rows.frames_per_row,
+        operator=args.operator,
+        notes=args.notes,
+    )
+    session.close()
+    info = session.info
+    say(
+        f"created session {info.name}: camera {info.camera.name} {info.camera.width}x{info.camera.height}, "
+        f"QR side {info.side_mm:g} mm, solver {info.solver}, {info.frames_per_row} frames per row, "
+        f"criteria {criteria.label()}"
+    )
+    print(session.path)
+    return 0
+
+
+# ------------------------------------------------------------------------------------ log
+def _add_log(parser: argparse.ArgumentParser) -> None:
+    from qrfield.runconfig import add_run_arguments
+
+    parser.add_argument("folder", metavar="FOLDER", help="the session folder")
+    parser.add_argument(
+        "--truth",
+        metavar="X,Y,Z,A,B,G",
+        help="the pose measured by hand: x, y, z (mm) and alpha, beta, gamma (degrees); 'bench' = the "
+        "virtual bench's own pose; without --truth every field is asked for (interactive)",
+    )
+    parser.add_argument("--combo", metavar="NAME", help="the rotation combination of the row")
+    parser.add_argument("--note", default="", metavar="T", help="a one-line note for the row")
+    parser.add_argument(
+        "--frames", type=int, default=None, metavar="N", help="frames averaged (default: the session's)"
+    )
+    # Camera, QR side and solver are the session's own: only the source and detection are chosen here.
+    add_run_arguments(
+        parser, only=("run", "detector", "virtual", "picamera"), run_skip=("camera", "side_mm", "method")
+    )
+
+
+def _parse_truth(text: str, combo: str | None, combinations: Any) -> Any:
+    """GroundTruth from ``--truth X,Y,Z,A,B,G`` and ``--combo``; GroundTruthError names each bad field."""
+    from qrfield.sessions import FIELDS, GroundTruthError, parse_ground_truth
+
+    parts = [p.strip() for p in text.split(",")]
+    if len(parts) != 6:
+        raise GroundTruthError(
+            {"truth": f"{text!r}: give 6 numbers X,Y,Z,ALPHA,BETA,GAMMA (mm, degrees; dots for decimals)"}
+        )
+    fields = dict(zip(FIELDS[:6], parts, strict=True))
+    fields["combo"] = combo or ""
+    return parse_ground_truth(fields, combinations)
+
+
+def _interrupt(signum: int, _frame: Any) -> None:
+    raise KeyboardInterrupt  # SIGTERM like Ctrl-C: stop collecting, log nothing half-done
+
+
+def _run_log(args: argparse.Namespace) -> int:
+    from qrfield.engine import FrameLoop
+    from qrfield.runconfig import effective_settings
+    from qrfield.sessions import Session, known_combinations, validate_field
+    from qrfield.sessions.recorder import RowRecorder, session_run_config
+
+    if args.frames is not None and args.frames < 1:
+        raise ValueError(f"--frames must be at least 1, got {args.frames}")
+    combinations = known_combinations()
+    follow = (args.truth or "").strip().lower() == "bench"
+    truth = None
+    if args.truth and not follow:
+        truth = _parse_truth(args.truth, args.combo, combinations)
+    elif follow:
+        _, message = validate_field("combo", args.combo or "", combinations)
+        if message:
+            raise ValueError(f"--combo: {message}")
+    session = Session.open(args.folder)
+    try:
+        for warning in session.warnings:
+            say(f"warning: {warning}")
+        effective = effective_settings(args, resolve_camera=False)  # the session's camera is used
+        for problem in effective.store.problems:
+            say(f"settings: {problem}")
+        config = session_run_config(effective.run_config(camera=session.info.camera), session.info)
+        recorder = RowRecorder(session.info, say)
+        loop = FrameLoop(config, events=recorder)
+        thread = threading.Thread(target=loop.run, name="frame loop", daemon=True)
+        previous = signal.signal(signal.SIGTERM, _interrupt)
+        thread.start()
+        try:
+
+            def ended() -> bool:
+                return not thread.is_alive()
+
+            if truth is not None or follow:
+                return _log_one(session, recorder, truth, args, follow, ended)
+            return _log_interactive(session, recorder, args, combinations, ended)
+        finally:
+            loop.stop()
+            thread.join(5.0)
+            signal.signal(signal.SIGTERM, previous)
+    finally:
+        session.close()
+
+
+def _log_one(session: Any, recorder: Any, truth: Any, args: Any, follow: bool, ended: Any) -> int:
+    frames = args.frames or session.info.frames_per_row
+    say(f"measuring row {session.next_row}: {frames} frames, solver {session.info.solver}")
+    measurement = recorder.measure(
+        truth, frames, note=args.note, follow_bench=follow, until=ended, combo=args.combo
+    )
+    if measurement is None:
+        say("stopped before the frames were in: nothing logged")
+        return 1
+    return _log(session, measurement)
+
+
+def _log(session: Any, measurement: Any) -> int:
+    """Append and fsync one row; 0 and "logged row K" only once it is on disk."""
+    outcome = session.log(measurement)
+    if not outcome.ok:
+        outcome = session.retry()
+    j = measurement.judgement
+    if outcome.ok:
+        verdict = "pass" if j.passed else f"fail ({j.reason or 'no converged frame'})"
+        a = measurement.average
+        print(
+            f"logged row {outcome.logged[-1] if outcome.logged else outcome.row}: {verdict}; "
+            f"{a.n_converged}/{a.n_frames} frames converged, err_pos {j.err_pos_mm:.2f} mm",
+            flush=True,
+        )
+        return 0
+    say(f"NOT logged: {outcome.message}")
+    for record in session.pending:  # the operator keeps these lines; the process is about to end
+        say(f"unwritten line of {session.rows_path.name}: {record.line.decode('utf-8').rstrip()}")
+    return 1
+
+
+def _ask(prompt: str) -> str | None:
+    """One line from stdin (None at end of input)."""
+    try:
+        return input(prompt)
+    except EOFError:
+        return None
+
+
+def _log_interactive(session: Any, recorder: Any, args: Any, combinations: Any, ended: Any) -> int:
+    """Ask each field (the app's form's validation), measure, log; again until 'q' or end of input."""
+    from qrfield.sessions import FIELDS, GroundTruth, validate_field
+    from qrfield.sessions.groundtruth import UNITS
+
+    last: dict[str, Any] = {}
+    if session.rows:
+        row = session.rows[-1].values
+        last = {name: row.get(f"gt_{name}", "") for name in FIELDS[:6]} | {"combo": row.get("combo", "")}
+    code = 0
+    print(
+        f"session {session.info.name}: next row {session.next_row}; type each value (Enter keeps the one in "
+        "[brackets]), q to quit",
+        flush=True,
+    )
+    if combinations:
+        print(f"combinations: {', '.join(combinations)}", flush=True)
+    while not ended():
+        values: dict[str, Any] = {}
+        for name in (*FIELDS, "note"):
+            while True:
+                unit = f" ({UNITS[name]})" if UNITS.get(name) else ""
+                default = last.get(name, "")
+                text = _ask(f"{name}{unit} [{default}]: ")
+                if text is None or text.strip().lower() == "q":
+                    return code
+                text = text.strip() or str(default)
+                if name == "note":
+                    values[name] = text
+                    break
+                value, message = validate_field(name, text, combinations)
+                if not message:
+                    values[name] = value
+                    last[name] = text
+                    break
+                print(f"  {name}: {message}", flush=True)
+        truth = GroundTruth(**{k: values[k] for k in FIELDS})
+        frames = args.frames or session.info.frames_per_row
+        print(f"measuring row {session.next_row}: {frames} frames…", flush=True)
+        measurement = recorder.measure(truth, frames, note=values["note"], until=ended)
+        if measurement is None:
+            say("the source stopped before the frames were in: nothing logged")
+            return 1
+        code = _log(session, measurement) or code
+        if _ask("Enter for the next row, q to quit: ") in (None, "q", "Q"):
+            return code
+    return code
+
+
+# ------------------------------------------------------------------------------------ undo
+def _add_undo(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("folder", metavar="FOLDER", help="the session folder")
+    parser.add_argument(
+        "--row", type=int, default=None, metavar="K", help="withdraw row K (default: the last)"
+    )
+
+
+def _run_undo(args: argparse.Namespace) -> int:
+    from qrfield.sessions import Session
+
+    with Session.open(args.folder) as session:
+        outcome = session.undo() if args.row is None else session.withdraw(args.row)
+        if not outcome.ok:
+            say(f"NOT withdrawn: {outcome.message}")
+            return 1
+        print(f"withdrew row {outcome.row} (its line stays in rows.csv, marked withdrawn)")
+    return 0
+
+
+# ------------------------------------------------------------------------------------ list / show
+def _add_list(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("root", metavar="ROOT", help="the folder that holds sessions")
+
+
+def _counts(content: Any) -> str:
+    active = [r for r in content.rows if not r.withdrawn]
+    passed = sum(1 for r in active if r.passed)
+    withdrawn = len(content.rows) - len(active)
+    return f"{len(active)} rows, {passed} pass, {withdrawn} withdrawn"
+
+
+def _run_list(args: argparse.Namespace) -> int:
+    from qrfield.sessions import SessionError, read_session, session_folders
+
+    root = Path(args.root)
+    if not root.is_dir():
+        raise ValueError(f"{root}: no such folder")
+    folders = session_folders(root)
+    if not folders:
+        say(f"no sessions in {root}")
+    for folder in folders:
+        try:
+            info, content = read_session(folder)
+        except (SessionError, OSError) as exc:
+            print(f"{folder.name}  (unreadable: {exc})")
+            continue
+        print(f"{folder.name}  {info.solver}, {info.side_mm:g} mm, {info.camera.name}: {_counts(content)}")
+    return 0
+
+
+def _add_show(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("folder", metavar="FOLDER", help="the session folder")
+
+
+def _run_show(args: argparse.Namespace) -> int:
+    from qrfield.sessions import read_session
+
+    info, content = read_session(args.folder)
+    cam = info.camera
+    print(f"session {info.name} ({Path(args.folder).resolve()})")
+    print(f"  created {info.created}, operator {info.operator or '-'}, app {info.app_version}")
+    print(f"  camera {cam.name} {cam.width}x{cam.height} (fx {cam.fx:.1f}), QR side {info.side_mm:g} mm")
+    print(f"  solver {info.solver}, {info.frames_per_row} frames per row, criteria {info.criteria.label()}")
+    if info.notes:
+        print(f"  notes: {' '.join(info.notes.split())}")
+    print(f"  {_counts(content)}")
+    for warning in content.warnings:
+        print(f"  warning: {warning}")
+    head = f"{'row':>4} {'combo':<18} {'truth x y z (mm), a b g (deg)':<44} {'measured':<44} conv  pass"
+    print(head)
+    for row in content.rows:
+        v = row.values
+        truth = " ".join(v.get(f"gt_{k}", "") for k in ("x", "y", "z", "alpha", "beta", "gamma"))
+        measured = " ".join(v.get(k, "") or "-" for k in ("x", "y", "z", "alpha", "beta", "gamma"))
+        verdict = "withdrawn" if row.withdrawn else ("pass" if row.passed else "fail")
+        conv = f"{v.get('n_converged', '')}/{v.get('n_frames', '')}"
+        print(f"{row.number:>4} {row.combo:<18} {truth:<44} {measured:<44} {conv:<5} {verdict}")
+    return 0
+
+
+SUBCOMMANDS: dict[str, Subcommand] = {
+    "new": Subcommand(
+        "create a session folder (camera, QR side, solver from the options or the config)", _add_new, _run_new
+    ),
+    "log": Subcommand(
+        "measure and log one row (or, without --truth, ask for each field)", _add_log, _run_log
+    ),
+    "undo": Subcommand("withdraw the last row (a withdrawal record is appended)", _add_undo, _run_undo),
+    "list": Subcommand("list the sessions in a folder", _add_list, _run_list),
+    "show": Subcommand("print a session's setup and rows", _add_show, _run_show),
+}
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    sub = parser.add_subparsers(dest="session_command", metavar="SUBCOMMAND", required=True)
+    for name, command in SUBCOMMANDS.items():
+        sp = sub.add_parser(name, help=command.help, description=command.help)
+        command.add_arguments(sp)
+        sp.set_defaults(_session_run=command.run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from qrfield.sessions import GroundTruthError, SessionError
+
+    try:
+        return int(args._session_run(args) or 0)
+    except GroundTruthError as exc:
+        for name, message in exc.errors.items():
+            say(f"error: {name}: {message}")
+        return 2
+    except SessionError as exc:
+        say(f"error: {exc}")
+        return 2

@@ -1,0 +1,451 @@
+"""Pose uncertainty: the corners' covariance propagated to the pose, and the mirror (flip) test.
+
+Conventions (docs/conventions.md, "Pose uncertainty"): corners V1..V4 in pixels as seen (distorted),
+their covariance (4, 2, 2) in px^2 (one 2x2 block per corner, corners independent); the pose is
+(x, y, z) in mm and (alpha, beta, gamma) in degrees with R = Rx(alpha) Ry(beta) Rz(gamma).
+The array functions accept a leading batch shape (...) and keep it.
+
+Method (first order; measured calibration in docs/uncertainty.md):
+  1. The corner covariance goes through the exact undistortion to normalised ideal coordinates
+     n = (x_i, y_i), the solvers' own input: Sigma_n = U Sigma U^T with U = D^-1 diag(1/fx, 1/fy),
+     D the 2x2 Jacobian of the distortion at the undistorted point.
+  2. Each solver is a function p(n) of those 8 numbers, p = (omega, t), omega a small rotation of
+     the camera frame (R -> exp([omega]x) R). Its Jacobian A = dp/dn is analytic:
+       - "ippe" (refined by LM or VVS) is the least-squares fit of the rigid square's projection to
+         the ideal pixels: A = (J^T W J)^-1 J^T W with J (8 x 6) the projection's Jacobian and
+         W = diag(fx^2, fy^2, ...) (pixels, unweighted, as OpenCV's refinement);
+       - "numerical" solves the four depths z from the six lengths (Gauss-Newton to their
+         least-squares optimum; implicit function theorem: dz/dn = -(Jz^T Jz)^-1 Jz^T Jn), then
+         fits the rotation to the vertices V_i = z_i (x_i, y_i, 1) (Kabsch: d omega =
+         H^-1 sum p_i x dV_i with H = sum |p_i|^2 I - p_i p_i^T, p_i the centred vertices) and
+         takes the mean vertex as the position.
+  3. The pose covariance is A Sigma_n A^T; the angles follow from omega by the inverse of the
+     Euler-rate matrix E = [e_x, Rx e_y, Rx Ry e_z] (singular at beta = +-90: NaN there).
+
+The mirror test: the reprojection chi-square r^T Sigma_n^-1 r of the answer's branch and of its
+mirror's (each at its own chi-square optimum, one Gauss-Newton step from the solver's pose);
+``ambiguous`` when the mirror's exceeds the answer's by less than FLIP_DELTA_CHI2 (a likelihood
+ratio mirror / answer above exp(-FLIP_DELTA_CHI2 / 2)). There the error is not Gaussian
+(the two branches of the planar ambiguity are both plausible) and the std does not describe it.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from qrfield.camera import CameraModel
+from qrfield.geometry import marker_vertices
+from qrfield.solvers.result import PoseResult, SolverError
+
+#: The mirror candidate counts as fitting the corners within their uncertainty when its
+#: reprojection chi-square exceeds the answer's by less than this, i.e. when the mirror is at least
+#: exp(-4.5) = 1.1 % as likely as the answer. Chosen for recall: on seeded views with known noise
+#: it leaves no flip unflagged, where 4 and 6 leave a few, each a pose tens of degrees off with a
+#: std of a degree (measured recall and precision: docs/uncertainty.md, ``qrfield bench pose``).
+FLIP_DELTA_CHI2 = 9.0
+#: Without a corner covariance the test falls back on the ratio of the two candidates' RMS
+#: reprojection errors (``PoseResult.ambiguity``): at or above this the mirror counts as fitting.
+AMBIGUITY_FALLBACK = 0.5
+#: Relative asymmetry tolerated in a 2x2 corner covariance block.
+SYMMETRY_RTOL = 1e-6
+
+_EYE3 = np.eye(3)
+_FOUR = np.arange(4)
+
+
+def _incidence() -> np.ndarray:
+    """(6, 4): +1 at vertex i and -1 at vertex j of each pair (i, j) of qrfield.solvers.kernel.PAIRS."""
+    from qrfield.solvers.kernel import PAIRS
+
+    out = np.zeros((6, 4))
+    for k, (i, j) in enumerate(PAIRS):
+        out[k, i], out[k, j] = 1.0, -1.0
+    return out
+
+
+def _unit_steps() -> np.ndarray:
+    """(4, 3, 8): dV_i / d(x_i, y_i) at unit depth (ones at [i, 0, 2i] and [i, 1, 2i + 1])."""
+    out = np.zeros((4, 3, 8))
+    out[_FOUR, 0, 2 * _FOUR] = 1.0
+    out[_FOUR, 1, 2 * _FOUR + 1] = 1.0
+    return out
+
+
+_INCIDENCE = _incidence()
+_UNIT_STEPS = _unit_steps()
+#: (3, 9): v @ _LEVI_CIVITA is [v]x flattened.
+_LEVI_CIVITA = np.array(
+    [[0, 0, 0, 0, 0, -1, 0, 1, 0], [0, 0, 1, 0, 0, 0, -1, 0, 0], [0, -1, 0, 1, 0, 0, 0, 0, 0]], dtype=float
+)
+#: Flat indices of the 4 diagonal 2x2 blocks of an 8 x 8 matrix, in (corner, row, column) order.
+_BLOCK_DIAGONAL = np.array(
+    [(2 * i + r) * 8 + 2 * i + c for i in range(4) for r in range(2) for c in range(2)]
+)
+
+
+def check_corners_cov(cov: object, batch: int | None = None) -> np.ndarray:
+    """A corner covariance as float (4, 2, 2) px^2, or (N, 4, 2, 2) when ``batch`` = N (a single
+    (4, 2, 2) is then shared by every row); SolverError saying what is wrong (shape, NaN/inf, not
+    symmetric, not positive semi-definite)."""
+    try:
+        c = np.array(cov, dtype=float)
+    except (TypeError, ValueError):
+        raise SolverError("corners_cov must be a numeric (4, 2, 2) array of px^2 (V1..V4)") from None
+    if batch is not None and c.shape == (4, 2, 2):
+        c = np.broadcast_to(c, (batch, 4, 2, 2)).copy()
+    want = (4, 2, 2) if batch is None else (batch, 4, 2, 2)
+    if c.shape != want:
+        raise SolverError(
+            f"corners_cov must have shape {want}: a 2x2 covariance in px^2 per corner V1..V4, got {c.shape}"
+        )
+    a, b, d = c[..., 0, 0], c[..., 0, 1], c[..., 1, 1]
+    if not np.isfinite(c).all():
+        raise SolverError("corners_cov contains NaN or inf")
+    if (np.abs(b - c[..., 1, 0]) > SYMMETRY_RTOL * (a + d + 1e-300)).any():
+        raise SolverError("corners_cov is not symmetric (each corner's 2x2 block must equal its transpose)")
+    if (a < 0.0).any() or (d < 0.0).any() or (a * d - b * b < -1e-9 * (a + d) ** 2).any():
+        raise SolverError(
+            "corners_cov is not a covariance: a negative variance or a 2x2 block that is not "
+            "positive semi-definite"
+        )
+    return c
+
+
+def isotropic_cov(std_px: float, batch: int | None = None) -> np.ndarray:
+    """(4, 2, 2) covariance of independent corners with ``std_px`` on each coordinate, px
+    ((N, 4, 2, 2) with ``batch``)."""
+    try:
+        std = float(std_px)
+    except (TypeError, ValueError):
+        raise SolverError(f"corner standard deviation must be a number of pixels, got {std_px!r}") from None
+    if not math.isfinite(std) or std < 0.0:
+        raise SolverError(f"corner standard deviation must be a finite number of pixels >= 0, got {std_px!r}")
+    cov = np.zeros((4, 2, 2))
+    cov[:, 0, 0] = cov[:, 1, 1] = std * std
+    return cov if batch is None else np.broadcast_to(cov, (batch, 4, 2, 2)).copy()
+
+
+def corners_std_px(cov: np.ndarray) -> np.ndarray:
+    """(..., 4) RMS radius of each corner's uncertainty, sqrt(trace of its 2x2 block), px."""
+    return np.sqrt(np.maximum(cov[..., 0, 0] + cov[..., 1, 1], 0.0))
+
+
+# ---------------------------------------------------------------------- corners -> normalised
+
+
+def distortion_jacobian(x: np.ndarray, y: np.ndarray, camera: CameraModel) -> np.ndarray:
+    """(..., 2, 2) derivative of OpenCV's 5-term distortion (distorted over ideal normalised
+    coordinates) at ideal normalised points (x, y) (...)."""
+    k1, k2, p1, p2, k3 = (float(v) for v in camera.dist)
+    r2 = x * x + y * y
+    radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    g = 2.0 * (k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2))  # 2 d radial / d r2
+    cross = x * y * g + 2.0 * p1 * x + 2.0 * p2 * y
+    out = np.empty((*np.shape(x), 2, 2))
+    out[..., 0, 0] = radial + x * x * g + 2.0 * p1 * y + 6.0 * p2 * x
+    out[..., 0, 1] = cross
+    out[..., 1, 0] = cross
+    out[..., 1, 1] = radial + y * y * g + 6.0 * p1 * y + 2.0 * p2 * x
+    return out
+
+
+def normalised_cov(cov_px: np.ndarray, x: np.ndarray, y: np.ndarray, camera: CameraModel) -> np.ndarray:
+    """(..., 4, 2, 2) covariance of the undistorted normalised coordinates (x, y) (..., 4) of the
+    corners, from their pixel covariance (..., 4, 2, 2) as seen (distorted)."""
+    scale = np.array([1.0 / camera.fx, 1.0 / camera.fy])
+    cov = cov_px * (scale[:, None] * scale[None, :])  # distorted normalised coordinates
+    if not camera.has_distortion:
+        return cov
+    inv = np.linalg.inv(distortion_jacobian(x, y, camera))
+    return inv @ cov @ np.swapaxes(inv, -1, -2)
+
+
+def information_matrix(cov_n: np.ndarray) -> np.ndarray:
+    """(8, 8) block-diagonal inverse of one corner set's normalised covariance (4, 2, 2); a floor of
+    1e-12 of the largest variance (and 1e-30, about 1e-12 px^2, when all are 0) keeps exact
+    corners usable."""
+    c = cov_n.reshape(16).tolist()
+    floor = 1e-12 * max(c[4 * i] + c[4 * i + 3] for i in range(4)) + 1e-30
+    w = [0.0] * 64
+    for i in range(4):
+        a, b, cc, d = c[4 * i] + floor, c[4 * i + 1], c[4 * i + 2], c[4 * i + 3] + floor
+        det = a * d - b * cc
+        k = 18 * i  # row 2i, column 2i of the flat 8 x 8
+        w[k], w[k + 1], w[k + 8], w[k + 9] = d / det, -b / det, -cc / det, a / det
+    return np.array(w).reshape(8, 8)
+
+
+# ---------------------------------------------------------------------- Jacobians of the solvers
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) matrices [v]x with [v]x w = v x w (one matmul: [v]x is linear in v)."""
+    return (v @ _LEVI_CIVITA).reshape(*v.shape[:-1], 3, 3)
+
+
+@functools.lru_cache(maxsize=16)
+def _vertices(side: float) -> np.ndarray:
+    """marker_vertices(side), cached read-only (4, 3) mm."""
+    q = marker_vertices(side)
+    q.setflags(write=False)
+    return q
+
+
+def rigid_projection(
+    rotation: np.ndarray, position: np.ndarray, side: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The rigid square at pose (R (..., 3, 3), t (..., 3) mm): its normalised projection (..., 8)
+    (x1, y1, ..., x4, y4), that projection's Jacobian (..., 8, 6) with respect to p = (omega rad,
+    t mm), and the vertices' depths (..., 4) mm (a depth <= 0 makes the first two meaningless)."""
+    arm = rotation[..., None, :, :] @ _vertices(side)[:, :, None]  # R q_i, (..., 4, 3, 1)
+    arm = arm[..., 0]
+    p = arm + position[..., None, :]
+    ax, ay, az = arm[..., 0], arm[..., 1], arm[..., 2]
+    inv_z = 1.0 / p[..., 2]
+    u, v = p[..., 0] * inv_z, p[..., 1] * inv_z
+    # du/domega = (R q) x (1, 0, -u) / Z, dv/domega = (R q) x (0, 1, -v) / Z;
+    # d(u, v)/dt = [[1, 0, -u], [0, 1, -v]] / Z.
+    jac = np.zeros((*p.shape[:-1], 2, 6))
+    jac[..., 0, 0], jac[..., 0, 1], jac[..., 0, 2] = -u * ay, az + u * ax, -ay
+    jac[..., 1, 0], jac[..., 1, 1], jac[..., 1, 2] = -v * ay - az, v * ax, ax
+    jac[..., 0, 3], jac[..., 1, 4] = 1.0, 1.0
+    jac[..., 0, 5], jac[..., 1, 5] = -u, -v
+    jac *= inv_z[..., None, None]
+    proj = np.stack([u, v], axis=-1)
+    return proj.reshape(*p.shape[:-2], 8), jac.reshape(*p.shape[:-2], 8, 6), p[..., 2]
+
+
+def rigid_jacobian(rotation: np.ndarray, position: np.ndarray, side: float) -> np.ndarray:
+    """(..., 8, 6) derivative of the rigid square's normalised projection (x1, y1, ..., x4, y4) at
+    pose (R (..., 3, 3), t (..., 3) mm) with respect to p = (omega rad, t mm)."""
+    return rigid_projection(rotation, position, side)[1]
+
+
+def ippe_jacobian(rotation: np.ndarray, position: np.ndarray, side: float, camera: CameraModel) -> np.ndarray:
+    """(..., 6, 8) derivative of the least-squares pose (IPPE refined by LM or VVS, unweighted
+    pixels) p = (omega, t) with respect to the normalised corners: (J^T W J)^-1 J^T W."""
+    return least_squares_jacobian(rigid_jacobian(rotation, position, side), camera)
+
+
+def least_squares_jacobian(jac: np.ndarray, camera: CameraModel) -> np.ndarray:
+    """(J^T W J)^-1 J^T W for the rigid projection's Jacobian J (..., 8, 6), W = diag(fx^2, fy^2, ...)."""
+    w = np.array([camera.fx**2, camera.fy**2] * 4)
+    jtw = np.swapaxes(jac, -1, -2) * w
+    return np.linalg.solve(jtw @ jac, jtw)
+
+
+def numerical_jacobian(z: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """(..., 6, 8) derivative of the numerical model's pose p = (omega, t) with respect to the
+    normalised corners (x1, y1, ..., x4, y4), at its least-squares depths z (..., 4) (mm).
+
+    Depths: implicit function theorem on the Gauss-Newton optimum of the six lengths (second
+    derivatives of the residuals neglected, as Gauss-Newton does; exact for exact corners). Pose:
+    the Kabsch rotation's first-order change (what qrfield.solvers.kernel.pose_from_vertices
+    computes for four vertices) and the mean vertex.
+    """
+    rays = np.ones((*z.shape, 3))  # lines of sight (x, y, 1), (..., 4, 3)
+    rays[..., 0], rays[..., 1] = x, y
+    verts = z[..., None] * rays
+    d = _INCIDENCE @ verts  # (..., 6, 3): V_i - V_j of each pair
+    e = d / np.sqrt((d * d).sum(axis=-1))[..., None]
+    jz = _INCIDENCE * (e @ np.swapaxes(rays, -1, -2))  # d diff_k / d z_i, (..., 6, 4)
+    jn = (_INCIDENCE[:, :, None] * e[..., :, None, :2]) * z[..., None, :, None]  # (..., 6, 4, 2)
+    jzt = np.swapaxes(jz, -1, -2)
+    dz = np.linalg.solve(jzt @ jz, jzt @ jn.reshape(*jn.shape[:-2], 8))  # minus dz/dn, (..., 4, 8)
+    # dV_i / dn = m_i dz_i / dn + z_i (unit steps in x_i and y_i).
+    dv = _UNIT_STEPS * z[..., :, None, None] - rays[..., :, :, None] * dz[..., :, None, :]  # (..., 4, 3, 8)
+    arm = verts - 0.25 * verts.sum(axis=-2)[..., None, :]
+    outer = np.swapaxes(arm, -1, -2) @ arm
+    h = (arm * arm).sum(axis=(-2, -1))[..., None, None] * _EYE3 - outer
+    out = np.empty((*z.shape[:-1], 6, 8))
+    out[..., :3, :] = np.linalg.solve(h, (_skew(arm) @ dv).sum(axis=-3))  # H^-1 sum_i p_i x dV_i
+    out[..., 3:, :] = 0.25 * dv.sum(axis=-3)
+    return out
+
+
+def euler_jacobian(angles_deg: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) derivative of (alpha, beta, gamma) in degrees with respect to omega (radians):
+    the inverse of E = [e_x, Rx(alpha) e_y, Rx(alpha) Ry(beta) e_z]; NaN at gimbal lock."""
+    if np.ndim(angles_deg) == 1:  # one pose: Python floats, no numpy call overhead
+        alpha, beta = math.radians(float(angles_deg[0])), math.radians(float(angles_deg[1]))
+        ca, sa, cb, sb = math.cos(alpha), math.sin(alpha), math.cos(beta), math.sin(beta)
+        inv_cb = 1.0 / cb if abs(cb) > 1e-9 else math.nan
+        rows = [[1.0, sa * sb * inv_cb, -ca * sb * inv_cb], [0.0, ca, sa], [0.0, -sa * inv_cb, ca * inv_cb]]
+        return math.degrees(1.0) * np.array(rows)
+    a = np.radians(angles_deg)
+    ca, sa = np.cos(a[..., 0]), np.sin(a[..., 0])
+    cb, sb = np.cos(a[..., 1]), np.sin(a[..., 1])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv_cb = np.where(np.abs(cb) > 1e-9, 1.0 / cb, np.nan)
+    zero, one = np.zeros_like(ca), np.ones_like(ca)
+    rows = [one, sa * sb * inv_cb, -ca * sb * inv_cb, zero, ca, sa, zero, -sa * inv_cb, ca * inv_cb]
+    return math.degrees(1.0) * np.stack(rows, axis=-1).reshape(*ca.shape, 3, 3)
+
+
+def pose_covariance(jac: np.ndarray, cov_n: np.ndarray, angles_deg: np.ndarray) -> np.ndarray:
+    """(..., 6, 6) covariance of (x, y, z mm, alpha, beta, gamma deg) from the Jacobian (..., 6, 8)
+    of p = (omega, t) over the normalised corners and their covariance (..., 4, 2, 2)."""
+    full = np.concatenate([jac[..., 3:, :], euler_jacobian(angles_deg) @ jac[..., :3, :]], axis=-2)
+    sigma = np.zeros((*cov_n.shape[:-3], 64))
+    sigma[..., _BLOCK_DIAGONAL] = cov_n.reshape(*cov_n.shape[:-3], 16)  # corners independent
+    sigma = sigma.reshape(*cov_n.shape[:-3], 8, 8)
+    return full @ sigma @ np.swapaxes(full, -1, -2)
+
+
+def pose_std(cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(position std (..., 3) mm, angle std (..., 3) deg) from a pose covariance (..., 6, 6)."""
+    diag = np.sqrt(np.maximum(np.diagonal(cov, axis1=-2, axis2=-1), 0.0))
+    return diag[..., :3], diag[..., 3:]
+
+
+# ---------------------------------------------------------------------- the mirror test
+
+
+def branch_chi2(
+    projection: tuple[np.ndarray, np.ndarray, np.ndarray], n_obs: np.ndarray, info: np.ndarray
+) -> np.ndarray:
+    """(k,) chi-square of each branch of the ambiguity at its own chi-square optimum, from the
+    rigid projections of k poses on those branches (:func:`rigid_projection`: (k, 8), (k, 8, 6),
+    (k, 4)), the normalised corners n_obs (8,) and their information matrix W (8, 8).
+
+    The optimum is that of the chi-square linearised at the pose given (one Gauss-Newton step,
+    predicted): r^T W r - g^T H^-1 g with g = J^T W r, H = J^T W J. The solvers' poses minimise
+    other residuals (lengths; unweighted pixels), so under an anisotropic or uneven corner
+    covariance their own chi-square overstates the branch's. inf when a vertex is behind the camera.
+    """
+    proj, jac, depth = projection
+    out = np.full(proj.shape[0], np.inf)
+    front = np.flatnonzero(depth.min(axis=-1) > 0.0)
+    if front.size == 0:
+        return out
+    r = n_obs - proj[front]  # (k, 8)
+    jac = jac[front]
+    jtw = np.swapaxes(jac, -1, -2) @ info
+    g = jtw @ r[..., None]  # (k, 6, 1)
+    step = np.linalg.solve(jtw @ jac, g)
+    chi2 = ((r @ info) * r).sum(axis=-1) - (g * step).sum(axis=(-2, -1))
+    out[front] = np.maximum(chi2, 0.0)
+    return out
+
+
+def is_ambiguous(chi2_answer: float, chi2_mirror: float) -> bool:
+    """The mirror explains the corners within their uncertainty about as well as the answer, or better."""
+    return bool(chi2_mirror - chi2_answer < FLIP_DELTA_CHI2)
+
+
+def ambiguity_ratio(error_answer: float, error_mirror: float) -> float:
+    """RMS reprojection error of the better-fitting of the two candidates over that of the worse,
+    in [0, 1] (1: the corners cannot tell them apart); 1 when both are 0."""
+    low, high = sorted((error_answer, error_mirror))
+    if not math.isfinite(low):
+        return math.nan
+    if high == 0.0:
+        return 1.0
+    return low / high if math.isfinite(high) else 0.0
+
+
+# ---------------------------------------------------------------------- one solve's result
+
+
+def with_uncertainty(
+    result: PoseResult,
+    corners: np.ndarray,
+    flat: list[float],
+    camera: CameraModel,
+    side: float,
+    cov: np.ndarray | None,
+) -> PoseResult:
+    """``result`` with its uncertainty fields and the mirror test filled (see :class:`PoseResult`).
+
+    ``cov`` is the checked (4, 2, 2) corner covariance in px^2, or None when unknown (then the std
+    fields stay NaN and the mirror test falls back on the ratio ``ambiguity``). A result that did
+    not converge gets only ``corners_std_px``.
+    """
+    from qrfield.solvers.rays import normalised_single
+
+    fields: dict[str, object] = {}
+    if cov is not None:
+        fields["corners_std_px"] = corners_std_px(cov)
+    if not (result.converged and np.isfinite(result.rotation).all()):
+        return replace(result, **fields) if fields else result
+    if cov is None:
+        alt = result.alternative
+        if alt is not None and result.ambiguity is not None:
+            better = alt.reprojection_px < result.reprojection_px
+            return replace(result, ambiguous=bool(better or result.ambiguity >= AMBIGUITY_FALLBACK))
+        return result
+    x_list, y_list = normalised_single(corners, flat, camera)
+    x, y = np.array(x_list), np.array(y_list)
+    cov_n = normalised_cov(cov, x, y, camera)
+    rotations, positions = [result.rotation], [result.position_mm]
+    mirror = _mirror_start(result, x_list, y_list)
+    if mirror is not None:
+        rotations.append(mirror[0])
+        positions.append(mirror[1])
+    projection = rigid_projection(np.array(rotations), np.array(positions), side)
+    if result.method == "numerical":
+        jac = numerical_jacobian(result.vertices_mm[:, 2], x, y)
+    else:
+        jac = least_squares_jacobian(projection[1][0], camera)
+    pose_cov = pose_covariance(jac, cov_n, result.angles_deg)
+    fields["pose_cov"] = pose_cov
+    fields["position_std_mm"], fields["angles_std_deg"] = pose_std(pose_cov)
+    n_obs = np.array([v for pair in zip(x_list, y_list, strict=True) for v in pair])
+    chi2 = branch_chi2(projection, n_obs, information_matrix(cov_n))
+    fields["chi2"] = float(chi2[0])
+    if mirror is not None:
+        fields.update(mirror_chi2=float(chi2[1]), ambiguous=is_ambiguous(chi2[0], chi2[1]))
+    return replace(result, **fields)
+
+
+def _mirror_start(result: PoseResult, x: list[float], y: list[float]) -> tuple[np.ndarray, np.ndarray] | None:
+    """(R, t) of the mirror candidate: the method's alternative, or for the numerical model without
+    one the reflected plane its mirror search starts from; None when no mirror is in view."""
+    if result.alternative is not None and np.isfinite(result.alternative.rotation).all():
+        return result.alternative.rotation, result.alternative.position_mm
+    if result.method != "numerical":
+        return None  # IPPE's second candidate was behind the camera or facing away: no mirror
+    from qrfield.solvers.numerical import reflected_pose
+
+    return reflected_pose(result, x, y)
+
+
+def batch_uncertainty(
+    method: str,
+    corners: np.ndarray,
+    cov: np.ndarray,
+    camera: CameraModel,
+    side: float,
+    rotation: np.ndarray,
+    position: np.ndarray,
+    angles: np.ndarray,
+    depths: np.ndarray | None,
+    rows: np.ndarray,
+) -> dict[str, np.ndarray]:
+    """The std fields of a BatchResult ((N, 4), (N, 3), (N, 3)) for N corner sets (N, 4, 2) with
+    covariances (N, 4, 2, 2); pose stds only at ``rows`` (bool (N,), the converged ones), from
+    rotation (N, 3, 3), position (N, 3), angles (N, 3) and, for "numerical", depths (N, 4)."""
+    from qrfield.solvers.rays import normalised_batch
+
+    count = corners.shape[0]
+    out = {
+        "corners_std_px": corners_std_px(cov),
+        "position_std_mm": np.full((count, 3), np.nan),
+        "angles_std_deg": np.full((count, 3), np.nan),
+    }
+    idx = np.flatnonzero(rows)
+    if idx.size == 0:
+        return out
+    x, y = normalised_batch(corners[idx], camera)
+    if method == "numerical":
+        jac = numerical_jacobian(depths[idx], x, y)
+    else:
+        jac = ippe_jacobian(rotation[idx], position[idx], side, camera)
+    pos_std, ang_std = pose_std(pose_covariance(jac, normalised_cov(cov[idx], x, y, camera), angles[idx]))
+    out["position_std_mm"][idx] = pos_std
+    out["angles_std_deg"][idx] = ang_std
+    return out

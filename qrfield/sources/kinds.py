@@ -1,0 +1,52 @@
+"""The source registry: the kinds of ``--source`` values, and which sources are real cameras.
+
+Kinds: ``auto``, ``virtual``, ``picamera2``, ``picamera2-sim`` (``picamera2-sim[:SENSOR]``, the
+picamera2 stand-in: SIMULATED), ``usb`` (``usb:N``), ``folder`` (a folder of images) and ``video``
+(any other path). Only a live camera (``picamera2``, ``usb``) measures the world: a
+pose from any other source (the virtual bench's rendering, a recording) is marked SIM on the serial
+link, never OK (docs/conventions.md), so a gripper that acts only on OK never moves on it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+#: The kinds of source a ``--source`` value names.
+SOURCE_KINDS = ("auto", "virtual", "picamera2", "picamera2-sim", "usb", "folder", "video")
+#: Kinds whose frames come from a camera looking at the world now.
+LIVE_CAMERA_KINDS = ("picamera2", "usb")
+#: What ``auto`` tries, in order (the virtual bench last, and only where allowed).
+AUTO_CANDIDATES = ("picamera2", "usb:0", "virtual")
+#: The sources offered in a chooser (files and folders are browsed for).
+SOURCE_CHOICES = ("auto", "virtual", "picamera2", "usb:0", "usb:1")
+
+SOURCE_HELP = (
+    "camera source: auto (picamera2, then USB camera 0, then the virtual bench), virtual, picamera2, "
+    "usb:N (OpenCV camera index N), a path to a video file or a folder of images, or "
+    "picamera2-sim[:imx219|imx708|imx477] (a SIMULATED Pi camera: the picamera2 stand-in)"
+)
+
+
+def source_kind(spec: str) -> str:
+    """The kind (one of SOURCE_KINDS) of a ``--source`` value; a path that is a folder is
+    ``folder``, any other path ``video``."""
+    spec = spec.strip()
+    if spec in ("auto", "virtual", "picamera2"):
+        return spec
+    if spec == "picamera2-sim" or spec.startswith("picamera2-sim:"):
+        return "picamera2-sim"
+    if spec == "usb" or spec.startswith("usb:"):
+        return "usb"
+    return "folder" if Path(spec).expanduser().is_dir() else "video"
+
+
+def is_live_camera(source: Any) -> bool:
+    """True when ``source`` (an opened FrameSource) is a camera looking at the world now: a live
+    picamera2 or USB camera that is not a stand-in (a ``simulated`` attribute set true)."""
+    name = str(getattr(source, "name", ""))
+    return (
+        bool(getattr(source, "live", False))
+        and source_kind(name) in LIVE_CAMERA_KINDS
+        and not getattr(source, "simulated", False)
+    )

@@ -1,0 +1,167 @@
+"""``qrfield session new|log|undo|list|show`` on the virtual bench, without a screen.
+
+Truth: the virtual bench's own pose (docs/conventions.md frames; mm and degrees) and the rows as
+read back by csv, not by the session code.
+"""
+
+from __future__ import annotations
+
+import csv
+import errno
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from qrfield.cli import main
+
+pytestmark = pytest.mark.timeout(120)
+REPO = Path(__file__).resolve().parent.parent
+BENCH = {"x": 10.0, "y": -5.0, "z": 300.0, "alpha": 15.0, "beta": -20.0, "gamma": 10.0}  # its defaults
+
+
+def rows_of(folder: Path) -> list[dict[str, str]]:
+    with open(folder / "rows.csv", newline="", encoding="utf-8") as f:
+        return list(csv.DictReader(f))
+
+
+def new_session(tmp_path: Path, capsys, *extra: str) -> Path:
+    args = [
+        "session",
+        "new",
+        str(tmp_path / "root"),
+        "--name",
+        "cli test",
+        "--config-dir",
+        str(tmp_path / "cfg"),
+    ]
+    assert main([*args, *extra]) == 0
+    out = capsys.readouterr()
+    folder = Path(out.out.strip())
+    assert folder.parent == tmp_path / "root" and folder.name.endswith("-cli-test")
+    return folder
+
+
+def log_args(folder: Path, tmp_path: Path, *extra: str) -> list[str]:
+    return [
+        "session",
+        "log",
+        str(folder),
+        "--source",
+        "virtual",
+        "--config-dir",
+        str(tmp_path / "cfg"),
+        *extra,
+    ]
+
+
+def test_new_then_log_measures_the_bench_with_the_sessions_setup(tmp_path: Path, capsys) -> None:
+    folder = new_session(tmp_path, capsys, "--side-mm", "50", "--method", "ippe", "--frames-per-row", "4",
+                         "--max-angle-error-deg", "1.5")  # fmt: skip
+    meta = json.loads((folder / "session.json").read_text())
+    assert (meta["side_mm"], meta["solver"]["method"], meta["frames_per_row"]) == (50.0, "ippe", 4)
+    assert meta["criteria"]["max_angle_error_deg"] == 1.5 and meta["camera"]["width"] == 640
+    truth = "--truth=10,-5,300,15,-20,10"
+    assert main(log_args(folder, tmp_path, truth, "--combo", "alpha", "--note", "first card")) == 0
+    out = capsys.readouterr()
+    assert out.out.startswith("logged row 1: pass")
+    (row,) = rows_of(folder)
+    assert (row["row"], row["combo"], row["note"], row["method"]) == ("1", "alpha", "first card", "ippe")
+    assert (row["n_frames"], row["n_converged"], row["pass"]) == ("4", "4", "1")
+    for name, value in BENCH.items():
+        assert float(row[f"gt_{name}"]) == value
+    measured = np.array([float(row[k]) for k in BENCH])
+    assert np.linalg.norm(measured[:3] - np.array(list(BENCH.values())[:3])) < 5.0
+    assert np.all(np.abs(measured[3:] - np.array(list(BENCH.values())[3:])) <= 1.5)
+    # A negative truth (given with '='), the bench's own truth, and --frames.
+    assert (
+        main(log_args(folder, tmp_path, "--truth=-10,5,300,0,0,0", "--combo", "beta", "--frames", "2")) == 0
+    )
+    assert capsys.readouterr().out.startswith("logged row 2: fail")  # the bench is not at that pose
+    assert main(log_args(folder, tmp_path, "--truth", "bench", "--combo", "gamma", "--frames", "3")) == 0
+    assert capsys.readouterr().out.startswith("logged row 3: pass")
+    rows = rows_of(folder)
+    assert (rows[1]["gt_x"], rows[1]["n_frames"], rows[1]["pass"]) == ("-10.000", "2", "0")
+    assert [float(rows[2][f"gt_{k}"]) for k in BENCH] == list(BENCH.values())
+
+
+def test_a_bad_truth_names_each_field_and_logs_nothing(tmp_path: Path, capsys) -> None:
+    folder = new_session(tmp_path, capsys)
+    code = main(log_args(folder, tmp_path, "--truth=10,-5,3o0,15,-95,10", "--combo", "nope"))
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "z: '3o0' is not a number" in err and "beta: -95 deg is outside -90..90" in err
+    assert "combo: 'nope' is not a known combination" in err
+    assert main(log_args(folder, tmp_path, "--truth=1,2,3", "--combo", "alpha")) == 2
+    assert "give 6 numbers" in capsys.readouterr().err
+    assert rows_of(folder) == []
+
+
+def test_a_row_is_logged_only_once_it_is_on_disk(tmp_path: Path, capsys, monkeypatch) -> None:
+    from qrfield.sessions.files import FileOps
+
+    folder = new_session(tmp_path, capsys)
+
+    def full_disk(self, fd):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(FileOps, "fsync", full_disk)
+    code = main(
+        log_args(folder, tmp_path, "--truth=10,-5,300,15,-20,10", "--combo", "alpha", "--frames", "2")
+    )
+    out = capsys.readouterr()
+    assert code == 1 and "logged row" not in out.out
+    assert "NOT logged" in out.err and "disk full" in out.err
+    assert "unwritten line of rows.csv: 1," in out.err  # the row is not lost: the operator has it
+
+
+def test_undo_list_and_show(tmp_path: Path, capsys) -> None:
+    folder = new_session(tmp_path, capsys)
+    for combo in ("alpha", "beta"):
+        assert main(log_args(folder, tmp_path, "--truth", "bench", "--combo", combo, "--frames", "2")) == 0
+    capsys.readouterr()
+    assert main(["session", "undo", str(folder)]) == 0
+    assert capsys.readouterr().out.startswith("withdrew row 2")
+    rows = rows_of(folder)
+    assert len(rows) == 3 and rows[2]["withdraws"] == "2" and rows[2]["row"] == ""
+    assert main(["session", "list", str(tmp_path / "root")]) == 0
+    assert (
+        f"{folder.name}  numerical, 50 mm, picam-v2@640x480: 1 rows, 1 pass, 1 withdrawn"
+        in capsys.readouterr().out
+    )
+    assert main(["session", "show", str(folder)]) == 0
+    out = capsys.readouterr().out
+    assert "solver numerical, 10 frames per row, criteria 2°/5 mm" in out
+    assert "withdrawn" in out.splitlines()[-1] and "   1 alpha" in out
+    assert main(["session", "undo", str(folder)]) == 0 and main(["session", "undo", str(folder)]) == 2
+    assert "nothing to undo" in capsys.readouterr().err
+
+
+def test_interactive_log_asks_each_field_with_the_forms_checks(tmp_path: Path, capsys) -> None:
+    folder = new_session(tmp_path, capsys)
+    # Row 1: z and combo typed wrong once each; then Enter for the next row, Enter x 8 (keep
+    # every value) for row 2, and q.
+    first = ["10", "-5", "3o0", "300", "15", "-20", "10", "nope", "alpha", "typed by hand"]
+    answers = [*first, "", *[""] * 8, "q"]
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    done = subprocess.run(
+        [sys.executable, "-m", "qrfield", *log_args(folder, tmp_path, "--frames", "2")],
+        input="\n".join(answers) + "\n",
+        capture_output=True,
+        text=True,
+        timeout=90,
+        env=env,
+    )
+    assert done.returncode == 0, done.stderr
+    assert (
+        "z: '3o0' is not a number" in done.stdout
+        and "combo: 'nope' is not a known combination" in done.stdout
+    )
+    assert done.stdout.count("logged row") == 2  # the second row kept every value (Enter), then q
+    rows = rows_of(folder)
+    assert [r["combo"] for r in rows] == ["alpha", "alpha"] and rows[0]["note"] == "typed by hand"
+    assert [float(rows[1][f"gt_{k}"]) for k in BENCH] == list(BENCH.values())
