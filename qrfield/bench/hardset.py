@@ -6,11 +6,11 @@ every piece of the picture is made another way than :mod:`qrfield.render`:
 - the symbol: encoded by segno (a different encoder from OpenCV's QRCodeEncoder, so the module
   layouts, masks and versions differ), payloads of 5 to 200 printable ASCII bytes, error correction
   L, M, Q or H, versions 1 to 10;
-- the picture: each camera pixel is the exact area average of the card over the pixel, estimated
-  by 233 point samples on a Fibonacci lattice (a pixel wholly inside one module is evaluated once): every sample is
-  mapped back onto the card plane through the pose (a ray-plane intersection) and the lens (OpenCV's
-  iterative undistortion, to 1e-10, at the pixel corners, bilinear within the pixel), then looked
-  up in the module matrix. No texture, no warp, no resampling;
+- the picture: each camera pixel is the area average of the card over the pixel, estimated by
+  233 point samples on a Fibonacci lattice (a pixel wholly inside one module is evaluated once):
+  every sample is mapped back onto the card plane through the pose (a ray-plane intersection)
+  and the lens (OpenCV's iterative undistortion, to 1e-10, at the pixel corners, bilinear within
+  the pixel), then looked up in the module matrix. No texture, no warp, no resampling;
 - the truth: the corners V1..V4 (docs/conventions.md) projected by ``cv2.projectPoints`` with the
   lens' distortion.
 
@@ -138,7 +138,7 @@ def symbol_matrix(text: str, error: str, max_version: int = MAX_VERSION) -> tupl
 
 def _payload(rng: np.random.Generator) -> str:
     low, high = PAYLOAD_BYTES
-    length = int(round(math.exp(rng.uniform(math.log(low), math.log(high)))))
+    length = round(math.exp(rng.uniform(math.log(low), math.log(high))))
     alphabet = string.ascii_letters + string.digits + " -_.:/?=&%+*#"
     return "".join(rng.choice(list(alphabet), size=length))
 
@@ -159,8 +159,14 @@ def _undistorted_normalised(camera: CameraModel, pts: np.ndarray) -> np.ndarray:
 
 
 def rasterise(
-    camera: CameraModel, pose: Pose, side_mm: float, matrix: np.ndarray, background: float, light: float,
-    dark: float, supersample: int = SUPERSAMPLE,
+    camera: CameraModel,
+    pose: Pose,
+    side_mm: float,
+    matrix: np.ndarray,
+    background: float,
+    light: float,
+    dark: float,
+    supersample: int = SUPERSAMPLE,
 ) -> np.ndarray:
     """(H, W) float image of the card: the exact area average over each pixel (point-sampled).
 
@@ -187,10 +193,10 @@ def rasterise(
 
     card_px = project_points(outline @ rot[:, :2].T + t, camera)
     w, h = camera.size
-    x0 = max(int(math.floor(card_px[:, 0].min())) - 2, 0)
-    y0 = max(int(math.floor(card_px[:, 1].min())) - 2, 0)
-    x1 = min(int(math.ceil(card_px[:, 0].max())) + 3, w)
-    y1 = min(int(math.ceil(card_px[:, 1].max())) + 3, h)
+    x0 = max(math.floor(card_px[:, 0].min()) - 2, 0)
+    y0 = max(math.floor(card_px[:, 1].min()) - 2, 0)
+    x1 = min(math.ceil(card_px[:, 0].max()) + 3, w)
+    y1 = min(math.ceil(card_px[:, 1].max()) + 3, h)
     image = np.full((h, w), float(background))
     if x1 <= x0 or y1 <= y0:
         return image
@@ -313,7 +319,18 @@ def hard_view(index: int, seed: int = 2024) -> HardView:
     image.setflags(write=False)
     corners.setflags(write=False)
     return HardView(
-        index, image, corners, camera, side, pose, text, version, n, _module_px(corners, n), noise, blur,
+        index,
+        image,
+        corners,
+        camera,
+        side,
+        pose,
+        text,
+        version,
+        n,
+        _module_px(corners, n),
+        noise,
+        blur,
         gradient,
     )
 
@@ -322,3 +339,35 @@ def hard_views(count: int, seed: int = 2024, start: int = 0) -> Iterator[HardVie
     """Views ``start`` .. ``start + count - 1`` of the hard set (even indices pinhole, odd distorted)."""
     for index in range(start, start + count):
         yield hard_view(index, seed)
+
+
+# ---------------------------------------------------------------------- ``qrfield bench hardset``
+HELP = "the hard bench set of `qrfield bench detect`: its make-up, render time and a check of its truth"
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--views", type=int, default=200, help="views to describe (default 200)")
+    parser.add_argument("--seed", type=int, default=2024)
+
+
+def run(args) -> int:
+    """Print the set's make-up (bands, versions, cameras) and how fast it is made."""
+    import collections
+    import time
+
+    t0 = time.perf_counter()
+    views = list(hard_views(args.views, args.seed))
+    ms = (time.perf_counter() - t0) * 1e3 / max(len(views), 1)
+    print(f"hard set, seed {args.seed}: {len(views)} views, {ms:.0f} ms a view to make (machine shared)")
+    for name, key in (
+        ("camera", lambda v: v.camera.name),
+        ("module band", lambda v: v.band),
+        ("QR version", lambda v: v.version),
+        ("side mm", lambda v: v.side_mm),
+    ):
+        counts = collections.Counter(key(v) for v in views)
+        print(f"{name:<12}" + "  ".join(f"{k}: {counts[k]}" for k in sorted(counts)))
+    z = np.array([v.pose.position_mm[2] for v in views])
+    size = np.array([len(v.text) for v in views])
+    print(f"z {z.min():.0f}-{z.max():.0f} mm, payload {size.min()}-{size.max()} bytes")
+    return 0
