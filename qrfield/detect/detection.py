@@ -39,6 +39,8 @@ class Detection:
         symbol: the decoded (n, n) module matrix as the image confirms it (float: 1 dark, 0 light,
             NaN for a module the decoder misread or the image leaves in doubt; row 0 and column 0
             at V1), None when the text was not decoded with a module matrix.
+        fit_state: the whole-symbol fit's edge width and lighting (qrfield.detect.symbol_fit.FitState),
+            from which a tracker starts warm; None without that fit.
         corners_cov: (4, 2, 2) covariance of V1..V4 in px^2 from the whole-symbol fit (its residual
             noise and Jacobian, qrfield.detect.symbol_fit), None when unknown.
     """
@@ -51,6 +53,7 @@ class Detection:
     refined: bool
     modules: int = 0
     symbol: np.ndarray | None = field(default=None, repr=False, compare=False)
+    fit_state: Any = field(default=None, repr=False, compare=False)
     corners_cov: np.ndarray | None = None
 
     def __post_init__(self) -> None:

@@ -145,8 +145,11 @@ class Detector:
         if camera is not self.lens.camera:
             self.lens = Lens(camera)
 
-    def detect(self, image: np.ndarray) -> list[Detection]:
+    def detect(self, image: np.ndarray, known: list[np.ndarray] | None = None) -> list[Detection]:
         """All accepted codes in a grey or BGR uint8 image of any size (empty list when none).
+
+        ``known``: corner sets (4, 2) of codes already followed (a tracker's periodic look for new
+        codes): candidates on them are skipped before the costly refinement.
 
         Raises DetectorInputError only for a wrong array type/shape; never for image content.
         """
@@ -155,13 +158,17 @@ class Detector:
             return []
         found: list[Detection] = []
         for backend in self.backends:
+            skipped = False
             for candidate in find_candidates(grey, backend):
                 if any(same_code(candidate.corners_px, d.corners_px) for d in found):
                     continue  # the same code seen again
+                if known and any(same_code(candidate.corners_px, k) for k in known):
+                    skipped = True
+                    continue
                 detection = self.accept(grey, candidate)
                 if detection is not None:
                     found.append(detection)
-            if found:
+            if found or skipped:
                 break
         return found
 
@@ -220,6 +227,7 @@ class Detector:
             refined,
             modules,
             symbol=result.matrix,
+            fit_state=result.fit_state,
             corners_cov=result.corners_cov,
         )
 

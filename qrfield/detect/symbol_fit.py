@@ -37,6 +37,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from qrfield.detect.lens import Lens
@@ -47,8 +48,10 @@ _UNIT_SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
 #: Huber threshold in robust residual scales.
 HUBER_K = 1.5
 #: Most samples in a full fit and in a tracked (warm) fit.
-FULL_BUDGET = 2500
-TRACK_BUDGET = 1200
+FULL_BUDGET = 1500
+TRACK_BUDGET = 600
+#: Most pixels of the coarse stage (it only brings the corners into the fine stage's reach).
+COARSE_BUDGET = 600
 #: Smallest fitted contrast, grey levels (a code is not seen below it).
 MIN_CONTRAST = 12.0
 #: Row and column in G of each of the 8 parameters (see _g_from_params).
@@ -62,10 +65,12 @@ START_EDGE_PX = 0.9
 
 @dataclass(frozen=True)
 class FitState:
-    """What a tracked fit carries to the next frame: edge width s (px) and lighting (6 terms)."""
+    """What a tracked fit carries to the next frame: edge width s (px), lighting (6 terms) and the
+    robust residual scale (grey levels; NaN when not known yet)."""
 
     edge_px: float
     lighting: np.ndarray
+    scale: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -118,8 +123,8 @@ def _homography(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
 
 
 def _apply(h: np.ndarray, xy: np.ndarray) -> np.ndarray:
-    p = xy @ h[:, :2].T + h[:, 2]
-    return p[:, :2] / p[:, 2:3]
+    """Homography ``h`` applied to points (k, 2), float64."""
+    return cv2.perspectiveTransform(np.asarray(xy, dtype=np.float64).reshape(1, -1, 2), h).reshape(-1, 2)
 
 
 class _Layout:
@@ -137,6 +142,7 @@ class _Layout:
 
     def __init__(self, cells: np.ndarray, r: int) -> None:
         size = cells.shape[0]
+        self.size = size
         m = 2 * r + 1
         known = np.isfinite(cells)
         self.colour = np.where(known, cells, 0.0).ravel()
@@ -182,7 +188,23 @@ class _Layout:
         return pts
 
 
+def _windows(layout: _Layout, uv: np.ndarray, r: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For points at module coordinates ``uv`` (k, 2): which have a window of (2 r + 1)^2 known
+    cells around the cell they lie in (k,) bool, those windows' colours (k', m, m) and their
+    first boundary in u and v (k', 2) (boundaries lie there + 0 .. 2 r + 1)."""
+    size = layout.size
+    m = 2 * r + 1
+    first = np.floor(uv).astype(np.int64) + (QUIET_RINGS - r)  # the window's first column, row
+    inside = ((first >= 0) & (first <= size - m)).all(axis=1)
+    start = np.where(inside, first[:, 1] * size + first[:, 0], 0)
+    ok = inside & layout.safe[start]
+    colour = layout.colour[start[ok][:, None] + layout.window[None, :]].reshape(-1, m, m)
+    return ok, colour, (first[ok] - QUIET_RINGS).astype(np.float64)
+
+
 _LAYOUTS: dict[tuple[int, int], tuple[np.ndarray, _Layout]] = {}
+#: Boundary offsets 0 .. m of a window of m cells.
+_SPANS = {m: np.arange(m + 1, dtype=np.float64) for m in (3, 5)}
 
 
 def _layout(cells: np.ndarray, r: int) -> _Layout:
@@ -196,6 +218,53 @@ def _layout(cells: np.ndarray, r: int) -> _Layout:
     layout = _Layout(cells, r)
     _LAYOUTS[key] = (cells, layout)
     return layout
+
+
+def darkness_at(
+    uv: np.ndarray,
+    corner: np.ndarray,
+    inv_grad: np.ndarray,
+    colour: np.ndarray,
+    edge_px: float,
+    derivatives: bool = True,
+    edge_derivative: bool = True,
+):
+    """The model's darkness D (k,) at module coordinates ``uv`` (k, 2) of points whose windows of
+    cells start at boundaries ``corner`` (k, 2) with colours ``colour`` (k, m, m) (see _windows),
+    ``inv_grad`` (k, 2) px per module unit across u and v edges there, edge width ``edge_px``.
+    With ``derivatives`` also (dD/du, dD/dv) (k, 2) and dD/ds (k,) (None without ``edge_derivative``).
+    u and v are handled side by side on a trailing axis of 2 (few, larger numpy operations).
+    """
+    # Distance to each boundary in px across it, then F = the logistic of width s convolved
+    # with the pixel's 1 px footprint (its variance across any edge direction is 1/12 px^2):
+    # F(z) = 1/2 + s/2 [L((z + 1/2) / s) - L((z - 1/2) / s)], L = ln cosh.
+    z = ((uv - corner)[:, :, None] - _SPANS[colour.shape[1]]) * inv_grad[:, :, None]  # (k, 2, m+1) px
+    # In float32 (the transcendental functions are most of the cost; 1e-7 is far below noise).
+    x = (np.stack([z + 0.5, z - 0.5]) * (1.0 / edge_px)).astype(np.float32)  # (2, k, 2, m+1)
+    ax = np.abs(x)
+    e = np.exp(-2.0 * ax)
+    lc = ax + np.log1p(e)  # ln cosh x + ln 2 (the constant cancels in differences)
+    f = 0.5 + (0.5 * edge_px) * (lc[0] - lc[1])
+    share = f[:, :, :-1] - f[:, :, 1:]  # each cell's share F(z_j) - F(z_j+1), (k, 2, m)
+    if not derivatives:
+        return np.einsum("kr,krc,kc->k", share[:, 1], colour, share[:, 0])
+    t = np.copysign((1.0 - e) / (1.0 + e), x)  # tanh x
+    df = (0.5 * (t[0] - t[1])) * inv_grad[:, :, None]  # dF/du (module units)
+    dshare = df[:, :, :-1] - df[:, :, 1:]
+    if edge_derivative:
+        xt = lc - x * t
+        fs = 0.5 * (xt[0] - xt[1])  # dF/ds, s in px (the ln 2 cancels here too)
+        sshare = fs[:, :, :-1] - fs[:, :, 1:]
+        stack = np.stack([share[:, 0], dshare[:, 0], sshare[:, 0]], axis=-1)
+    else:
+        stack = np.stack([share[:, 0], dshare[:, 0]], axis=-1)
+    rows = colour @ stack  # (k, m rows, 2|3): colour summed over u per row
+    by_v = np.einsum("kr,krj->kj", share[:, 1], rows)  # D, dD/du, [dD/ds from u]
+    d_v = np.einsum("kr,kr->k", dshare[:, 1], rows[:, :, 0])
+    d_s = None
+    if edge_derivative:
+        d_s = by_v[:, 2] + np.einsum("kr,kr->k", sshare[:, 1], rows[:, :, 0])
+    return by_v[:, 0], np.column_stack([by_v[:, 1], d_v]), d_s
 
 
 class _Problem:
@@ -230,8 +299,7 @@ class _Problem:
         sides = ideal_corners - ideal_corners[[1, 2, 3, 0]]
         module_px = float(np.sqrt((sides * sides).sum(axis=1)).mean()) * scale / n
         self.module_px = module_px
-        r = 1 if edge_px / module_px < 0.35 else 2
-        m = 2 * r + 1
+        r = 1 if edge_px / module_px < 0.4 else 2
         layout = _layout(cells, r)
         pts = layout.candidates(max(1, min(8, round(module_px))), max(module_px, 0.05), band_px, budget)
         ox, oy = offset
@@ -240,7 +308,11 @@ class _Problem:
         xs, ys = xy[:, 0], xy[:, 1]
         inside = (xs >= 1) & (ys >= 1) & (xs < w - 1) & (ys < h - 1)
         flat = np.sort(ys[inside] * w + xs[inside])
-        flat = flat[np.diff(flat, prepend=-1) != 0]
+        if len(flat):
+            distinct = np.empty(len(flat), dtype=bool)
+            distinct[0] = True
+            np.not_equal(flat[1:], flat[:-1], out=distinct[1:])
+            flat = flat[distinct]
         if len(flat) > budget:
             flat = flat[np.linspace(0, len(flat) - 1, budget).astype(np.int64)]
         xs, ys = flat % w, flat // w
@@ -249,24 +321,16 @@ class _Problem:
         # Where each pixel starts in module coordinates; the cells around it must all be known.
         uvw = p @ g[:, :2].T + g[:, 2]
         uv = uvw[:, :2] / uvw[:, 2:3]
-        first = np.floor(uv).astype(np.int64) + (QUIET_RINGS - r)  # the window's first column, row
-        inside = ((first >= 0) & (first <= size - m)).all(axis=1)
-        start = np.where(inside, first[:, 1] * size + first[:, 0], 0)
-        ok = inside & layout.safe[start]
-        start = start[ok]
+        ok, self.colour, self.corner = _windows(layout, uv, r)
         self.xs, self.ys = xs[ok], ys[ok]
         self.values = grey[self.ys, self.xs].astype(np.float64)
         self.p = p[ok]
-        self.ph = np.column_stack([np.ones(len(start)), self.p])
-        self.colour = layout.colour[start[:, None] + layout.window[None, :]].reshape(-1, m, m)
-        # The window's first boundary in u and in v (k, 2): boundaries lie at it + 0..m.
-        self.corner = (first[ok] - QUIET_RINGS).astype(np.float64)
-        self.span = np.arange(m + 1, dtype=np.float64)
-        # |du/dp| and |dv/dp| (k, 2): an edge width of s px is s times these in module units.
+        self.ph = np.column_stack([np.ones(len(self.p)), self.p])
+        # px per module unit across u and across v edges (k, 2): 1 / |du/dp|, 1 / |dv/dp|.
         duv = (g[None, :2, :2] - uv[ok][:, :, None] * g[None, 2:3, :2]) / (uvw[ok, 2:3, None] * scale)
         if lens.distorted:
             duv = duv @ jl[ok]
-        self.inv_grad = 1.0 / np.sqrt((duv * duv).sum(axis=2))  # px per module unit, (k, 2)
+        self.inv_grad = 1.0 / np.sqrt((duv * duv).sum(axis=2))
         self.radius = r
 
     def __len__(self) -> int:
@@ -276,42 +340,21 @@ class _Problem:
         self, geo: np.ndarray, edge_px: float, derivatives: bool = True, edge_derivative: bool = True
     ):
         """D (k,) and, with ``derivatives``, (dD/du, dD/dv) (k, 2), dD/ds (k,) (None without
-        ``edge_derivative``), the module coordinates (k, 2) and the homography's w (k,).
-
-        u and v are handled side by side on a trailing axis of 2 (few, larger numpy operations).
-        """
+        ``edge_derivative``), the module coordinates (k, 2) and the homography's w (k,)."""
         g = _g_from_params(geo)
         uvw = self.p @ g[:, :2].T + g[:, 2]
         w = uvw[:, 2]
         uv = uvw[:, :2] / w[:, None]
-        # Distance to each boundary in px across it, then F = the logistic of width s convolved
-        # with the pixel's 1 px footprint (its variance across any edge direction is 1/12 px^2):
-        # F(z) = 1/2 + s/2 [L((z + 1/2) / s) - L((z - 1/2) / s)], L = ln cosh.
-        z = ((uv - self.corner)[:, :, None] - self.span) * self.inv_grad[:, :, None]  # (k, 2, m+1) px
-        x = np.stack([z + 0.5, z - 0.5]) * (1.0 / edge_px)  # (2, k, 2, m+1)
-        ax = np.abs(x)
-        lc = ax + np.log1p(np.exp(-2.0 * ax))  # ln cosh + ln 2 (cancels in the difference)
-        f = 0.5 + (0.5 * edge_px) * (lc[0] - lc[1])
-        share = f[:, :, :-1] - f[:, :, 1:]  # each cell's share F(z_j) - F(z_j+1), (k, 2, m)
+        out = darkness_at(uv, self.corner, self.inv_grad, self.colour, edge_px, derivatives, edge_derivative)
         if not derivatives:
-            return np.einsum("kr,krc,kc->k", share[:, 1], self.colour, share[:, 0])
-        t = np.tanh(x)
-        df = (0.5 * (t[0] - t[1])) * self.inv_grad[:, :, None]  # dF/du (module units)
-        dshare = df[:, :, :-1] - df[:, :, 1:]
-        if edge_derivative:
-            xt = lc - x * t
-            fs = 0.5 * (xt[0] - xt[1])  # dF/ds, s in px
-            sshare = fs[:, :, :-1] - fs[:, :, 1:]
-            stack = np.stack([share[:, 0], dshare[:, 0], sshare[:, 0]], axis=-1)
-        else:
-            stack = np.stack([share[:, 0], dshare[:, 0]], axis=-1)
-        rows = self.colour @ stack  # (k, m rows, 2|3): colour summed over u per row
-        by_v = np.einsum("kr,krj->kj", share[:, 1], rows)  # D, dD/du, [dD/ds from u]
-        d_v = np.einsum("kr,kr->k", dshare[:, 1], rows[:, :, 0])
-        d_s = None
-        if edge_derivative:
-            d_s = by_v[:, 2] + np.einsum("kr,kr->k", sshare[:, 1], rows[:, :, 0])
-        return by_v[:, 0], np.column_stack([by_v[:, 1], d_v]), d_s, uv, w
+            return out
+        return (*out, uv, w)
+
+    def residual_only(self, geo: np.ndarray, edge_px: float, light: np.ndarray) -> np.ndarray:
+        """Residuals (k,) image - model, without the Jacobian."""
+        d = self.darkness(geo, edge_px, derivatives=False)
+        ab = self.ph @ light.reshape(2, 3).T
+        return self.values - ab[:, 0] + ab[:, 1] * d
 
     def residuals(self, geo: np.ndarray, edge_px: float, light: np.ndarray, free_edge: bool):
         """Residuals (k,) image - model and their Jacobian (k, 8 [+1] + 6) with respect to
@@ -373,9 +416,12 @@ def _corners_jacobian(theta: np.ndarray, n: int, norm: tuple[np.ndarray, float])
 class _Solver:
     """Levenberg-Marquardt (or plain Gauss-Newton) over homography, [edge width,] lighting."""
 
-    def __init__(self, problem: _Problem, free_edge: bool) -> None:
+    def __init__(self, problem: _Problem, free_edge: bool, scale: float = math.nan) -> None:
         self.problem = problem
         self.free_edge = free_edge
+        self.start_scale = scale
+        # A homography entry's change times this bounds how far (px) the corners move, roughly.
+        self.scale_px = problem.scale * 2.0
 
     @staticmethod
     def weights(resid: np.ndarray, scale: float) -> np.ndarray:
@@ -389,8 +435,11 @@ class _Solver:
 
     @staticmethod
     def robust_scale(resid: np.ndarray) -> float:
-        """1.4826 MAD, at least 0.5 grey levels (uint8 rounding alone gives 0.29)."""
-        return max(1.4826 * float(np.median(np.abs(resid - np.median(resid)))), 0.5)
+        """1.4826 times the median absolute residual (the lighting terms centre the residuals), at
+        least 0.5 grey levels (uint8 rounding alone gives 0.29)."""
+        a = np.abs(resid)
+        half = len(a) // 2
+        return max(1.4826 * float(np.partition(a, half)[half]), 0.5) if len(a) else 0.5
 
     def run(self, geo, edge_px, light, max_iter: int, n: int, norm, lm: bool = True, tol_px: float = 2e-3):
         """Iterate from (geo, edge_px, light); returns them, the last residuals and Jacobian, the
@@ -398,34 +447,32 @@ class _Solver:
         evaluation each (tracking, from a good start)."""
         pr = self.problem
         resid, jac = pr.residuals(geo, edge_px, light, self.free_edge)
-        scale = self.robust_scale(resid)
+        scale = self.start_scale if math.isfinite(self.start_scale) else self.robust_scale(resid)
         cost = self.cost(resid, scale)
         lam = 1e-4
         corners = _corners_ideal(geo, n, norm)
         iterations = 0
         if not lm:
-            # Gauss-Newton from a good start: one evaluation per step, none after the last (its
-            # residuals and Jacobian, one step before the end, stand for the result's).
+            # From a good start (tracking): Gauss-Newton steps with the first Jacobian (a chord
+            # method: after the first step only the residuals are evaluated again), no checks.
+            # The Jacobian and weights of the first evaluation stand for the result's.
+            w = self.weights(resid, scale)
+            jw = jac * w[:, None]
+            try:
+                solve = np.linalg.inv(jw.T @ jac + 1e-9 * np.eye(jac.shape[1])) @ jw.T
+            except np.linalg.LinAlgError:
+                return geo, edge_px, light, resid, jac, scale, 0
+            k = 9 if self.free_edge else 8
             for it in range(max_iter):
                 iterations += 1
-                w = self.weights(resid, scale)
-                jw = jac * w[:, None]
-                try:
-                    delta = -np.linalg.solve(jw.T @ jac + 1e-9 * np.eye(jac.shape[1]), jw.T @ resid)
-                except np.linalg.LinAlgError:
-                    break
+                delta = -(solve @ resid)
                 geo = geo + delta[:8]
-                k = 8
                 if self.free_edge:
-                    edge_px = float(np.clip(edge_px + delta[8], MIN_EDGE_PX, 6.0))
-                    k = 9
+                    edge_px = min(max(edge_px + float(delta[8]), MIN_EDGE_PX), 6.0)
                 light = light + delta[k : k + 6]
-                new_corners = _corners_ideal(geo, n, norm)
-                moved = float(np.abs(new_corners - corners).max())
-                corners = new_corners
-                if moved < tol_px or it == max_iter - 1:
-                    break
-                resid, jac = pr.residuals(geo, edge_px, light, self.free_edge)
+                if it == max_iter - 1 or float(np.abs(delta[:8]).max()) * self.scale_px < tol_px:
+                    break  # the last step is small: the residuals before it stand for the result's
+                resid = pr.residual_only(geo, edge_px, light)
             return geo, edge_px, light, resid, jac, self.robust_scale(resid), iterations
         for _ in range(max_iter):
             iterations += 1
@@ -546,23 +593,23 @@ def fit_symbol(
     iterations = 0
     stages = []
     if coarse:
-        coarse_edge = max(1.5, 0.5 * module_px, edge)
-        stages.append((coarse_edge, 1.5 * coarse_edge + 2.0, False, 4))
-    stages.append((None, None, True, max_iter))
+        coarse_edge = max(1.5, 0.35 * module_px, edge)
+        stages.append((coarse_edge, 1.5 * coarse_edge + 2.0, False, 4, min(budget, COARSE_BUDGET)))
+    stages.append((None, None, True, max_iter, budget))
     light = warm.lighting if warm is not None else None
     problem = None
     resid = jac = None
     robust = math.nan
     with np.errstate(all="ignore"):
-        for stage_edge, band, free, iters in stages:
+        for stage_edge, band, free, iters, most in stages:
             use_edge = stage_edge if stage_edge is not None else edge
             band = band if band is not None else 1.5 * use_edge + 1.0
-            problem = _Problem(grey, lens, cells, geo, norm, use_edge, band, budget, offset)
+            problem = _Problem(grey, lens, cells, geo, norm, use_edge, band, most, offset)
             if len(problem) < 60:
                 return fail(f"too few pixels on known edges ({len(problem)})", iterations)
             if light is None or stage_edge is not None:
                 light, _ = _solve_lighting(problem, geo, use_edge)
-            solver = _Solver(problem, free_edge=free)
+            solver = _Solver(problem, free_edge=free, scale=warm.scale if warm is not None else math.nan)
             geo, use_edge, light, resid, jac, robust, done = solver.run(
                 geo, use_edge, light, iters, n, norm, lm=lm
             )
@@ -578,14 +625,16 @@ def fit_symbol(
         moved = float(np.linalg.norm(corners - start, axis=1).max())
         if abs(contrast) < MIN_CONTRAST:
             return fail(f"too little contrast ({abs(contrast):.0f} grey levels)", iterations)
-        if moved > max(3.0, 2.0 * module_px):
-            return fail(f"a corner moved {moved:.1f} px from its start", iterations)
         # The starting corners on the same pixels (lighting refitted): the fallback's measure
         # (not for a warm start, where the start is a prediction, not a competing answer).
         start_scale = math.nan
         if warm is None:
             _, start_resid = _solve_lighting(problem, _params_from_g(g0), edge)
             start_scale = _Solver.robust_scale(start_resid)
+        # A corner far from its start is trusted only when the fit explains the image much better
+        # there (a backend may miss V3 by many pixels; a fit may also wander off a code).
+        if moved > max(3.0, 2.0 * module_px) and not robust < 0.5 * start_scale:
+            return fail(f"a corner moved {moved:.1f} px from its start", iterations)
         # Covariance: robust scale^2 (J^T W J)^-1, its homography block taken to the corners.
         w = _Solver.weights(resid, robust)
         normal = (jac * w[:, None]).T @ jac
@@ -595,11 +644,12 @@ def fit_symbol(
             return fail("the fit is singular", iterations)
         dc = _corners_jacobian(geo, n, norm)
         cov_ideal = dc @ cov @ dc.T
-        jl = lens.distort_jacobian(corners_ideal)
-        corners_cov = np.empty((4, 2, 2))
-        for i in range(4):
-            block = cov_ideal[2 * i : 2 * i + 2, 2 * i : 2 * i + 2]
-            corners_cov[i] = jl[i] @ block @ jl[i].T
+        blocks = cov_ideal.reshape(4, 2, 4, 2)[np.arange(4), :, np.arange(4), :]  # (4, 2, 2)
+        if lens.distorted:
+            jl = lens.distort_jacobian(corners_ideal)
+            corners_cov = jl @ blocks @ jl.transpose(0, 2, 1)
+        else:
+            corners_cov = blocks
         if not np.all(np.isfinite(corners_cov)):
             return fail("the fit is singular", iterations)
     return SymbolFit(
@@ -613,5 +663,5 @@ def fit_symbol(
         edge,
         len(problem),
         iterations,
-        FitState(edge, light.copy()),
+        FitState(edge, light.copy(), robust),
     )

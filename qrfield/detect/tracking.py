@@ -23,7 +23,8 @@ from qrfield.detect.backends import Candidate, find_candidates
 from qrfield.detect.detection import Detection, DetectorSettings, quality_of
 from qrfield.detect.detector import Detector, Refined, as_grey, same_code, symbol_cells
 from qrfield.detect.patterns import check_patterns
-from qrfield.detect.symbol_fit import START_EDGE_PX, TRACK_BUDGET, FitState, fit_symbol
+from qrfield.detect.symbol_fit import START_EDGE_PX, FitState, fit_symbol
+from qrfield.detect.symbol_track import WarmFit
 
 #: Gauss-Newton steps of a warm fit.
 TRACK_ITERATIONS = 2
@@ -41,6 +42,9 @@ class _Track:
     cells: np.ndarray | None = None
     fit_state: FitState | None = None
     residual: float = np.nan
+    warm: WarmFit | None = None
+    #: the pattern score of the last check (the warm fit does not check the patterns each frame)
+    score: float | None = None
 
     def predicted(self) -> np.ndarray:
         corners = self.detection.corners_px
@@ -94,7 +98,8 @@ class Tracker:
         if found is not None and not due:
             return found
         grey = as_grey(image) if grey is None else grey
-        detections = self.detector.detect(grey)
+        known = [f.corners_px for f in found] if found is not None else None
+        detections = self.detector.detect(grey, known)
         self._frames_since_full = 0
         if found is not None:
             # The periodic full look: keep the codes tracked (the backends may miss a code that
@@ -112,8 +117,8 @@ class Tracker:
         cells = symbol_cells(
             grey, detection.corners_px, detection.modules, detection.symbol, check.inverted, lens
         )
-        state = None
-        if detection.corners_cov is not None and np.isfinite(check.light - check.dark):
+        state = detection.fit_state
+        if state is None and detection.corners_cov is not None and np.isfinite(check.light - check.dark):
             # Warm from the start: the light level and contrast the pattern check saw.
             state = FitState(START_EDGE_PX, np.array([check.light, 0, 0, check.light - check.dark, 0, 0]))
         return _Track(detection, inverted=check.inverted, cells=cells, fit_state=state)
@@ -186,19 +191,9 @@ class Tracker:
             cells = symbol_cells(grey, predicted, last.modules, last.symbol, track.inverted, lens, offset)
         result = None
         if track.fit_state is not None:
-            fit = fit_symbol(
-                grey,
-                predicted,
-                cells,
-                lens=lens,
-                offset=offset,
-                image_shape=shape,
-                budget=TRACK_BUDGET,
-                coarse=False,
-                max_iter=TRACK_ITERATIONS,
-                warm=track.fit_state,
-                lm=False,
-            )
+            if track.warm is None or track.warm.cells is not cells or track.warm.lens is not lens:
+                track.warm = WarmFit(cells, lens)
+            fit = track.warm.fit(grey, predicted, track.fit_state, offset, TRACK_ITERATIONS)
             holds = (
                 fit.ok
                 and (fit.contrast < 0) == track.inverted
@@ -206,6 +201,20 @@ class Tracker:
                 and not fit.residual > MAX_RESIDUAL_GROWTH * track.residual + 2.0
             )
             if holds:
+                result = Refined(
+                    fit.corners_px,
+                    fit.corners_cov,
+                    fit.corners_std_px,
+                    track.detection.quality if track.score is None else track.score,
+                    True,
+                    fit.state,
+                    fit.residual,
+                    cells,
+                )
+        if result is None and track.fit_state is not None:
+            # A prediction too far for the warm fit (a new track, a jerk): the full fit from it.
+            fit = fit_symbol(grey, predicted, cells, lens=lens, offset=offset, image_shape=shape)
+            if fit.ok and fit.residual < MAX_RESIDUAL_SHARE * abs(fit.contrast):
                 check = check_patterns(grey, fit.corners_px, last.modules, lens, offset)
                 if check.score >= settings.min_quality and check.inverted == track.inverted:
                     result = Refined(
@@ -237,6 +246,7 @@ class Tracker:
                 return None
         track.fit_state = result.fit_state
         track.residual = result.residual
+        track.score = result.score
         if result.cells is not None:
             track.cells = result.cells
         return Detection(
@@ -248,6 +258,7 @@ class Tracker:
             True,
             last.modules,
             symbol=last.symbol,
+            fit_state=result.fit_state,
             corners_cov=result.corners_cov,
         )
 
