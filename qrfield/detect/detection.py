@@ -139,6 +139,12 @@ class DetectorSettings:
     refine: bool = setting(
         True, label="sub-pixel refinement", help="fit the symbol's outer edges for sub-pixel corners"
     )
+    symbol_fit: bool = setting(
+        True,
+        label="whole-symbol fit",
+        help="refine the corners by fitting a model of the whole symbol (every known edge, through "
+        "the camera's lens) to the image, with a covariance per corner; off: the outer edges only",
+    )
     search_px: float = setting(
         2.5,
         label="refinement search window",

@@ -142,8 +142,10 @@ class Detector:
     def set_camera(self, camera: CameraModel | None) -> None:
         """The camera model of the images to come (its lens is modelled by the whole-symbol fit);
         None for a pinhole. Its size must be the images' size."""
-        if camera is not self.lens.camera:
-            self.lens = Lens(camera)
+        lens_camera = camera if camera is not None and camera.has_distortion else None
+        current = self.lens.camera
+        if lens_camera is not current and not (lens_camera is not None and lens_camera == current):
+            self.lens = Lens(lens_camera)
 
     def detect(self, image: np.ndarray, known: list[np.ndarray] | None = None) -> list[Detection]:
         """All accepted codes in a grey or BGR uint8 image of any size (empty list when none).
@@ -213,10 +215,13 @@ class Detector:
             if result is None:
                 result = Refined(corners, None, np.full(4, np.nan), rough.score, False)
         score, refined = result.score, result.refined
-        if score < (settings.min_quality if refined else min(settings.min_quality, UNREFINED_MIN_SCORE)):
+        if score < min(settings.min_quality, UNREFINED_MIN_SCORE):
             return None
-        if not refined and not candidate.text:
-            return None  # unrefined corners are only trusted for a code whose text was read
+        if (not refined or score < settings.min_quality) and not candidate.text:
+            # Unrefined corners, and corners whose patterns check out less well than min_quality
+            # (a worn print, a real photo's glare), are only kept for a code whose text was read;
+            # their quality stays below GOOD_QUALITY.
+            return None
         quality = quality_of(score, result.corners_cov) if refined else UNREFINED_QUALITY_FACTOR * score
         return Detection(
             result.corners_px,
@@ -249,8 +254,9 @@ class Detector:
         same pixels. None when neither fit holds (the patterns must fit at least as well as at
         ``corners``, within 0.02)."""
         settings = self.settings
-        start, edge = corners, None
+        start, edge, tried = corners, None, []
         for seed in seeds if seeds is not None else (corners,):
+            tried.append(seed)
             fit = refine_corners(grey, seed, modules, inverted=inverted, search_px=settings.search_px)
             if not fit.ok:
                 continue
@@ -260,11 +266,37 @@ class Detector:
                 edge = Refined(fit.corners_px, None, fit.corner_rms_px, fine.score, True)
                 start = fit.corners_px
                 break
+        if not settings.symbol_fit:
+            return edge
+        # The whole symbol from the edge lines' corners, else from each seed in turn (a backend
+        # can miss a corner by several modules; the finder patterns' locator does not).
+        for begin in [start] if edge is not None else tried:
+            whole = self._whole(
+                grey, begin, modules, rough_score, inverted, matrix, edge is not None, offset, image_shape
+            )
+            if whole is not None:
+                return whole
+        return edge
+
+    def _whole(
+        self,
+        grey: np.ndarray,
+        start: np.ndarray,
+        modules: int,
+        rough_score: float,
+        inverted: bool,
+        matrix: np.ndarray | None,
+        from_edges: bool,
+        offset: tuple[int, int],
+        image_shape: tuple[int, int] | None,
+    ) -> Refined | None:
+        """The whole-symbol fit from ``start`` (see :meth:`refine`); None when it does not hold
+        (or, from the edge lines' corners, fits worse than they do)."""
         lens = self.lens
         cells = symbol_cells(grey, start, modules, matrix, inverted, lens, offset)
         decoded = cells is not fixed_cells(modules)
         whole = fit_symbol(grey, start, cells, lens=lens, offset=offset, image_shape=image_shape)
-        if whole.ok and (edge is None or not whole.residual > whole.start_residual):
+        if whole.ok and not (from_edges and whole.residual > whole.start_residual):
             if decoded:
                 # The decoder's matrix may hold misread modules: keep those the image confirms
                 # at the fitted corners, and fit again if any was dropped.
@@ -301,4 +333,4 @@ class Detector:
                     cells,
                     matrix if decoded else None,
                 )
-        return edge
+        return None

@@ -34,6 +34,7 @@ from qrfield.detect.symbol import QUIET_RINGS
 from qrfield.detect.symbol_fit import (
     HUBER_K,
     MIN_CONTRAST,
+    MODEL_FLOOR_PX,
     FitState,
     SymbolFit,
     _homography,
@@ -227,6 +228,7 @@ class WarmFit:
             if lens.distorted:
                 jl = lens.distort_jacobian(corners_ideal)
                 corners_cov = jl @ corners_cov @ jl.transpose(0, 2, 1)
+            corners_cov = corners_cov + MODEL_FLOOR_PX**2 * np.eye(2)
         if not np.all(np.isfinite(corners_cov)):
             return fail("the fit is singular")
         return SymbolFit(

@@ -190,7 +190,7 @@ class Tracker:
         if cells is None:
             cells = symbol_cells(grey, predicted, last.modules, last.symbol, track.inverted, lens, offset)
         result = None
-        if track.fit_state is not None:
+        if track.fit_state is not None and settings.symbol_fit:
             if track.warm is None or track.warm.cells is not cells or track.warm.lens is not lens:
                 track.warm = WarmFit(cells, lens)
             fit = track.warm.fit(grey, predicted, track.fit_state, offset, TRACK_ITERATIONS)
@@ -211,7 +211,7 @@ class Tracker:
                     fit.residual,
                     cells,
                 )
-        if result is None and track.fit_state is not None:
+        if result is None and track.fit_state is not None and settings.symbol_fit:
             # A prediction too far for the warm fit (a new track, a jerk): the full fit from it.
             fit = fit_symbol(grey, predicted, cells, lens=lens, offset=offset, image_shape=shape)
             if fit.ok and fit.residual < MAX_RESIDUAL_SHARE * abs(fit.contrast):
