@@ -112,10 +112,11 @@ def print_tables(title: str, results: list[CornerResult]) -> None:
                 f"V{k + 1} {np.median(e[:, k]):.3f}/{np.percentile(e[:, k], 90):.3f}/{e[:, k].max():.3f}"
                 for k in range(4)
             )
+            right = sum(r.text_right for r in hits)
+            wrong = sum(r.text_wrong for r in hits)
             print(
                 f"{lens:<10}{label:<9}{len(hits):>5}/{len(rows):<3}{good.sum():>6}{bad.sum():>8}"
-                f"{(bad & good).sum():>10}{sum(r.text_right for r in hits):>9}{sum(r.text_wrong for r in hits):>7}"
-                f"   {corners}"
+                f"{(bad & good).sum():>10}{right:>9}{wrong:>7}   {corners}"
             )
 
 

@@ -117,7 +117,8 @@ def _hard_set(count: int, seed: int) -> None:
         if settings.symbol_fit:
             _corners.print_calibration(results)
     print(
-        "good: refined with quality >= 0.85; >0.5px: a corner more than 0.5 px off; wrong: another text read\n"
+        "good: refined with quality >= 0.85; >0.5px: a corner more than 0.5 px off; "
+        "wrong: another text read\n"
         "targets (modules >= 2 px): every corner's 90th pct <= 0.08 px and max <= 0.3 px, pinhole and "
         "distorted; no view with a corner > 0.5 px off reported good"
     )
