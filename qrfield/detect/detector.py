@@ -315,6 +315,7 @@ class Detector:
                         offset=offset,
                         image_shape=image_shape,
                         coarse=False,
+                        max_iter=3,
                         warm=whole.state,
                     )
                     if again.ok:

@@ -19,17 +19,18 @@ F stands in for the real one (Gaussian blur, defocus, pixel area), and s is fitt
 The fit. Unknowns: the homography from ideal pixels to module coordinates (8, in coordinates
 normalised about the code), s, and the six lighting terms. Samples are image pixel centres (no
 interpolation of the image) within a band of about 1.5 s + 1 px around the edges between known
-cells of different colour, at most ``budget`` of them (a fixed spatial hash chooses which, so a
-tracked code keeps its samples). Levenberg-Marquardt on the residuals I - model, with Huber
+cells of different colour, at most ``budget`` of them (the edges taken in a fixed shuffled order,
+so that a subset covers the whole symbol). Levenberg-Marquardt on the residuals I - model, with Huber
 weights at 1.5 times a robust residual scale (MAD) so that misread modules, specular spots or
 a finger over the code do not pull the corners. Coarse to fine: from a backend's or the edge
-fit's corners, first a blurred model (s at least 1.5 px or half a module) over a wider band,
-then the sharp model with s free. Tracking starts from the last frame's fit and does only the
-fine stage.
+fit's corners, first a blurred model (s at least 1.5 px or a third of a module) over a wider band,
+then the sharp model with s free. Tracking keeps the fit warm another way
+(:mod:`qrfield.detect.symbol_track`).
 
 The uncertainty. The covariance of the parameters is the robust scale squared times the inverse
 of the weighted normal matrix, J^T W J; the corners' (4, 2, 2) covariance follows through the
-corners' derivatives with respect to the homography (finite differences) and the lens.
+corners' (analytic) derivatives with respect to the homography and the lens, plus a model-error
+floor (MODEL_FLOOR_PX).
 """
 
 from __future__ import annotations
@@ -47,9 +48,8 @@ from qrfield.detect.symbol import QUIET_RINGS
 _UNIT_SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
 #: Huber threshold in robust residual scales.
 HUBER_K = 1.5
-#: Most samples in a full fit and in a tracked (warm) fit.
+#: Most pixels sampled by a fit.
 FULL_BUDGET = 1500
-TRACK_BUDGET = 600
 #: Most pixels of the coarse stage (it only brings the corners into the fine stage's reach).
 COARSE_BUDGET = 600
 #: Model error of a corner, px per coordinate, added in quadrature to the covariance from the
@@ -355,12 +355,6 @@ class _Problem:
             return out
         return (*out, uv, w)
 
-    def residual_only(self, geo: np.ndarray, edge_px: float, light: np.ndarray) -> np.ndarray:
-        """Residuals (k,) image - model, without the Jacobian."""
-        d = self.darkness(geo, edge_px, derivatives=False)
-        ab = self.ph @ light.reshape(2, 3).T
-        return self.values - ab[:, 0] + ab[:, 1] * d
-
     def residuals(self, geo: np.ndarray, edge_px: float, light: np.ndarray, free_edge: bool):
         """Residuals (k,) image - model and their Jacobian (k, 8 [+1] + 6) with respect to
         (homography, [edge width,] lighting): J = d resid / d parameters = -d model / d parameters."""
@@ -425,8 +419,6 @@ class _Solver:
         self.problem = problem
         self.free_edge = free_edge
         self.start_scale = scale
-        # A homography entry's change times this bounds how far (px) the corners move, roughly.
-        self.scale_px = problem.scale * 2.0
 
     @staticmethod
     def weights(resid: np.ndarray, scale: float) -> np.ndarray:
@@ -446,10 +438,9 @@ class _Solver:
         half = len(a) // 2
         return max(1.4826 * float(np.partition(a, half)[half]), 0.5) if len(a) else 0.5
 
-    def run(self, geo, edge_px, light, max_iter: int, n: int, norm, lm: bool = True, tol_px: float = 2e-3):
+    def run(self, geo, edge_px, light, max_iter: int, n: int, norm, tol_px: float = 2e-3):
         """Iterate from (geo, edge_px, light); returns them, the last residuals and Jacobian, the
-        robust scale and the iterations done. ``lm`` False: plain Gauss-Newton steps, one model
-        evaluation each (tracking, from a good start)."""
+        robust scale and the iterations done."""
         pr = self.problem
         resid, jac = pr.residuals(geo, edge_px, light, self.free_edge)
         scale = self.start_scale if math.isfinite(self.start_scale) else self.robust_scale(resid)
@@ -457,28 +448,6 @@ class _Solver:
         lam = 1e-4
         corners = _corners_ideal(geo, n, norm)
         iterations = 0
-        if not lm:
-            # From a good start (tracking): Gauss-Newton steps with the first Jacobian (a chord
-            # method: after the first step only the residuals are evaluated again), no checks.
-            # The Jacobian and weights of the first evaluation stand for the result's.
-            w = self.weights(resid, scale)
-            jw = jac * w[:, None]
-            try:
-                solve = np.linalg.inv(jw.T @ jac + 1e-9 * np.eye(jac.shape[1])) @ jw.T
-            except np.linalg.LinAlgError:
-                return geo, edge_px, light, resid, jac, scale, 0
-            k = 9 if self.free_edge else 8
-            for it in range(max_iter):
-                iterations += 1
-                delta = -(solve @ resid)
-                geo = geo + delta[:8]
-                if self.free_edge:
-                    edge_px = min(max(edge_px + float(delta[8]), MIN_EDGE_PX), 6.0)
-                light = light + delta[k : k + 6]
-                if it == max_iter - 1 or float(np.abs(delta[:8]).max()) * self.scale_px < tol_px:
-                    break  # the last step is small: the residuals before it stand for the result's
-                resid = pr.residual_only(geo, edge_px, light)
-            return geo, edge_px, light, resid, jac, self.robust_scale(resid), iterations
         for _ in range(max_iter):
             iterations += 1
             w = self.weights(resid, scale)
@@ -541,7 +510,6 @@ def fit_symbol(
     coarse: bool = True,
     max_iter: int = 8,
     warm: FitState | None = None,
-    lm: bool = True,
 ) -> SymbolFit:
     """Fit the symbol's model to ``grey`` starting from corners V1..V4 (image pixels).
 
@@ -557,7 +525,6 @@ def fit_symbol(
             off); False when starting from a good fit (tracking).
         max_iter: most iterations of the fine stage.
         warm: the edge width and lighting of the last frame's fit.
-        lm: Levenberg-Marquardt with a cost check per step (False: plain Gauss-Newton, for a warm start).
 
     Returns:
         SymbolFit; never raises for image content (ok False with a reason).
@@ -615,9 +582,7 @@ def fit_symbol(
             if light is None or stage_edge is not None:
                 light, _ = _solve_lighting(problem, geo, use_edge)
             solver = _Solver(problem, free_edge=free, scale=warm.scale if warm is not None else math.nan)
-            geo, use_edge, light, resid, jac, robust, done = solver.run(
-                geo, use_edge, light, iters, n, norm, lm=lm
-            )
+            geo, use_edge, light, resid, jac, robust, done = solver.run(geo, use_edge, light, iters, n, norm)
             iterations += done
             if stage_edge is None:
                 edge = use_edge
