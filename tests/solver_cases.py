@@ -6,22 +6,15 @@ import functools
 
 import numpy as np
 
-from qrfield.camera import CameraModel, resolve_camera
+from qrfield.bench.hardset import DISTORTED_CAMERA
+from qrfield.camera import resolve_camera
 from qrfield.geometry import angle_difference
 from qrfield.sampling import random_visible_poses
 
 SIDE_MM = 50.0
-#: A lens with visible barrel distortion (k1, k2, p1, p2, k3), typical of a wide Pi camera.
-DISTORTED = CameraModel(
-    fx=530.0,
-    fy=528.0,
-    cx=322.0,
-    cy=236.5,
-    width=640,
-    height=480,
-    dist=np.array([-0.28, 0.09, 0.0012, -0.0008, -0.012]),
-    name="test-distorted",
-)
+#: A lens with visible barrel distortion (k1, k2, p1, p2, k3), typical of a wide Pi camera (declared
+#: once, with the hard bench set that uses it too).
+DISTORTED = DISTORTED_CAMERA
 
 
 @functools.lru_cache(maxsize=8)

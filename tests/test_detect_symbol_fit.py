@@ -8,7 +8,7 @@ import pytest
 
 segno = pytest.importorskip("segno", reason="segno (a dev dependency) encodes the hard set's symbols")
 
-from qrfield.bench.hardset import DISTORTED_CAMERA, hard_view, rasterise  # noqa: E402
+from qrfield.bench.hardset import hard_view, rasterise  # noqa: E402
 from qrfield.detect import Detector  # noqa: E402
 from qrfield.detect.detection import GOOD_QUALITY, quality_of  # noqa: E402
 from qrfield.detect.symbol import QUIET_RINGS, decoded_cells, fixed_cells, verified_matrix  # noqa: E402
@@ -122,12 +122,6 @@ def test_the_hard_set_rasteriser_agrees_with_qrfields_renderer(camera_vga):
     theirs = rasterise(camera_vga, pose, 50.0, qr_symbol("qrfield"), 110.0, 255.0, 0.0)
     assert np.abs(ours - theirs).mean() < 0.05
     assert np.abs(ours - theirs).max() < 10.0
-
-
-def test_the_hard_sets_lens_is_the_solver_tests_lens():
-    from solver_cases import DISTORTED
-
-    assert DISTORTED_CAMERA == DISTORTED
 
 
 def test_a_sharp_frontal_code_is_not_pulled_by_the_pixel_grid(camera_vga):

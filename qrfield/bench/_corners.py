@@ -24,12 +24,12 @@ class CornerResult:
     distorted: bool
     band: str
     module_px: float
-    error_px: np.ndarray | None  # (4,) px per corner
-    diff_px: np.ndarray | None  # (4, 2) detected - true
-    cov: np.ndarray | None  # (4, 2, 2) px^2
-    good: bool
-    text_right: bool
-    text_wrong: bool
+    error_px: np.ndarray | None = None  # (4,) px per corner
+    diff_px: np.ndarray | None = None  # (4, 2) detected - true
+    cov: np.ndarray | None = None  # (4, 2, 2) px^2
+    good: bool = False
+    text_right: bool = False
+    text_wrong: bool = False
 
 
 def evaluate(views: Iterable[HardView], detect: Callable[[HardView], list]) -> list[CornerResult]:
@@ -38,20 +38,7 @@ def evaluate(views: Iterable[HardView], detect: Callable[[HardView], list]) -> l
     for view in views:
         found = detect(view)
         if not found:
-            out.append(
-                CornerResult(
-                    view.index,
-                    view.distorted,
-                    view.band,
-                    view.module_px,
-                    None,
-                    None,
-                    None,
-                    False,
-                    False,
-                    False,
-                )
-            )
+            out.append(CornerResult(view.index, view.distorted, view.band, view.module_px))
             continue
         best = min(found, key=lambda d: float(np.abs(d.corners_px - view.corners_px).max()))
         diff = best.corners_px - view.corners_px

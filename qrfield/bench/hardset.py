@@ -36,8 +36,8 @@ import numpy as np
 from qrfield.camera import CameraModel
 from qrfield.geometry import Pose, marker_vertices
 
-#: A lens with visible barrel distortion; the same numbers as tests/solver_cases.DISTORTED (a test
-#: checks that they agree).
+#: A lens with visible barrel distortion (k1, k2, p1, p2, k3), typical of a wide Pi camera; the
+#: solver tests use it too (tests/solver_cases.DISTORTED).
 DISTORTED_CAMERA = CameraModel(
     fx=530.0,
     fy=528.0,

@@ -412,6 +412,17 @@ def _corners_jacobian(theta: np.ndarray, n: int, norm: tuple[np.ndarray, float])
     return (dx * scale).transpose(0, 2, 1).reshape(8, 8)
 
 
+def corner_covariance(dc: np.ndarray, cov: np.ndarray, corners_ideal: np.ndarray, lens: Lens) -> np.ndarray:
+    """(4, 2, 2) image-pixel covariance of V1..V4 from the homography parameters' covariance
+    ``cov`` (8, 8), the corners' derivatives ``dc`` (4, 2, 8) in ideal pixels, the lens'
+    Jacobian at ``corners_ideal`` (4, 2), and the model-error floor."""
+    out = dc @ cov @ dc.transpose(0, 2, 1)
+    if lens.distorted:
+        jl = lens.distort_jacobian(corners_ideal)
+        out = jl @ out @ jl.transpose(0, 2, 1)
+    return out + MODEL_FLOOR_PX**2 * np.eye(2)
+
+
 class _Solver:
     """Levenberg-Marquardt (or plain Gauss-Newton) over homography, [edge width,] lighting."""
 
@@ -612,15 +623,8 @@ def fit_symbol(
             cov = robust**2 * np.linalg.inv(normal)[:8, :8]
         except np.linalg.LinAlgError:
             return fail("the fit is singular", iterations)
-        dc = _corners_jacobian(geo, n, norm)
-        cov_ideal = dc @ cov @ dc.T
-        blocks = cov_ideal.reshape(4, 2, 4, 2)[np.arange(4), :, np.arange(4), :]  # (4, 2, 2)
-        if lens.distorted:
-            jl = lens.distort_jacobian(corners_ideal)
-            corners_cov = jl @ blocks @ jl.transpose(0, 2, 1)
-        else:
-            corners_cov = blocks
-        corners_cov = corners_cov + MODEL_FLOOR_PX**2 * np.eye(2)
+        dc = _corners_jacobian(geo, n, norm).reshape(4, 2, 8)
+        corners_cov = corner_covariance(dc, cov, corners_ideal, lens)
         if not np.all(np.isfinite(corners_cov)):
             return fail("the fit is singular", iterations)
     return SymbolFit(

@@ -34,12 +34,12 @@ from qrfield.detect.symbol import QUIET_RINGS
 from qrfield.detect.symbol_fit import (
     HUBER_K,
     MIN_CONTRAST,
-    MODEL_FLOOR_PX,
     FitState,
     SymbolFit,
     _homography,
     _layout,
     _windows,
+    corner_covariance,
     darkness_at,
 )
 
@@ -223,24 +223,17 @@ class WarmFit:
                 ],
                 axis=1,
             )  # (4, 2, 8)
-            dc = -(dpx @ dw)  # (4, 2, 8)
-            corners_cov = dc @ cov @ dc.transpose(0, 2, 1)
-            if lens.distorted:
-                jl = lens.distort_jacobian(corners_ideal)
-                corners_cov = jl @ corners_cov @ jl.transpose(0, 2, 1)
-            corners_cov = corners_cov + MODEL_FLOOR_PX**2 * np.eye(2)
+            corners_cov = corner_covariance(-(dpx @ dw), cov, corners_ideal, lens)
         if not np.all(np.isfinite(corners_cov)):
             return fail("the fit is singular")
         return SymbolFit(
-            True,
-            corners,
-            corners_cov,
-            "",
-            robust,
-            math.nan,
-            contrast,
-            edge,
-            k,
-            iterations,
-            FitState(edge, light, robust),
+            ok=True,
+            corners_px=corners,
+            corners_cov=corners_cov,
+            residual=robust,
+            contrast=contrast,
+            edge_px=edge,
+            samples=k,
+            iterations=iterations,
+            state=FitState(edge, light, robust),
         )
