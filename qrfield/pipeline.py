@@ -241,6 +241,9 @@ class Pipeline:
             result.status, result.reason = ERROR, f"camera model does not fit the frame: {exc}"
             return
         result.camera = camera
+        set_camera = getattr(self._tracker, "set_camera", None)
+        if set_camera is not None:  # the detector fits the symbol through this camera's lens
+            set_camera(camera)
         t = time.perf_counter()
         result.detections = list(self._tracker.update(frame.image))
         result.detection = self._select(result.detections, self.select_text)

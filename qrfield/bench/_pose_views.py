@@ -16,21 +16,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from qrfield.bench.hardset import DISTORTED_CAMERA
 from qrfield.camera import CameraModel, resolve_camera
 from qrfield.geometry import Pose
 
-#: A lens with visible barrel distortion (k1, k2, p1, p2, k3) at 640x480, typical of a wide Pi
-#: camera (also the tests' DISTORTED case, tests/solver_cases.py).
-DISTORTED = CameraModel(
-    fx=530.0,
-    fy=528.0,
-    cx=322.0,
-    cy=236.5,
-    width=640,
-    height=480,
-    dist=np.array([-0.28, 0.09, 0.0012, -0.0008, -0.012]),
-    name="distorted-640x480",
-)
+#: The lens with visible barrel distortion of the hard bench set (also the tests' DISTORTED case).
+DISTORTED = DISTORTED_CAMERA
 #: QR sides (mm), distances (mm) and the largest tilt (deg) the sets draw from.
 SIDES_MM = (30.0, 50.0, 100.0)
 Z_RANGE_MM = (150.0, 1000.0)

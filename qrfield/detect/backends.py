@@ -37,12 +37,15 @@ class Candidate:
         text: the decoded payload, or None when the backend located the code but could not read it.
         backend: the backend's name.
         modules: modules per side of the symbol when the backend knows its version, else None.
+        symbol: the decoded (n, n) bool module matrix (True = dark, upright: V1 top-left) when the
+            backend gives it (zxing-cpp), else None.
     """
 
     corners_px: np.ndarray
     text: str | None
     backend: str
     modules: int | None = None
+    symbol: np.ndarray | None = None
 
 
 def read_qr_barcodes(grey: np.ndarray) -> list:  # type: ignore[type-arg]
@@ -64,6 +67,8 @@ def read_qr_barcodes(grey: np.ndarray) -> list:  # type: ignore[type-arg]
 
 
 def _zxing(grey: np.ndarray) -> list[Candidate]:
+    from qrfield.detect.symbol import matrix_from_zxing
+
     out = []
     barcodes = read_qr_barcodes(grey)
     for barcode in barcodes:
@@ -83,7 +88,10 @@ def _zxing(grey: np.ndarray) -> list[Candidate]:
             modules = 17 + 4 * version if 1 <= version <= 40 else None
         except (AttributeError, TypeError, ValueError):
             modules = None
-        out.append(Candidate(corners, barcode.text if barcode.valid else None, "zxing", modules))
+        symbol = matrix_from_zxing(barcode) if barcode.valid else None
+        if symbol is not None and modules is not None and symbol.shape[0] != modules:
+            symbol = None
+        out.append(Candidate(corners, barcode.text if barcode.valid else None, "zxing", modules, symbol))
     return out
 
 
@@ -99,7 +107,7 @@ def _zxing_x2(grey: np.ndarray) -> list[Candidate]:
     out = []
     for c in _zxing(big):
         # pixel centres: x_small = (x_big + 0.5) / 2 - 0.5
-        out.append(Candidate((c.corners_px + 0.5) / 2.0 - 0.5, c.text, "zxing-x2", c.modules))
+        out.append(Candidate((c.corners_px + 0.5) / 2.0 - 0.5, c.text, "zxing-x2", c.modules, c.symbol))
     return out
 
 
@@ -162,7 +170,9 @@ def _opencv_aruco(grey: np.ndarray) -> list[Candidate]:
 def _finders(grey: np.ndarray) -> list[Candidate]:
     from qrfield.detect.finders import locate_by_finders
 
-    return [Candidate(corners, text, "finders", n) for corners, n, text in locate_by_finders(grey)]
+    return [
+        Candidate(corners, text, "finders", n, symbol) for corners, n, text, symbol in locate_by_finders(grey)
+    ]
 
 
 _BACKENDS: dict[str, Callable[[np.ndarray], list[Candidate]]] = {

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -20,21 +20,29 @@ class Detection:
             finder pattern, V2 top-right, V3 bottom-right (no finder pattern), V4 bottom-left, following
             the code when it is rotated); OpenCV pixel convention (top-left pixel centre = (0, 0)).
         text: the decoded payload, or None when it could not be read.
-        quality: 0..1. For refined corners: the share of the symbol's fixed modules (finder
-            patterns, separators, timing patterns, first ring of the quiet zone) that show the
-            expected colour at these corners (about 0.5 for corners that are not on a code, near 1
-            for a good detection). Unrefined corners (the backend's, about 1 px off and V3 sometimes
-            several px) get half of that, so quality >= 0.85 means sub-pixel corners that check out.
-        corner_quality: (4,) px, per corner the RMS distance of the sub-pixel edge points to the two
-            fitted sides that meet there (smaller is better; about 0.01-0.05 px on a clean view);
-            NaN when not refined.
+        quality: 0..1, see :func:`quality_of`: the *pattern score* (the share of the symbol's fixed
+            modules - finder patterns, separators, timing patterns, first ring of the quiet zone -
+            that show the expected colour at these corners: about 0.5 for corners that are not on
+            a code, near 1 for a good detection), lowered when the corners' uncertainty is above
+            GOOD_CORNER_STD_PX. quality >= GOOD_QUALITY (0.85) means sub-pixel corners from the
+            whole-symbol fit that check out and whose uncertainty is small. Corners of the edge-line
+            fallback (no covariance) get at most FALLBACK_QUALITY_FACTOR of their score, unrefined
+            corners (the backend's, about 1 px off and V3 sometimes several px) half of it.
+        corner_quality: (4,) px, smaller is better. With the whole-symbol fit (``corners_cov`` set):
+            each corner's standard uncertainty (RMS radius, the square root of its covariance's
+            trace). With the edge-line fallback: the RMS distance of the sub-pixel edge points to
+            the two fitted sides that meet there. NaN when not refined.
         backend: which backend found the code ("zxing", "zxing-x2", "finders", "opencv-aruco",
             "opencv"), or "track" when the tracker re-found it by refinement alone.
         refined: True when the corners are the sub-pixel fit, False when they are the backend's.
         modules: modules per side of the symbol (21 for version 1).
-        corners_cov: (4, 2, 2) covariance of V1..V4 in px^2 from the corner fit, or None when
-            unknown (no detector fills it yet: the edge-line fit's residuals miss its model errors).
-            qrfield.solvers.solve(corners_cov=...) propagates it to the pose's uncertainty.
+        symbol: the decoded (n, n) module matrix as the image confirms it (float: 1 dark, 0 light,
+            NaN for a module the decoder misread or the image leaves in doubt; row 0 and column 0
+            at V1), None when the text was not decoded with a module matrix.
+        fit_state: the whole-symbol fit's edge width and lighting (qrfield.detect.symbol_fit.FitState),
+            from which a tracker starts warm; None without that fit.
+        corners_cov: (4, 2, 2) covariance of V1..V4 in px^2 from the whole-symbol fit (its residual
+            noise and Jacobian, qrfield.detect.symbol_fit), None when unknown.
     """
 
     corners_px: np.ndarray
@@ -44,6 +52,8 @@ class Detection:
     backend: str
     refined: bool
     modules: int = 0
+    symbol: np.ndarray | None = field(default=None, repr=False, compare=False)
+    fit_state: Any = field(default=None, repr=False, compare=False)
     corners_cov: np.ndarray | None = None
 
     def __post_init__(self) -> None:
@@ -57,6 +67,19 @@ class Detection:
         cq.setflags(write=False)
         object.__setattr__(self, "corners_px", corners)
         object.__setattr__(self, "corner_quality", cq)
+        if self.corners_cov is not None:
+            cov = np.array(self.corners_cov, dtype=np.float64)
+            if cov.shape != (4, 2, 2):
+                raise ValueError(f"Detection.corners_cov must have shape (4, 2, 2) (px^2), got {cov.shape}")
+            cov.setflags(write=False)
+            object.__setattr__(self, "corners_cov", cov)
+
+    @property
+    def corners_std_px(self) -> np.ndarray:
+        """(4,) RMS radius of each corner's uncertainty, px (docs/conventions.md); NaN when unknown."""
+        if self.corners_cov is None:
+            return np.full(4, np.nan)
+        return np.sqrt(np.trace(self.corners_cov, axis1=1, axis2=2))
 
     @property
     def area_px(self) -> float:
@@ -75,10 +98,31 @@ class Detection:
             "text": self.text,
             "quality": num(self.quality),
             "corner_quality_px": [num(q) for q in self.corner_quality],
+            "corners_std_px": [num(q) for q in self.corners_std_px],
             "backend": self.backend,
             "refined": self.refined,
             "modules": self.modules,
         }
+
+
+#: Largest corner uncertainty (RMS radius, px) of a detection that may be reported as good.
+GOOD_CORNER_STD_PX = 0.1
+#: Quality from which a detection counts as good (sub-pixel, checked, small uncertainty).
+GOOD_QUALITY = 0.85
+#: Corners of the edge-line fallback have no covariance: their quality is at most this share of
+#: their pattern score, below GOOD_QUALITY (the whole-symbol fit failed or fitted worse there).
+FALLBACK_QUALITY_FACTOR = 0.8
+
+
+def quality_of(score: float, corners_cov: np.ndarray | None) -> float:
+    """Quality of refined corners: the pattern score times min(1, GOOD_CORNER_STD_PX / the largest
+    corner uncertainty), or times FALLBACK_QUALITY_FACTOR when the uncertainty is unknown."""
+    if corners_cov is None:
+        return FALLBACK_QUALITY_FACTOR * score
+    std = float(np.sqrt(np.trace(np.asarray(corners_cov), axis1=1, axis2=2)).max())
+    if not math.isfinite(std):
+        return FALLBACK_QUALITY_FACTOR * score
+    return score * min(1.0, GOOD_CORNER_STD_PX / max(std, 1e-12))
 
 
 @dataclass(frozen=True)
@@ -95,6 +139,12 @@ class DetectorSettings:
     refine: bool = setting(
         True, label="sub-pixel refinement", help="fit the symbol's outer edges for sub-pixel corners"
     )
+    symbol_fit: bool = setting(
+        True,
+        label="whole-symbol fit",
+        help="refine the corners by fitting a model of the whole symbol (every known edge, through "
+        "the camera's lens) to the image, with a covariance per corner; off: the outer edges only",
+    )
     search_px: float = setting(
         2.5,
         label="refinement search window",
@@ -109,7 +159,7 @@ class DetectorSettings:
         minimum=0.0,
         maximum=1.0,
         help="share of the fixed QR modules (finders, timing, quiet zone) that must check out at the "
-        "corners; below it a code is dropped",
+        "corners (the pattern score); below it a code is dropped",
     )
     require_text: bool = setting(
         True, label="require decoded text", help="drop codes whose text could not be read (safer corners)"

@@ -2,12 +2,19 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
+from qrfield.camera import CameraModel
 from qrfield.detect.backends import Candidate, find_candidates, parse_backends
-from qrfield.detect.detection import Detection, DetectorSettings
+from qrfield.detect.detection import Detection, DetectorSettings, quality_of
+from qrfield.detect.lens import Lens, module_points_px
 from qrfield.detect.patterns import best_module_count, check_patterns
 from qrfield.detect.refine import refine_corners
+from qrfield.detect.sampling import sample_bilinear
+from qrfield.detect.symbol import decoded_cells, fixed_cells, verified_matrix
+from qrfield.detect.symbol_fit import FitState, fit_symbol
 from qrfield.settings import validated
 
 
@@ -41,6 +48,75 @@ UNREFINED_QUALITY_FACTOR = 0.5
 UNREFINED_MIN_SCORE = 0.7
 
 
+#: Least share of a decoded matrix's modules that must show their colour in the image (sampled at
+#: module centres from the starting corners) for the fit to use the data modules; else (a matrix
+#: of another code, mirrored, or corners too far off) the fixed patterns alone are fitted.
+MATRIX_AGREEMENT = 0.85
+
+
+@dataclass(frozen=True)
+class Refined:
+    """Corners after refinement (see :meth:`Detector.refine`)."""
+
+    corners_px: np.ndarray
+    corners_cov: np.ndarray | None
+    corner_quality: np.ndarray
+    score: float
+    refined: bool
+    fit_state: FitState | None = None
+    residual: float = np.nan
+    cells: np.ndarray | None = None
+    #: the decoded module matrix as confirmed by the image (float, NaN where not), when decoded
+    matrix: np.ndarray | None = None
+
+
+def _module_centres(n: int) -> np.ndarray:
+    return np.stack(np.meshgrid(np.arange(n) + 0.5, np.arange(n) + 0.5), axis=-1).reshape(-1, 2)
+
+
+def matrix_agrees(
+    grey: np.ndarray,
+    corners: np.ndarray,
+    matrix: np.ndarray,
+    inverted: bool,
+    lens: Lens | None = None,
+    offset: tuple[int, int] = (0, 0),
+) -> bool:
+    """True when the (n, n) module matrix (bool, or float with NaN for unknown) shows its colours at
+    ``corners`` V1..V4 in ``grey``."""
+    n = matrix.shape[0]
+    values = sample_bilinear(grey, module_points_px(lens, corners, n, _module_centres(n), offset))
+    m = np.asarray(matrix, dtype=np.float64).reshape(-1)
+    known = np.isfinite(m) & np.isfinite(values)
+    if known.mean() < 0.5:
+        return False
+    values, dark = values[known], m[known] > 0.5
+    if dark.all() or not dark.any():
+        return False
+    threshold = 0.5 * (np.median(values[dark]) + np.median(values[~dark]))
+    seen_dark = values > threshold if inverted else values < threshold
+    return float(np.mean(seen_dark == dark)) >= MATRIX_AGREEMENT
+
+
+def symbol_cells(
+    grey: np.ndarray,
+    corners: np.ndarray,
+    modules: int,
+    matrix: np.ndarray | None,
+    inverted: bool,
+    lens: Lens | None = None,
+    offset: tuple[int, int] = (0, 0),
+) -> np.ndarray:
+    """The cell map to fit: the decoded matrix's when it agrees with the image, else the fixed patterns'."""
+    if (
+        matrix is not None
+        and matrix.shape == (modules, modules)
+        and matrix_agrees(grey, corners, matrix, inverted, lens, offset)
+    ):
+        return decoded_cells(matrix)
+    return fixed_cells(modules)
+
+
 def same_code(a: np.ndarray, b: np.ndarray) -> bool:
     """True when corner sets ``a`` and ``b`` (4, 2) outline the same code (centres and sizes close)."""
     size_a = float(np.linalg.norm(a[2] - a[0]))
@@ -58,12 +134,24 @@ class Detector:
     only when its quality reaches ``settings.min_quality`` (and its text was read, if required).
     """
 
-    def __init__(self, settings: DetectorSettings | None = None) -> None:
+    def __init__(self, settings: DetectorSettings | None = None, camera: CameraModel | None = None) -> None:
         self.settings = validated(settings or DetectorSettings())
         self.backends = parse_backends(self.settings.backends)
+        self.lens = Lens(camera)
 
-    def detect(self, image: np.ndarray) -> list[Detection]:
+    def set_camera(self, camera: CameraModel | None) -> None:
+        """The camera model of the images to come (its lens is modelled by the whole-symbol fit);
+        None for a pinhole. Its size must be the images' size."""
+        lens_camera = camera if camera is not None and camera.has_distortion else None
+        current = self.lens.camera
+        if lens_camera is not current and not (lens_camera is not None and lens_camera == current):
+            self.lens = Lens(lens_camera)
+
+    def detect(self, image: np.ndarray, known: list[np.ndarray] | None = None) -> list[Detection]:
         """All accepted codes in a grey or BGR uint8 image of any size (empty list when none).
+
+        ``known``: corner sets (4, 2) of codes already followed (a tracker's periodic look for new
+        codes): candidates on them are skipped before the costly refinement.
 
         Raises DetectorInputError only for a wrong array type/shape; never for image content.
         """
@@ -72,13 +160,17 @@ class Detector:
             return []
         found: list[Detection] = []
         for backend in self.backends:
+            skipped = False
             for candidate in find_candidates(grey, backend):
                 if any(same_code(candidate.corners_px, d.corners_px) for d in found):
                     continue  # the same code seen again
+                if known and any(same_code(candidate.corners_px, k) for k in known):
+                    skipped = True
+                    continue
                 detection = self.accept(grey, candidate)
                 if detection is not None:
                     found.append(detection)
-            if found:
+            if found or skipped:
                 break
         return found
 
@@ -97,7 +189,7 @@ class Detector:
         if x1 - x0 < 21 or y1 - y0 < 21:
             return
         offset = np.array([x0, y0], dtype=np.float64)
-        for located, _, _ in locate_by_finders(np.ascontiguousarray(grey[y0:y1, x0:x1]), decode=False):
+        for located, _, _, _ in locate_by_finders(np.ascontiguousarray(grey[y0:y1, x0:x1]), decode=False):
             if same_code(located + offset, corners):
                 yield located + offset
 
@@ -110,35 +202,136 @@ class Detector:
         if settings.require_text and not candidate.text:
             return None
         if candidate.modules:
-            rough = check_patterns(grey, corners, candidate.modules)
+            rough = check_patterns(grey, corners, candidate.modules, self.lens)
         else:
             rough = best_module_count(grey, corners)
         if rough.reason and rough.score == 0.0:
             return None
         modules = rough.modules
-        score, final, corner_quality, refined = rough.score, corners, np.full(4, np.nan), False
+        result = Refined(corners, None, np.full(4, np.nan), rough.score, False)
         if settings.refine:
-            for seed in self._seeds(grey, corners):
-                fit = refine_corners(
-                    grey, seed, modules, inverted=rough.inverted, search_px=settings.search_px
-                )
-                if not fit.ok:
-                    continue
-                fine = check_patterns(grey, fit.corners_px, modules)
-                # A refinement that makes the patterns fit worse is not trusted.
-                if fine.score >= rough.score - 0.02:
-                    score, final, corner_quality, refined = (
-                        fine.score,
-                        fit.corners_px,
-                        fit.corner_rms_px,
-                        True,
-                    )
-                    break
-        if score < (settings.min_quality if refined else min(settings.min_quality, UNREFINED_MIN_SCORE)):
+            seeds = self._seeds(grey, corners)
+            result = self.refine(grey, corners, modules, rough.score, rough.inverted, candidate.symbol, seeds)
+            if result is None:
+                result = Refined(corners, None, np.full(4, np.nan), rough.score, False)
+        score, refined = result.score, result.refined
+        if score < min(settings.min_quality, UNREFINED_MIN_SCORE):
             return None
-        if not refined and not candidate.text:
-            return None  # unrefined corners are only trusted for a code whose text was read
-        quality = score if refined else UNREFINED_QUALITY_FACTOR * score
+        if (not refined or score < settings.min_quality) and not candidate.text:
+            # Unrefined corners, and corners whose patterns check out less well than min_quality
+            # (a worn print, a real photo's glare), are only kept for a code whose text was read;
+            # their quality stays below GOOD_QUALITY.
+            return None
+        quality = quality_of(score, result.corners_cov) if refined else UNREFINED_QUALITY_FACTOR * score
         return Detection(
-            final, candidate.text, quality, corner_quality, backend or candidate.backend, refined, modules
+            result.corners_px,
+            candidate.text,
+            quality,
+            result.corner_quality,
+            backend or candidate.backend,
+            refined,
+            modules,
+            symbol=result.matrix,
+            fit_state=result.fit_state,
+            corners_cov=result.corners_cov,
         )
+
+    def refine(
+        self,
+        grey: np.ndarray,
+        corners: np.ndarray,
+        modules: int,
+        rough_score: float,
+        inverted: bool,
+        matrix: np.ndarray | None,
+        seeds=None,
+        offset: tuple[int, int] = (0, 0),
+        image_shape: tuple[int, int] | None = None,
+    ) -> Refined | None:
+        """Sub-pixel corners from ``corners``: the edge-line fit (qrfield.detect.refine) from each
+        seed until one holds, then the whole-symbol fit (qrfield.detect.symbol_fit) from there;
+        the symbol fit's corners unless its residual is worse than the edge-line corners' on the
+        same pixels. None when neither fit holds (the patterns must fit at least as well as at
+        ``corners``, within 0.02)."""
+        settings = self.settings
+        start, edge, tried = corners, None, []
+        for seed in seeds if seeds is not None else (corners,):
+            tried.append(seed)
+            fit = refine_corners(grey, seed, modules, inverted=inverted, search_px=settings.search_px)
+            if not fit.ok:
+                continue
+            fine = check_patterns(grey, fit.corners_px, modules, self.lens, offset)
+            # A refinement that makes the patterns fit worse is not trusted.
+            if fine.score >= rough_score - 0.02:
+                edge = Refined(fit.corners_px, None, fit.corner_rms_px, fine.score, True)
+                start = fit.corners_px
+                break
+        if not settings.symbol_fit:
+            return edge
+        # The whole symbol from the edge lines' corners, else from each seed in turn (a backend
+        # can miss a corner by several modules; the finder patterns' locator does not).
+        for begin in [start] if edge is not None else tried:
+            whole = self._whole(
+                grey, begin, modules, rough_score, inverted, matrix, edge is not None, offset, image_shape
+            )
+            if whole is not None:
+                return whole
+        return edge
+
+    def _whole(
+        self,
+        grey: np.ndarray,
+        start: np.ndarray,
+        modules: int,
+        rough_score: float,
+        inverted: bool,
+        matrix: np.ndarray | None,
+        from_edges: bool,
+        offset: tuple[int, int],
+        image_shape: tuple[int, int] | None,
+    ) -> Refined | None:
+        """The whole-symbol fit from ``start`` (see :meth:`refine`); None when it does not hold
+        (or, from the edge lines' corners, fits worse than they do)."""
+        lens = self.lens
+        cells = symbol_cells(grey, start, modules, matrix, inverted, lens, offset)
+        decoded = cells is not fixed_cells(modules)
+        whole = fit_symbol(grey, start, cells, lens=lens, offset=offset, image_shape=image_shape)
+        if whole.ok and not (from_edges and whole.residual > whole.start_residual):
+            if decoded:
+                # The decoder's matrix may hold misread modules: keep those the image confirms
+                # at the fitted corners, and fit again if any was dropped.
+                values = sample_bilinear(
+                    grey, module_points_px(lens, whole.corners_px, modules, _module_centres(modules), offset)
+                ).reshape(modules, modules)
+                levels = check_patterns(grey, whole.corners_px, modules, lens, offset)
+                checked = verified_matrix(values, matrix, levels.dark, levels.light)
+                if np.isnan(checked).sum() > np.isnan(np.asarray(matrix, dtype=np.float64)).sum():
+                    again_cells = decoded_cells(checked)
+                    again = fit_symbol(
+                        grey,
+                        whole.corners_px,
+                        again_cells,
+                        lens=lens,
+                        offset=offset,
+                        image_shape=image_shape,
+                        coarse=False,
+                        max_iter=3,
+                        warm=whole.state,
+                    )
+                    if again.ok:
+                        whole, cells = again, again_cells
+                matrix = checked
+            check = check_patterns(grey, whole.corners_px, modules, lens, offset)
+            if check.score >= rough_score - 0.02:
+                return Refined(
+                    whole.corners_px,
+                    whole.corners_cov,
+                    whole.corners_std_px,
+                    check.score,
+                    True,
+                    whole.state,
+                    whole.residual,
+                    cells,
+                    matrix if decoded else None,
+                )
+        return None

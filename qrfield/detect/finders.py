@@ -127,9 +127,13 @@ def _fit_symbol(
     return best
 
 
-def decode_rectified(grey: np.ndarray, corners: np.ndarray, modules: int) -> str | None:
-    """Warp the symbol at ``corners`` (V1..V4) upright with a quiet zone and decode it with zxing-cpp."""
+def decode_rectified(
+    grey: np.ndarray, corners: np.ndarray, modules: int
+) -> tuple[str | None, np.ndarray | None]:
+    """Warp the symbol at ``corners`` (V1..V4) upright with a quiet zone and decode it with zxing-cpp:
+    (text, (n, n) bool module matrix) or (None, None)."""
     from qrfield.detect.backends import read_qr_barcodes  # here: backends imports this module
+    from qrfield.detect.symbol import matrix_from_zxing
 
     q, s = RECTIFIED_QUIET, RECTIFIED_PX
     dst = np.array([[q, q], [q + modules, q], [q + modules, q + modules], [q, q + modules]], np.float32) * s
@@ -139,15 +143,21 @@ def decode_rectified(grey: np.ndarray, corners: np.ndarray, modules: int) -> str
         grey, h, (size, size), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE
     )
     barcodes = read_qr_barcodes(upright)
-    return barcodes[0].text if barcodes and barcodes[0].valid else None
+    if not barcodes or not barcodes[0].valid:
+        return None, None
+    matrix = matrix_from_zxing(barcodes[0])
+    return barcodes[0].text, matrix if matrix is not None and matrix.shape[0] == modules else None
 
 
-def locate_by_finders(grey: np.ndarray, decode: bool = True) -> list[tuple[np.ndarray, int, str | None]]:
-    """Codes located by their finder patterns: (corners V1..V4 px, modules, text or None).
+def locate_by_finders(
+    grey: np.ndarray, decode: bool = True
+) -> list[tuple[np.ndarray, int, str | None, np.ndarray | None]]:
+    """Codes located by their finder patterns: (corners V1..V4 px, modules, text or None, decoded
+    module matrix or None).
 
     With ``decode`` False the symbols are only located (text None), e.g. to re-seed a refinement.
     """
-    found: list[tuple[np.ndarray, int, str | None]] = []
+    found: list[tuple[np.ndarray, int, str | None, np.ndarray | None]] = []
     small = cv2.resize(
         grey, (max(grey.shape[1] // 8, 1), max(grey.shape[0] // 8, 1)), interpolation=cv2.INTER_AREA
     )
@@ -163,10 +173,11 @@ def locate_by_finders(grey: np.ndarray, decode: bool = True) -> list[tuple[np.nd
         for corners, n in _candidates_from_finders(grey, _finder_quads(binary)):
             if any(
                 np.linalg.norm(corners.mean(axis=0) - c.mean(axis=0)) < 0.2 * np.ptp(c, axis=0).max()
-                for c, _, _ in found
+                for c, _, _, _ in found
             ):
                 continue
-            found.append((corners, n, decode_rectified(grey, corners, n) if decode else None))
+            text, matrix = decode_rectified(grey, corners, n) if decode else (None, None)
+            found.append((corners, n, text, matrix))
         if found:
             break
     return found

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from qrfield.detect.lens import Lens, module_points_px
 from qrfield.detect.sampling import sample_bilinear
 
 #: Smallest contrast (grey levels between the dark and light pattern modules) a code may have.
@@ -94,10 +95,20 @@ def _median(values: np.ndarray) -> float:
     return float(0.5 * (ordered[(n - 1) // 2] + ordered[n // 2]))
 
 
-def check_patterns(grey: np.ndarray, corners_px: np.ndarray, n: int) -> PatternCheck:
-    """Score corners V1..V4 (pixels) of a symbol of ``n`` modules per side against its fixed patterns."""
+def check_patterns(
+    grey: np.ndarray,
+    corners_px: np.ndarray,
+    n: int,
+    lens: Lens | None = None,
+    offset: tuple[int, int] = (0, 0),
+) -> PatternCheck:
+    """Score corners V1..V4 (pixels) of a symbol of ``n`` modules per side against its fixed patterns.
+
+    With a distorting ``lens`` the module centres are found through it (``offset``: where ``grey``'s
+    top-left pixel lies in the camera's image, for a crop); else by the corners' homography.
+    """
     xy, dark, quiet = fixed_modules(n)
-    values = sample_bilinear(grey, to_pixels(module_homography(corners_px, n), xy))
+    values = sample_bilinear(grey, module_points_px(lens, corners_px, n, xy, offset))
     outside = np.isnan(values)
     if outside[~quiet].any():
         return PatternCheck(0.0, n, False, np.nan, np.nan, "the code is cut by the image border")

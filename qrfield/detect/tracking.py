@@ -1,8 +1,11 @@
 """Tracking a QR code through video: look around the last corners first, the whole frame when lost.
 
 Per frame and per code tracked, cheapest first:
-1. refine directly from the corners predicted by constant velocity (no decoding: the text is carried
-   over) and check the symbol's fixed patterns there;
+1. fit the whole symbol (qrfield.detect.symbol_fit) warm: from the corners predicted by constant
+   velocity, with the last frame's edge width and lighting, two Gauss-Newton steps, on the
+   module layout of the first decode (no decoding: the text is carried over); the fit must still
+   see the code (its contrast and residual) and the symbol's fixed patterns must check out there.
+   If it does not hold, the edge-line refinement and a full symbol fit from the prediction;
 2. else run the first backend on a region around the prediction (``track_margin_px`` plus a quarter
    of the code's size), refine and check; the text must be the one tracked;
 3. else (any code lost) a full-frame detection with every backend. Every ``redetect_frames``
@@ -15,11 +18,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from qrfield.camera import CameraModel
 from qrfield.detect.backends import Candidate, find_candidates
-from qrfield.detect.detection import Detection, DetectorSettings
-from qrfield.detect.detector import Detector, as_grey, same_code
+from qrfield.detect.detection import Detection, DetectorSettings, quality_of
+from qrfield.detect.detector import Detector, Refined, as_grey, same_code, symbol_cells
 from qrfield.detect.patterns import check_patterns
-from qrfield.detect.refine import refine_corners
+from qrfield.detect.symbol_fit import START_EDGE_PX, FitState, fit_symbol
+from qrfield.detect.symbol_track import WarmFit
+
+#: Gauss-Newton steps of a warm fit.
+TRACK_ITERATIONS = 2
+#: A warm fit still sees the code while its residual stays below this share of its contrast ...
+MAX_RESIDUAL_SHARE = 0.2
+#: ... and below this multiple of the last frame's residual (plus 2 grey levels).
+MAX_RESIDUAL_GROWTH = 2.0
 
 
 @dataclass
@@ -27,6 +39,12 @@ class _Track:
     detection: Detection
     previous_corners: np.ndarray | None = None
     inverted: bool = False
+    cells: np.ndarray | None = None
+    fit_state: FitState | None = None
+    residual: float = np.nan
+    warm: WarmFit | None = None
+    #: the pattern score of the last check (the warm fit does not check the patterns each frame)
+    score: float | None = None
 
     def predicted(self) -> np.ndarray:
         corners = self.detection.corners_px
@@ -43,12 +61,16 @@ class Tracker:
             around them), "roi" (step 2), "full" (full-frame detection) or "" before the first frame.
     """
 
-    def __init__(self, settings: DetectorSettings | None = None) -> None:
-        self.detector = Detector(settings)
+    def __init__(self, settings: DetectorSettings | None = None, camera: CameraModel | None = None) -> None:
+        self.detector = Detector(settings, camera)
         self.settings = self.detector.settings
         self._tracks: list[_Track] = []
         self._frames_since_full = 0
         self.last_mode = ""
+
+    def set_camera(self, camera: CameraModel | None) -> None:
+        """The camera model of the frames to come (see Detector.set_camera)."""
+        self.detector.set_camera(camera)
 
     def reset(self) -> None:
         """Forget the tracked codes: the next frame gets a full-frame detection."""
@@ -76,7 +98,8 @@ class Tracker:
         if found is not None and not due:
             return found
         grey = as_grey(image) if grey is None else grey
-        detections = self.detector.detect(grey)
+        known = [f.corners_px for f in found] if found is not None else None
+        detections = self.detector.detect(grey, known)
         self._frames_since_full = 0
         if found is not None:
             # The periodic full look: keep the codes tracked (the backends may miss a code that
@@ -88,11 +111,17 @@ class Tracker:
         self.last_mode = "full"
         return detections
 
-    @staticmethod
-    def _new_track(grey: np.ndarray, detection: Detection) -> _Track:
-        return _Track(
-            detection, inverted=check_patterns(grey, detection.corners_px, detection.modules).inverted
+    def _new_track(self, grey: np.ndarray, detection: Detection) -> _Track:
+        lens = self.detector.lens
+        check = check_patterns(grey, detection.corners_px, detection.modules, lens)
+        cells = symbol_cells(
+            grey, detection.corners_px, detection.modules, detection.symbol, check.inverted, lens
         )
+        state = detection.fit_state
+        if state is None and detection.corners_cov is not None and np.isfinite(check.light - check.dark):
+            # Warm from the start: the light level and contrast the pattern check saw.
+            state = FitState(START_EDGE_PX, np.array([check.light, 0, 0, check.light - check.dark, 0, 0]))
+        return _Track(detection, inverted=check.inverted, cells=cells, fit_state=state)
 
     def _search_all(self, grey: np.ndarray) -> list[Detection] | None:
         """Step 2 for every track; None as soon as one is not found."""
@@ -107,8 +136,9 @@ class Tracker:
     def _advance(self, found: list[Detection], grey: np.ndarray | None = None) -> None:
         for track, detection in zip(self._tracks, found, strict=True):
             track.previous_corners = track.detection.corners_px
-            if grey is not None:  # re-found by a backend: re-read its polarity
-                track.inverted = check_patterns(grey, detection.corners_px, detection.modules).inverted
+            if grey is not None:  # re-found by a backend: re-read its polarity and layout
+                fresh = self._new_track(grey, detection)
+                track.inverted, track.cells, track.fit_state = fresh.inverted, fresh.cells, fresh.fit_state
             track.detection = detection
 
     def _refine_all(self, image: np.ndarray) -> list[Detection] | None:
@@ -131,35 +161,106 @@ class Tracker:
         if x1 - x0 < 21 or y1 - y0 < 21:
             return None
         grey = as_grey(image[y0:y1, x0:x1])
-        offset = np.array([x0, y0], dtype=np.float64)
+        offset = (int(x0), int(y0))
+        shape = (h, w)
         found = []
         for track, predicted in zip(self._tracks, predictions, strict=True):
-            last = track.detection
-            fit = refine_corners(
-                grey,
-                predicted - offset,
-                last.modules,
-                inverted=track.inverted,
-                search_px=settings.search_px,
-                from_finders=False,
+            detection = self._follow(
+                grey, track, predicted - np.array(offset, dtype=np.float64), offset, shape
             )
-            if not fit.ok:
+            if detection is None:
                 return None
-            check = check_patterns(grey, fit.corners_px, last.modules)
-            if check.score < settings.min_quality or check.inverted != track.inverted:
-                return None
-            found.append(
-                Detection(
-                    fit.corners_px + offset,
-                    last.text,
-                    check.score,
-                    fit.corner_rms_px,
-                    "track",
-                    True,
-                    last.modules,
-                )
-            )
+            found.append(detection)
         return found
+
+    def _follow(
+        self,
+        grey: np.ndarray,
+        track: _Track,
+        predicted: np.ndarray,
+        offset: tuple[int, int],
+        shape: tuple[int, int],
+    ) -> Detection | None:
+        """Step 1 for one track on a crop ``grey`` at ``offset`` of an image of ``shape`` (H, W):
+        the warm whole-symbol fit, else the detector's refinement from the prediction."""
+        settings = self.settings
+        last = track.detection
+        lens = self.detector.lens
+        cells = track.cells
+        if cells is None:
+            cells = symbol_cells(grey, predicted, last.modules, last.symbol, track.inverted, lens, offset)
+        result = None
+        if track.fit_state is not None and settings.symbol_fit:
+            if track.warm is None or track.warm.cells is not cells or track.warm.lens is not lens:
+                track.warm = WarmFit(cells, lens)
+            fit = track.warm.fit(grey, predicted, track.fit_state, offset, TRACK_ITERATIONS)
+            holds = (
+                fit.ok
+                and (fit.contrast < 0) == track.inverted
+                and fit.residual < MAX_RESIDUAL_SHARE * abs(fit.contrast)
+                and not fit.residual > MAX_RESIDUAL_GROWTH * track.residual + 2.0
+            )
+            if holds:
+                result = Refined(
+                    fit.corners_px,
+                    fit.corners_cov,
+                    fit.corners_std_px,
+                    track.detection.quality if track.score is None else track.score,
+                    True,
+                    fit.state,
+                    fit.residual,
+                    cells,
+                )
+        if result is None and track.fit_state is not None and settings.symbol_fit:
+            # A prediction too far for the warm fit (a new track, a jerk): the full fit from it.
+            fit = fit_symbol(grey, predicted, cells, lens=lens, offset=offset, image_shape=shape)
+            if fit.ok and fit.residual < MAX_RESIDUAL_SHARE * abs(fit.contrast):
+                check = check_patterns(grey, fit.corners_px, last.modules, lens, offset)
+                if check.score >= settings.min_quality and check.inverted == track.inverted:
+                    result = Refined(
+                        fit.corners_px,
+                        fit.corners_cov,
+                        fit.corners_std_px,
+                        check.score,
+                        True,
+                        fit.state,
+                        fit.residual,
+                        cells,
+                    )
+        if result is None:
+            # Cold: the edge lines and the whole symbol fit from the prediction (V3 is not
+            # re-sought: it comes with the prediction).
+            result = self.detector.refine(
+                grey,
+                predicted,
+                last.modules,
+                0.0,
+                track.inverted,
+                last.symbol,
+                offset=offset,
+                image_shape=shape,
+            )
+            if result is None or result.score < settings.min_quality:
+                return None
+            if check_patterns(grey, result.corners_px, last.modules, lens, offset).inverted != track.inverted:
+                return None
+        track.fit_state = result.fit_state
+        track.residual = result.residual
+        track.score = result.score
+        if result.cells is not None:
+            track.cells = result.cells
+        return Detection(
+            result.corners_px + np.array(offset, dtype=np.float64),
+            last.text,
+            quality_of(result.score, result.corners_cov),
+            result.corner_quality,
+            "track",
+            True,
+            last.modules,
+            symbol=last.symbol,
+            fit_state=result.fit_state,
+            corners_cov=result.corners_cov,
+        )
 
     def _search_around(self, grey: np.ndarray, track: _Track) -> Detection | None:
         """Step 2: the first backend on a region around the prediction, then the usual checks."""

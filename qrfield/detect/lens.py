@@ -1,0 +1,126 @@
+"""Between image pixels and ideal pixels: the camera's lens distortion for the symbol fit.
+
+*Ideal pixels* are where a point would appear through a distortion-free pinhole camera with the
+same K (OpenCV's ``undistortPoints(..., P=K)``): a plane maps to them by a homography, so the
+symbol fit (:mod:`qrfield.detect.symbol_fit`) works in ideal pixels and goes through the lens only
+to compare with the image. Pixels follow OpenCV (top-left pixel centre = (0, 0)); the distortion
+model is OpenCV's five coefficients k1, k2, p1, p2, k3 (qrfield.camera).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import cv2
+import numpy as np
+
+from qrfield.camera import CameraModel
+
+#: Images up to this many pixels keep a whole-frame table of ideal pixels per camera (8 bytes per
+#: pixel and coordinate: 5 MB at 640x480); larger ones undistort the pixels each fit needs.
+MAX_TABLE_PIXELS = 2_500_000
+
+
+@functools.lru_cache(maxsize=4)
+def _ideal_table(camera: CameraModel) -> np.ndarray:
+    """(H, W, 2) float64 ideal pixels of every pixel centre of ``camera``'s image."""
+    u, v = np.meshgrid(np.arange(camera.width, dtype=np.float64), np.arange(camera.height, dtype=np.float64))
+    out = undistort_pixels(camera, np.column_stack([u.ravel(), v.ravel()]))
+    out = out.reshape(camera.height, camera.width, 2)
+    out.setflags(write=False)
+    return out
+
+
+def undistort_pixels(camera: CameraModel, px: np.ndarray) -> np.ndarray:
+    """Ideal pixels (k, 2) of image pixels ``px`` (k, 2): OpenCV's iterative undistortion to 1e-10 px."""
+    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-10)
+    src = np.asarray(px, dtype=np.float64).reshape(-1, 1, 2)
+    if hasattr(cv2, "undistortPointsIter"):  # OpenCV 4.x
+        out = cv2.undistortPointsIter(src, camera.K, camera.dist, None, camera.K, criteria)
+    else:  # OpenCV 5 folded the iterative variant into undistortPoints(..., criteria)
+        out = cv2.undistortPoints(src, camera.K, camera.dist, R=None, P=camera.K, criteria=criteria)
+    return out.reshape(-1, 2)
+
+
+class Lens:
+    """One camera's lens for the fit; ``Lens(None)`` (or a camera without distortion) is a pinhole."""
+
+    def __init__(self, camera: CameraModel | None) -> None:
+        self.camera = camera if camera is not None and camera.has_distortion else None
+
+    @property
+    def distorted(self) -> bool:
+        return self.camera is not None
+
+    def fits(self, shape: tuple[int, int]) -> bool:
+        """True when the camera model is for images of ``shape`` (H, W) (always for a pinhole)."""
+        return self.camera is None or (self.camera.height, self.camera.width) == tuple(shape)
+
+    def ideal(self, xs: np.ndarray, ys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Ideal pixels (k, 2) of the integer pixels (xs, ys) (k,) and the lens' local scale (k, 2, 2)
+        d ideal / d pixel (the identity for a pinhole)."""
+        px = np.column_stack([xs, ys]).astype(np.float64)
+        if self.camera is None:
+            return px, np.broadcast_to(np.eye(2), (len(px), 2, 2))
+        cam = self.camera
+        if cam.width * cam.height <= MAX_TABLE_PIXELS:
+            table = _ideal_table(cam)
+            x0, x1 = np.maximum(xs - 1, 0), np.minimum(xs + 1, cam.width - 1)
+            y0, y1 = np.maximum(ys - 1, 0), np.minimum(ys + 1, cam.height - 1)
+            ideal = table[ys, xs]
+            ddx = (table[ys, x1] - table[ys, x0]) / (x1 - x0)[:, None]
+            ddy = (table[y1, xs] - table[y0, xs]) / (y1 - y0)[:, None]
+        else:
+            ideal = undistort_pixels(cam, px)
+            half_x, half_y = np.array([0.5, 0.0]), np.array([0.0, 0.5])
+            ddx = undistort_pixels(cam, px + half_x) - undistort_pixels(cam, px - half_x)
+            ddy = undistort_pixels(cam, px + half_y) - undistort_pixels(cam, px - half_y)
+        return ideal, np.stack([ddx, ddy], axis=-1)
+
+    def distort(self, ideal: np.ndarray) -> np.ndarray:
+        """Image pixels (k, 2) of ideal pixels (k, 2) (OpenCV's distortion model)."""
+        ideal = np.asarray(ideal, dtype=np.float64)
+        if self.camera is None:
+            return ideal.copy()
+        cam = self.camera
+        k1, k2, p1, p2, k3 = cam.dist
+        x = (ideal[:, 0] - cam.cx) / cam.fx
+        y = (ideal[:, 1] - cam.cy) / cam.fy
+        r2 = x * x + y * y
+        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
+        yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+        return np.column_stack([xd * cam.fx + cam.cx, yd * cam.fy + cam.cy])
+
+    def distort_jacobian(self, ideal: np.ndarray) -> np.ndarray:
+        """(k, 2, 2) d pixel / d ideal pixel at ideal pixels (k, 2) (central differences)."""
+        ideal = np.asarray(ideal, dtype=np.float64)
+        if self.camera is None:
+            return np.broadcast_to(np.eye(2), (len(ideal), 2, 2)).copy()
+        h = 1e-3
+        cols = [
+            (self.distort(ideal + step) - self.distort(ideal - step)) / (2 * h)
+            for step in (np.array([h, 0.0]), np.array([0.0, h]))
+        ]
+        return np.stack(cols, axis=-1)
+
+
+def module_points_px(
+    lens: Lens | None, corners_px: np.ndarray, n: int, xy: np.ndarray, offset: tuple[int, int] = (0, 0)
+) -> np.ndarray:
+    """Pixels (k, 2) of module coordinates ``xy`` (k, 2) for a symbol of ``n`` modules whose corners
+    V1..V4 are ``corners_px`` (pixels of an image whose top-left pixel is at ``offset`` in the
+    camera's image): the plane's homography in ideal pixels, then the lens."""
+    import cv2
+
+    corners = np.asarray(corners_px, dtype=np.float64)
+    src = np.array([[0, 0], [n, 0], [n, n], [0, n]], dtype=np.float64)
+    if lens is None or not lens.distorted:
+        h = cv2.getPerspectiveTransform(src.astype(np.float32), corners.astype(np.float32))
+        p = xy @ h[:, :2].T + h[:, 2]
+        return p[:, :2] / p[:, 2:3]
+    shift = np.asarray(offset, dtype=np.float64)
+    ideal = undistort_pixels(lens.camera, corners + shift)
+    h = cv2.getPerspectiveTransform(src.astype(np.float32), ideal.astype(np.float32))
+    p = xy @ h[:, :2].T + h[:, 2]
+    return lens.distort(p[:, :2] / p[:, 2:3]) - shift

@@ -1,0 +1,167 @@
+"""The module layout of a QR symbol as far as it is known: fixed patterns, and the data once decoded.
+
+A *cell map* is an (n + 2 Q, n + 2 Q) float array over the symbol and Q = QUIET_RINGS rings of
+its quiet zone, in module rows (y, from V1 towards V4) and columns (x, from V1 towards V2):
+1.0 for a dark module, 0.0 for a light one, NaN where the colour is not known. Cell (Q + r, Q + c)
+is module (row r, column c); module column c spans x in [c, c + 1) in the module coordinates of
+:mod:`qrfield.detect.patterns` (V1 = (0, 0), V2 = (n, 0), V3 = (n, n), V4 = (0, n)).
+
+Without a decoded matrix only what every symbol of that size has is known (ISO/IEC 18004): the
+three finder patterns and their separators, the two timing patterns, the alignment patterns
+(version 2 and up, centres from the standard's table E.1), the dark module beside the lower-left
+finder, and the quiet zone. Format and version information and the data are left unknown.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+#: Rings of the quiet zone taken as known light (ISO/IEC 18004 asks for 4; prints often have less
+#: room, and the fit only looks about one module beyond the symbol).
+QUIET_RINGS = 2
+
+#: Centre rows/columns of the alignment patterns per version (ISO/IEC 18004, table E.1).
+ALIGNMENT_CENTRES: dict[int, tuple[int, ...]] = {
+    1: (),
+    2: (6, 18),
+    3: (6, 22),
+    4: (6, 26),
+    5: (6, 30),
+    6: (6, 34),
+    7: (6, 22, 38),
+    8: (6, 24, 42),
+    9: (6, 26, 46),
+    10: (6, 28, 50),
+    11: (6, 30, 54),
+    12: (6, 32, 58),
+    13: (6, 34, 62),
+    14: (6, 26, 46, 66),
+    15: (6, 26, 48, 70),
+    16: (6, 26, 50, 74),
+    17: (6, 30, 54, 78),
+    18: (6, 30, 56, 82),
+    19: (6, 30, 58, 86),
+    20: (6, 34, 62, 90),
+    21: (6, 28, 50, 72, 94),
+    22: (6, 26, 50, 74, 98),
+    23: (6, 30, 54, 78, 102),
+    24: (6, 28, 54, 80, 106),
+    25: (6, 32, 58, 84, 110),
+    26: (6, 30, 58, 86, 114),
+    27: (6, 34, 62, 90, 118),
+    28: (6, 26, 50, 74, 98, 122),
+    29: (6, 30, 54, 78, 102, 126),
+    30: (6, 26, 52, 78, 104, 130),
+    31: (6, 30, 56, 82, 108, 134),
+    32: (6, 34, 60, 86, 112, 138),
+    33: (6, 30, 58, 86, 114, 142),
+    34: (6, 34, 62, 90, 118, 146),
+    35: (6, 30, 54, 78, 102, 126, 150),
+    36: (6, 24, 50, 76, 102, 128, 154),
+    37: (6, 28, 54, 80, 106, 132, 158),
+    38: (6, 32, 58, 84, 110, 136, 162),
+    39: (6, 26, 54, 82, 110, 138, 166),
+    40: (6, 30, 58, 86, 114, 142, 170),
+}
+
+
+def version_of(n: int) -> int:
+    """QR version (1..40) of a symbol with ``n`` modules per side; ValueError otherwise."""
+    version, rest = divmod(n - 17, 4)
+    if rest or not 1 <= version <= 40:
+        raise ValueError(f"a QR symbol has 17 + 4 v modules per side (v = 1..40), got {n}")
+    return version
+
+
+@functools.lru_cache(maxsize=64)
+def fixed_cells(n: int) -> np.ndarray:
+    """Cell map (see the module docstring) of what every symbol of ``n`` modules per side shows."""
+    version = version_of(n)
+    q = QUIET_RINGS
+    cells = np.full((n + 2 * q, n + 2 * q), np.nan)
+    cells[:q, :] = cells[-q:, :] = cells[:, :q] = cells[:, -q:] = 0.0
+    inner = cells[q:-q, q:-q]
+
+    def finder(r0: int, c0: int) -> None:
+        ring = np.maximum(np.abs(np.arange(7)[:, None] - 3), np.abs(np.arange(7)[None, :] - 3))
+        inner[r0 : r0 + 7, c0 : c0 + 7] = (ring != 2).astype(float)
+
+    finder(0, 0)
+    finder(0, n - 7)
+    finder(n - 7, 0)
+    # Separators: the light L around each finder inside the symbol.
+    inner[7, :8] = inner[:8, 7] = 0.0
+    inner[7, n - 8 :] = inner[:8, n - 8] = 0.0
+    inner[n - 8, :8] = inner[n - 8 :, 7] = 0.0
+    # Timing patterns: row 6 and column 6 between the separators, dark on even modules.
+    timing = (np.arange(8, n - 8) % 2 == 0).astype(float)
+    inner[6, 8 : n - 8] = timing
+    inner[8 : n - 8, 6] = timing
+    centres = ALIGNMENT_CENTRES[version]
+    for r in centres:
+        for c in centres:
+            if (r, c) in ((6, 6), (6, centres[-1]), (centres[-1], 6)):
+                continue  # where the finder patterns are
+            ring = np.maximum(np.abs(np.arange(5)[:, None] - 2), np.abs(np.arange(5)[None, :] - 2))
+            inner[r - 2 : r + 3, c - 2 : c + 3] = (ring != 1).astype(float)
+    inner[n - 8, 8] = 1.0  # the dark module (ISO/IEC 18004, 7.9.1)
+    cells.setflags(write=False)
+    return cells
+
+
+def decoded_cells(matrix: np.ndarray) -> np.ndarray:
+    """Cell map of a decoded symbol: its (n, n) module matrix (True or 1 = dark, False or 0 = light,
+    NaN = not known) with the quiet zone.
+
+    The fixed patterns are taken from the standard rather than from ``matrix`` where they differ
+    (a module misread by the decoder's sampling); ValueError for a matrix of a wrong shape.
+    """
+    matrix = np.asarray(matrix)
+    if matrix.ndim != 2 or matrix.shape[0] != matrix.shape[1]:
+        raise ValueError(f"a QR module matrix must be square, got shape {matrix.shape}")
+    n = matrix.shape[0]
+    fixed = fixed_cells(n)
+    q = QUIET_RINGS
+    cells = fixed.copy()
+    inner = cells[q:-q, q:-q]
+    unknown = np.isnan(inner)
+    values = matrix.astype(np.float64)
+    inner[unknown] = np.where(np.isnan(values), np.nan, values > 0.5)[unknown]
+    cells.setflags(write=False)
+    return cells
+
+
+def verified_matrix(values: np.ndarray, matrix: np.ndarray, dark: float, light: float) -> np.ndarray:
+    """The decoded ``matrix`` (n, n) as a float matrix (1 dark, 0 light) with NaN where the image
+    does not confirm it: ``values`` (n, n) are the grey levels at the module centres (from a fit
+    that did not need the data modules), ``dark``/``light`` the levels of the fixed patterns.
+
+    zxing-cpp's matrix is the grid it sampled to decode, misread modules included (2 to 7 of 441
+    on blurred views of the hard bench set): a misread module would pull the fit, so a module
+    whose centre reads the other colour, or within 15 % of the contrast of the middle, is unknown.
+    """
+    m = np.asarray(matrix, dtype=np.float64)
+    contrast = light - dark
+    if not np.isfinite(contrast) or abs(contrast) < 1e-6:
+        return np.full(m.shape, np.nan)
+    darkness = (light - np.asarray(values, dtype=np.float64)) / contrast  # 0 light .. 1 dark
+    confirmed = np.where(m > 0.5, darkness > 0.65, darkness < 0.35)
+    return np.where(confirmed & np.isfinite(m), m, np.nan)
+
+
+def matrix_from_zxing(barcode: object) -> np.ndarray | None:
+    """(n, n) bool module matrix (True = dark) of a zxing-cpp Barcode, upright (V1 top-left), or None.
+
+    zxing-cpp's ``Barcode.to_image(scale=1, add_quiet_zones=False)`` renders the symbol's module
+    matrix as it was sampled when decoding (0 = dark, 255 = light), upright whatever the code's
+    rotation in the image (checked in tests against segno's own matrices).
+    """
+    try:
+        image = np.asarray(barcode.to_image(scale=1, add_hrt=False, add_quiet_zones=False))  # type: ignore[attr-defined]
+    except Exception:  # an older zxing-cpp without to_image, or a barcode without a symbol
+        return None
+    if image.ndim != 2 or image.shape[0] != image.shape[1] or (image.shape[0] - 17) % 4:
+        return None
+    return image < 128

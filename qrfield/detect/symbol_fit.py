@@ -1,0 +1,642 @@
+"""Corners V1..V4 from the whole symbol: a model of the code's image fitted to the pixels.
+
+The model. Module coordinates (u, v) (V1 = (0, 0), V2 = (n, 0), V3 = (n, n), V4 = (0, n), as in
+:mod:`qrfield.detect.patterns`) map to *ideal pixels* (:mod:`qrfield.detect.lens`: the image a
+distortion-free pinhole with the same K would see) by a homography, since the code is flat; the
+lens then maps ideal pixels to the image. The expected grey level at an image pixel p is
+
+    I(p) = A(p) - B(p) * D(u(p), v(p))
+
+where D is the darkness of the known modules (:mod:`qrfield.detect.symbol`: every fixed pattern,
+the quiet zone, and the data modules once decoded) seen through an edge spread of width s px:
+each cell contributes its colour times F(u - left) - F(u - right) in u, the same in v, with
+F the logistic (1 + tanh(z / s)) / 2 of the distance z in px across the edge, convolved with the
+pixel's 1 px footprint (its variance across an edge of any direction).
+A(p) (the light level) and B(p) (the contrast) are linear across the code, for uneven lighting;
+B < 0 for an inverted code. Any symmetric edge spread places an edge without bias, so the logistic
+F stands in for the real one (Gaussian blur, defocus, pixel area), and s is fitted.
+
+The fit. Unknowns: the homography from ideal pixels to module coordinates (8, in coordinates
+normalised about the code), s, and the six lighting terms. Samples are image pixel centres (no
+interpolation of the image) within a band of about 1.5 s + 1 px around the edges between known
+cells of different colour, at most ``budget`` of them (the edges taken in a fixed shuffled order,
+so that a subset covers the whole symbol). Levenberg-Marquardt on the residuals I - model, with Huber
+weights at 1.5 times a robust residual scale (MAD) so that misread modules, specular spots or
+a finger over the code do not pull the corners. Coarse to fine: from a backend's or the edge
+fit's corners, first a blurred model (s at least 1.5 px or a third of a module) over a wider band,
+then the sharp model with s free. Tracking keeps the fit warm another way
+(:mod:`qrfield.detect.symbol_track`).
+
+The uncertainty. The covariance of the parameters is the robust scale squared times the inverse
+of the weighted normal matrix, J^T W J; the corners' (4, 2, 2) covariance follows through the
+corners' (analytic) derivatives with respect to the homography and the lens, plus a model-error
+floor (MODEL_FLOOR_PX).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from qrfield.detect.lens import Lens
+from qrfield.detect.symbol import QUIET_RINGS
+
+#: Module coordinates of V1..V4.
+_UNIT_SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+#: Huber threshold in robust residual scales.
+HUBER_K = 1.5
+#: Most pixels sampled by a fit.
+FULL_BUDGET = 1500
+#: Most pixels of the coarse stage (it only brings the corners into the fine stage's reach).
+COARSE_BUDGET = 600
+#: Model error of a corner, px per coordinate, added in quadrature to the covariance from the
+#: residual noise (which alone under-covers noise-free views: the model is not the exact optics).
+#: Measured on the hard set (seeds 2024 and 7, 600 views): without it the whitened errors have an
+#: RMS of 1.17 and 92 % lie within 2; with it 1.03 and 95 % (docs/detection.md).
+MODEL_FLOOR_PX = 0.003
+#: Smallest fitted contrast, grey levels (a code is not seen below it).
+MIN_CONTRAST = 12.0
+#: Row and column in G of each of the 8 parameters (see _g_from_params).
+_ENTRY_ROWS = np.array([0, 0, 0, 1, 1, 1, 2, 2])
+_ENTRY_COLS = np.array([2, 0, 1, 2, 0, 1, 0, 1])
+#: Smallest edge width s, px (the pixel's own footprint is modelled besides).
+MIN_EDGE_PX = 0.1
+#: Starting edge width s (logistic scale), px: about a 0.6 px blur plus the pixel's area.
+START_EDGE_PX = 0.9
+
+
+@dataclass(frozen=True)
+class FitState:
+    """What a tracked fit carries to the next frame: edge width s (px), lighting (6 terms) and the
+    robust residual scale (grey levels; NaN when not known yet)."""
+
+    edge_px: float
+    lighting: np.ndarray
+    scale: float = math.nan
+
+
+@dataclass(frozen=True)
+class SymbolFit:
+    """Outcome of :func:`fit_symbol`.
+
+    Attributes:
+        ok: True when the fit converged to a plausible symbol; else ``reason`` says why.
+        corners_px: (4, 2) V1..V4 in image pixels (the starting corners when not ok).
+        corners_cov: (4, 2, 2) covariance of each corner, px^2 (None when not ok).
+        residual: robust residual scale of the fit, grey levels (noise plus model error).
+        start_residual: the same on the same pixels at the starting corners (lighting refitted).
+        contrast: fitted contrast B at the code's centre, grey levels (negative: inverted code).
+        edge_px: fitted edge width s, px.
+        samples: pixels used; iterations: LM iterations done (all stages).
+        state: for a warm start on the next frame.
+    """
+
+    ok: bool
+    corners_px: np.ndarray
+    corners_cov: np.ndarray | None
+    reason: str = ""
+    residual: float = math.nan
+    start_residual: float = math.nan
+    contrast: float = math.nan
+    edge_px: float = math.nan
+    samples: int = 0
+    iterations: int = 0
+    state: FitState | None = None
+
+    @property
+    def corners_std_px(self) -> np.ndarray:
+        """(4,) RMS radius of each corner's uncertainty, px (sqrt of the covariance's trace)."""
+        if self.corners_cov is None:
+            return np.full(4, np.nan)
+        return np.sqrt(np.trace(self.corners_cov, axis1=1, axis2=2))
+
+
+# ---------------------------------------------------------------------------------------- helpers
+def _homography(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    """(3, 3) homography taking 4 points ``src`` to ``dst`` (float64, H[2, 2] = 1)."""
+    a = np.zeros((8, 8))
+    b = np.zeros(8)
+    for i, ((x, y), (u, v)) in enumerate(zip(src, dst, strict=True)):
+        a[2 * i] = [x, y, 1, 0, 0, 0, -u * x, -u * y]
+        a[2 * i + 1] = [0, 0, 0, x, y, 1, -v * x, -v * y]
+        b[2 * i], b[2 * i + 1] = u, v
+    h = np.linalg.solve(a, b)
+    return np.append(h, 1.0).reshape(3, 3)
+
+
+def _apply(h: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """Homography ``h`` applied to points (k, 2), float64."""
+    return cv2.perspectiveTransform(np.asarray(xy, dtype=np.float64).reshape(1, -1, 2), h).reshape(-1, 2)
+
+
+class _Layout:
+    """What the fit needs of one cell map, for windows of 2 r + 1 cells: computed once per map.
+
+    Attributes:
+        colour: the cell map flattened, unknown cells 0.
+        safe: per flat cell index, True when the window starting there holds only known cells.
+        window: flat offsets of a window's cells from its first cell.
+        mids, kinds: midpoints (k, 2) in module coordinates of the edges between known cells of
+            different colour, and their orientation (0: the edge runs along v, separating cells
+            left and right; 1: along u), in a fixed shuffled order so that the first few are
+            spread over the whole symbol.
+    """
+
+    def __init__(self, cells: np.ndarray, r: int) -> None:
+        size = cells.shape[0]
+        self.size = size
+        m = 2 * r + 1
+        known = np.isfinite(cells)
+        self.colour = np.where(known, cells, 0.0).ravel()
+        full = np.zeros((size, size), dtype=bool)
+        counts = np.lib.stride_tricks.sliding_window_view(known, (m, m)).all(axis=(2, 3))
+        full[: size - m + 1, : size - m + 1] = counts
+        self.safe = full.ravel()
+        self.window = (np.arange(m)[:, None] * size + np.arange(m)[None, :]).ravel()
+        q = QUIET_RINGS
+        left, right = cells[:, :-1], cells[:, 1:]
+        rows, cols = np.nonzero(known[:, :-1] & known[:, 1:] & (left != right))
+        vertical = np.column_stack([cols + 1 - q, rows - q + 0.5])
+        top, bottom = cells[:-1, :], cells[1:, :]
+        rows2, cols2 = np.nonzero(known[:-1, :] & known[1:, :] & (top != bottom))
+        horizontal = np.column_stack([cols2 - q + 0.5, rows2 + 1 - q])
+        mids = np.concatenate([vertical, horizontal]).astype(np.float64)
+        kinds = np.concatenate([np.zeros(len(vertical)), np.ones(len(horizontal))]).astype(np.int8)
+        order = np.random.default_rng(len(mids)).permutation(len(mids))
+        self.mids, self.kinds = mids[order], kinds[order]
+        self._candidates: dict[tuple[int, int, int], np.ndarray] = {}
+
+    def candidates(self, per_edge: int, module_px: float, band_px: float, budget: int) -> np.ndarray:
+        """Module coordinates (k, 2) of points near the edges: ``per_edge`` along each, every 0.7 px
+        across it within +-``band_px``; the first edges of the shuffle, enough for about twice
+        ``budget`` pixels. Cached per (per_edge, module size and band to 5 %, budget)."""
+        key = (per_edge, round(math.log(module_px) * 20), round(math.log(band_px) * 20), budget)
+        pts = self._candidates.get(key)
+        if pts is not None:
+            return pts
+        along = (np.arange(per_edge) + 0.5) / per_edge - 0.5
+        across = np.arange(-band_px, band_px + 1e-9, 0.7) / module_px
+        wanted = math.ceil(2.0 * budget / max(len(along) * len(across) * 0.6, 1.0))
+        mids, kinds = self.mids[:wanted], self.kinds[:wanted]
+        a, c = np.meshgrid(along, across)
+        a, c = a.ravel(), c.ravel()
+        vertical = kinds[:, None] == 0  # an edge along v: across it is u
+        du = np.where(vertical, c[None, :], a[None, :])
+        dv = np.where(vertical, a[None, :], c[None, :])
+        pts = np.column_stack([(mids[:, :1] + du).ravel(), (mids[:, 1:] + dv).ravel()])
+        if len(self._candidates) > 32:
+            self._candidates.clear()
+        self._candidates[key] = pts
+        return pts
+
+
+def _windows(layout: _Layout, uv: np.ndarray, r: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For points at module coordinates ``uv`` (k, 2): which have a window of (2 r + 1)^2 known
+    cells around the cell they lie in (k,) bool, those windows' colours (k', m, m) and their
+    first boundary in u and v (k', 2) (boundaries lie there + 0 .. 2 r + 1)."""
+    size = layout.size
+    m = 2 * r + 1
+    first = np.floor(uv).astype(np.int64) + (QUIET_RINGS - r)  # the window's first column, row
+    inside = ((first >= 0) & (first <= size - m)).all(axis=1)
+    start = np.where(inside, first[:, 1] * size + first[:, 0], 0)
+    ok = inside & layout.safe[start]
+    colour = layout.colour[start[ok][:, None] + layout.window[None, :]].reshape(-1, m, m)
+    return ok, colour, (first[ok] - QUIET_RINGS).astype(np.float64)
+
+
+_LAYOUTS: dict[tuple[int, int], tuple[np.ndarray, _Layout]] = {}
+#: Boundary offsets 0 .. m of a window of m cells.
+_SPANS = {m: np.arange(m + 1, dtype=np.float64) for m in (3, 5)}
+
+
+def _layout(cells: np.ndarray, r: int) -> _Layout:
+    """The (cached) layout of a cell map: keyed by the map object, which the callers keep."""
+    key = (id(cells), r)
+    hit = _LAYOUTS.get(key)
+    if hit is not None and hit[0] is cells:
+        return hit[1]
+    if len(_LAYOUTS) > 64:
+        _LAYOUTS.clear()
+    layout = _Layout(cells, r)
+    _LAYOUTS[key] = (cells, layout)
+    return layout
+
+
+def darkness_at(
+    uv: np.ndarray,
+    corner: np.ndarray,
+    inv_grad: np.ndarray,
+    colour: np.ndarray,
+    edge_px: float,
+    derivatives: bool = True,
+    edge_derivative: bool = True,
+):
+    """The model's darkness D (k,) at module coordinates ``uv`` (k, 2) of points whose windows of
+    cells start at boundaries ``corner`` (k, 2) with colours ``colour`` (k, m, m) (see _windows),
+    ``inv_grad`` (k, 2) px per module unit across u and v edges there, edge width ``edge_px``.
+    With ``derivatives`` also (dD/du, dD/dv) (k, 2) and dD/ds (k,) (None without ``edge_derivative``).
+    u and v are handled side by side on a trailing axis of 2 (few, larger numpy operations).
+    """
+    # Distance to each boundary in px across it, then F = the logistic of width s convolved
+    # with the pixel's 1 px footprint (its variance across any edge direction is 1/12 px^2):
+    # F(z) = 1/2 + s/2 [L((z + 1/2) / s) - L((z - 1/2) / s)], L = ln cosh.
+    z = ((uv - corner)[:, :, None] - _SPANS[colour.shape[1]]) * inv_grad[:, :, None]  # (k, 2, m+1) px
+    # In float32 (the transcendental functions are most of the cost; 1e-7 is far below noise).
+    x = (np.stack([z + 0.5, z - 0.5]) * (1.0 / edge_px)).astype(np.float32)  # (2, k, 2, m+1)
+    ax = np.abs(x)
+    e = np.exp(-2.0 * ax)
+    lc = ax + np.log1p(e)  # ln cosh x + ln 2 (the constant cancels in differences)
+    f = 0.5 + (0.5 * edge_px) * (lc[0] - lc[1])
+    share = f[:, :, :-1] - f[:, :, 1:]  # each cell's share F(z_j) - F(z_j+1), (k, 2, m)
+    if not derivatives:
+        return np.einsum("kr,krc,kc->k", share[:, 1], colour, share[:, 0])
+    t = np.copysign((1.0 - e) / (1.0 + e), x)  # tanh x
+    df = (0.5 * (t[0] - t[1])) * inv_grad[:, :, None]  # dF/du (module units)
+    dshare = df[:, :, :-1] - df[:, :, 1:]
+    if edge_derivative:
+        xt = lc - x * t
+        fs = 0.5 * (xt[0] - xt[1])  # dF/ds, s in px (the ln 2 cancels here too)
+        sshare = fs[:, :, :-1] - fs[:, :, 1:]
+        stack = np.stack([share[:, 0], dshare[:, 0], sshare[:, 0]], axis=-1)
+    else:
+        stack = np.stack([share[:, 0], dshare[:, 0]], axis=-1)
+    rows = colour @ stack  # (k, m rows, 2|3): colour summed over u per row
+    by_v = np.einsum("kr,krj->kj", share[:, 1], rows)  # D, dD/du, [dD/ds from u]
+    d_v = np.einsum("kr,kr->k", dshare[:, 1], rows[:, :, 0])
+    d_s = None
+    if edge_derivative:
+        d_s = by_v[:, 2] + np.einsum("kr,kr->k", sshare[:, 1], rows[:, :, 0])
+    return by_v[:, 0], np.column_stack([by_v[:, 1], d_v]), d_s
+
+
+class _Problem:
+    """The samples of one fit stage (image pixels near known edges) and the model on them.
+
+    What does not change within a stage is computed once here: the pixels, their normalised ideal
+    coordinates, the cells around each (a window of 2R + 1 cells each way about the cell the pixel
+    starts in: R = 1 when edges are sharp against the module size, else 2) and the edge width's
+    scale factors |du/dp|, |dv/dp| (module units per px).
+    """
+
+    def __init__(
+        self,
+        grey: np.ndarray,
+        lens: Lens,
+        cells: np.ndarray,
+        geo: np.ndarray,
+        norm: tuple[np.ndarray, float],
+        edge_px: float,
+        band_px: float,
+        budget: int,
+        offset: tuple[int, int] = (0, 0),
+    ) -> None:
+        size = cells.shape[0]
+        n = size - 2 * QUIET_RINGS
+        origin, scale = norm
+        self.scale = scale
+        h, w = grey.shape
+        g = _g_from_params(geo)
+        inv = np.linalg.inv(g)
+        ideal_corners = _apply(inv, _UNIT_SQUARE * n)
+        sides = ideal_corners - ideal_corners[[1, 2, 3, 0]]
+        module_px = float(np.sqrt((sides * sides).sum(axis=1)).mean()) * scale / n
+        self.module_px = module_px
+        r = 1 if edge_px / module_px < 0.4 else 2
+        layout = _layout(cells, r)
+        pts = layout.candidates(max(1, min(8, round(module_px))), max(module_px, 0.05), band_px, budget)
+        ox, oy = offset
+        px = lens.distort(_apply(inv, pts) * scale + origin)
+        xy = np.rint(px).astype(np.int64) - (ox, oy)
+        xs, ys = xy[:, 0], xy[:, 1]
+        inside = (xs >= 1) & (ys >= 1) & (xs < w - 1) & (ys < h - 1)
+        flat = np.sort(ys[inside] * w + xs[inside])
+        if len(flat):
+            distinct = np.empty(len(flat), dtype=bool)
+            distinct[0] = True
+            np.not_equal(flat[1:], flat[:-1], out=distinct[1:])
+            flat = flat[distinct]
+        if len(flat) > budget:
+            flat = flat[np.linspace(0, len(flat) - 1, budget).astype(np.int64)]
+        xs, ys = flat % w, flat // w
+        ideal, jl = lens.ideal(xs + ox, ys + oy)
+        p = (ideal - origin) / scale
+        # Where each pixel starts in module coordinates; the cells around it must all be known.
+        uvw = p @ g[:, :2].T + g[:, 2]
+        uv = uvw[:, :2] / uvw[:, 2:3]
+        ok, self.colour, self.corner = _windows(layout, uv, r)
+        self.xs, self.ys = xs[ok], ys[ok]
+        self.values = grey[self.ys, self.xs].astype(np.float64)
+        self.p = p[ok]
+        self.ph = np.column_stack([np.ones(len(self.p)), self.p])
+        # px per module unit across u and across v edges (k, 2): 1 / |du/dp|, 1 / |dv/dp|.
+        duv = (g[None, :2, :2] - uv[ok][:, :, None] * g[None, 2:3, :2]) / (uvw[ok, 2:3, None] * scale)
+        if lens.distorted:
+            duv = duv @ jl[ok]
+        self.inv_grad = 1.0 / np.sqrt((duv * duv).sum(axis=2))
+        self.radius = r
+
+    def __len__(self) -> int:
+        return len(self.xs)
+
+    def darkness(
+        self, geo: np.ndarray, edge_px: float, derivatives: bool = True, edge_derivative: bool = True
+    ):
+        """D (k,) and, with ``derivatives``, (dD/du, dD/dv) (k, 2), dD/ds (k,) (None without
+        ``edge_derivative``), the module coordinates (k, 2) and the homography's w (k,)."""
+        g = _g_from_params(geo)
+        uvw = self.p @ g[:, :2].T + g[:, 2]
+        w = uvw[:, 2]
+        uv = uvw[:, :2] / w[:, None]
+        out = darkness_at(uv, self.corner, self.inv_grad, self.colour, edge_px, derivatives, edge_derivative)
+        if not derivatives:
+            return out
+        return (*out, uv, w)
+
+    def residuals(self, geo: np.ndarray, edge_px: float, light: np.ndarray, free_edge: bool):
+        """Residuals (k,) image - model and their Jacobian (k, 8 [+1] + 6) with respect to
+        (homography, [edge width,] lighting): J = d resid / d parameters = -d model / d parameters."""
+        d, d_uv, d_s, uv, w = self.darkness(geo, edge_px, edge_derivative=free_edge)
+        ab = self.ph @ light.reshape(2, 3).T  # (k, 2): light level A and contrast B
+        b = ab[:, 1]
+        resid = self.values - ab[:, 0] + b * d
+        k = len(d)
+        col = 9 if free_edge else 8
+        jac = np.empty((k, col + 6))
+        # d model / d (u, v) = -B dD/d(u, v); du/dg0* = (1, x, y) / w, du/dg2* = -u (x, y) / w
+        m = d_uv * (b / w)[:, None]  # = -(d model / d (u, v)) / w
+        jac[:, 0:3] = self.ph * m[:, :1]
+        jac[:, 3:6] = self.ph * m[:, 1:]
+        jac[:, 6:8] = self.p * (-(m * uv).sum(axis=1))[:, None]
+        if free_edge:
+            jac[:, 8] = b * d_s
+        jac[:, col : col + 3] = -self.ph
+        jac[:, col + 3 : col + 6] = self.ph * d[:, None]
+        return resid, jac
+
+
+def _g_from_params(theta: np.ndarray) -> np.ndarray:
+    """(3, 3) map from normalised ideal pixels (x, y, 1) to module coordinates, from its 8 free
+    entries in the order (g02, g00, g01, g12, g10, g11, g20, g21) (g22 = 1): the order of the
+    Jacobian's columns, which multiply (1, x, y)."""
+    return np.array(
+        [[theta[1], theta[2], theta[0]], [theta[4], theta[5], theta[3]], [theta[6], theta[7], 1.0]]
+    )
+
+
+def _params_from_g(g: np.ndarray) -> np.ndarray:
+    g = g / g[2, 2]
+    return np.array([g[0, 2], g[0, 0], g[0, 1], g[1, 2], g[1, 0], g[1, 1], g[2, 0], g[2, 1]])
+
+
+def _corners_ideal(theta: np.ndarray, n: int, norm: tuple[np.ndarray, float]) -> np.ndarray:
+    origin, scale = norm
+    inv = np.linalg.inv(_g_from_params(theta))
+    return _apply(inv, _UNIT_SQUARE * n) * scale + origin
+
+
+def _corners_jacobian(theta: np.ndarray, n: int, norm: tuple[np.ndarray, float]) -> np.ndarray:
+    """(8, 8) d (V1..V4 ideal px, flattened x1 y1 x2 ...) / d theta, analytically.
+
+    Corner x solves G (x, 1) ~ (m, 1); for a change dG, dx = -(G^-1 dG x~)[:2] + x (G^-1 dG x~)[2].
+    """
+    _, scale = norm
+    inv = np.linalg.inv(_g_from_params(theta))
+    corners = _apply(inv, _UNIT_SQUARE * n)  # normalised, (4, 2)
+    xh = np.column_stack([corners, np.ones(4)])
+    # theta's entries (i, j) of G: g02 g00 g01 g12 g10 g11 g20 g21; G^-1 E_ij x~ = G^-1[:, i] x~_j
+    y = inv[:, _ENTRY_ROWS].T[None, :, :] * xh[:, _ENTRY_COLS][:, :, None]  # (4 corners, 8, 3)
+    dx = -y[:, :, :2] + corners[:, None, :] * y[:, :, 2:3]
+    return (dx * scale).transpose(0, 2, 1).reshape(8, 8)
+
+
+def corner_covariance(dc: np.ndarray, cov: np.ndarray, corners_ideal: np.ndarray, lens: Lens) -> np.ndarray:
+    """(4, 2, 2) image-pixel covariance of V1..V4 from the homography parameters' covariance
+    ``cov`` (8, 8), the corners' derivatives ``dc`` (4, 2, 8) in ideal pixels, the lens'
+    Jacobian at ``corners_ideal`` (4, 2), and the model-error floor."""
+    out = dc @ cov @ dc.transpose(0, 2, 1)
+    if lens.distorted:
+        jl = lens.distort_jacobian(corners_ideal)
+        out = jl @ out @ jl.transpose(0, 2, 1)
+    return out + MODEL_FLOOR_PX**2 * np.eye(2)
+
+
+class _Solver:
+    """Levenberg-Marquardt (or plain Gauss-Newton) over homography, [edge width,] lighting."""
+
+    def __init__(self, problem: _Problem, free_edge: bool, scale: float = math.nan) -> None:
+        self.problem = problem
+        self.free_edge = free_edge
+        self.start_scale = scale
+
+    @staticmethod
+    def weights(resid: np.ndarray, scale: float) -> np.ndarray:
+        a = np.abs(resid)
+        return np.where(a <= HUBER_K * scale, 1.0, HUBER_K * scale / np.maximum(a, 1e-12))
+
+    @staticmethod
+    def cost(resid: np.ndarray, scale: float) -> float:
+        a = np.abs(resid) / scale
+        return float(np.sum(np.where(a <= HUBER_K, 0.5 * a * a, HUBER_K * a - 0.5 * HUBER_K**2)))
+
+    @staticmethod
+    def robust_scale(resid: np.ndarray) -> float:
+        """1.4826 times the median absolute residual (the lighting terms centre the residuals), at
+        least 0.5 grey levels (uint8 rounding alone gives 0.29)."""
+        a = np.abs(resid)
+        half = len(a) // 2
+        return max(1.4826 * float(np.partition(a, half)[half]), 0.5) if len(a) else 0.5
+
+    def run(self, geo, edge_px, light, max_iter: int, n: int, norm, tol_px: float = 2e-3):
+        """Iterate from (geo, edge_px, light); returns them, the last residuals and Jacobian, the
+        robust scale and the iterations done."""
+        pr = self.problem
+        resid, jac = pr.residuals(geo, edge_px, light, self.free_edge)
+        scale = self.start_scale if math.isfinite(self.start_scale) else self.robust_scale(resid)
+        cost = self.cost(resid, scale)
+        lam = 1e-4
+        corners = _corners_ideal(geo, n, norm)
+        iterations = 0
+        for _ in range(max_iter):
+            iterations += 1
+            w = self.weights(resid, scale)
+            jw = jac * w[:, None]
+            normal = jw.T @ jac
+            grad = jw.T @ resid
+            step = None
+            for _attempt in range(6):
+                damped = normal + (lam + 1e-12) * np.diag(np.diag(normal) + 1e-9)
+                try:
+                    delta = -np.linalg.solve(damped, grad)  # J = d resid / d parameters
+                except np.linalg.LinAlgError:
+                    lam = max(lam, 1e-4) * 10
+                    continue
+                new_geo = geo + delta[:8]
+                k = 8
+                new_edge = edge_px
+                if self.free_edge:
+                    new_edge = float(np.clip(edge_px + delta[8], MIN_EDGE_PX, 6.0))
+                    k = 9
+                new_light = light + delta[k : k + 6]
+                r2, j2 = pr.residuals(new_geo, new_edge, new_light, self.free_edge)
+                c2 = self.cost(r2, scale)
+                if np.isfinite(c2) and c2 <= cost and np.all(np.isfinite(r2)):
+                    step = (new_geo, new_edge, new_light, r2, j2, c2)
+                    lam = lam / 10
+                    break
+                lam = max(lam, 1e-4) * 10
+            if step is None:
+                break
+            geo, edge_px, light, resid, jac, cost = step
+            new_corners = _corners_ideal(geo, n, norm)
+            moved = float(np.abs(new_corners - corners).max())
+            corners = new_corners
+            if moved < tol_px:
+                break
+        return geo, edge_px, light, resid, jac, self.robust_scale(resid), iterations
+
+
+def _solve_lighting(problem: _Problem, geo: np.ndarray, edge_px: float) -> tuple[np.ndarray, np.ndarray]:
+    """Lighting terms by linear least squares at a fixed geometry; returns them and the residuals."""
+    d = problem.darkness(geo, edge_px, derivatives=False)
+    a = np.concatenate([problem.ph, -problem.ph * d[:, None]], axis=1)
+    try:
+        light = np.linalg.solve(a.T @ a, a.T @ problem.values)
+    except np.linalg.LinAlgError:
+        light = np.linalg.lstsq(a, problem.values, rcond=None)[0]
+    return light, problem.values - a @ light
+
+
+def fit_symbol(
+    grey: np.ndarray,
+    corners_px: np.ndarray,
+    cells: np.ndarray,
+    *,
+    lens: Lens | None = None,
+    offset: tuple[int, int] = (0, 0),
+    image_shape: tuple[int, int] | None = None,
+    budget: int = FULL_BUDGET,
+    coarse: bool = True,
+    max_iter: int = 8,
+    warm: FitState | None = None,
+) -> SymbolFit:
+    """Fit the symbol's model to ``grey`` starting from corners V1..V4 (image pixels).
+
+    Args:
+        grey: (H, W) uint8 image.
+        corners_px: (4, 2) starting corners V1..V4, pixels of ``grey`` (docs/conventions.md).
+        cells: the symbol's cell map (qrfield.detect.symbol: fixed_cells(n) or decoded_cells(matrix)).
+        lens: the camera's lens (None: pinhole); its camera must be for images of ``image_shape``.
+        offset: (x, y) of ``grey``'s top-left pixel in the camera image, when ``grey`` is a crop.
+        image_shape: (H, W) of the camera image (None: ``grey`` is the whole image).
+        budget: most pixels sampled.
+        coarse: first the blurred model over a wider band (for starting corners a pixel or more
+            off); False when starting from a good fit (tracking).
+        max_iter: most iterations of the fine stage.
+        warm: the edge width and lighting of the last frame's fit.
+
+    Returns:
+        SymbolFit; never raises for image content (ok False with a reason).
+    """
+    lens = lens or Lens(None)
+    start = np.asarray(corners_px, dtype=np.float64)
+    if start.shape != (4, 2) or not np.all(np.isfinite(start)):
+        raise ValueError(f"corners must be a finite (4, 2) array of pixels V1..V4, got shape {start.shape}")
+    size = cells.shape[0]
+    n = size - 2 * QUIET_RINGS
+    if grey.ndim != 2:
+        raise ValueError(f"grey must be an (H, W) image, got shape {grey.shape}")
+    if not lens.fits(image_shape or grey.shape):
+        return SymbolFit(False, start.copy(), None, "the camera model is for another image size")
+    shift = np.asarray(offset, dtype=np.float64)
+
+    def fail(reason: str, iterations: int = 0) -> SymbolFit:
+        return SymbolFit(False, start.copy(), None, reason, iterations=iterations)
+
+    if lens.distorted:
+        from qrfield.detect.lens import undistort_pixels
+
+        ideal_start = undistort_pixels(lens.camera, start + shift)
+    else:
+        ideal_start = start + shift
+    origin = ideal_start.mean(axis=0)
+    scale = float(np.linalg.norm(ideal_start[2] - ideal_start[0])) / 2.0
+    if scale < 4.0:
+        return fail("the code is too small to fit")
+    norm = (origin, scale)
+    try:
+        g0 = _homography((ideal_start - origin) / scale, _UNIT_SQUARE * n)
+    except np.linalg.LinAlgError:
+        return fail("degenerate corners")
+    module_px = scale * 2.0 / (n * math.sqrt(2.0))
+    geo = _params_from_g(g0)
+    edge = warm.edge_px if warm is not None else START_EDGE_PX
+    iterations = 0
+    stages = []
+    if coarse:
+        coarse_edge = max(1.5, 0.35 * module_px, edge)
+        stages.append((coarse_edge, 1.5 * coarse_edge + 2.0, False, 4, min(budget, COARSE_BUDGET)))
+    stages.append((None, None, True, max_iter, budget))
+    light = warm.lighting if warm is not None else None
+    problem = None
+    resid = jac = None
+    robust = math.nan
+    with np.errstate(all="ignore"):
+        for stage_edge, band, free, iters, most in stages:
+            use_edge = stage_edge if stage_edge is not None else edge
+            band = band if band is not None else 1.5 * use_edge + 1.0
+            problem = _Problem(grey, lens, cells, geo, norm, use_edge, band, most, offset)
+            if len(problem) < 60:
+                return fail(f"too few pixels on known edges ({len(problem)})", iterations)
+            if light is None or stage_edge is not None:
+                light, _ = _solve_lighting(problem, geo, use_edge)
+            solver = _Solver(problem, free_edge=free, scale=warm.scale if warm is not None else math.nan)
+            geo, use_edge, light, resid, jac, robust, done = solver.run(geo, use_edge, light, iters, n, norm)
+            iterations += done
+            if stage_edge is None:
+                edge = use_edge
+        assert problem is not None and resid is not None and jac is not None
+        corners_ideal = _corners_ideal(geo, n, norm)
+        if not np.all(np.isfinite(corners_ideal)):
+            return fail("the fit diverged", iterations)
+        corners = lens.distort(corners_ideal) - shift
+        contrast = float(light[3])
+        moved = float(np.linalg.norm(corners - start, axis=1).max())
+        if abs(contrast) < MIN_CONTRAST:
+            return fail(f"too little contrast ({abs(contrast):.0f} grey levels)", iterations)
+        # The starting corners on the same pixels (lighting refitted): the fallback's measure
+        # (not for a warm start, where the start is a prediction, not a competing answer).
+        start_scale = math.nan
+        if warm is None:
+            _, start_resid = _solve_lighting(problem, _params_from_g(g0), edge)
+            start_scale = _Solver.robust_scale(start_resid)
+        # A corner far from its start is trusted only when the fit explains the image much better
+        # there (a backend may miss V3 by many pixels; a fit may also wander off a code).
+        if moved > max(3.0, 2.0 * module_px) and not robust < 0.5 * start_scale:
+            return fail(f"a corner moved {moved:.1f} px from its start", iterations)
+        # Covariance: robust scale^2 (J^T W J)^-1, its homography block taken to the corners.
+        w = _Solver.weights(resid, robust)
+        normal = (jac * w[:, None]).T @ jac
+        try:
+            cov = robust**2 * np.linalg.inv(normal)[:8, :8]
+        except np.linalg.LinAlgError:
+            return fail("the fit is singular", iterations)
+        dc = _corners_jacobian(geo, n, norm).reshape(4, 2, 8)
+        corners_cov = corner_covariance(dc, cov, corners_ideal, lens)
+        if not np.all(np.isfinite(corners_cov)):
+            return fail("the fit is singular", iterations)
+    return SymbolFit(
+        True,
+        corners,
+        corners_cov,
+        "",
+        robust,
+        start_scale,
+        contrast,
+        edge,
+        len(problem),
+        iterations,
+        FitState(edge, light.copy(), robust),
+    )

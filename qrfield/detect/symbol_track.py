@@ -1,0 +1,239 @@
+"""The whole-symbol fit kept warm from frame to frame: inverse compositional, for tracking.
+
+:func:`qrfield.detect.symbol_fit.fit_symbol` evaluates its model (and the model's derivatives) at
+every pixel it samples, on every iteration: accurate, but some milliseconds of numpy work. A
+tracked code changes little from one frame to the next, so here the model is evaluated once, at
+fixed points of the symbol (module coordinates near its known edges: the *template*), and each
+frame only maps those points into the image, samples the image there (bilinear, cv2.remap on a
+float copy) and solves a small linear system (Baker and Matthews' inverse compositional
+Lucas-Kanade: the Jacobian lives in the symbol's coordinates and does not change):
+
+    residual(x) = I(W(x)) - (A(x) - B(x) T(x)),   W = lens o H,   H <- H o dH^-1
+
+with T the template's darkness, A and B the lighting (linear across the code, fitted with the
+geometry), H the homography from module coordinates to ideal pixels and dH the increment of the
+step (8 terms). The template is rebuilt when the code's scale in the image, or the edge width,
+has changed by more than TEMPLATE_TOLERANCE since it was made. Huber weights at 1.5 robust
+residual scales, as in the full fit. The corners' covariance follows from the last step's normal
+matrix, as there.
+
+Sampling the image between pixel centres (bilinear) smooths it a little depending on where the
+points fall; over hundreds of points at all phases this averages out (measured on the moving
+sequence of ``qrfield bench detect``: docs/detection.md).
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+
+from qrfield.detect.lens import Lens
+from qrfield.detect.symbol import QUIET_RINGS
+from qrfield.detect.symbol_fit import (
+    HUBER_K,
+    MIN_CONTRAST,
+    FitState,
+    SymbolFit,
+    _homography,
+    _layout,
+    _windows,
+    corner_covariance,
+    darkness_at,
+)
+
+#: Template points (module coordinates near the known edges).
+TEMPLATE_POINTS = 600
+#: Relative change of the code's scale (px per module along u or v) or of the edge width after
+#: which the template is made again.
+TEMPLATE_TOLERANCE = 0.15
+#: Module coordinates of V1..V4 per module of the symbol.
+_SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+
+
+def _scales(h: np.ndarray, n: int) -> np.ndarray:
+    """px per module along u and along v at the symbol's centre for homography ``h`` (module -> px)."""
+    c = np.array([[n / 2, n / 2], [n / 2 + 1, n / 2], [n / 2, n / 2 + 1]], dtype=np.float64)
+    p = cv2.perspectiveTransform(c.reshape(1, 3, 2), h).reshape(3, 2)
+    return np.hypot(*(p[1:] - p[0]).T)
+
+
+class _Template:
+    """The model evaluated at fixed symbol points for one scale and edge width."""
+
+    def __init__(self, cells: np.ndarray, h: np.ndarray, edge_px: float, points: int) -> None:
+        size = cells.shape[0]
+        n = size - 2 * QUIET_RINGS
+        self.scales = _scales(h, n)
+        self.edge_px = edge_px
+        module_px = float(self.scales.mean())
+        r = 1 if edge_px / max(module_px, 1e-6) < 0.4 else 2
+        layout = _layout(cells, r)
+        band = 1.5 * edge_px + 1.0
+        pts = layout.candidates(max(1, min(8, round(module_px))), max(module_px, 0.05), band, points)
+        if len(pts) > points:
+            pts = pts[np.linspace(0, len(pts) - 1, points).astype(np.int64)]
+        ok, colour, corner = _windows(layout, pts, r)
+        uv = pts[ok]
+        # px per module unit across u and v edges at each point, from the homography's Jacobian.
+        one = np.ones(len(uv))
+        q = uv @ h[:2, :2].T + h[:2, 2]
+        w = uv @ h[2, :2] + h[2, 2]
+        px = q / w[:, None]
+        jac = (h[None, :2, :2] - px[:, :, None] * h[None, 2:3, :2]) / w[:, None, None]  # d px / d uv
+        det = jac[:, 0, 0] * jac[:, 1, 1] - jac[:, 0, 1] * jac[:, 1, 0]
+        grad_u = np.column_stack([jac[:, 1, 1], -jac[:, 0, 1]]) / det[:, None]  # rows of the inverse
+        grad_v = np.column_stack([-jac[:, 1, 0], jac[:, 0, 0]]) / det[:, None]
+        inv_grad = 1.0 / np.column_stack([np.hypot(*grad_u.T), np.hypot(*grad_v.T)])
+        t, dt, _ = darkness_at(uv, corner, inv_grad, colour, edge_px, edge_derivative=False)
+        self.uv = uv
+        self.t = t
+        u, v = uv[:, 0], uv[:, 1]
+        # d W(x; dH) / d dH at the identity, for dH = I + [[d0 d1 d2], [d3 d4 d5], [d6 d7 0]]
+        dwu = np.column_stack([u, v, one, 0 * one, 0 * one, 0 * one, -u * u, -u * v])
+        dwv = np.column_stack([0 * one, 0 * one, 0 * one, u, v, one, -u * v, -v * v])
+        self.geo = dt[:, :1] * dwu + dt[:, 1:] * dwv  # dT / d dH, (k, 8)
+        # lighting basis: 1, x, y over the symbol (normalised module coordinates)
+        xy = uv / (n / 2.0) - 1.0
+        self.basis = np.column_stack([one, xy])
+        self.light_cols = np.concatenate([self.basis, -self.basis * t[:, None]], axis=1)
+        self.n = n
+
+    def fits(self, h: np.ndarray, edge_px: float) -> bool:
+        change = np.abs(_scales(h, self.n) / self.scales - 1.0).max()
+        return bool(change < TEMPLATE_TOLERANCE and abs(edge_px / self.edge_px - 1.0) < TEMPLATE_TOLERANCE)
+
+
+class WarmFit:
+    """The warm whole-symbol fit of one tracked code (its cell map and lens fixed)."""
+
+    def __init__(self, cells: np.ndarray, lens: Lens | None = None, points: int = TEMPLATE_POINTS) -> None:
+        self.cells = cells
+        self.n = cells.shape[0] - 2 * QUIET_RINGS
+        self.lens = lens or Lens(None)
+        self.points = points
+        self._template: _Template | None = None
+
+    def fit(
+        self,
+        grey: np.ndarray,
+        predicted_px: np.ndarray,
+        state: FitState,
+        offset: tuple[int, int] = (0, 0),
+        iterations: int = 2,
+    ) -> SymbolFit:
+        """Corners V1..V4 (pixels of ``grey``, a crop at ``offset`` of the camera's image) from the
+        predicted corners and the last frame's edge width and lighting; never raises for content."""
+        start = np.asarray(predicted_px, dtype=np.float64)
+        lens, n = self.lens, self.n
+        shift = np.asarray(offset, dtype=np.float64)
+
+        def fail(reason: str) -> SymbolFit:
+            return SymbolFit(False, start.copy(), None, reason)
+
+        if lens.distorted:
+            from qrfield.detect.lens import undistort_pixels
+
+            ideal = undistort_pixels(lens.camera, start + shift)
+        else:
+            ideal = start + shift
+        try:
+            h = _homography(_SQUARE * n, ideal)
+        except np.linalg.LinAlgError:
+            return fail("degenerate corners")
+        edge = state.edge_px
+        template = self._template
+        if template is None or not template.fits(h, edge):
+            template = self._template = _Template(self.cells, h, edge, self.points)
+        if len(template.t) < 60:
+            return fail("too few template points")
+        image = grey.astype(np.float32)
+        hh, ww = grey.shape
+        light = np.asarray(state.lighting, dtype=np.float64)
+        scale = state.scale if math.isfinite(state.scale) else 2.0
+        uv = template.uv.reshape(1, -1, 2)
+        k = len(template.t)
+        resid = np.zeros(k)
+        normal = None
+        jac = None
+        with np.errstate(all="ignore"):
+            for _ in range(iterations):
+                px = cv2.perspectiveTransform(uv, h).reshape(-1, 2)
+                if lens.distorted:
+                    px = lens.distort(px)
+                px -= shift
+                inside = (px[:, 0] >= 0) & (px[:, 1] >= 0) & (px[:, 0] <= ww - 1) & (px[:, 1] <= hh - 1)
+                if inside.mean() < 0.9:
+                    return fail("the code leaves the region")
+                values = cv2.remap(
+                    image,
+                    px.astype(np.float32).reshape(1, -1, 2),
+                    None,
+                    cv2.INTER_LANCZOS4,
+                    borderMode=cv2.BORDER_REPLICATE,
+                ).reshape(-1)
+                ab = template.basis @ light.reshape(2, 3).T
+                b = ab[:, 1]
+                resid = values - ab[:, 0] + b * template.t
+                a = np.abs(resid)
+                w = np.where(
+                    inside, np.where(a <= HUBER_K * scale, 1.0, HUBER_K * scale / np.maximum(a, 1e-12)), 0.0
+                )
+                # d model / d dH = -B dT/d dH; d model / d light = (basis, -T basis)
+                jac = np.concatenate([-b[:, None] * template.geo, template.light_cols], axis=1)
+                jw = jac * w[:, None]
+                normal = jw.T @ jac
+                try:
+                    delta = np.linalg.solve(normal + 1e-9 * np.eye(14), jw.T @ resid)
+                except np.linalg.LinAlgError:
+                    return fail("the fit is singular")
+                d = delta[:8]
+                dh = np.array([[1 + d[0], d[1], d[2]], [d[3], 1 + d[4], d[5]], [d[6], d[7], 1.0]])
+                try:
+                    h = h @ np.linalg.inv(dh)
+                except np.linalg.LinAlgError:
+                    return fail("the fit diverged")
+                light = light + delta[8:]
+            half = k // 2
+            robust = max(1.4826 * float(np.partition(np.abs(resid), half)[half]), 0.5)
+            corners_ideal = cv2.perspectiveTransform((_SQUARE * n).reshape(1, 4, 2), h).reshape(4, 2)
+            if not np.all(np.isfinite(corners_ideal)):
+                return fail("the fit diverged")
+            corners = (lens.distort(corners_ideal) if lens.distorted else corners_ideal) - shift
+            contrast = float(light[3])
+            if abs(contrast) < MIN_CONTRAST:
+                return fail(f"too little contrast ({abs(contrast):.0f} grey levels)")
+            try:
+                cov = robust**2 * np.linalg.inv(normal)[:8, :8]
+            except np.linalg.LinAlgError:
+                return fail("the fit is singular")
+            # Corner k is H (m_k - dW(m_k) dH) to first order: d corner / d dH = -dpx/dm dW/ddH.
+            m = _SQUARE * n
+            q = m @ h[:2, :2].T + h[:2, 2]
+            wm = m @ h[2, :2] + h[2, 2]
+            pm = q / wm[:, None]
+            dpx = (h[None, :2, :2] - pm[:, :, None] * h[None, 2:3, :2]) / wm[:, None, None]  # (4, 2, 2)
+            u, v = m[:, 0], m[:, 1]
+            zero, one = np.zeros(4), np.ones(4)
+            dw = np.stack(
+                [
+                    np.column_stack([u, v, one, zero, zero, zero, -u * u, -u * v]),
+                    np.column_stack([zero, zero, zero, u, v, one, -u * v, -v * v]),
+                ],
+                axis=1,
+            )  # (4, 2, 8)
+            corners_cov = corner_covariance(-(dpx @ dw), cov, corners_ideal, lens)
+        if not np.all(np.isfinite(corners_cov)):
+            return fail("the fit is singular")
+        return SymbolFit(
+            ok=True,
+            corners_px=corners,
+            corners_cov=corners_cov,
+            residual=robust,
+            contrast=contrast,
+            edge_px=edge,
+            samples=k,
+            iterations=iterations,
+            state=FitState(edge, light, robust),
+        )
