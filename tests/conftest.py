@@ -1,4 +1,5 @@
-"""Shared fixtures: the real photos in ../shared/data, and a standard camera."""
+"""Shared fixtures: the real photos in ../shared/data, a standard camera, and the user's folders
+kept out of the real home (every test sees an empty config and data folder of its own session)."""
 
 from __future__ import annotations
 
@@ -10,6 +11,21 @@ import pytest
 from qrfield.camera import CameraModel, resolve_camera
 
 REPO = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _private_user_folders(tmp_path_factory: pytest.TempPathFactory) -> None:
+    """Point qrfield's config, data, calibration and sessions folders at this test session's own
+    (subprocesses inherit them): no test reads a profile from, or writes results into, the home
+    of whoever runs the suite. Tests that check the lookup order set these themselves."""
+    home = tmp_path_factory.mktemp("user-folders")
+    for name, sub in (
+        ("QRFIELD_CONFIG_DIR", "config"),
+        ("QRFIELD_DATA_DIR", "data"),
+        ("QRFIELD_SESSIONS_DIR", "sessions"),
+    ):
+        os.environ[name] = str(home / sub)
+    os.environ.pop("QRFIELD_CALIB_DIR", None)
 
 
 def shared_data_dir() -> Path | None:
