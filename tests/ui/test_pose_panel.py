@@ -45,9 +45,10 @@ def test_panel_shows_each_method_the_truth_and_the_verdict(qtbot) -> None:
     panel.show_result(result, ("numerical", "ippe"))
     assert np.allclose(panel.displayed("numerical"), [10.4, -5.2, 301.0, 15.5, -19.0, 10.2])
     assert np.allclose(panel.displayed("true"), [10.0, -5.0, 300.0, 15.0, -20.0, 10.0])
-    verdict = panel.verdict.text()
-    assert "numerical: Δpos 1.10 mm, Δangle ≤ 1.00°" in verdict and "✔ meets" in verdict  # sqrt(1.2) = 1.095
-    assert "ippe: Δpos 9.22 mm, Δangle ≤ 3.00°" in verdict and "✘ fails" in verdict  # sqrt(85) = 9.220
+    lines = panel.verdict.text().splitlines()
+    assert lines[0] == "vs true pose (✔ = within 2° and 5\u00a0mm):"  # the seed's criteria
+    assert lines[1] == "✔ numerical: Δpos 1.10 mm, Δangle ≤ 1.00°"  # sqrt(1.2) = 1.095
+    assert lines[2] == "✘ ippe: Δpos 9.22 mm, Δangle ≤ 3.00°"  # sqrt(85) = 9.220
     assert "flip risk" in panel.findChild(type(panel.headline), "status_ippe").text()
     assert "flip risk" not in panel.findChild(type(panel.headline), "status_numerical").text()
 
@@ -61,3 +62,35 @@ def test_solver_status_lines() -> None:
     assert text.startswith("NOT converged") and text.endswith("n_max reached") and warn
     text, warn = solver_status_text(pose_result("ippe", [0, 0, 1], [0, 0, 0], ambiguity=1.4))
     assert "ambiguity 1.40" in text and warn
+
+
+def test_no_negative_zero_and_stale_only_after_a_real_pose(qtbot) -> None:
+    panel = PosePanel()
+    qtbot.addWidget(panel)
+    panel.mark_stale("no source")  # nothing was ever measured: nothing can be stale
+    assert panel.headline.text().startswith("NO SOURCE") and "STALE" not in panel.headline.text()
+    result = FrameResult(
+        4,
+        101,
+        "OK",
+        detection=SimpleNamespace(text="qrfield", corners_px=np.zeros((4, 2))),
+        poses={"numerical": pose_result("numerical", [-0.04, 0.0, 300.0], [-0.004, 0.001, -0.0])},
+    )
+    panel.show_result(result, ("numerical",))
+    texts = [panel.findChild(type(panel.headline), f"numerical_{r}").text() for r in range(6)]
+    assert texts == ["0.0", "0.0", "300.0", "0.00", "0.00", "0.00"]  # -0.04 mm and -0.004 deg round to 0
+    panel.mark_stale("no source")
+    assert panel.headline.text().startswith("STALE")
+    panel.source_opened()  # a new source has shown no pose of its own yet
+    panel.mark_stale("no source")
+    assert panel.headline.text().startswith("NO SOURCE")
+
+
+def test_numbers_on_screen_never_read_minus_zero() -> None:
+    from ui.plots import ZeroSafeAxis
+    from ui.text import fixed
+
+    assert fixed(-0.004, 2) == "0.00" and fixed(-0.005001, 2) == "-0.01" and fixed(float("nan"), 1) == "—"
+    assert fixed(-0.0, 0) == "0" and fixed(None, 1, missing="-") == "-"
+    axis = ZeroSafeAxis("left")
+    assert axis.tickStrings([-1e-17, 0.01, -0.01], 1.0, 0.01) == ["0", "0.01", "-0.01"]  # not "-1e-17"
