@@ -25,7 +25,7 @@ from qrfield.sessions.files import atomic_write
 from ui.background import BackgroundJob
 from ui.groundtruth_form import WrappedLabel
 from ui.session_dialogs import touch_button
-from ui.text import breakable, fixed, short_path
+from ui.text import fixed, short_path
 
 #: The folder, inside a session, that its analysis is written to.
 ANALYSIS_FOLDER = "analysis"
@@ -257,7 +257,7 @@ class AnalysisTab(QtWidgets.QWidget):
             self._set_state("an analysis is running", error=False)
             return False
         self.run_button.setEnabled(False)
-        self._set_state(f"analysing {breakable(short_path(session_dir))} …", error=False)
+        self._set_state(f"analysing {short_path(session_dir)} …", error=False)
         return True
 
     def _set_state(self, text: str, error: bool) -> None:
@@ -272,7 +272,7 @@ class AnalysisTab(QtWidgets.QWidget):
         self.run_button.setEnabled(True)
         self.save_button.setEnabled(True)
         self.result = result
-        where = breakable(short_path(result["out_dir"]))
+        where = short_path(result["out_dir"])
         self._set_state(
             f"analysed {Path(result['session']).name}; results in {where}"
             + (f"\n⚠ {result['out_note']}" if result["out_note"] else ""),
@@ -330,7 +330,7 @@ class AnalysisTab(QtWidgets.QWidget):
         except OSError as exc:
             self._set_state(f"not saved to {folder}: {exc}", error=True)
             return copies
-        self._set_state(f"saved {len(copies)} files to {breakable(short_path(folder))}", error=False)
+        self._set_state(f"saved {len(copies)} files to {short_path(folder)}", error=False)
         return copies
 
     def shutdown(self) -> None:

@@ -240,7 +240,8 @@ class CalibrationDialog(QtWidgets.QDialog):
         self.virtual_check = QtWidgets.QCheckBox("virtual chessboard")
         self.virtual_check.setToolTip("seeded board poses rendered through the app's camera model")
         self.virtual_check.setObjectName("virtual")
-        self.virtual_check.setSizePolicy(QtWidgets.QSizePolicy.Policy.Maximum, QtWidgets.QSizePolicy.Policy.Fixed)
+        policy = QtWidgets.QSizePolicy.Policy
+        self.virtual_check.setSizePolicy(policy.Maximum, policy.Fixed)  # a click beside the text does nothing
         self.next_button = QtWidgets.QPushButton("Next pose")
         self.next_button.setObjectName("next_pose")
         self.next_button.setEnabled(False)

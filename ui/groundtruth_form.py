@@ -105,7 +105,7 @@ class GroundTruthForm(QtWidgets.QWidget):
         grid = QtWidgets.QGridLayout(self)
         grid.setContentsMargins(0, 0, 0, 0)
         grid.setHorizontalSpacing(6)
-        grid.setVerticalSpacing(4)
+        grid.setVerticalSpacing(3)
         self._build_pose_fields(grid)
         self._build_combo(grid)
         self._build_note_row(grid)
@@ -241,6 +241,13 @@ class GroundTruthForm(QtWidgets.QWidget):
             values = truth_fields(position_mm, angles_deg)
             values.pop("combo")
             self.set_fields(values)
+
+    def bench_gone(self) -> None:
+        """Frames without a true pose (another source, or none): nothing to follow any more."""
+        self._bench_pose = None
+        if self.follow_box.isEnabled():
+            self.follow_box.setEnabled(False)
+            self.follow_box.hide()
 
     def _follow_toggled(self, on: bool) -> None:
         if on and self._bench_pose is not None:

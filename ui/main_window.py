@@ -38,7 +38,6 @@ from ui.sessions_panel import BenchContext, SessionPanel
 from ui.settings_form import SettingsForm
 from ui.simulation_tab import CONFIG_KEY as SIMULATION_KEY
 from ui.simulation_tab import SimulationTab
-from ui.text import breakable
 from ui.wheel_guard import install_wheel_guard
 from ui.worker import PipelineWorker, Processed, RunConfig, start_worker, stop_worker
 
@@ -48,6 +47,8 @@ REDRAW_MS = 25
 PLOT_PERIOD_S = 0.2
 #: The window's size on a desktop (px); never more than the screen's free area.
 DESKTOP_SIZE = (1300, 820)
+#: The smallest window (px): the Raspberry Pi Touch Display, the smallest size the layout is tested at.
+MINIMUM_SIZE = (800, 480)
 #: Below this window height (px) the pose panel uses its compact type (800x480, 1024x600).
 COMPACT_BELOW_PX = 700
 #: The left column's (preview and pose) share of the window's width.
@@ -175,7 +176,6 @@ class MainWindow(QtWidgets.QMainWindow):
         left_layout = QtWidgets.QVBoxLayout(left)
         left_layout.setContentsMargins(0, 0, 0, 0)
         left_layout.setSpacing(2)
-        left_layout.addWidget(self.banner_row)
         left_layout.addWidget(self.preview_pane, 1)
         left_layout.addWidget(self.pose_panel)
         splitter = QtWidgets.QSplitter(QtCore.Qt.Orientation.Horizontal)
@@ -186,7 +186,17 @@ class MainWindow(QtWidgets.QMainWindow):
         splitter.setStretchFactor(0, 2)
         splitter.setStretchFactor(1, 3)
         self.splitter = splitter
-        self.setCentralWidget(splitter)
+        central = QtWidgets.QWidget()
+        central_layout = QtWidgets.QVBoxLayout(central)
+        central_layout.setContentsMargins(0, 0, 0, 0)
+        central_layout.setSpacing(0)
+        central_layout.addWidget(self.banner_row)  # across the whole window: few lines, even at 800 px
+        central_layout.addWidget(splitter, 1)
+        self.setCentralWidget(central)
+        # The window keeps the size it is given (the screen's): word-wrapped labels would otherwise
+        # raise its minimum height to their height at the narrowest width and grow it past an
+        # 800x480 screen. That everything fits is checked by tests/ui/test_app_layout.py.
+        self.layout().setSizeConstraint(QtWidgets.QLayout.SizeConstraint.SetNoConstraint)
         self.status_source = QtWidgets.QLabel("")
         self.status_source.setObjectName("status_source")
         self.status_rate = QtWidgets.QLabel("")
@@ -225,6 +235,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.last: Processed | None = None
         self.frames_shown = 0
         self._frames_since_open = 0
+        self._t_open_request = 0.0  # when the operator last asked for a source (monotonic s)
         self._t0 = time.monotonic()
         self._last_plot = 0.0
         self._rate_t = time.monotonic()
@@ -241,6 +252,8 @@ class MainWindow(QtWidgets.QMainWindow):
         if screen is None:
             return
         free = screen.availableGeometry()
+        # Never smaller than the smallest screen the layout is checked at (800x480).
+        self.setMinimumSize(min(MINIMUM_SIZE[0], free.width()), min(MINIMUM_SIZE[1], free.height()))
         if self.width() > free.width() or self.height() > free.height():
             self.resize(min(self.width(), free.width()), min(self.height(), free.height()))
 
@@ -303,7 +316,11 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def _open_source(self) -> None:
         """Open the chosen source (again), e.g. after a failure."""
+        self.worker.latest.take()  # a result of the source being replaced is not drawn any more
         self._frames_since_open = 0
+        self._t_open_request = time.monotonic()
+        self.pose_panel.source_opened()  # its poses cannot be "stale" values of the new source
+        self.preview_pane.show_empty(f"Opening the source “{self.source_controls.source()}” …")
         self._reconfigure(reopen=True)
         self.banner_row.hide()
 
@@ -345,29 +362,28 @@ class MainWindow(QtWidgets.QMainWindow):
         self.banner_row.hide()
         self.status_source.setText(f"source: {short_source(self.app_settings.source)}")
         self.status_source.setToolTip(description)
-        self.source_controls.show_state(f"open: {breakable(description)}")
+        self.source_controls.show_state(f"open: {description}")
         self.plots.clear_history()
-        self.pose_panel.source_opened()
         self.session_panel.source_opened()
         if self._frames_since_open == 0:
             self.preview_pane.show_empty(f"Waiting for the first frame from “{self.app_settings.source}” …")
 
     def _on_source_failed(self, message: str) -> None:
         last = self.worker.latest.take()  # the worker stored it before failing: draw it, then mark it old
-        if last is not None:
+        if last is not None and last.frame.t_capture >= self._t_open_request:  # of this source
             self._draw(last)
-        self.banner.setText(f"{message} — choose a source in Setup › Source, or press Reopen source")
+        self.banner.setText(message)  # what to do is on its button and in Setup › Source
         self.banner_row.show()
         self.status_source.setText(f"source: {short_source(self.app_settings.source)} (closed)")
         self.status_source.setToolTip(message)
-        self.source_controls.show_state(f"closed: {breakable(message)}", error=True)
+        self.source_controls.show_state(f"closed: {message}", error=True)
         self.session_panel.source_lost(message)
         if self._frames_since_open == 0:  # nothing of this source to show: one clear empty state
-            self.preview_pane.show_empty(
-                f"No picture: {breakable(message)}\n\n"
+            self.preview_pane.show_empty(  # why is in the banner above
+                "No picture: the source is closed.\n\n"
                 "Choose a source in Setup › Source, or press Reopen source."
             )
-        self.pose_panel.mark_stale("no source: the values shown are the last ones measured")
+        self.pose_panel.mark_stale("the last values measured")
 
     def _on_note(self, message: str) -> None:
         """A note from the worker or the settings: in the status bar for a while (shortened with
@@ -383,6 +399,8 @@ class MainWindow(QtWidgets.QMainWindow):
     def _redraw(self) -> None:
         item: Processed | None = self.worker.latest.take()
         now = time.monotonic()
+        if item is not None and item.frame.t_capture < self._t_open_request:
+            item = None  # a frame of the source being replaced: not drawn (nor averaged into a row)
         if item is not None:
             self._draw(item)
         self.serial_panel.refresh()

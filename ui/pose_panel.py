@@ -188,9 +188,9 @@ class PosePanel(QtWidgets.QWidget):
         """The source stopped: "STALE" over the last real pose shown, or, when none was ever shown,
         "no source" and dashes (nothing measured can be stale)."""
         if not self.has_pose:
-            self.show_no_source(why)
+            self.show_no_source("")  # the banner says why
             return
-        self.headline.setText(f"STALE   {why}")
+        self.headline.setText(f"STALE: {why}" if why else "STALE")
         self._style_headline("#888")
 
     def show_no_source(self, why: str) -> None:

@@ -21,7 +21,7 @@ from qrfield.sessions import AcceptanceCriteria, SessionSettings, session_folder
 from qrfield.settings import setting
 from ui.groundtruth_form import WrappedLabel
 from ui.settings_form import SettingsForm
-from ui.text import breakable, short_path
+from ui.text import short_path
 
 ENV_ROOT = "QRFIELD_SESSIONS_DIR"
 SOLVERS = ("numerical", "ippe")
@@ -198,9 +198,9 @@ class ResumeDialog(QtWidgets.QDialog):
         if self.list.count():
             self.list.setCurrentRow(0)
         self.where.setText(
-            f"Sessions in {breakable(short_path(root))}:"
+            f"Sessions in {short_path(root)}:"
             if self.list.count()
-            else f"No sessions in {breakable(short_path(root))} yet: press Other folder… or make a new one."
+            else f"No sessions in {short_path(root)} yet: press Other folder… or make a new one."
         )
         self.resume_button.setEnabled(self.list.count() > 0)
 

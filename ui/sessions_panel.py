@@ -60,7 +60,7 @@ from ui.session_dialogs import (
     sessions_root,
     touch_button,
 )
-from ui.text import breakable, short_path
+from ui.text import short_path
 
 __all__ = ["ENV_ROOT", "SOLVERS", "BenchContext", "SessionFolderSettings", "SessionPanel", "sessions_root"]
 
@@ -140,10 +140,10 @@ class SessionPanel(QtWidgets.QWidget):
         self._build_banners()
         self._build_row_box()
         self.table = RowsTable()
-        self.table.setMinimumHeight(72)
+        self.table.setMinimumHeight(60)
         layout = QtWidgets.QVBoxLayout(self)
-        layout.setContentsMargins(6, 6, 6, 6)
-        layout.setSpacing(4)
+        layout.setContentsMargins(4, 4, 4, 4)
+        layout.setSpacing(3)
         layout.addLayout(self.session_bar)
         layout.addWidget(self.title)
         layout.addWidget(self.count)
@@ -371,7 +371,7 @@ class SessionPanel(QtWidgets.QWidget):
             return None
         dialog.accept()
         self._use(session)
-        self._say(f"created session {session.path.name}: type the ground truth, then Log row", "ok")
+        self._say(f"created session {session.path.name}", "ok")
         return session
 
     def open_session(self, path: str | os.PathLike[str]) -> Session | None:
@@ -445,6 +445,7 @@ class SessionPanel(QtWidgets.QWidget):
     def source_lost(self, message: str) -> None:
         """The window's source failed: no frames until it is reopened; a row being collected ends."""
         self._source_problem = message
+        self.form.bench_gone()
         if self._collector is not None:
             self._give_up(f"the source failed while collecting ({message})")
         self._update_state()
@@ -453,7 +454,7 @@ class SessionPanel(QtWidgets.QWidget):
         """Why no live frames arrive ("" while they do)."""
         now = time.monotonic() if now is None else now
         if self._source_problem:
-            return f"no frames: {self._source_problem}"
+            return "no frames: the source is closed (see the red banner)"
         if self._last_frame_t is None:
             return "no frames yet: open a source (Setup › Source)"
         quiet = now - self._last_frame_t
@@ -484,6 +485,8 @@ class SessionPanel(QtWidgets.QWidget):
             truth = getattr(result, "truth", None)
             if truth is not None:
                 self.form.follow(truth.position_mm, truth.angles_deg)
+            else:
+                self.form.bench_gone()
             return
         if item.frame.t_capture < self._t_press:
             return  # captured before "Log row" was pressed
@@ -767,10 +770,10 @@ class SessionPanel(QtWidgets.QWidget):
             f"next row {session.next_row}"
             + (f"; {len(session.pending)} NOT WRITTEN" if session.pending else "")
         )
-        self.count.setText(
-            f"{breakable(short_path(session.path))}\n{info.solver}, {info.frames_per_row} frames per row, "
-            f"QR side {info.side_mm:g} mm"
+        self.title.setToolTip(
+            f"solver {info.solver}, {info.frames_per_row} frames per row, QR side {info.side_mm:g} mm"
         )
+        self.count.setText(f"{short_path(session.path)} · {info.solver}, QR {info.side_mm:g} mm")
         self.count.setToolTip(str(session.path))
         self.count.show()
         self.window_title_changed(f"{info.name} ({len(active)} rows)")

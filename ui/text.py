@@ -1,13 +1,10 @@
-"""How the app writes numbers and paths on screen."""
+"""How the app writes numbers and paths on screen (Qt wraps a long path after its slashes)."""
 
 from __future__ import annotations
 
 import math
 import os
 from pathlib import Path
-
-#: Zero-width space: lets a word-wrapped label break a long path after a separator.
-BREAK = "\u200b"
 
 
 def fixed(value: float | None, decimals: int, missing: str = "—") -> str:
@@ -28,8 +25,3 @@ def short_path(path: str | os.PathLike[str]) -> str:
     if text == home or text.startswith(home + os.sep):
         return "~" + text[len(home) :]
     return text
-
-
-def breakable(text: str) -> str:
-    """``text`` (a path) with a break opportunity after each separator, for word-wrapped labels."""
-    return text.replace(os.sep, os.sep + BREAK).replace("-", "-" + BREAK)

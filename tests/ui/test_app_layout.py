@@ -5,7 +5,6 @@ in view without scrolling, finger-sized for a session's actions."""
 
 from __future__ import annotations
 
-import re
 from collections.abc import Iterator
 
 import pytest
@@ -18,7 +17,6 @@ WAIT_MS = 15000
 SIZES = [(800, 480), (1024, 600), (1300, 820)]
 #: The Session tab's buttons for a session's actions (finger-sized).
 ACTION_BUTTONS = ("new_session", "resume", "export_rows", "log_row", "cancel_row", "undo_row")
-WORD_BREAKS = re.compile(r"[\s\u200b]+")
 
 
 def text_width(label: QtWidgets.QLabel, text: str) -> float:
@@ -33,13 +31,35 @@ def text_width(label: QtWidgets.QLabel, text: str) -> float:
     return max(metrics.horizontalAdvance(line) for line in text.split("\n"))
 
 
+def widest_line(label: QtWidgets.QLabel, text: str, room: int) -> float:
+    """The widest line of ``text`` word-wrapped at ``room`` px as QLabel wraps it (at word
+    boundaries and wherever Unicode allows a break, e.g. after a slash): an unbreakable run
+    wider than ``room`` sticks out."""
+    plain = (
+        QtGui.QTextDocumentFragment.fromHtml(text).toPlainText() if QtGui.Qt.mightBeRichText(text) else text
+    )
+    layout = QtGui.QTextLayout(plain.replace("\n", "\u2028"), label.font())
+    option = QtGui.QTextOption()
+    option.setWrapMode(QtGui.QTextOption.WrapMode.WordWrap)
+    layout.setTextOption(option)
+    layout.beginLayout()
+    widest = 0.0
+    while True:
+        line = layout.createLine()
+        if not line.isValid():
+            break
+        line.setLineWidth(room)
+        widest = max(widest, line.naturalTextWidth())
+    layout.endLayout()
+    return widest
+
+
 def label_problem(label: QtWidgets.QLabel) -> str:
     """Why ``label``'s text is cut, or "" when it is shown whole."""
     text = label.text()
     room = label.contentsRect().width() - 2 * label.margin()
     if label.wordWrap():
-        words = [w for w in WORD_BREAKS.split(QtGui.QTextDocumentFragment.fromHtml(text).toPlainText()) if w]
-        widest = max((text_width(label, w) for w in words), default=0.0)
+        widest = widest_line(label, text, room)
         if widest > room + 1:
             return f"a word is {widest:.0f} px wide, the label {room} px"
         need = label.heightForWidth(label.width())
@@ -192,3 +212,20 @@ def test_every_session_button_is_in_view_without_scrolling(
     table = panel.table
     assert inside.contains(QtCore.QRect(table.mapTo(window, QtCore.QPoint(0, 0)), table.size()))
     assert table.height() >= 60
+
+
+def test_a_source_that_failed_cuts_no_text_at_800x480(make_window, qtbot, tmp_path, monkeypatch) -> None:
+    """The red banner with a long reason, the empty preview and NO SOURCE still fit the screen."""
+    monkeypatch.setenv("QRFIELD_SESSIONS_DIR", str(tmp_path / "sessions"))
+    missing = tmp_path / "a-folder-with-a-long-name" / "and-another-one" / "camera-unplugged-recording.avi"
+    window = make_window({"source": str(missing)})
+    window.resize(800, 480)
+    qtbot.waitUntil(window.banner_row.isVisible, timeout=WAIT_MS)
+    panel = window.session_panel
+    panel.name_edit.setText("no-source")
+    assert panel.create_from_form() is not None
+    settle(qtbot)
+    assert (window.width(), window.height()) == (800, 480)
+    assert window.preview_pane.is_empty and window.pose_panel.headline.text().startswith("NO SOURCE")
+    assert not cut_labels(window) and not overlaps(window), (cut_labels(window), overlaps(window))
+    assert window.preview_pane.height() >= 100  # the empty state stays readable under the banner

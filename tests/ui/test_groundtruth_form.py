@@ -78,3 +78,12 @@ def test_fields_turn_red_only_after_input_or_a_failed_attempt(form, qtbot) -> No
 def test_enter_submits(form, qtbot) -> None:
     with qtbot.waitSignal(form.submitted, timeout=1000):
         qtbot.keyClick(form.edits["y"], QtCore.Qt.Key.Key_Return)
+
+
+def test_follow_the_bench_is_offered_only_while_frames_carry_a_true_pose(form) -> None:
+    assert not form.follow_box.isVisible() and not form.following  # not the virtual bench (yet)
+    form.follow((10.0, -5.0, 300.0), (0.0, 40.0, 0.0))
+    assert form.follow_box.isVisible() and form.following
+    assert form.fields()["beta"] == "40" and form.combo.currentText() == "beta"
+    form.bench_gone()  # a camera instead: nothing to follow
+    assert not form.follow_box.isVisible() and not form.following
