@@ -15,17 +15,27 @@ SIZES=("$@")
 command -v Xvfb >/dev/null || { echo "screenshots: Xvfb is missing (see the comment at the top)"; exit 1; }
 ./run.sh --version >/dev/null  # make the venv first
 PY="${QRFIELD_VENV:-.venv}/bin/python"
-DISPLAY_NUM="${SHOT_DISPLAY:-:96}"
 status=0
+work="$(mktemp -d)"
+XVFB_PID=""
+cleanup() { [ -n "$XVFB_PID" ] && kill "$XVFB_PID" 2>/dev/null || true; rm -rf "$work"; }
+trap cleanup EXIT
 for size in "${SIZES[@]}"; do
-  Xvfb "$DISPLAY_NUM" -screen 0 "${size}x24" -nolisten tcp >/tmp/qrfield-screenshots-xvfb.log 2>&1 &
+  # Xvfb picks a free display itself (-displayfd) and writes its number once it is ready: the app
+  # never talks to another X server that happens to use a fixed number.
+  : > "$work/display"
+  exec {fd}> "$work/display"
+  Xvfb -displayfd "$fd" -screen 0 "${size}x24" -nolisten tcp >"$work/xvfb.log" 2>&1 &
   XVFB_PID=$!
-  trap 'kill "$XVFB_PID" 2>/dev/null || true' EXIT
-  for _ in $(seq 50); do xdpyinfo -display "$DISPLAY_NUM" >/dev/null 2>&1 && break; sleep 0.1; done
+  exec {fd}>&-
+  for _ in $(seq 100); do [ -s "$work/display" ] && break; sleep 0.1; done
+  [ -s "$work/display" ] || { echo "screenshots: Xvfb did not start: $(cat "$work/xvfb.log")"; exit 1; }
+  display=":$(head -1 "$work/display")"
   more=""
   [ "$size" = "800x480" ] && more="--all"  # the smallest screen: every Setup page and the dialogs too
-  DISPLAY="$DISPLAY_NUM" "$PY" scripts/screenshots.py --size "$size" --out "$OUT" $more || status=1
+  DISPLAY="$display" "$PY" scripts/screenshots.py --size "$size" --out "$OUT" $more || status=1
   kill "$XVFB_PID" 2>/dev/null || true
   wait "$XVFB_PID" 2>/dev/null || true
+  XVFB_PID=""
 done
 exit $status
