@@ -24,6 +24,7 @@ from session_steps import (
     click_box,
     create_session,
     log_by_enter,
+    pick,
     rows_csv,
     show_tab,
     type_truth,
@@ -330,7 +331,7 @@ def test_a_row_on_a_wobbling_bench_compares_with_its_mean_true_pose(session_wind
     panel.ask_combo_choice = lambda message, suggestion: "keep"
     qtbot.waitUntil(lambda: panel.form.follow_box.isEnabled(), timeout=WAIT_MS)
     assert panel.form.follow_box.isChecked()  # on by default on the virtual bench
-    qtbot.keyClicks(panel.form.combo, COMBO)
+    pick(panel.form.combo, COMBO)
     log_by_enter(qtbot, panel, 1, panel.form.combo)
     row = rows_csv(panel.session.path)[1][0]
     # Over a whole 0.5 s swing, the truth at the press and the mean over the frames differ by
