@@ -52,7 +52,7 @@ MINIMUM_SIZE = (800, 480)
 #: Below this window height (px) the pose panel uses its compact type (800x480, 1024x600).
 COMPACT_BELOW_PX = 700
 #: The left column's (preview and pose) share of the window's width.
-LEFT_SHARE = 0.42
+LEFT_SHARE = 0.44
 #: How many notes the window keeps (the status bar's tooltip shows the last few).
 NOTES_KEPT = 50
 
@@ -262,7 +262,7 @@ class MainWindow(QtWidgets.QMainWindow):
         compact = self.height() < COMPACT_BELOW_PX
         self.pose_panel.set_compact(compact)
         if not self.splitter.property("sized") or event.oldSize().width() != event.size().width():
-            width = self.splitter.width() or self.width()
+            width = self.width()  # the splitter spans the window (its own width may lag behind)
             self.splitter.setSizes([round(width * LEFT_SHARE), width - round(width * LEFT_SHARE)])
             self.splitter.setProperty("sized", True)
 
