@@ -1,25 +1,42 @@
-"""The Analysis tab: choose a session, run :func:`qrfield.sessions.analysis.analyze` on a worker
-thread (it solves one pose per row for the resemblance to the simulation), then show the report
-text, the per-combination table and the two PNG plots it wrote to a temporary folder."""
+"""The Analysis tab: choose a session, run :func:`qrfield.sessions.analysis.analyze` in the
+background (it solves one pose per row for the resemblance to the simulation), then show the
+report, the per-combination table and the two plots.
+
+Results belong to their session: each analysis writes ``<session>/analysis/`` (``report.txt``,
+``analysis.json``, ``errors_vs_tilt.png``, ``measured_vs_truth.png``; a new analysis replaces the
+last one, each file written whole). "Save as…" copies them to a folder the operator chooses.
+Only when the session folder cannot be written (a read-only medium) do they go to a temporary
+folder, and the tab says so.
+"""
 
 from __future__ import annotations
 
+import json
 import os
+import shutil
 import tempfile
-import threading
 from pathlib import Path
 from typing import Any
 
 from PySide6 import QtCore, QtGui, QtWidgets
 
-from qrfield.sessions import session_folders
+from qrfield.sessions import read_session, session_folders
+from qrfield.sessions.files import atomic_write
+from ui.background import BackgroundJob
+from ui.groundtruth_form import WrappedLabel
+from ui.session_dialogs import touch_button
+from ui.text import fixed, short_path
 
+#: The folder, inside a session, that its analysis is written to.
+ANALYSIS_FOLDER = "analysis"
+REPORT_FILE = "report.txt"
+JSON_FILE = "analysis.json"
 #: Per-combination table: (header, key in a per_combination item, how to show it).
 TABLE_COLUMNS = (
     ("combination", "combo", str),
     ("rows", "rows", str),
     ("passed", "passed", str),
-    ("pass rate", "pass_rate", lambda v: "-" if v is None else f"{100 * v:.1f} %"),
+    ("pass rate", "pass_rate", lambda v: "-" if v is None else f"{fixed(100 * v, 1)} %"),
     ("no pose", "no_pose", str),
 )
 ERROR_COLUMNS = (
@@ -31,7 +48,42 @@ ERROR_COLUMNS = (
 
 
 def _num(value: float | None) -> str:
-    return "-" if value is None else f"{value:.2f}"
+    return fixed(value, 2, missing="-")
+
+
+def analyse_into_session(session_dir: str) -> dict[str, Any]:
+    """Analyse ``session_dir`` and write the results into its ``analysis/`` folder (a temporary
+    folder when that cannot be written: ``result["out_note"]`` says why). Runs off the GUI thread."""
+    from qrfield.sessions.analysis import analyze, format_report
+
+    read_session(session_dir)  # SessionError for a folder that is no session: nothing written into it
+    out = Path(session_dir) / ANALYSIS_FOLDER
+    note = ""
+    try:
+        out.mkdir(exist_ok=True)
+        probe = out / ".write-test"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as exc:
+        note = (
+            f"the session folder cannot be written ({exc.strerror or exc}): "
+            "results kept in a temporary folder"
+        )
+        out = Path(tempfile.mkdtemp(prefix="qrfield-analysis-"))
+    result = analyze(session_dir, out_dir=out, compare=True)
+    result["report"] = format_report(result)
+    atomic_write(out / REPORT_FILE, (result["report"] + "\n").encode("utf-8"))
+    data = {k: v for k, v in result.items() if k != "report"}
+    atomic_write(out / JSON_FILE, (json.dumps(data, indent=2) + "\n").encode("utf-8"))
+    result["out_dir"] = str(out)
+    result["out_note"] = note
+    return result
+
+
+def result_files(result: dict[str, Any]) -> list[Path]:
+    """The files an analysis wrote (report, JSON, plots)."""
+    out = Path(result["out_dir"])
+    return [out / REPORT_FILE, out / JSON_FILE, *(Path(p) for p in result["plots"])]
 
 
 class ScaledImage(QtWidgets.QLabel):
@@ -41,6 +93,7 @@ class ScaledImage(QtWidgets.QLabel):
         super().__init__(text)
         self.image: QtGui.QPixmap | None = None
         self.setAlignment(QtCore.Qt.AlignmentFlag.AlignCenter)
+        self.setWordWrap(True)
         self.setSizePolicy(QtWidgets.QSizePolicy.Policy.Ignored, QtWidgets.QSizePolicy.Policy.Fixed)
         self.setMinimumHeight(60)
 
@@ -61,99 +114,97 @@ class ScaledImage(QtWidgets.QLabel):
         self.setFixedHeight(scaled.height())
 
 
-class _Runner(QtCore.QObject):
-    """Runs analyze() on a plain thread; reports by signal (queued into the GUI thread)."""
-
-    finished = QtCore.Signal(object)  # the result dict
-    failed = QtCore.Signal(str)
-
-    def start(self, session_dir: str, out_dir: str) -> threading.Thread:
-        thread = threading.Thread(target=self._run, args=(session_dir, out_dir), name="qrfield-analysis")
-        thread.daemon = True
-        thread.start()
-        return thread
-
-    def _run(self, session_dir: str, out_dir: str) -> None:
-        try:
-            from qrfield.sessions.analysis import analyze, format_report
-
-            result = analyze(session_dir, out_dir=out_dir, compare=True)
-            result["report"] = format_report(result)
-        except Exception as exc:  # a damaged session or an unwritable folder: show it, keep the app
-            self.failed.emit(f"analysis of {session_dir} failed: {exc}")
-            return
-        self.finished.emit(result)
-
-
 class AnalysisTab(QtWidgets.QWidget):
     """Analysis of a session (the current one by default). ``root()`` gives the sessions folder."""
 
-    analysisDone = QtCore.Signal(object)  # the result dict (with "report")
+    analysisDone = QtCore.Signal(object)  # the result dict (with "report" and "out_dir")
 
     def __init__(self, root: Any, parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__(parent)
         self.root = root
         self.current: str | None = None
         self.result: dict[str, Any] | None = None
-        self._thread: threading.Thread | None = None
-        self._out = tempfile.TemporaryDirectory(prefix="qrfield-analysis-")
-        self._runs = 0
-        self._runner = _Runner()
-        self._runner.finished.connect(self._done)
-        self._runner.failed.connect(self._failed)
+        self.job = BackgroundJob("qrfield-analysis", self)
+        self.job.finished.connect(self._done)
+        self.job.failed.connect(self._failed)
+        self._build_controls()
+        self._build_results()
+        layout = QtWidgets.QVBoxLayout(self)
+        layout.setContentsMargins(6, 6, 6, 6)
+        layout.addLayout(self.controls)
+        layout.addWidget(self.state)
+        layout.addWidget(self.pass_rate)
+        layout.addWidget(self.pages, 1)
+        self.refresh_sessions()
 
+    # ---------------------------------------------------------------- builders
+    def _build_controls(self) -> None:
         self.choice = QtWidgets.QComboBox()
         self.choice.setObjectName("analysis_session")
         self.choice.setEditable(True)
         self.choice.setToolTip("a session folder (the open session is first)")
-        browse = QtWidgets.QPushButton("Folder…")
-        browse.clicked.connect(self._browse)
-        refresh = QtWidgets.QPushButton("↻")
+        self.choice.setMinimumContentsLength(12)
+        self.choice.setSizeAdjustPolicy(
+            QtWidgets.QComboBox.SizeAdjustPolicy.AdjustToMinimumContentsLengthWithIcon
+        )
+        refresh = touch_button("↻")
+        refresh.setFixedWidth(44)
         refresh.setToolTip("list the sessions folder again")
         refresh.clicked.connect(self.refresh_sessions)
-        self.run_button = QtWidgets.QPushButton("Analyze")
-        self.run_button.setObjectName("analyze")
+        browse = touch_button("Folder…")
+        browse.clicked.connect(self._browse)
+        self.run_button = touch_button("Analyze", "analyze")
         self.run_button.clicked.connect(self.run)
-        top = QtWidgets.QHBoxLayout()
-        top.addWidget(self.choice, 1)
-        top.addWidget(refresh)
-        top.addWidget(browse)
-        top.addWidget(self.run_button)
-        self.state = QtWidgets.QLabel("choose a session and press Analyze")
+        self.save_button = touch_button("Save as…", "save_analysis")
+        self.save_button.setToolTip("copy the report, its JSON and the plots to a folder you choose")
+        self.save_button.setEnabled(False)
+        self.save_button.clicked.connect(self.save_as)
+        first, second = QtWidgets.QHBoxLayout(), QtWidgets.QHBoxLayout()
+        first.addWidget(self.choice, 1)
+        first.addWidget(refresh)
+        first.addWidget(browse)
+        second.addWidget(self.run_button)
+        second.addWidget(self.save_button)
+        second.addStretch(1)
+        self.controls = QtWidgets.QVBoxLayout()  # two lines: the session's name needs the width
+        self.controls.addLayout(first)
+        self.controls.addLayout(second)
+        self.state = WrappedLabel("choose a session and press Analyze")
         self.state.setObjectName("analysis_state")
-        self.state.setWordWrap(True)
-        self.pass_rate = QtWidgets.QLabel("")
+        self.pass_rate = WrappedLabel("")
         self.pass_rate.setObjectName("analysis_pass_rate")
-        self.pass_rate.setStyleSheet("font-size: 15pt; font-weight: bold;")
+        self.pass_rate.setStyleSheet("font-size: 13pt; font-weight: bold;")
+
+    def _build_results(self) -> None:
         self.report = QtWidgets.QPlainTextEdit()
         self.report.setObjectName("analysis_report")
         self.report.setReadOnly(True)
         self.report.setLineWrapMode(QtWidgets.QPlainTextEdit.LineWrapMode.NoWrap)
         self.report.setFont(QtGui.QFontDatabase.systemFont(QtGui.QFontDatabase.SystemFont.FixedFont))
-        self.report.setMinimumHeight(140)
         self.table = QtWidgets.QTableWidget(0, len(TABLE_COLUMNS) + len(ERROR_COLUMNS))
         self.table.setObjectName("analysis_table")
         self.table.setHorizontalHeaderLabels(
-            [h for h, _, _ in TABLE_COLUMNS] + [f"{h} mean/max" for h, _ in ERROR_COLUMNS]
+            [h for h, _, _ in TABLE_COLUMNS] + [f"{h}\nmean / max" for h, _ in ERROR_COLUMNS]
         )
         self.table.verticalHeader().hide()
         self.table.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
-        self.table.setMaximumHeight(160)
         self.plots: list[ScaledImage] = []
-        plots = QtWidgets.QVBoxLayout()
+        plots_page = QtWidgets.QWidget()
+        plots_layout = QtWidgets.QVBoxLayout(plots_page)
         for name in ("errors against tilt", "measured against truth"):
             label = ScaledImage(f"({name}: not drawn yet)")
             label.setObjectName(name.replace(" ", "_"))
             self.plots.append(label)
-            plots.addWidget(label)
-        layout = QtWidgets.QVBoxLayout(self)
-        layout.addLayout(top)
-        layout.addWidget(self.state)
-        layout.addWidget(self.pass_rate)
-        layout.addWidget(self.report)
-        layout.addWidget(self.table)
-        layout.addLayout(plots)
-        self.refresh_sessions()
+            plots_layout.addWidget(label)
+        plots_layout.addStretch(1)
+        plots_area = QtWidgets.QScrollArea()
+        plots_area.setWidget(plots_page)
+        plots_area.setWidgetResizable(True)
+        self.pages = QtWidgets.QTabWidget()
+        self.pages.setObjectName("analysis_pages")
+        self.pages.addTab(self.report, "Report")
+        self.pages.addTab(self.table, "Per combination")
+        self.pages.addTab(plots_area, "Plots")
 
     # ---------------------------------------------------------------- choosing
     def set_current(self, path: str | os.PathLike[str] | None) -> None:
@@ -194,41 +245,57 @@ class AnalysisTab(QtWidgets.QWidget):
     # ---------------------------------------------------------------- running
     @property
     def busy(self) -> bool:
-        return self._thread is not None and self._thread.is_alive()
+        return self.job.busy
 
     def run(self) -> bool:
-        """Start the analysis of the chosen session on a worker thread; False if it cannot start."""
+        """Start the analysis of the chosen session in the background; False if it cannot start."""
         session_dir = self.chosen()
         if not session_dir:
-            self.state.setText("choose a session first")
+            self._set_state("choose a session first", error=True)
             return False
-        if self.busy:
-            self.state.setText("an analysis is running")
+        if not self.job.start(analyse_into_session, session_dir):
+            self._set_state("an analysis is running", error=False)
             return False
-        self._runs += 1
-        out = Path(self._out.name) / f"run{self._runs}"
         self.run_button.setEnabled(False)
-        self.state.setText(f"analysing {session_dir} …")
-        self._thread = self._runner.start(session_dir, str(out))
+        self._set_state(f"analysing {short_path(session_dir)} …", error=False)
         return True
+
+    def _set_state(self, text: str, error: bool) -> None:
+        self.state.setText(text)
+        self.state.setStyleSheet("color: #c0392b;" if error else "")
 
     def _failed(self, message: str) -> None:
         self.run_button.setEnabled(True)
-        self.state.setText(message)
-        self.state.setStyleSheet("color: #c0392b;")
+        self._set_state(f"analysis of {self.chosen()} failed: {message}", error=True)
 
     def _done(self, result: dict[str, Any]) -> None:
         self.run_button.setEnabled(True)
-        self.state.setStyleSheet("")
+        self.save_button.setEnabled(True)
         self.result = result
-        self.state.setText(f"analysed {result['session']}; plots in {Path(self._out.name)}")
+        where = short_path(result["out_dir"])
+        self._set_state(
+            f"analysed {Path(result['session']).name}; results in {where}"
+            + (f"\n⚠ {result['out_note']}" if result["out_note"] else ""),
+            error=bool(result["out_note"]),
+        )
         rate = result["pass_rate"]
         self.pass_rate.setText(
             "pass rate: -"
             if rate is None
-            else f"pass rate {100 * rate:.2f} %  ({result['passed']} of {result['rows']} rows)"
+            else f"pass rate {fixed(100 * rate, 2)} %  ({result['passed']} of {result['rows']} rows)"
         )
         self.report.setPlainText(result["report"])
+        self._fill_table(result)
+        for label, path in zip(self.plots, result["plots"], strict=False):
+            pixmap = QtGui.QPixmap(path)
+            if pixmap.isNull():
+                label.setText(f"cannot show {path}")
+            else:
+                label.set_image(pixmap)
+            label.setToolTip(path)
+        self.analysisDone.emit(result)
+
+    def _fill_table(self, result: dict[str, Any]) -> None:
         items = [*result["per_combination"], {"combo": "all", **result}]
         self.table.setRowCount(len(items))
         for r, item in enumerate(items):
@@ -240,18 +307,32 @@ class AnalysisTab(QtWidgets.QWidget):
             for c, text in enumerate(cells):
                 self.table.setItem(r, c, QtWidgets.QTableWidgetItem(text))
         self.table.resizeColumnsToContents()
-        for label, path in zip(self.plots, result["plots"], strict=False):
-            pixmap = QtGui.QPixmap(path)
-            if pixmap.isNull():
-                label.setText(f"cannot show {path}")
-            else:
-                label.set_image(pixmap)
-            label.setToolTip(path)
-        self.analysisDone.emit(result)
+
+    # ---------------------------------------------------------------- saving
+    def ask_save_folder(self) -> str:
+        """The folder to copy the results to ("" = cancelled); tests replace this."""
+        return QtWidgets.QFileDialog.getExistingDirectory(self, "Save the analysis in", str(Path.home()))
+
+    def save_as(self) -> list[Path]:
+        """Copy the last analysis' files to a folder the operator chooses; the copies' paths."""
+        if self.result is None:
+            return []
+        folder = self.ask_save_folder()
+        if not folder:
+            return []
+        prefix = Path(self.result["session"]).name
+        copies = []
+        try:
+            for path in result_files(self.result):
+                target = Path(folder) / f"{prefix}-{path.name}"
+                shutil.copyfile(path, target)
+                copies.append(target)
+        except OSError as exc:
+            self._set_state(f"not saved to {folder}: {exc}", error=True)
+            return copies
+        self._set_state(f"saved {len(copies)} files to {short_path(folder)}", error=False)
+        return copies
 
     def shutdown(self) -> None:
-        """Wait briefly for a running analysis, then remove the temporary plots."""
-        if self._thread is not None:
-            self._thread.join(timeout=5.0)
-        if not self.busy:
-            self._out.cleanup()
+        """Wait briefly for a running analysis (the window is closing)."""
+        self.job.join(5.0)

@@ -6,16 +6,18 @@ rendering seeded board poses through the app's current camera model (so the dial
 and tested, without hardware). A :class:`BoardFinder` runs :func:`qrfield.calibration.detect_board`
 (``thorough=False`` for live frames) and draws the corners on its own thread, one frame at a time:
 a frame arriving while it is busy replaces the waiting one (frames are dropped, never queued).
-:func:`qrfield.calibration.calibrate` runs on a plain thread too; results come back by signal.
-Saving writes the CameraModel JSON to the user's profile folder
-(:func:`qrfield.paths.user_calib_dir`, ``~/.config/qrfield/calib/NAME.json``, where ``--camera NAME``
-finds it; no silent overwrite); "Use" makes it the app's camera model.
+Saving writes the CameraModel JSON as ``NAME.json`` in the user's calib folder
+(:func:`qrfield.paths.user_calib_dir`, never the checkout's shipped presets; no silent
+overwrite), NAME being the camera name the operator gives; "Use" makes it the app's camera model.
+:func:`qrfield.calibration.calibrate` runs as a :class:`ui.background.BackgroundJob`. The dialog
+fits an 800x480 screen: its controls scroll beside the picture.
 """
 
 from __future__ import annotations
 
 import contextlib
 import dataclasses
+import re
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -42,7 +44,9 @@ from qrfield.chessboard import Board
 from qrfield.files import make_folder
 from qrfield.settings import setting
 from qrfield.virtual_board import VirtualChessboard
+from ui.background import BackgroundJob
 from ui.settings_form import SettingsForm
+from ui.text import short_path
 
 COVERED_COLOUR = "#2a8c2a"
 UNCOVERED_COLOUR = "#c44"
@@ -64,7 +68,12 @@ class CalibrationDialogSettings:
         decimals=2,
         help="printed square side",
     )
-    name: str = setting("calibrated", label="camera name", help="saved as NAME.json in your profile folder")
+    name: str = setting(
+        "calibrated",
+        label="camera name",
+        help="saved as NAME.json in the user's calib folder (~/.config/qrfield/calib); "
+        "the Camera tab then knows it by this name",
+    )
     fix_k3: bool = setting(False, label="fix k3", help="keep k3 = 0 (few views, or a mild lens)")
     virtual_seed: int = setting(
         1, label="virtual seed", minimum=0, maximum=1_000_000, help="seed of the virtual chessboard's poses"
@@ -169,7 +178,7 @@ class CalibrationDialog(QtWidgets.QDialog):
     """
 
     cameraChosen = QtCore.Signal(str)
-    computed = QtCore.Signal(object)  # CalibrationResult or an error message (str)
+    computed = QtCore.Signal(object)  # shown: the CalibrationResult or an error message (str)
 
     def __init__(
         self,
@@ -179,6 +188,7 @@ class CalibrationDialog(QtWidgets.QDialog):
     ) -> None:
         super().__init__(parent)
         self.setWindowTitle("qrfield — camera calibration")
+        self._initial_settings = settings
         self.camera_provider = camera_provider
         self.captured: list[BoardDetection] = []
         #: per captured view, the exact corner pixels when it was rendered (virtual), else None
@@ -190,12 +200,31 @@ class CalibrationDialog(QtWidgets.QDialog):
         self._virtual: VirtualChessboard | None = None
         self._virtual_key: tuple[Any, ...] | None = None
         self.finder = BoardFinder()
+        self.job = BackgroundJob("calibrate", self)
+        left = self._build_picture()
+        right = QtWidgets.QScrollArea()  # the controls scroll on a small screen; the picture stays
+        page = self._build_controls()
+        right.setWidget(page)
+        right.setWidgetResizable(True)
+        right.setHorizontalScrollBarPolicy(QtCore.Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
+        scrollbar = right.style().pixelMetric(QtWidgets.QStyle.PixelMetric.PM_ScrollBarExtent)
+        right.setMinimumWidth(page.minimumSizeHint().width() + scrollbar + 2 * right.frameWidth())
+        layout = QtWidgets.QHBoxLayout(self)
+        layout.addLayout(left, 3)
+        layout.addWidget(right, 2)
+        self._fit_screen()
+        self._wire()
+        self._board = self._parse_board()
+        self._seed = self.settings().virtual_seed
+        self._update_coverage()
+        self._update_path()
 
-        # ----- left: the picture
+    # ---------------------------------------------------------------- builders
+    def _build_picture(self) -> QtWidgets.QVBoxLayout:
         self.picture = QtWidgets.QLabel("waiting for frames…")
         self.picture.setObjectName("picture")
         self.picture.setAlignment(QtCore.Qt.AlignmentFlag.AlignCenter)
-        self.picture.setMinimumSize(480, 360)
+        self.picture.setMinimumSize(240, 180)
         self.picture.setSizePolicy(QtWidgets.QSizePolicy.Policy.Ignored, QtWidgets.QSizePolicy.Policy.Ignored)
         self.picture.setStyleSheet("background: #202020; color: #ccc;")
         self.found_label = QtWidgets.QLabel("")
@@ -204,13 +233,15 @@ class CalibrationDialog(QtWidgets.QDialog):
         left = QtWidgets.QVBoxLayout()
         left.addWidget(self.picture, 1)
         left.addWidget(self.found_label)
+        return left
 
-        # ----- right: settings, views, coverage, results
-        self.form = SettingsForm(CalibrationDialogSettings, settings)
-        self.virtual_check = QtWidgets.QCheckBox(
-            "virtual chessboard (seeded poses through the app's camera model)"
-        )
+    def _build_controls(self) -> QtWidgets.QWidget:
+        self.form = SettingsForm(CalibrationDialogSettings, self._initial_settings)
+        self.virtual_check = QtWidgets.QCheckBox("virtual chessboard")
+        self.virtual_check.setToolTip("seeded board poses rendered through the app's camera model")
         self.virtual_check.setObjectName("virtual")
+        policy = QtWidgets.QSizePolicy.Policy
+        self.virtual_check.setSizePolicy(policy.Maximum, policy.Fixed)  # a click beside the text does nothing
         self.next_button = QtWidgets.QPushButton("Next pose")
         self.next_button.setObjectName("next_pose")
         self.next_button.setEnabled(False)
@@ -220,7 +251,6 @@ class CalibrationDialog(QtWidgets.QDialog):
         capture_row = QtWidgets.QHBoxLayout()
         capture_row.addWidget(self.capture_button, 2)
         capture_row.addWidget(self.next_button, 1)
-
         self.views = QtWidgets.QListWidget()
         self.views.setObjectName("views")
         self.views.setMaximumHeight(110)
@@ -229,27 +259,6 @@ class CalibrationDialog(QtWidgets.QDialog):
         views_row = QtWidgets.QHBoxLayout()
         views_row.addWidget(self.remove_button)
         views_row.addWidget(self.clear_button)
-
-        coverage_box = QtWidgets.QGroupBox("where the board has been (views per image cell)")
-        coverage_layout = QtWidgets.QVBoxLayout(coverage_box)
-        grid = QtWidgets.QGridLayout()
-        grid.setSpacing(2)
-        self.cells: list[list[QtWidgets.QLabel]] = []
-        for r in range(3):
-            row_labels = []
-            for c in range(3):
-                label = QtWidgets.QLabel("0")
-                label.setAlignment(QtCore.Qt.AlignmentFlag.AlignCenter)
-                label.setMinimumSize(44, 26)
-                grid.addWidget(label, r, c)
-                row_labels.append(label)
-            self.cells.append(row_labels)
-        coverage_layout.addLayout(grid)
-        self.hint = QtWidgets.QLabel("")
-        self.hint.setObjectName("hint")
-        self.hint.setWordWrap(True)
-        coverage_layout.addWidget(self.hint)
-
         self.compute_button = QtWidgets.QPushButton(f"Compute (needs {MIN_VIEWS} views)")
         self.compute_button.setObjectName("compute")
         self.compute_button.setEnabled(False)
@@ -272,28 +281,55 @@ class CalibrationDialog(QtWidgets.QDialog):
         self.note = QtWidgets.QLabel("")
         self.note.setObjectName("note")
         self.note.setWordWrap(True)
-
-        right = QtWidgets.QVBoxLayout()
+        page = QtWidgets.QWidget()
+        right = QtWidgets.QVBoxLayout(page)
         right.addWidget(self.form)
         right.addWidget(self.virtual_check)
         right.addLayout(capture_row)
         right.addWidget(self.views)
         right.addLayout(views_row)
-        right.addWidget(coverage_box)
+        right.addWidget(self._build_coverage())
         right.addWidget(self.compute_button)
         right.addWidget(self.results, 1)
         right.addWidget(self.path_label)
         right.addLayout(out_row)
         right.addWidget(self.note)
-        layout = QtWidgets.QHBoxLayout(self)
-        layout.addLayout(left, 3)
-        layout.addLayout(right, 2)
-        self.resize(1100, 820)
+        return page
 
-        # ----- wiring
+    def _build_coverage(self) -> QtWidgets.QGroupBox:
+        box = QtWidgets.QGroupBox("views per image cell")
+        box.setToolTip("where the board has been: captured views with a corner in each ninth of the image")
+        layout = QtWidgets.QVBoxLayout(box)
+        grid = QtWidgets.QGridLayout()
+        grid.setSpacing(2)
+        self.cells: list[list[QtWidgets.QLabel]] = []
+        for r in range(3):
+            row_labels = []
+            for c in range(3):
+                label = QtWidgets.QLabel("0")
+                label.setAlignment(QtCore.Qt.AlignmentFlag.AlignCenter)
+                label.setMinimumSize(44, 26)
+                grid.addWidget(label, r, c)
+                row_labels.append(label)
+            self.cells.append(row_labels)
+        layout.addLayout(grid)
+        self.hint = QtWidgets.QLabel("")
+        self.hint.setObjectName("hint")
+        self.hint.setWordWrap(True)
+        layout.addWidget(self.hint)
+        return box
+
+    def _fit_screen(self) -> None:
+        """1100x820, or the screen's free area when that is smaller (an 800x480 display)."""
+        screen = self.screen() or QtWidgets.QApplication.primaryScreen()
+        free = screen.availableGeometry() if screen is not None else QtCore.QRect(0, 0, 1100, 820)
+        self.resize(min(1100, free.width()), min(820, free.height()))
+
+    def _wire(self) -> None:
         self.finder.previewReady.connect(self._on_preview)
         self.finder.failed.connect(lambda text: self.note.setText(f"⚠ preview: {text}"))
-        self.computed.connect(self._on_computed)
+        self.job.finished.connect(self._on_computed)
+        self.job.failed.connect(lambda text: self._on_computed(f"calibration failed: {text}"))
         self.form.changed.connect(self._on_settings_changed)
         self.virtual_check.toggled.connect(self._on_virtual_toggled)
         self.next_button.clicked.connect(self.request_virtual_view)
@@ -303,10 +339,6 @@ class CalibrationDialog(QtWidgets.QDialog):
         self.compute_button.clicked.connect(self.compute)
         self.save_button.clicked.connect(self.save)
         self.use_button.clicked.connect(self.use)
-        self._board = self._parse_board()
-        self._seed = self.settings().virtual_seed
-        self._update_coverage()
-        self._update_path()
 
     # ---------------------------------------------------------------- settings
     def settings(self) -> CalibrationDialogSettings:
@@ -340,10 +372,10 @@ class CalibrationDialog(QtWidgets.QDialog):
             self.request_virtual_view()
 
     def save_path(self) -> Path:
-        """Where Save writes: ``NAME.json`` in the user's profile folder (qrfield.paths.user_calib_dir),
-        the folder ``--camera NAME`` looks in (``./calib`` is not searched by name, docs/cli.md)."""
-        name = self.settings().name.strip() or "calibrated"
-        return paths.user_calib_dir() / f"{name}.json"
+        """Where Save writes: ``NAME.json`` in the user's calib folder
+        (:func:`qrfield.paths.user_calib_dir`, where camera names are looked up), NAME being the
+        camera name given, made file-safe."""
+        return paths.user_calib_dir() / f"{profile_name(self.settings().name)}.json"
 
     def _update_path(self) -> None:
         self.path_label.setText(f"saves to {_shown_path(self.save_path())}")
@@ -499,7 +531,7 @@ class CalibrationDialog(QtWidgets.QDialog):
 
     # ---------------------------------------------------------------- compute
     def compute(self) -> None:
-        """Calibrate from the captured views on a worker thread; ``computed`` brings the result."""
+        """Calibrate from the captured views in the background; ``computed`` once the result is shown."""
         board = self._board
         if self.computing or board is None or len(self.captured) < MIN_VIEWS:
             return
@@ -511,17 +543,13 @@ class CalibrationDialog(QtWidgets.QDialog):
         name = s.name.strip() or "calibrated"
         stream = self.camera_provider()  # its sensor crop and lens position go into the profile
 
-        def work() -> None:
+        def work() -> Any:
             try:
-                outcome: Any = calibrate(detections, board, fix_k3=s.fix_k3, name=name, stream=stream)
+                return calibrate(detections, board, fix_k3=s.fix_k3, name=name, stream=stream)
             except CalibrationError as exc:
-                outcome = f"calibration failed: {exc}"
-            except Exception as exc:  # never let the thread die silently
-                outcome = f"calibration failed: {type(exc).__name__}: {exc}"
-            with contextlib.suppress(RuntimeError):  # the dialog was deleted meanwhile
-                self.computed.emit(outcome)
+                return f"calibration failed: {exc}"
 
-        threading.Thread(target=work, name="calibrate", daemon=True).start()
+        self.job.start(work)
 
     def _on_computed(self, outcome: Any) -> None:
         self.computing = False
@@ -529,6 +557,7 @@ class CalibrationDialog(QtWidgets.QDialog):
         if isinstance(outcome, str):
             self.result = None
             self.results.setPlainText(outcome)
+            self.computed.emit(outcome)
             return
         self.result = outcome
         self.saved_path = None
@@ -541,6 +570,7 @@ class CalibrationDialog(QtWidgets.QDialog):
             item.setText(f"{base}  → {view.rms_px:.3f} px RMS" if view else f"{base}  → skipped")
         self.save_button.setEnabled(True)
         self.use_button.setEnabled(True)
+        self.computed.emit(outcome)
 
     # ---------------------------------------------------------------- save / use
     def confirm_overwrite(self, path: Path) -> bool:
@@ -586,6 +616,7 @@ class CalibrationDialog(QtWidgets.QDialog):
     # ---------------------------------------------------------------- shutdown
     def shutdown(self) -> None:
         self.finder.stop()
+        self.job.join(5.0)
 
     def showEvent(self, event: QtGui.QShowEvent) -> None:
         super().showEvent(event)
@@ -597,12 +628,15 @@ class CalibrationDialog(QtWidgets.QDialog):
         super().closeEvent(event)
 
 
+def profile_name(name: str) -> str:
+    """A camera name as a file name: letters, digits, '.', '_', '-'; other runs become '-'."""
+    cleaned = re.sub(r"[^A-Za-z0-9._-]+", "-", name.strip()).strip("-.")
+    return cleaned[:60] or "calibrated"
+
+
 def _shown_path(path: Path) -> str:
-    """``path`` relative to the working directory when it lies below it (shorter to read)."""
-    try:
-        return str(path.relative_to(Path.cwd()))
-    except ValueError:
-        return str(path)
+    """``path`` with the home folder as ``~`` (shorter to read)."""
+    return short_path(path)
 
 
 def describe(result: CalibrationResult) -> str:

@@ -60,6 +60,10 @@ class SourceControls(QtWidgets.QWidget):
         self.open_button = QtWidgets.QPushButton("Open / reopen source")
         self.open_button.setObjectName("open_source")
         layout.addRow(self.open_button)
+        self.state = QtWidgets.QLabel("")
+        self.state.setObjectName("source_state")
+        self.state.setWordWrap(True)
+        layout.addRow(self.state)
         box = QtWidgets.QGroupBox("Raspberry Pi camera (picamera2)")
         box_layout = QtWidgets.QVBoxLayout(box)
         self.picamera = SettingsForm(Picamera2Settings, picamera)
@@ -75,6 +79,11 @@ class SourceControls(QtWidgets.QWidget):
 
     def source(self) -> str:
         return self.combo.currentText().strip() or "auto"
+
+    def show_state(self, text: str, error: bool = False) -> None:
+        """What the source is doing: its description when open, why when it failed."""
+        self.state.setText(text)
+        self.state.setStyleSheet("color: #c0392b;" if error else "color: #1d6b1d;")
 
     def set_source(self, spec: str) -> None:
         with QtCore.QSignalBlocker(self.combo):

@@ -1,5 +1,8 @@
-"""The bench app's main window: preview, pose panel, the control tabs (right) and, under the
-preview, the live plots and the Session, Analysis and Simulation tabs.
+"""The bench app's main window: on the left the preview over the pose panel, on the right the
+tabs (Session first, Live plots, Analysis, Simulation, and Setup with the Source, Detect & solve,
+Camera, Virtual bench and Serial pages). It fits an 800x480 touch display, 1024x600 and a desktop:
+the window never grows beyond the screen, the pose panel's type shrinks on a small screen, and
+only lists, tables and long settings forms scroll (docs/app.md).
 
 The window never touches the camera: a :class:`~ui.worker.PipelineWorker` on its own QThread
 captures and processes; the window takes the newest result on a QTimer (older unread results are
@@ -10,7 +13,9 @@ and is saved to the config file when the window closes.
 from __future__ import annotations
 
 import dataclasses
+import os
 import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -35,18 +40,30 @@ from ui.controls import (
 )
 from ui.plots import PosePlots
 from ui.pose_panel import PosePanel
-from ui.preview import PreviewView
+from ui.preview import PreviewPane, PreviewView
 from ui.serial_panel import SerialPanel
+from ui.session_dialogs import touch_button
 from ui.sessions_panel import BenchContext, SessionPanel
 from ui.settings_form import SettingsForm
 from ui.simulation_tab import CONFIG_KEY as SIMULATION_KEY
 from ui.simulation_tab import SimulationTab
+from ui.wheel_guard import install_wheel_guard
 from ui.worker import PipelineWorker, Processed, start_worker, stop_worker
 
 #: Redraw period of the GUI timer, ms (40 Hz, above the usual camera rate); plots redraw at most
 #: every PLOT_PERIOD_S seconds.
 REDRAW_MS = 25
 PLOT_PERIOD_S = 0.2
+#: The window's size on a desktop (px); never more than the screen's free area.
+DESKTOP_SIZE = (1300, 820)
+#: The smallest window (px): the Raspberry Pi Touch Display, the smallest size the layout is tested at.
+MINIMUM_SIZE = (800, 480)
+#: Below this window height (px) the pose panel uses its compact type (800x480, 1024x600).
+COMPACT_BELOW_PX = 700
+#: The left column's (preview and pose) share of the window's width.
+LEFT_SHARE = 0.44
+#: How many notes the window keeps (the status bar's tooltip shows the last few).
+NOTES_KEPT = 50
 
 
 def detector_settings_class() -> type:
@@ -69,33 +86,51 @@ class MainWindow(QtWidgets.QMainWindow):
         source_factory: Any = None,
     ) -> None:
         super().__init__()
+        install_wheel_guard()  # before any control is polished (see ui/wheel_guard.py)
         self.setWindowTitle("qrfield — bench")
         self.store = store
         self.app_settings: RunSettings = dataclasses.replace(
             store.group("run", RunSettings), **{k: v for k, v in (overrides or {}).items() if v is not None}
         )
         self.view_settings: ViewSettings = store.group("view", ViewSettings)
-        classes = settings_classes()
-        detector_cls = detector_settings_class()
         self.camera_model: CameraModel | None = None
+        self.notes: list[str] = []  # every status note, in full (the status bar may shorten them)
+        self._build_live_view()
+        self._build_setup_tabs()
+        self._build_work_tabs()
+        self._build_layout()
+        self._start_worker(source_factory)
+        self._wire()
+        self._start_redraw()
+        self.session_panel.offer_reopen()
 
-        # ----- widgets
+    # ---------------------------------------------------------------- builders
+    def _build_live_view(self) -> None:
+        """The preview (or its empty state), the source-failure banner and the pose panel."""
         self.preview = PreviewView()
-        self.plots = PosePlots(self.view_settings.plot_window_s)
+        self.preview_pane = PreviewPane(self.preview)
+        self.preview_pane.show_empty(f"Opening the source “{self.app_settings.source}” …")
         self.pose_panel = PosePanel()
         self.banner = QtWidgets.QLabel("")
         self.banner.setObjectName("banner")
         self.banner.setWordWrap(True)
-        self.banner.setStyleSheet("background: #a01818; color: white; padding: 6px; font-weight: bold;")
-        self.banner_button = QtWidgets.QPushButton("Reopen source")
-        banner_row = QtWidgets.QWidget()
+        self.banner.setStyleSheet("color: white; font-weight: bold;")
+        self.banner_button = touch_button("Reopen source", "reopen_source")
+        banner_row = QtWidgets.QFrame()
+        banner_row.setObjectName("banner_row")
+        banner_row.setStyleSheet("QFrame#banner_row { background: #a01818; }")
         banner_layout = QtWidgets.QHBoxLayout(banner_row)
-        banner_layout.setContentsMargins(0, 0, 0, 0)
+        banner_layout.setContentsMargins(6, 2, 6, 2)
         banner_layout.addWidget(self.banner, 1)
         banner_layout.addWidget(self.banner_button)
         self.banner_row = banner_row
         banner_row.hide()
 
+    def _build_setup_tabs(self) -> None:
+        """Source, detection and solvers, camera, virtual bench, serial: the Setup tab's pages."""
+        store = self.store
+        classes = settings_classes()
+        detector_cls = detector_settings_class()
         self.source_controls = SourceControls(store.group("picamera", Picamera2Settings))
         self.solver_controls = SolverControls(
             classes,
@@ -106,74 +141,82 @@ class MainWindow(QtWidgets.QMainWindow):
         self.virtual_form = SettingsForm(VirtualBenchSettings, store.group("virtual", VirtualBenchSettings))
         show_app_settings(self.app_settings, self.source_controls, self.solver_controls, self.camera_controls)
         show_view_settings(self.view_settings, self.camera_controls)
-
-        tabs = QtWidgets.QTabWidget()
-        tabs.addTab(_scrolled(self.source_controls), "Source")
-        tabs.addTab(_scrolled(self.solver_controls), "Detect && solve")
-        tabs.addTab(self.camera_controls, "Camera")
-        tabs.addTab(_scrolled(self.virtual_form), "Virtual bench")
         self.serial_panel = SerialPanel(store.group("serial", SerialLinkSettings))
         self.calibration_dialog: CalibrationDialog | None = None
         self.calibrate_button = QtWidgets.QPushButton("Calibrate camera…")
         self.calibrate_button.setObjectName("calibrate")
         self.camera_controls.layout().addRow(self.calibrate_button)
         self.calibrate_button.clicked.connect(self.open_calibration)
+        tabs = QtWidgets.QTabWidget()
+        tabs.setObjectName("setup_tabs")
+        tabs.addTab(_scrolled(self.source_controls), "Source")
+        tabs.addTab(_scrolled(self.solver_controls), "Detect && solve")
+        tabs.addTab(_scrolled(self.camera_controls), "Camera")
+        tabs.addTab(_scrolled(self.virtual_form), "Virtual bench")
         tabs.addTab(_scrolled(self.serial_panel), "Serial")
+        self.tabs = tabs
+
+    def _build_work_tabs(self) -> None:
+        """The right-hand tabs: Session first (what an operator does), then the plots, the
+        analysis, the simulation and the Setup pages."""
+        store, app = self.store, self.app_settings
+        self.plots = PosePlots(self.view_settings.plot_window_s)
         self.session_panel = SessionPanel(store, self._session_context)
         self.analysis_tab = AnalysisTab(self.session_panel.root)
         self.session_panel.set_default_solver(self.methods())
-        self.session_panel.sessionChanged.connect(lambda s: self.analysis_tab.set_current(s and s.path))
-        # The pose panel judges against the open session's criteria, else those of the New form.
-        self.session_panel.sessionChanged.connect(lambda _s: self._show_criteria())
-        self.session_panel.criteria_form.changed.connect(lambda *_: self._show_criteria())
-        self._show_criteria()
-        self.tabs = tabs
-        # Under the preview, the wide pane: the live plots and the pages whose tables and pictures
-        # need the width (rows, analysis, coverage); the controls keep the narrow right-hand tabs.
+        self.simulation_tab = SimulationTab(app.camera, app.side_mm, store.value(SIMULATION_KEY))
         work = QtWidgets.QTabWidget()
         work.setObjectName("work_tabs")
+        work.addTab(self.session_panel, "Session")
         work.addTab(self.plots, "Live plots")
-        work.addTab(_scrolled(self.session_panel), "Session")
-        work.addTab(_scrolled(self.analysis_tab), "Analysis")
-        app = self.app_settings
-        self.simulation_tab = SimulationTab(app.camera, app.side_mm, store.value(SIMULATION_KEY))
+        work.addTab(self.analysis_tab, "Analysis")
         work.addTab(self.simulation_tab, "Simulation")
+        work.addTab(self.tabs, "Setup")
         self.work_tabs = work
 
-        left = QtWidgets.QSplitter(QtCore.Qt.Orientation.Vertical)
-        top = QtWidgets.QWidget()
-        top_layout = QtWidgets.QVBoxLayout(top)
-        top_layout.setContentsMargins(0, 0, 0, 0)
-        top_layout.addWidget(banner_row)
-        top_layout.addWidget(self.preview, 1)
-        left.addWidget(top)
-        left.addWidget(work)
-        left.setSizes([470, 330])
-        self.left_splitter = left
-        work.currentChanged.connect(self._work_tab_chosen)
-        right = QtWidgets.QWidget()
-        right_layout = QtWidgets.QVBoxLayout(right)
-        right_layout.addWidget(self.pose_panel)
-        right_layout.addWidget(tabs, 1)
+    def _build_layout(self) -> None:
+        """Left: the picture over the pose; right: the tabs. Sized to fit the screen."""
+        left = QtWidgets.QWidget()
+        left_layout = QtWidgets.QVBoxLayout(left)
+        left_layout.setContentsMargins(0, 0, 0, 0)
+        left_layout.setSpacing(2)
+        left_layout.addWidget(self.preview_pane, 1)
+        left_layout.addWidget(self.pose_panel)
         splitter = QtWidgets.QSplitter(QtCore.Qt.Orientation.Horizontal)
+        splitter.setObjectName("main_splitter")
+        splitter.setChildrenCollapsible(False)
         splitter.addWidget(left)
-        splitter.addWidget(right)
-        splitter.setSizes([820, 480])
-        splitter.setStretchFactor(0, 3)
-        splitter.setStretchFactor(1, 2)
-        self.setCentralWidget(splitter)
+        splitter.addWidget(self.work_tabs)
+        splitter.setStretchFactor(0, 2)
+        splitter.setStretchFactor(1, 3)
+        self.splitter = splitter
+        central = QtWidgets.QWidget()
+        central_layout = QtWidgets.QVBoxLayout(central)
+        central_layout.setContentsMargins(0, 0, 0, 0)
+        central_layout.setSpacing(0)
+        central_layout.addWidget(self.banner_row)  # across the whole window: few lines, even at 800 px
+        central_layout.addWidget(splitter, 1)
+        self.setCentralWidget(central)
+        # The window keeps the size it is given (the screen's): word-wrapped labels would otherwise
+        # raise its minimum height to their height at the narrowest width and grow it past an
+        # 800x480 screen. That everything fits is checked by tests/ui/test_app_layout.py.
+        self.layout().setSizeConstraint(QtWidgets.QLayout.SizeConstraint.SetNoConstraint)
         self.status_source = QtWidgets.QLabel("")
+        self.status_source.setObjectName("status_source")
         self.status_rate = QtWidgets.QLabel("")
-        self.statusBar().addWidget(self.status_source, 1)
+        self.status_rate.setObjectName("status_rate")
+        self.statusBar().addWidget(self.status_source)
         self.statusBar().addPermanentWidget(self.status_rate)
-        self.resize(1300, 820)
-        geometry = store.value("window")
+        QtGui.QShortcut(QtGui.QKeySequence(QtCore.Qt.Key.Key_F11), self, self.toggle_full_screen)
+        geometry = self.store.value("window")
         if isinstance(geometry, str):
             self.restoreGeometry(QtCore.QByteArray.fromBase64(geometry.encode()))
+        else:
+            self.resize(*DESKTOP_SIZE)
+        self.fit_screen()
 
-        # ----- worker
-        config = self._run_config()
-        self.worker = PipelineWorker(config, source_factory=source_factory)
+    def _start_worker(self, source_factory: Any) -> None:
+        self.worker = PipelineWorker(self._run_config(), source_factory=source_factory)
         self.worker.sourceOpened.connect(self._on_source_opened)
         self.worker.sourceFailed.connect(self._on_source_failed)
         self.worker.sourceNote.connect(self._on_note)
@@ -181,18 +224,26 @@ class MainWindow(QtWidgets.QMainWindow):
         self.thread = start_worker(self.worker)
         self._closed = False
 
-        # ----- wiring
+    def _wire(self) -> None:
         self.source_controls.openRequested.connect(self._open_source)
         self.source_controls.changed.connect(self._apply)
         self.solver_controls.changed.connect(self._apply)
         self.camera_controls.changed.connect(self._apply)
         self.virtual_form.changed.connect(self._apply)
         self.banner_button.clicked.connect(self._open_source)
-        for problem in [*store.problems, *self.simulation_tab.problems]:
+        self.session_panel.sessionChanged.connect(lambda s: self.analysis_tab.set_current(s and s.path))
+        # The pose panel judges against the open session's criteria, else those of the New form.
+        self.session_panel.sessionChanged.connect(lambda _s: self._show_criteria())
+        self.session_panel.criteria_form.changed.connect(lambda *_: self._show_criteria())
+        self._show_criteria()
+        for problem in [*self.store.problems, *self.simulation_tab.problems]:
             self._on_note(problem)
 
+    def _start_redraw(self) -> None:
         self.last: Processed | None = None
         self.frames_shown = 0
+        self._frames_since_open = 0
+        self._t_open_request = 0.0  # when the operator last asked for a source (monotonic s)
         self._t0 = time.monotonic()
         self._last_plot = 0.0
         self._rate_t = time.monotonic()
@@ -201,6 +252,31 @@ class MainWindow(QtWidgets.QMainWindow):
         self.timer = QtCore.QTimer(self)
         self.timer.timeout.connect(self._redraw)
         self.timer.start(REDRAW_MS)
+
+    # ---------------------------------------------------------------- size
+    def fit_screen(self) -> None:
+        """Never larger than the screen's free area (an 800x480 display gets all of itself)."""
+        screen = self.screen() or QtWidgets.QApplication.primaryScreen()
+        if screen is None:
+            return
+        free = screen.availableGeometry()
+        # Never smaller than the smallest screen the layout is checked at (800x480).
+        self.setMinimumSize(min(MINIMUM_SIZE[0], free.width()), min(MINIMUM_SIZE[1], free.height()))
+        if self.width() > free.width() or self.height() > free.height():
+            self.resize(min(self.width(), free.width()), min(self.height(), free.height()))
+
+    def resizeEvent(self, event: QtGui.QResizeEvent) -> None:
+        super().resizeEvent(event)
+        compact = self.height() < COMPACT_BELOW_PX
+        self.pose_panel.set_compact(compact)
+        if not self.splitter.property("sized") or event.oldSize().width() != event.size().width():
+            width = self.width()  # the splitter spans the window (its own width may lag behind)
+            self.splitter.setSizes([round(width * LEFT_SHARE), width - round(width * LEFT_SHARE)])
+            self.splitter.setProperty("sized", True)
+
+    def toggle_full_screen(self) -> None:
+        """F11: full screen (a Pi's touch display) and back."""
+        self.setWindowState(self.windowState() ^ QtCore.Qt.WindowState.WindowFullScreen)
 
     # ---------------------------------------------------------------- configuration
     def methods(self) -> tuple[str, ...]:
@@ -253,17 +329,13 @@ class MainWindow(QtWidgets.QMainWindow):
         criteria = session.info.criteria if session is not None else self.session_panel.criteria_form.value()
         self.pose_panel.set_criteria(criteria)
 
-    def _work_tab_chosen(self, index: int) -> None:
-        """A form or table page under the preview gets at least about half the height (never shrunk)."""
-        if index <= 0:
-            return
-        top, bottom = self.left_splitter.sizes()
-        if bottom < 0.5 * (top + bottom):
-            half = (top + bottom) // 2
-            self.left_splitter.setSizes([top + bottom - half - 40, half + 40])
-
     def _open_source(self) -> None:
         """Open the chosen source (again), e.g. after a failure."""
+        self.worker.latest.take()  # a result of the source being replaced is not drawn any more
+        self._frames_since_open = 0
+        self._t_open_request = time.monotonic()
+        self.pose_panel.source_opened()  # its poses cannot be "stale" values of the new source
+        self.preview_pane.show_empty(f"Opening the source “{self.source_controls.source()}” …")
         self._reconfigure(reopen=True)
         self.banner_row.hide()
 
@@ -309,25 +381,47 @@ class MainWindow(QtWidgets.QMainWindow):
     def _on_source_opened(self, description: str) -> None:
         self.camera_controls.report.show_stream(self.worker.stream_report)
         self.banner_row.hide()
-        self.status_source.setText(f"source: {description}")
+        self.status_source.setText(f"source: {short_source(self.app_settings.source)}")
+        self.status_source.setToolTip(description)
+        self.source_controls.show_state(f"open: {description}")
         self.plots.clear_history()
+        self.session_panel.source_opened()
+        if self._frames_since_open == 0:
+            self.preview_pane.show_empty(f"Waiting for the first frame from “{self.app_settings.source}” …")
 
     def _on_source_failed(self, message: str) -> None:
         last = self.worker.latest.take()  # the worker stored it before failing: draw it, then mark it old
-        if last is not None:
+        if last is not None and last.frame.t_capture >= self._t_open_request:  # of this source
             self._draw(last)
-        self.banner.setText(f"{message} — choose a source or press Reopen")
+        self.banner.setText(message)  # what to do is on its button and in Setup › Source
         self.banner_row.show()
-        self.status_source.setText(f"source closed: {message}")
-        self.pose_panel.mark_stale("no source: the values shown are the last ones measured")
+        self.status_source.setText(f"source: {short_source(self.app_settings.source)} (closed)")
+        self.status_source.setToolTip(message)
+        self.source_controls.show_state(f"closed: {message}", error=True)
+        self.session_panel.source_lost(message)
+        if self._frames_since_open == 0:  # nothing of this source to show: one clear empty state
+            self.preview_pane.show_empty(  # why is in the banner above
+                "No picture: the source is closed.\n\n"
+                "Choose a source in Setup › Source, or press Reopen source."
+            )
+        self.pose_panel.mark_stale("the last values measured")
 
     def _on_note(self, message: str) -> None:
-        self.statusBar().showMessage(message, 8000)
+        """A note from the worker or the settings: in the status bar for a while (shortened with
+        "…" to the room there), in full in its tooltip and in :attr:`notes`."""
+        self.notes = [*self.notes[-(NOTES_KEPT - 1) :], message]
+        bar = self.statusBar()
+        room = max(100, bar.width() - self.status_rate.width() - self.status_source.width() - 40)
+        shown = bar.fontMetrics().elidedText(message, QtCore.Qt.TextElideMode.ElideRight, room)
+        bar.showMessage(shown, 8000)
+        bar.setToolTip("\n".join(self.notes[-5:]))
 
     # ---------------------------------------------------------------- drawing
     def _redraw(self) -> None:
         item: Processed | None = self.worker.latest.take()
         now = time.monotonic()
+        if item is not None and item.frame.t_capture < self._t_open_request:
+            item = None  # a frame of the source being replaced: not drawn (nor averaged into a row)
         if item is not None:
             self._draw(item)
         self.serial_panel.refresh()
@@ -340,15 +434,17 @@ class MainWindow(QtWidgets.QMainWindow):
             self._rates = ((processed - self._rate_counts[0]) / dt, (shown - self._rate_counts[1]) / dt)
             self._rate_counts, self._rate_t = (processed, shown), now
             self.status_rate.setText(
-                f"processed {self._rates[0]:.1f} fps, shown {self._rates[1]:.1f} fps, "
-                f"dropped {self.worker.latest.dropped}"
+                f"{self._rates[0]:.1f} fps, shown {self._rates[1]:.1f}, dropped {self.worker.latest.dropped}"
             )
+            self.status_rate.setToolTip("frames processed per second, drawn per second, dropped (not drawn)")
 
     def _draw(self, item: Processed) -> None:
         self.last = item
         self.frames_shown += 1
+        self._frames_since_open += 1
         frame, result = item.frame, item.result
         methods = tuple(result.poses) or self.methods()
+        self.preview_pane.show_live()
         self.preview.show_frame(frame.image)
         self.frameDrawn.emit(frame.image)
         self.preview.show_corners(None if result.detection is None else result.detection.corners_px)
@@ -364,7 +460,7 @@ class MainWindow(QtWidgets.QMainWindow):
                 camera,
             )
         self.preview.show_info(
-            f"{result.status}  {self._rates[0]:.1f} fps  latency {result.latency_ms:.0f} ms  "
+            f"{result.status}  {self._rates[0]:.1f} fps  latency {result.latency_ms:.0f} ms "
             f"(detect {result.detect_ms:.0f}, solve {result.solve_ms:.1f})  #{result.index}"
             + (f"  {item.frames_behind} behind" if item.frames_behind else "")
         )
@@ -413,12 +509,21 @@ class MainWindow(QtWidgets.QMainWindow):
         self.session_panel.shutdown()
         self.analysis_tab.shutdown()
 
+    def showEvent(self, event: QtGui.QShowEvent) -> None:
+        super().showEvent(event)
+        self.fit_screen()  # the screen is known for sure once shown
+
     def closeEvent(self, event: QtGui.QCloseEvent) -> None:
         if not self._closed and not self.session_panel.confirm_close():
             event.ignore()  # rows not written yet: the operator chose to keep the app open
             return
         self.shutdown()
         super().closeEvent(event)
+
+
+def short_source(spec: str) -> str:
+    """A source as the status bar names it: a file or folder by its name, others as given."""
+    return Path(spec).name or spec if ("/" in spec or os.sep in spec) else spec
 
 
 def result_side(window: MainWindow) -> float:

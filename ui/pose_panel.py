@@ -1,7 +1,11 @@
 """The pose panel: x, y, z (mm) and alpha, beta, gamma (degrees) in large type, one column per
 method (and the virtual bench's true pose beside them), each value with its standard uncertainty
 (+- in small type, when the corners' covariance is known: docs/uncertainty.md), and each solver's
-status below (with the flip warning of the core's mirror test, ``PoseResult.ambiguous``)."""
+status below (with the flip warning of the core's mirror test, ``PoseResult.ambiguous``).
+
+On a small screen (:meth:`PosePanel.set_compact`) the type is smaller and a solver's status line
+is shown only when it warns. "STALE" is said only when a real pose was shown before the source
+stopped; without one the panel says there is no source."""
 
 from __future__ import annotations
 
@@ -13,22 +17,31 @@ from PySide6 import QtCore, QtGui, QtWidgets
 
 from qrfield.geometry import Pose, angle_difference
 from qrfield.sessions.criteria import AcceptanceCriteria
+from ui.text import fixed
 
 ROWS = (("x", "mm"), ("y", "mm"), ("z", "mm"), ("α", "°"), ("β", "°"), ("γ", "°"))
-#: Style of the "+- std" beside a value: small and grey, so the value stays the thing to read.
-STD_STYLE = "font-size: 11pt; font-weight: normal; color: #888;"
+#: An ambiguity ratio at or above this counts as "the two mirror poses fit almost equally well".
+AMBIGUITY_WARNING = 0.8
 TRUTH = "true"
+#: Point sizes (values, headline, column headers, the "+- std" beside a value) and the value
+#: columns' width (px), by layout (compact: a small screen).
+SIZES = {False: (22, 15, 12, 11, 100), True: (13, 11, 9, 7, 56)}
+NBSP = "\u00a0"
 
 
 def format_value(value: float, row: int) -> str:
-    if not math.isfinite(value):
-        return "—"
-    return f"{value:.1f}" if row < 3 else f"{value:.2f}"
+    """A position (rows 0-2) in mm with 1 decimal, an angle in degrees with 2; "—" when unknown."""
+    return fixed(value, 1 if row < 3 else 2)
 
 
 def format_std(std: float) -> str:
     """ "±0.12" (two decimals, mm or degrees), or "" when the uncertainty is unknown."""
-    return f"±{std:.2f}" if math.isfinite(std) else ""
+    return f"±{fixed(std, 2)}" if math.isfinite(std) else ""
+
+
+def std_style(compact: bool) -> str:
+    """Style of the "+- std" beside a value: small and grey, so the value stays the thing to read."""
+    return f"font-size: {SIZES[compact][3]}pt; font-weight: normal; color: #888;"
 
 
 def _pose_std(pose: Any) -> np.ndarray:
@@ -80,17 +93,45 @@ class PosePanel(QtWidgets.QWidget):
         self.verdict = QtWidgets.QLabel("")
         self.verdict.setObjectName("verdict")
         self.verdict.setWordWrap(True)
+        self.compact = False
+        self.has_pose = False  # a real pose has been shown (only then can values be stale)
         self._big = QtGui.QFont()
-        self._big.setPointSize(22)
         self._big.setBold(True)
         self._big.setStyleHint(QtGui.QFont.StyleHint.Monospace)
+        self._methods: tuple[str, ...] = ("numerical",)
         #: What the verdict against the true pose judges by (the session's; the seed's by default).
         self.criteria = AcceptanceCriteria()
-        self.set_columns(("numerical",), truth=False)
+        self._apply_sizes()
+        self.set_columns(self._methods, truth=False)
 
     def set_criteria(self, criteria: AcceptanceCriteria) -> None:
         """Judge against ``criteria`` from the next result on."""
         self.criteria = criteria
+
+    def set_compact(self, compact: bool) -> None:
+        """Smaller type for a small screen (800x480, 1024x600)."""
+        if compact == self.compact:
+            return
+        self.compact = compact
+        self._apply_sizes()
+        columns, self._columns = self._columns, []
+        truth = TRUTH in columns
+        self.set_columns(tuple(c for c in columns if c != TRUTH), truth)
+
+    def _apply_sizes(self) -> None:
+        big, headline, _header, _std, _width = SIZES[self.compact]
+        self._big.setPointSize(big)
+        self._headline_pt = headline
+        self._grid.setHorizontalSpacing(10 if self.compact else 18)
+        self._grid.setVerticalSpacing(0 if self.compact else 6)
+        self._style_headline(self.headline.property("colour") or "")
+        self.verdict.setStyleSheet("font-size: 8pt;" if self.compact else "")
+
+    def _style_headline(self, colour: str) -> None:
+        self.headline.setProperty("colour", colour)
+        self.headline.setStyleSheet(
+            f"font-size: {self._headline_pt}pt; font-weight: bold;" + (f" color: {colour};" if colour else "")
+        )
 
     def set_columns(self, methods: tuple[str, ...], truth: bool) -> None:
         """One column per method, plus the true pose when ``truth``."""
@@ -102,12 +143,14 @@ class PosePanel(QtWidgets.QWidget):
             if item.widget() is not None and item.widget() not in (self.headline, self.verdict):
                 item.widget().deleteLater()
         self._columns = columns
+        self._methods = tuple(methods)
         self._cells, self._headers, self._status = {}, {}, {}
+        _big, _headline, header_pt, _std, width = SIZES[self.compact]
         self._grid.addWidget(self.headline, 0, 0, 1, len(columns) + 2)
         for c, name in enumerate(columns):
             header = QtWidgets.QLabel(name)
             header.setAlignment(QtCore.Qt.AlignmentFlag.AlignRight)
-            header.setStyleSheet("font-size: 12pt; color: #888;" if name == TRUTH else "font-size: 12pt;")
+            header.setStyleSheet(f"font-size: {header_pt}pt;" + (" color: #888;" if name == TRUTH else ""))
             self._grid.addWidget(header, 1, c + 1)
             self._headers[name] = header
             cells = []
@@ -117,7 +160,7 @@ class PosePanel(QtWidgets.QWidget):
                 cell.setTextFormat(QtCore.Qt.TextFormat.RichText)
                 cell.setFont(self._big)
                 cell.setAlignment(QtCore.Qt.AlignmentFlag.AlignRight | QtCore.Qt.AlignmentFlag.AlignVCenter)
-                cell.setMinimumWidth(100)
+                cell.setMinimumWidth(width)
                 cell.setObjectName(f"{name}_{r}")
                 if name == TRUTH:
                     cell.setStyleSheet("color: #888;")
@@ -148,8 +191,7 @@ class PosePanel(QtWidgets.QWidget):
         if result.reason:
             text += f"   {result.reason}"
         self.headline.setText(text)
-        colour = {"OK": "#2a2", "NOQR": "#c80", "NOCONV": "#c40"}.get(result.status, "#d22")
-        self.headline.setStyleSheet(f"font-size: 15pt; font-weight: bold; color: {colour};")
+        self._style_headline({"OK": "#2a2", "NOQR": "#c80", "NOCONV": "#c40"}.get(result.status, "#d22"))
         for name in methods:
             pose = result.poses.get(name)
             values = (
@@ -157,48 +199,75 @@ class PosePanel(QtWidgets.QWidget):
                 if pose is not None
                 else np.full(6, np.nan)
             )
+            if pose is not None and np.all(np.isfinite(values)):
+                self.has_pose = True
             stds = _pose_std(pose)
             for r, cell in enumerate(self._cells[name]):
                 self._set_cell(cell, format_value(float(values[r]), r), format_std(float(stds[r])))
             line, warn = solver_status_text(pose) if result.detection is not None else ("no code", False)
             self._status[name].setText(f"{name}: {line}")
             self._status[name].setStyleSheet("color: #d60;" if warn else "")
+            self._status[name].setVisible(warn or not self.compact)
         if result.truth is not None:
             truth = np.concatenate([result.truth.position_mm, result.truth.angles_deg])
             for r, cell in enumerate(self._cells[TRUTH]):
                 self._set_cell(cell, format_value(float(truth[r]), r), "")
         self.verdict.setText(self._verdict(result, methods))
+        self.verdict.setVisible(bool(self.verdict.text()))
 
-    @staticmethod
-    def _set_cell(cell: QtWidgets.QLabel, value: str, std: str) -> None:
+    def _set_cell(self, cell: QtWidgets.QLabel, value: str, std: str) -> None:
         """The value in large type, its "±std" (if any) small beside it; the plain value is kept
         in the cell's "value" property for :meth:`displayed`."""
         cell.setProperty("value", value)
         cell.setProperty("std", std)
-        cell.setText(value + (f'<span style="{STD_STYLE}"> {std}</span>' if std else ""))
+        cell.setText(value + (f'<span style="{std_style(self.compact)}"> {std}</span>' if std else ""))
 
     def mark_stale(self, why: str) -> None:
-        """Say that the numbers shown are old (the source stopped)."""
-        self.headline.setText(f"STALE   {why}")
-        self.headline.setStyleSheet("font-size: 15pt; font-weight: bold; color: #888;")
+        """The source stopped: "STALE" over the last real pose shown, or, when none was ever shown,
+        "no source" and dashes (nothing measured can be stale)."""
+        if not self.has_pose:
+            self.show_no_source("")  # the banner says why
+            return
+        self.headline.setText(f"STALE: {why}" if why else "STALE")
+        self._style_headline("#888")
+
+    def show_no_source(self, why: str) -> None:
+        """No frames: dashes in every value, and why."""
+        self.headline.setText(f"NO SOURCE   {why}" if why else "NO SOURCE")
+        self._style_headline("#888")
+        for cells in self._cells.values():
+            for cell in cells:
+                self._set_cell(cell, "—", "")
+        for status in self._status.values():
+            status.setText("")
+            status.hide()
+        self.verdict.setText("")
+        self.verdict.hide()
+
+    def source_opened(self) -> None:
+        """A new source: its values are not stale until it has shown a pose of its own."""
+        self.has_pose = False
 
     def _verdict(self, result: Any, methods: tuple[str, ...]) -> str:
         if result.truth is None:
             return ""
-        parts = []
+        criteria = self.criteria
+        lines = [
+            f"vs true pose (✔ = within {criteria.max_angle_error_deg:g}° and "
+            f"{criteria.max_position_error_mm:g}{NBSP}mm):"
+        ]
         for name in methods:
             pose = result.pose_of(name)
             if pose is None:
-                parts.append(f"{name}: —")
+                lines.append(f"– {name}: no pose")
                 continue
             position_error, angle_errors = pose_errors(pose, result.truth)
-            ok = bool(self.criteria.meets(position_error, max(angle_errors)))
-            label = self.criteria.label()
-            parts.append(
-                f"{name}: Δpos {position_error:.2f} mm, Δangle ≤ {max(angle_errors):.2f}° "
-                + (f"✔ meets {label}" if ok else f"✘ fails {label}")
+            ok = bool(criteria.meets(position_error, max(angle_errors)))
+            lines.append(
+                ("✔" if ok else "✘")
+                + f" {name}: Δpos {fixed(position_error, 2)} mm, Δangle ≤ {fixed(max(angle_errors), 2)}°"
             )
-        return "vs true pose — " + "; ".join(parts)
+        return "\n".join(lines)
 
     def displayed(self, column: str) -> np.ndarray:
         """The six numbers shown in ``column`` (NaN where a dash is shown), for tests and tools."""

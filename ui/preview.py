@@ -4,13 +4,16 @@ Drawn with pyqtgraph in image pixel coordinates (OpenCV convention: the centre o
 pixel is (0, 0); the y axis points down). The pose axes are the marker frame's X (red), Y (green)
 and Z (blue, into the card), one QR side long, projected through the camera model with
 :func:`qrfield.geometry.project_points`.
+
+:class:`PreviewPane` holds the view and one empty state (a plain message: no source yet, or the
+source failed before any frame came), so the operator never sees a black square with stray labels.
 """
 
 from __future__ import annotations
 
 import numpy as np
 import pyqtgraph as pg
-from PySide6 import QtCore, QtGui
+from PySide6 import QtCore, QtGui, QtWidgets
 
 from qrfield.camera import CameraModel
 from qrfield.geometry import project_points, transform_points
@@ -51,6 +54,7 @@ class PreviewView(pg.GraphicsLayoutWidget):
         for i, colour in enumerate(VERTEX_COLOURS):
             label = pg.TextItem(f"V{i + 1}", color=colour, anchor=(0.5, 0.5))
             label.setFont(QtGui.QFont("Sans", 11, QtGui.QFont.Weight.Bold))
+            label.setVisible(False)  # until a code is found
             self.view.addItem(label)
             self.labels.append(label)
         self.axes: list[list[pg.PlotDataItem]] = []
@@ -65,9 +69,16 @@ class PreviewView(pg.GraphicsLayoutWidget):
                 lines.append(item)
             self.axes.append(lines)
         self.info = pg.TextItem("", color="#ffffff", anchor=(0, 0), fill=pg.mkBrush(0, 0, 0, 150))
-        self.info.setFont(QtGui.QFont("Monospace", 10))
+        self.info.setFont(QtGui.QFont("Monospace", 9))
+        self.info.setVisible(False)  # until there is something to say
         self.view.addItem(self.info)
         self._size: tuple[int, int] | None = None
+
+    def resizeEvent(self, event: QtGui.QResizeEvent | None) -> None:
+        super().resizeEvent(event)
+        info = getattr(self, "info", None)  # pyqtgraph calls this from its own __init__, before ours
+        if info is not None:  # the info line wraps at the view's width instead of running out of it
+            info.textItem.setTextWidth(max(80.0, float(self.width() - 12)))
 
     def show_frame(self, image: np.ndarray) -> None:
         """Display a grey (H, W) or BGR (H, W, 3) uint8 image."""
@@ -113,3 +124,35 @@ class PreviewView(pg.GraphicsLayoutWidget):
 
     def show_info(self, text: str) -> None:
         self.info.setText(text)
+        self.info.setVisible(bool(text))
+
+
+class PreviewPane(QtWidgets.QStackedWidget):
+    """The preview, or one empty state in its place: a message on the preview's dark background."""
+
+    def __init__(self, view: PreviewView, parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.view = view
+        self.empty = QtWidgets.QLabel("")
+        self.empty.setObjectName("preview_empty")
+        self.empty.setWordWrap(True)
+        self.empty.setAlignment(QtCore.Qt.AlignmentFlag.AlignCenter)
+        self.empty.setMargin(16)
+        self.empty.setStyleSheet("background: #202020; color: #d0d0d0; font-size: 12pt;")
+        self.empty.setMinimumSize(120, 90)
+        self.addWidget(self.empty)
+        self.addWidget(view)
+
+    @property
+    def is_empty(self) -> bool:
+        return self.currentWidget() is self.empty
+
+    def show_empty(self, text: str) -> None:
+        """Show ``text`` instead of the picture (no frame to show)."""
+        self.empty.setText(text)
+        self.setCurrentWidget(self.empty)
+
+    def show_live(self) -> None:
+        """Show the picture (a frame has been drawn)."""
+        if self.currentWidget() is not self.view:
+            self.setCurrentWidget(self.view)

@@ -23,18 +23,18 @@ def _triple(row: LoggedRow, columns: Sequence[str]) -> str:
     return ", ".join(row.values.get(c, "") or "–" for c in columns)
 
 
-#: (header, text of a row) per table column.
+#: (header, text of a row) per table column; a header's second line is its unit.
 COLUMNS: tuple[tuple[str, Callable[[LoggedRow], str]], ...] = (
     ("row", lambda r: str(r.number)),
     ("pass", lambda r: ("pass" if r.passed else "fail") + ("" if r.confirmed else " (pending)")),
     ("time", lambda r: r.values.get("time", "")[11:19] or r.values.get("time", "")),
     ("combo", lambda r: r.combo),
-    ("truth x, y, z (mm)", lambda r: _triple(r, ("gt_x", "gt_y", "gt_z"))),
-    ("truth α, β, γ (deg)", lambda r: _triple(r, ("gt_alpha", "gt_beta", "gt_gamma"))),
-    ("measured x, y, z (mm)", lambda r: _triple(r, ("x", "y", "z"))),
-    ("measured α, β, γ (deg)", lambda r: _triple(r, ("alpha", "beta", "gamma"))),
-    ("err pos (mm)", lambda r: r.values.get("err_pos", "") or "–"),
-    ("err α, β, γ (deg)", lambda r: _triple(r, ("err_alpha", "err_beta", "err_gamma"))),
+    ("truth x, y, z\nmm", lambda r: _triple(r, ("gt_x", "gt_y", "gt_z"))),
+    ("truth α, β, γ\ndeg", lambda r: _triple(r, ("gt_alpha", "gt_beta", "gt_gamma"))),
+    ("measured x, y, z\nmm", lambda r: _triple(r, ("x", "y", "z"))),
+    ("measured α, β, γ\ndeg", lambda r: _triple(r, ("alpha", "beta", "gamma"))),
+    ("err pos\nmm", lambda r: r.values.get("err_pos", "") or "–"),
+    ("err α, β, γ\ndeg", lambda r: _triple(r, ("err_alpha", "err_beta", "err_gamma"))),
     ("frames", lambda r: f"{r.values.get('n_converged', '')}/{r.values.get('n_frames', '')}"),
     ("note", lambda r: r.values.get("note", "")),
 )
@@ -111,6 +111,9 @@ class RowsTable(QtWidgets.QTableView):
         self.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
         self.verticalHeader().hide()
         self.horizontalHeader().setStretchLastSection(True)
+        self.horizontalHeader().setTextElideMode(QtCore.Qt.TextElideMode.ElideNone)
+        self.horizontalHeader().setDefaultAlignment(QtCore.Qt.AlignmentFlag.AlignCenter)
+        self._settle()  # headers as wide as their text before any row (they were cut at both ends)
 
     def show_rows(self, rows: list[LoggedRow]) -> None:
         self.rows_model.set_rows(rows)

@@ -1,4 +1,5 @@
-"""The Session tab: new / resume a session, the ground-truth form, "Log row", undo, the rows table.
+"""The Session tab: the session bar (New, Resume, Export, the open session's name, folder and rows),
+the ground-truth form, "Log row" / Cancel / Undo, and the rows table, laid out to fit 800x480.
 
 A thin layer over :mod:`qrfield.sessions`. "Log row" collects the next N results the window draws
 (:meth:`SessionPanel.on_processed`, fed from the main window's redraw: the same results the
@@ -6,12 +7,20 @@ preview shows, no second camera path; only frames captured after the press count
 them with a :class:`~qrfield.sessions.FrameCollector` for the session's solver and calls
 :meth:`Session.log` on the GUI thread (one append and fsync per row). When the form follows the
 virtual bench, the row's ground truth is the bench's mean true pose over the frames collected
-(a wobbling bench moves while the row is measured). The status says "logged
-row K" only when ``log`` returned "logged"; a row that could not be written stays in the
-session's pending queue and a red banner offers Retry and "Save pending elsewhere…".
+(a wobbling bench moves while the row is measured). The status says "logged row K" only when
+``log`` returned "logged"; a row that could not be written stays in the session's pending queue
+and a red banner offers Retry and "Save pending elsewhere…".
+
+Frames must be arriving: "Log row" is disabled, with the reason, while no frame has come for
+``frame_timeout_s`` (no source, a source that failed or stalled), and a row being collected is
+given up, nothing logged, when frames stop for that long or the source fails. A row whose
+combination label disagrees with the signs of its angles is logged only after the operator says
+so (:meth:`ask_combo_choice`). At start the window offers to reopen the last session
+(:meth:`offer_reopen`, a banner: no dialog in the way).
 
 Dialogs go through small methods (:meth:`ask_confirm`, :meth:`ask_pending_choice`,
-:meth:`ask_save_path`, :meth:`ask_folder`) so that tests can answer them.
+:meth:`ask_save_path`, :meth:`ask_export_path`, :meth:`ask_folder`, :meth:`ask_combo_choice`)
+so that tests can answer them.
 """
 
 from __future__ import annotations
@@ -25,9 +34,7 @@ from typing import Any
 from PySide6 import QtCore, QtWidgets
 
 from qrfield.camera import CameraModel
-from qrfield.methods import METHODS
 from qrfield.sessions import (
-    AcceptanceCriteria,
     FrameCollector,
     GroundTruth,
     LogOutcome,
@@ -35,32 +42,37 @@ from qrfield.sessions import (
     SessionError,
     SessionSettings,
     known_combinations,
-    session_folders,
+    read_session,
 )
+from qrfield.sessions.combo_signs import sign_table
+from qrfield.sessions.export import DEFAULT_NAME, export_session
 from qrfield.sessions.recorder import bench_mean_truth
-from qrfield.settings import SettingError, setting
-from ui.groundtruth_form import GroundTruthForm
+from qrfield.settings import SettingError
+from ui.groundtruth_form import FIELD_NAMES, GroundTruthForm, WrappedLabel
 from ui.rows_table import RowsTable
-from ui.settings_form import SettingsForm
+from ui.session_dialogs import (
+    ENV_ROOT,
+    NewSessionDialog,
+    ResumeDialog,
+    SessionFolderSettings,
+    sessions_root,
+    touch_button,
+)
+from ui.text import short_path
 
-ENV_ROOT = "QRFIELD_SESSIONS_DIR"
+__all__ = ["ENV_ROOT", "BenchContext", "SessionFolderSettings", "SessionPanel", "sessions_root"]
 
-
-@dataclass(frozen=True)
-class SessionFolderSettings:
-    """Where the app makes new sessions."""
-
-    root: str = setting(
-        "",
-        label="sessions folder",
-        help=f"new sessions are made in this folder (empty = ${ENV_ROOT} or ~/qrfield-sessions)",
-    )
-
-
-def sessions_root(settings: SessionFolderSettings) -> Path:
-    """The folder of new sessions: the setting, else $QRFIELD_SESSIONS_DIR, else ~/qrfield-sessions."""
-    text = settings.root.strip() or os.environ.get(ENV_ROOT, "").strip()
-    return Path(text).expanduser() if text else Path.home() / "qrfield-sessions"
+#: Config key of the last session used (offered again at the next start).
+LAST_SESSION_KEY = "last_session"
+#: How often the panel re-checks that frames arrive (ms).
+LIVENESS_MS = 250
+#: Colours of the status line by kind of message.
+STATUS_STYLES = {
+    "ok": "color: #1d6b1d;",
+    "fail": "color: #a05000; font-weight: bold;",
+    "error": "color: #c0392b; font-weight: bold;",
+    "info": "color: #444;",
+}
 
 
 @dataclass(frozen=True)
@@ -89,178 +101,158 @@ class SessionPanel(QtWidgets.QWidget):
         self._note = ""
         self._following = False
         self._t_press = 0.0
+        self._last_frame_t: float | None = None  # monotonic time of the last frame drawn
+        self._last_pose_t: float | None = None  # ... of the last one with a pose of the session's solver
+        self._source_problem = ""  # why the source gave no frames (it failed), "" while it runs
+        self._reopen_path = ""
+        self._last_session = str(store.value(LAST_SESSION_KEY) or "")
 
-        # ----- session: current, new, resume
-        self.title = QtWidgets.QLabel("no session open: create one or resume one")
-        self.title.setObjectName("session_title")
-        self.title.setStyleSheet("font-weight: bold;")
-        self.title.setWordWrap(True)
-        self.count = QtWidgets.QLabel("")
-        self.count.setObjectName("session_count")
-        self.count.setWordWrap(True)
-        self.warnings = QtWidgets.QLabel("")
-        self.warnings.setObjectName("session_warnings")
-        self.warnings.setWordWrap(True)
-        self.warnings.setStyleSheet("color: #a05000;")
-        self.warnings.hide()
-
-        new_box = QtWidgets.QWidget()
-        new_form = QtWidgets.QFormLayout(new_box)
-        self.name_edit = QtWidgets.QLineEdit()
-        self.name_edit.setObjectName("session_name")
-        self.name_edit.setPlaceholderText("e.g. beta-sweep")
-        self.operator_edit = QtWidgets.QLineEdit()
-        self.operator_edit.setObjectName("session_operator")
-        self.notes_edit = QtWidgets.QPlainTextEdit()
-        self.notes_edit.setObjectName("session_notes")
-        self.notes_edit.setTabChangesFocus(True)
-        self.notes_edit.setMaximumHeight(54)
-        self.solver_combo = QtWidgets.QComboBox()
-        self.solver_combo.addItems(list(METHODS))
-        self.solver_combo.setToolTip("the pose method whose results the rows average")
-        self.folder_form = SettingsForm(
-            SessionFolderSettings, store.group("session_folder", SessionFolderSettings)
-        )
-        folder_row = QtWidgets.QHBoxLayout()
-        folder_row.addWidget(self.folder_form, 1)
-        browse = QtWidgets.QPushButton("Folder…")
-        browse.clicked.connect(self._choose_root)
-        folder_row.addWidget(browse)
-        self.row_settings = SettingsForm(SessionSettings, store.group("session", SessionSettings))
-        self.criteria_form = SettingsForm(AcceptanceCriteria, store.group("criteria", AcceptanceCriteria))
-        self.create_button = QtWidgets.QPushButton("Create session")
-        self.create_button.setObjectName("create_session")
-        new_form.addRow("name", self.name_edit)
-        new_form.addRow("operator", self.operator_edit)
-        new_form.addRow("notes", self.notes_edit)
-        new_form.addRow("solver", self.solver_combo)
-        new_form.addRow(folder_row)
-        new_form.addRow(self.row_settings)
-        new_form.addRow(self.criteria_form)
-        new_form.addRow(self.create_button)
-
-        resume_box = QtWidgets.QWidget()
-        resume_layout = QtWidgets.QVBoxLayout(resume_box)
-        resume_row = QtWidgets.QHBoxLayout()
-        resume_layout.addLayout(resume_row)
-        self.resume_combo = QtWidgets.QComboBox()
-        self.resume_combo.setObjectName("resume_choice")
-        self.resume_button = QtWidgets.QPushButton("Resume")
-        self.resume_button.setObjectName("resume_session")
-        open_button = QtWidgets.QPushButton("Open folder…")
-        resume_row.addWidget(self.resume_combo, 1)
-        resume_row.addWidget(self.resume_button)
-        resume_row.addWidget(open_button)
-        resume_note = QtWidgets.QLabel(
-            "Resuming continues the numbering after the last row; rows already logged are never rewritten."
-        )
-        resume_note.setWordWrap(True)
-        resume_layout.addWidget(resume_note)
-        resume_layout.addStretch(1)
-        self.manage = QtWidgets.QTabWidget()
-        self.manage.setObjectName("session_manage")
-        self.manage.addTab(new_box, "New session")
-        self.manage.addTab(resume_box, "Resume / open")
-
-        # ----- the next row
-        row_box = QtWidgets.QGroupBox("Next row: ground truth measured by hand")
-        row_layout = QtWidgets.QVBoxLayout(row_box)
-        self.form = GroundTruthForm(known_combinations())
-        row_layout.addWidget(self.form)
-        buttons = QtWidgets.QHBoxLayout()
-        self.log_button = QtWidgets.QPushButton("Log row  (Enter)")
-        self.log_button.setObjectName("log_row")
-        self.cancel_button = QtWidgets.QPushButton("Cancel")
-        self.cancel_button.setObjectName("cancel_row")
-        self.undo_button = QtWidgets.QPushButton("Undo last row…")
-        self.undo_button.setObjectName("undo_row")
-        buttons.addWidget(self.log_button)
-        buttons.addWidget(self.cancel_button)
-        buttons.addStretch(1)
-        buttons.addWidget(self.undo_button)
-        row_layout.addLayout(buttons)
-        self.progress = QtWidgets.QProgressBar()
-        self.progress.setObjectName("row_progress")
-        self.progress.setFormat("%v / %m frames")
-        self.progress.setValue(0)
-        row_layout.addWidget(self.progress)
-        self.why = QtWidgets.QLabel("")
-        self.why.setObjectName("log_blocked_reason")
-        self.why.setWordWrap(True)
-        self.why.setStyleSheet("color: #666;")
-        row_layout.addWidget(self.why)
-        self.status = QtWidgets.QLabel("")
-        self.status.setObjectName("session_status")
-        self.status.setWordWrap(True)
-        row_layout.addWidget(self.status)
-
-        # ----- pending banner
-        self.banner = QtWidgets.QWidget()
-        self.banner.setObjectName("pending_banner")
-        banner_layout = QtWidgets.QHBoxLayout(self.banner)
-        banner_layout.setContentsMargins(0, 0, 0, 0)
-        self.banner_text = QtWidgets.QLabel("")
-        self.banner_text.setWordWrap(True)
-        self.banner_text.setStyleSheet("background: #a01818; color: white; padding: 6px; font-weight: bold;")
-        self.retry_button = QtWidgets.QPushButton("Retry")
-        self.retry_button.setObjectName("retry_pending")
-        self.export_button = QtWidgets.QPushButton("Save pending elsewhere…")
-        self.export_button.setObjectName("export_pending")
-        banner_layout.addWidget(self.banner_text, 1)
-        banner_layout.addWidget(self.retry_button)
-        banner_layout.addWidget(self.export_button)
-        self.banner.hide()
-
+        self.new_dialog = NewSessionDialog(store, self)
+        self.resume_dialog = ResumeDialog(self.root, lambda: self.ask_folder(), self)
+        self._build_session_bar()
+        self._build_banners()
+        self._build_row_box()
         self.table = RowsTable()
-        self.table.setMinimumHeight(180)
-
+        self.table.setMinimumHeight(60)
         layout = QtWidgets.QVBoxLayout(self)
+        layout.setContentsMargins(4, 4, 4, 4)
+        layout.setSpacing(3)
+        layout.addLayout(self.session_bar)
         layout.addWidget(self.title)
         layout.addWidget(self.count)
-        layout.addWidget(self.warnings)
-        layout.addWidget(self.banner)
-        layout.addWidget(row_box)
+        for widget in (self.reopen_banner, self.warnings, self.banner):
+            layout.addWidget(widget)
+        layout.addWidget(self.form)
+        layout.addLayout(self.actions)
+        layout.addWidget(self.why)
+        layout.addWidget(self.status)
         layout.addWidget(self.table, 1)
-        layout.addWidget(self.manage)
+        self._wire()
+        self.timer = QtCore.QTimer(self)
+        self.timer.timeout.connect(self.tick)
+        self.timer.start(LIVENESS_MS)
+        self._update_state()
 
-        # ----- wiring
-        self.create_button.clicked.connect(self.create_from_form)
-        self.resume_button.clicked.connect(self._resume_chosen)
-        open_button.clicked.connect(self._open_folder)
+    # ---------------------------------------------------------------- builders
+    def _build_session_bar(self) -> None:
+        self.new_button = touch_button("New session…", "new_session")
+        self.resume_button = touch_button("Resume…", "resume")
+        self.export_button = touch_button("Export…", "export_rows")
+        self.export_button.setToolTip(
+            "write the rows in force (withdrawn rows left out) to a CSV with units in the column names"
+        )
+        self.session_bar = QtWidgets.QHBoxLayout()
+        self.session_bar.addWidget(self.new_button)
+        self.session_bar.addWidget(self.resume_button)
+        self.session_bar.addStretch(1)
+        self.session_bar.addWidget(self.export_button)
+        self.title = WrappedLabel("")
+        self.title.setObjectName("session_title")
+        self.title.setStyleSheet("font-weight: bold;")
+        self.count = WrappedLabel("")
+        self.count.setObjectName("session_count")
+        self.count.setStyleSheet("color: #444;")
+
+    def _build_banners(self) -> None:
+        self.reopen_text = WrappedLabel("")
+        self.reopen_button = touch_button("Reopen", "reopen_last")
+        self.reopen_no = touch_button("Not now", "reopen_no")
+        self.reopen_banner = _banner(
+            "reopen_banner", self.reopen_text, (self.reopen_button, self.reopen_no), "#e8f0fb"
+        )
+        self.warnings = WrappedLabel("")
+        self.warnings.setObjectName("session_warnings")
+        self.warnings.setStyleSheet("color: #a05000;")
+        self.warnings.hide()
+        self.banner_text = WrappedLabel("")
+        self.banner_text.setStyleSheet("color: white; font-weight: bold;")
+        self.retry_button = touch_button("Retry", "retry_pending")
+        self.pending_button = touch_button("Save pending…", "export_pending")
+        self.pending_button.setToolTip("save the rows not yet written to another file (another drive)")
+        self.banner = _banner(
+            "pending_banner", self.banner_text, (self.retry_button, self.pending_button), "#a01818"
+        )
+
+    def _build_row_box(self) -> None:
+        table = sign_table()
+        self.form = GroundTruthForm(known_combinations(), signs=table)
+        self.log_button = touch_button("Log row", "log_row")
+        self.log_button.setToolTip("collect the session's frames per row and log their mean (Enter)")
+        self.cancel_button = touch_button("Cancel", "cancel_row")
+        self.undo_button = touch_button("Undo…", "undo_row")
+        self.undo_button.setToolTip("withdraw the last row (its line stays in rows.csv, marked withdrawn)")
+        self.progress = QtWidgets.QProgressBar()
+        self.progress.setObjectName("row_progress")
+        self.progress.setMinimumWidth(70)
+        self.progress.setRange(0, SessionSettings().frames_per_row)
+        self.progress.setValue(0)
+        self.actions = QtWidgets.QHBoxLayout()
+        self.actions.addWidget(self.log_button)
+        self.actions.addWidget(self.cancel_button)
+        self.actions.addWidget(self.progress, 1)
+        self.actions.addWidget(self.undo_button)
+        self.why = WrappedLabel("")
+        self.why.setObjectName("log_blocked_reason")
+        self.why.setStyleSheet("color: #555;")
+        self.status = WrappedLabel("")
+        self.status.setObjectName("session_status")
+
+    def _wire(self) -> None:
+        self.new_button.clicked.connect(self.show_new_dialog)
+        self.resume_button.clicked.connect(self.show_resume_dialog)
+        self.export_button.clicked.connect(self.export_rows)
+        self.new_dialog.createRequested.connect(self.create_from_form)
+        self.resume_dialog.resumeRequested.connect(self._resume_requested)
+        self.reopen_button.clicked.connect(self.reopen_last)
+        self.reopen_no.clicked.connect(lambda: self.reopen_banner.hide())
         self.log_button.clicked.connect(self.log_row)
         self.form.submitted.connect(self.log_row)
-        self.form.validityChanged.connect(lambda _valid: self._update_state())
+        self.form.changed.connect(self._update_state)
         self.cancel_button.clicked.connect(self.cancel_row)
         self.undo_button.clicked.connect(self.undo_row)
         self.retry_button.clicked.connect(self.retry)
-        self.export_button.clicked.connect(self.export_pending)
-        self.folder_form.changed.connect(lambda *_: self.refresh_folders())
-        self.manage.currentChanged.connect(lambda _index: self.refresh_folders())
-        self.refresh_folders()
-        self._update_state()
+        self.pending_button.clicked.connect(self.export_pending)
 
     # ---------------------------------------------------------------- settings
     def root(self) -> Path:
-        return sessions_root(self.folder_form.value())
+        return self.new_dialog.root()
+
+    # The New session form's parts, under the names the panel had when the form was inline.
+    @property
+    def name_edit(self) -> QtWidgets.QLineEdit:
+        return self.new_dialog.name_edit
+
+    @property
+    def operator_edit(self) -> QtWidgets.QLineEdit:
+        return self.new_dialog.operator_edit
+
+    @property
+    def row_settings(self) -> Any:
+        return self.new_dialog.row_settings
+
+    @property
+    def criteria_form(self) -> Any:
+        return self.new_dialog.criteria_form
+
+    @property
+    def create_button(self) -> QtWidgets.QPushButton:
+        return self.new_dialog.create_button
+
+    def frame_timeout_s(self) -> float:
+        return float(self.row_settings.value().frame_timeout_s)
 
     def save_settings(self, store: Any) -> None:
-        store.set_group("session_folder", self.folder_form.value())
+        store.set_group("session_folder", self.new_dialog.folder_form.value())
         store.set_group("session", self.row_settings.value())
         store.set_group("criteria", self.criteria_form.value())
+        current = str(self.session.path) if self.session is not None else self._last_session
+        store.set_value(LAST_SESSION_KEY, current)
 
     def set_default_solver(self, methods: tuple[str, ...]) -> None:
         """Preselect the solver of a new session: the thesis' model when it runs, else the one that runs."""
-        self.solver_combo.setCurrentText("numerical" if "numerical" in methods or not methods else methods[0])
-
-    def refresh_folders(self) -> None:
-        current = self.resume_combo.currentData()
-        self.resume_combo.clear()
-        for folder in reversed(session_folders(self.root())):  # newest first
-            self.resume_combo.addItem(folder.name, str(folder))
-        if current:
-            index = self.resume_combo.findData(current)
-            if index >= 0:
-                self.resume_combo.setCurrentIndex(index)
+        self.new_dialog.solver_combo.setCurrentText(
+            "numerical" if "numerical" in methods or not methods else methods[0]
+        )
 
     # ---------------------------------------------------------------- dialogs (tests replace these)
     def ask_confirm(self, title: str, text: str) -> bool:
@@ -283,9 +275,29 @@ class SessionPanel(QtWidgets.QWidget):
         clicked = box.clickedButton()
         return next((name for name, button in buttons.items() if button is clicked), "cancel")
 
+    def ask_combo_choice(self, message: str, suggestion: str | None) -> str:
+        """'keep' (log as labelled), 'use' (relabel with ``suggestion``) or 'cancel'."""
+        box = QtWidgets.QMessageBox(self)
+        box.setIcon(QtWidgets.QMessageBox.Icon.Question)
+        box.setWindowTitle("Combination and angles disagree")
+        box.setText(f"{message[0].upper()}{message[1:]}.\n\nLog the row anyway?")
+        buttons = {"keep": box.addButton("Log as labelled", QtWidgets.QMessageBox.ButtonRole.AcceptRole)}
+        if suggestion:
+            buttons["use"] = box.addButton(f"Use '{suggestion}'", QtWidgets.QMessageBox.ButtonRole.ActionRole)
+        buttons["cancel"] = box.addButton("Cancel", QtWidgets.QMessageBox.ButtonRole.RejectRole)
+        box.exec()
+        clicked = box.clickedButton()
+        return next((name for name, button in buttons.items() if button is clicked), "cancel")
+
     def ask_save_path(self) -> str:
         path, _ = QtWidgets.QFileDialog.getSaveFileName(
             self, "Save pending rows elsewhere", str(Path.home() / "qrfield-pending-rows.csv"), "CSV (*.csv)"
+        )
+        return path
+
+    def ask_export_path(self, default: Path) -> str:
+        path, _ = QtWidgets.QFileDialog.getSaveFileName(
+            self, "Export the rows in force", str(default), "CSV (*.csv)"
         )
         return path
 
@@ -293,30 +305,46 @@ class SessionPanel(QtWidgets.QWidget):
         return QtWidgets.QFileDialog.getExistingDirectory(self, "Open a session folder", str(self.root()))
 
     # ---------------------------------------------------------------- open / create
+    def show_new_dialog(self) -> NewSessionDialog:
+        self.new_dialog.say("")
+        self.new_dialog.open()
+        self.new_dialog.name_edit.setFocus()
+        return self.new_dialog
+
+    def show_resume_dialog(self) -> ResumeDialog:
+        self.resume_dialog.say("")
+        self.resume_dialog.refresh()
+        self.resume_dialog.open()
+        return self.resume_dialog
+
     def create_from_form(self) -> Session | None:
-        """Create a session from the New box and the window's context; errors go to the status line."""
+        """Create a session from the New session form and the window's context; an error stays in
+        the form (and the status line), the form closes when the session is made."""
         if not self._release_current():
             return None
         ctx: BenchContext = self.context()
-        solver = self.solver_combo.currentText()
+        dialog = self.new_dialog
+        solver = dialog.solver_combo.currentText()
         try:
             session = Session.create(
                 self.root(),
-                self.name_edit.text(),
+                dialog.name_edit.text(),
                 camera=ctx.camera,
                 side_mm=ctx.side_mm,
                 solver=solver,
                 solver_settings=ctx.solver_settings.get(solver),
-                criteria=self.criteria_form.value(),
-                frames_per_row=self.row_settings.value().frames_per_row,
-                operator=self.operator_edit.text(),
-                notes=self.notes_edit.toPlainText(),
+                criteria=dialog.criteria_form.value(),
+                frames_per_row=dialog.row_settings.value().frames_per_row,
+                operator=dialog.operator_edit.text(),
+                notes=dialog.notes_edit.toPlainText(),
             )
         except (SessionError, SettingError, OSError) as exc:
-            self._say(f"cannot create the session: {exc}", error=True)
+            dialog.say(f"cannot create the session: {exc}")
+            self._say(f"cannot create the session: {exc}", "error")
             return None
+        dialog.accept()
         self._use(session)
-        self._say(f"created session {session.path.name} in {session.path.parent}")
+        self._say(f"created session {session.path.name}", "ok")
         return session
 
     def open_session(self, path: str | os.PathLike[str]) -> Session | None:
@@ -326,29 +354,36 @@ class SessionPanel(QtWidgets.QWidget):
         try:
             session = Session.open(path)
         except (SessionError, OSError) as exc:
-            self._say(f"cannot open {path}: {exc}", error=True)
+            self.resume_dialog.say(f"cannot open {path}: {exc}")
+            self._say(f"cannot open {path}: {exc}", "error")
             return None
+        self.resume_dialog.accept()
         self._use(session)
-        self._say(f"resumed {session.path.name}: {len(session.rows)} rows, next row {session.next_row}")
+        self._say(f"resumed {session.path.name}: {len(session.rows)} rows, next row {session.next_row}", "ok")
         return session
 
-    def _resume_chosen(self) -> None:
-        path = self.resume_combo.currentData()
-        if path:
-            self.open_session(path)
+    def _resume_requested(self, path: str) -> None:
+        self.open_session(path)
 
-    def _open_folder(self) -> None:
-        path = self.ask_folder()
-        if path:
-            self.open_session(path)
+    def offer_reopen(self) -> bool:
+        """Offer (a banner, not a dialog) to reopen the session used last; False if there is none."""
+        path = self._last_session
+        if self.session is not None or not path:
+            return False
+        try:
+            info, content = read_session(path)
+        except (SessionError, OSError):
+            return False
+        rows = sum(1 for r in content.rows if not r.withdrawn)
+        self._reopen_path = path
+        self.reopen_text.setText(f"Reopen the last session, {info.name} ({rows} rows)?")
+        self.reopen_banner.setToolTip(path)
+        self.reopen_banner.show()
+        return True
 
-    def _choose_root(self) -> None:
-        path = QtWidgets.QFileDialog.getExistingDirectory(self, "Sessions folder", str(self.root()))
-        if path:
-            widget = self.folder_form.widgets["root"]
-            assert isinstance(widget, QtWidgets.QLineEdit)
-            widget.setText(path)
-            widget.editingFinished.emit()
+    def reopen_last(self) -> Session | None:
+        self.reopen_banner.hide()
+        return self.open_session(self._reopen_path) if self._reopen_path else None
 
     def _release_current(self) -> bool:
         """Close the open session before another is used; False if its pending rows must stay."""
@@ -363,32 +398,97 @@ class SessionPanel(QtWidgets.QWidget):
 
     def _use(self, session: Session) -> None:
         self.session = session
+        self._last_session = str(session.path)
+        self.reopen_banner.hide()
         self.table.show_rows(session.rows)
         self.warnings.setText("\n".join(f"⚠ {w}" for w in session.warnings))
         self.warnings.setVisible(bool(session.warnings))
         self.banner.setVisible(bool(session.pending))
-        self.refresh_folders()
+        self.progress.setRange(0, session.info.frames_per_row)
+        self.progress.setValue(0)
         self._update_state()
         self.sessionChanged.emit(session)
+
+    # ---------------------------------------------------------------- frames
+    def source_opened(self) -> None:
+        """The window's source opened: frames may come again."""
+        self._source_problem = ""
+        self._update_state()
+
+    def source_lost(self, message: str) -> None:
+        """The window's source failed: no frames until it is reopened; a row being collected ends."""
+        self._source_problem = message
+        self.form.bench_gone()
+        if self._collector is not None:
+            self._give_up(f"the source failed while collecting ({message})")
+        self._update_state()
+
+    def live_reason(self, now: float | None = None) -> str:
+        """Why no live frames arrive ("" while they do)."""
+        now = time.monotonic() if now is None else now
+        if self._source_problem:
+            return "no frames: the source is closed (see the red banner)"
+        if self._last_frame_t is None:
+            return "no frames yet: open a source (Setup › Source)"
+        quiet = now - self._last_frame_t
+        if quiet > self.frame_timeout_s():
+            return f"no frame for {quiet:.0f} s: is the source still running?"
+        return ""
+
+    def tick(self) -> None:
+        """Every LIVENESS_MS: give up a row whose frames stopped; re-check what may be logged."""
+        now = time.monotonic()
+        collector = self._collector
+        if collector is not None:
+            last = max(self._t_press, self._last_frame_t or 0.0)
+            if now - last > self.frame_timeout_s():
+                self._give_up(f"no frame for {now - last:.1f} s")
+                return
+        if (self.blocked_reason(), self.context_notes()) != self._shown_state:
+            self._update_state()
+
+    def on_processed(self, item: Any) -> None:
+        """One result the window drew (ui.worker.Processed): follow the bench's truth, or collect it."""
+        result = item.result
+        self._last_frame_t = time.monotonic()
+        pose = result.poses.get(self.session.info.solver) if self.session is not None else None
+        if pose is not None and pose.converged:  # a hint ("a row now fails"), not the average's test
+            self._last_pose_t = self._last_frame_t
+        collector = self._collector
+        if collector is None:
+            truth = getattr(result, "truth", None)
+            if truth is not None:
+                self.form.follow(truth.position_mm, truth.angles_deg)
+            else:
+                self.form.bench_gone()
+            return
+        if item.frame.t_capture < self._t_press:
+            return  # captured before "Log row" was pressed
+        done = collector.add(result)
+        self.progress.setValue(collector.progress[0])
+        if done:
+            self._finish_row(collector)
 
     # ---------------------------------------------------------------- logging
     def blocked_reason(self) -> str:
         """Why "Log row" cannot be pressed now ("" when it can)."""
         if self.session is None:
-            return "open or create a session first"
+            return "open a session first: New session… or Resume…"
         if self._collector is not None:
             return "collecting frames…"
         if not self.form.valid:
-            bad = ", ".join(self.form.errors)
-            return f"fix the marked field(s) first: {bad}"
+            shown = self.form.shown_errors()
+            if shown:
+                return "fix " + ", ".join(FIELD_NAMES[n] for n in shown) + " first"
+            return "type the ground truth: " + ", ".join(FIELD_NAMES[n] for n in self.form.untouched_errors())
         solver = self.session.info.solver
         ctx: BenchContext = self.context()
         if solver not in ctx.methods:
             return (
                 f"this session measures with '{solver}', which is not running: choose it (or 'both') "
-                "in Detect & solve"
+                "in Setup › Detect & solve"
             )
-        return ""
+        return self.live_reason()
 
     def context_notes(self) -> list[str]:
         """Differences between the session's recorded setup and the window's (shown, not blocking)."""
@@ -403,15 +503,26 @@ class SessionPanel(QtWidgets.QWidget):
                 f"the app's camera is {ctx.camera.name} {ctx.camera.width}x{ctx.camera.height}, the "
                 f"session's {info.camera.name} {info.camera.width}x{info.camera.height}"
             )
+        if self._last_frame_t is not None and not self.live_reason():
+            last_pose = self._last_pose_t or 0.0
+            if self._last_frame_t - last_pose > self.frame_timeout_s():
+                notes.append(
+                    f"no '{info.solver}' pose in the last frames: a row now is a fail (no converged frame)"
+                )
         return notes
 
     def log_row(self) -> bool:
         """Start collecting the next N frames for a row; False (with the reason shown) if it cannot."""
         reason = self.blocked_reason()
         if reason:
-            self._say(f"cannot log: {reason}", error=self._collector is None)
+            if self.session is not None and not self.form.valid:
+                self.form.reveal_errors()
+                reason = self.blocked_reason()
+            self._say(f"cannot log: {reason}", "error" if self._collector is None else "info")
             return False
         assert self.session is not None
+        if not self._combination_confirmed():
+            return False
         self._truth = self.form.truth()
         self._note = self.form.note.text()
         self._following = self.form.following
@@ -419,37 +530,51 @@ class SessionPanel(QtWidgets.QWidget):
         self._t_press = time.monotonic()
         self.progress.setRange(0, self._collector.frames_wanted)
         self.progress.setValue(0)
-        self._say(f"collecting {self._collector.frames_wanted} frames for row {self.session.next_row}…")
+        self._say(
+            f"collecting {self._collector.frames_wanted} frames for row {self.session.next_row}…", "info"
+        )
         self._update_state()
         return True
+
+    def _combination_confirmed(self) -> bool:
+        """True when the label agrees with the angles' signs, or the operator chose to log it anyway
+        (or to relabel it with the combination the signs fit)."""
+        mismatch = self.form.mismatch()
+        if not mismatch:
+            return True
+        suggestion = self.form.suggestion()
+        choice = self.ask_combo_choice(mismatch, suggestion)
+        if choice == "use" and suggestion:
+            self.form.combo.setCurrentText(suggestion)
+            return True
+        if choice == "keep":
+            return True
+        self._say(f"not logged: {mismatch}", "info")
+        return False
 
     def cancel_row(self) -> None:
         if self._collector is None:
             return
         self._collector = None
         self.progress.setValue(0)
-        self._say("row cancelled: nothing logged")
+        self._say("row cancelled: nothing logged", "info")
+        self._update_state()
+
+    def _give_up(self, why: str) -> None:
+        """Frames stopped while collecting: end the row, log nothing, say so."""
+        collector, self._collector = self._collector, None
+        got = collector.progress[0] if collector is not None else 0
+        wanted = collector.frames_wanted if collector is not None else 0
+        self.progress.setValue(0)
+        row = self.session.next_row if self.session is not None else "?"
+        self._say(
+            f"row {row} not logged: {why} ({got} of {wanted} frames came); press Log row again", "error"
+        )
         self._update_state()
 
     @property
     def collecting(self) -> bool:
         return self._collector is not None
-
-    def on_processed(self, item: Any) -> None:
-        """One result the window drew (ui.worker.Processed): follow the bench's truth, or collect it."""
-        result = item.result
-        collector = self._collector
-        if collector is None:
-            truth = getattr(result, "truth", None)
-            if truth is not None:
-                self.form.follow(truth.position_mm, truth.angles_deg)
-            return
-        if item.frame.t_capture < self._t_press:
-            return  # captured before "Log row" was pressed
-        done = collector.add(result)
-        self.progress.setValue(collector.progress[0])
-        if done:
-            self._finish_row(collector)
 
     def _finish_row(self, collector: FrameCollector) -> None:
         assert self.session is not None and self._truth is not None
@@ -461,11 +586,13 @@ class SessionPanel(QtWidgets.QWidget):
         try:
             outcome = self.session.log(measurement)
         except SessionError as exc:  # refused before anything is written (e.g. a note too long)
-            self._say(f"row NOT logged: {exc}", error=True)
+            self._say(f"row NOT logged: {exc}", "error")
             self._update_state()
             return
-        verdict = "pass" if measurement.judgement.passed else f"fail ({measurement.judgement.reason})"
-        self._after(outcome, f"logged row {outcome.row}: {verdict}")
+        self.progress.setValue(0)
+        passed = measurement.judgement.passed
+        verdict = "pass" if passed else f"fail ({measurement.judgement.reason})"
+        self._after(outcome, f"logged row {outcome.row}: {verdict}", "ok" if passed else "fail")
         if outcome.ok and outcome.row is not None:
             self.rowLogged.emit(outcome.row)
 
@@ -476,20 +603,20 @@ class SessionPanel(QtWidgets.QWidget):
             return
         last = next((r for r in reversed(session.rows) if not r.withdrawn), None)
         if last is None:
-            self._say("nothing to undo")
+            self._say("nothing to undo", "info")
             return
         if not self.ask_confirm(
             "Withdraw row", f"Withdraw row {last.number}? Its line stays in rows.csv, marked withdrawn."
         ):
             return
         outcome = session.withdraw(last.number)
-        self._after(outcome, f"withdrew row {last.number}")
+        self._after(outcome, f"withdrew row {last.number}", "ok")
 
     def retry(self) -> LogOutcome | None:
         if self.session is None:
             return None
         outcome = self.session.retry()
-        self._after(outcome, outcome.message)
+        self._after(outcome, outcome.message, "ok")
         for label in outcome.logged:
             if label.isdigit():
                 self.rowLogged.emit(int(label))
@@ -505,20 +632,44 @@ class SessionPanel(QtWidgets.QWidget):
         try:
             count = self.session.export_pending(path)
         except OSError as exc:
-            self._say(f"could not save the pending rows to {path}: {exc}", error=True)
+            self._say(f"could not save the pending rows to {path}: {exc}", "error")
             return 0
-        self._say(f"saved {count} pending record(s) to {path} (they are still retried here)")
+        self._say(f"saved {count} pending record(s) to {path} (they are still retried here)", "ok")
         return count
 
-    def _after(self, outcome: LogOutcome, success: str) -> None:
+    def export_rows(self) -> int:
+        """Export the rows in force of the open session to a CSV the operator names (default:
+        rows-clean.csv in the session folder); returns how many rows were written."""
+        session = self.session
+        if session is None:
+            return 0
+        path = self.ask_export_path(session.path / DEFAULT_NAME)
+        if not path:
+            return 0
+        try:
+            count = export_session(session.path, path)
+        except (SessionError, OSError) as exc:
+            self._say(f"not exported: {exc}", "error")
+            return 0
+        withdrawn = sum(1 for r in session.rows if r.withdrawn)
+        pending = sum(1 for r in session.rows if not r.confirmed)
+        self._say(
+            f"exported {count} rows to {path}"
+            + (f" ({withdrawn} withdrawn left out)" if withdrawn else "")
+            + (f"; {pending} row(s) not yet written are not in it" if pending else ""),
+            "fail" if pending else "ok",
+        )
+        return count
+
+    def _after(self, outcome: LogOutcome, success: str, kind: str) -> None:
         self.table.refresh()
         if outcome.ok:
             self.banner.setVisible(bool(self.session and self.session.pending))
-            self._say(success)
+            self._say(success, kind)
         else:
             self.banner_text.setText(outcome.message)
             self.banner.show()
-            self._say(outcome.message, error=True)
+            self._say(outcome.message, "error")
             self.rowPending.emit(outcome.message)
         self._update_state()
 
@@ -547,42 +698,87 @@ class SessionPanel(QtWidgets.QWidget):
         return self.resolve_pending()
 
     def shutdown(self) -> None:
+        self.timer.stop()
         self._collector = None
         if self.session is not None:
             self.session.close()
 
     # ---------------------------------------------------------------- state
-    def _say(self, text: str, error: bool = False) -> None:
+    def _say(self, text: str, kind: str = "ok") -> None:
+        """The status line: ``kind`` ok (green), fail (amber: a row that failed its criteria),
+        error (red: nothing was done) or info (grey)."""
         self.status.setText(text)
-        self.status.setStyleSheet("color: #c0392b; font-weight: bold;" if error else "color: #1d6b1d;")
+        self.status.setProperty("kind", kind)
+        self.status.setStyleSheet(STATUS_STYLES[kind])
+
+    _shown_state: tuple[str, list[str]] = ("", [])
 
     def _update_state(self) -> None:
         session = self.session
         collecting = self._collector is not None
         reason = self.blocked_reason()
+        notes = self.context_notes()
+        self._shown_state = (reason, notes)
         self.log_button.setEnabled(not reason)
         self.cancel_button.setEnabled(collecting)
         self.form.setEnabled(not collecting)
+        self.export_button.setEnabled(session is not None)
         self.undo_button.setEnabled(
             session is not None and not collecting and any(not r.withdrawn for r in session.rows)
         )
-        notes = self.context_notes()
         self.why.setText("\n".join([reason, *(f"⚠ {n}" for n in notes)]).strip() if not collecting else "")
+        self.why.setVisible(bool(self.why.text()))
+        if collecting:
+            self.progress.setFormat("%v / %m frames")
+        elif session is not None:
+            self.progress.setFormat(f"{session.info.frames_per_row} frames per row")
+        else:
+            self.progress.setFormat("no session")
         if session is None:
-            self.title.setText("no session open: create one or resume one")
+            self.title.setText("No session open: start one with New session…, or Resume… one")
             self.count.setText("")
+            self.count.hide()
+            self.window_title_changed("")
             return
         info = session.info
-        self.title.setText(f"session {info.name}  ({session.path})")
         withdrawn = sum(1 for r in session.rows if r.withdrawn)
         active = [r for r in session.rows if not r.withdrawn]
         passed = sum(1 for r in active if r.passed)
-        self.count.setText(
-            f"{len(active)} rows ({passed} pass), {withdrawn} withdrawn, next row {session.next_row}; "
-            f"solver {info.solver}, {info.frames_per_row} frames per row, QR side {info.side_mm:g} mm"
+        self.title.setText(
+            f"{info.name}: {len(active)} rows ({passed} pass), {withdrawn} withdrawn, "
+            f"next row {session.next_row}"
             + (f"; {len(session.pending)} NOT WRITTEN" if session.pending else "")
         )
+        self.title.setToolTip(
+            f"solver {info.solver}, {info.frames_per_row} frames per row, QR side {info.side_mm:g} mm"
+        )
+        self.count.setText(f"{short_path(session.path)} · {info.solver}, QR {info.side_mm:g} mm")
+        self.count.setToolTip(str(session.path))
+        self.count.show()
+        self.window_title_changed(f"{info.name} ({len(active)} rows)")
+
+    def window_title_changed(self, text: str) -> None:
+        """Hook for the window: the open session in a few words ("" when none)."""
+        window = self.window()
+        if isinstance(window, QtWidgets.QMainWindow):
+            window.setWindowTitle("qrfield — bench" + (f" — {text}" if text else ""))
 
     def refresh_state(self) -> None:
         """Re-check what may be logged (the window's method or camera changed)."""
         self._update_state()
+
+
+def _banner(
+    name: str, text: QtWidgets.QLabel, buttons: tuple[QtWidgets.QPushButton, ...], background: str
+) -> QtWidgets.QFrame:
+    """A coloured strip: a wrapped message and its buttons on one line (hidden at first)."""
+    frame = QtWidgets.QFrame()
+    frame.setObjectName(name)
+    frame.setStyleSheet(f"QFrame#{name} {{ background: {background}; border-radius: 3px; }}")
+    layout = QtWidgets.QHBoxLayout(frame)
+    layout.setContentsMargins(6, 2, 6, 2)
+    layout.addWidget(text, 1)
+    for button in buttons:
+        layout.addWidget(button)
+    frame.hide()
+    return frame

@@ -62,7 +62,7 @@ class AcceptanceCriteria:
 
 @dataclass(frozen=True)
 class SessionSettings:
-    """How the app logs one row."""
+    """How the app logs one row, and how long it waits for frames."""
 
     frames_per_row: int = setting(
         10,
@@ -71,4 +71,14 @@ class SessionSettings:
         minimum=1,
         maximum=1000,
         help="'Log row' averages this many consecutive frames into one row",
+    )
+    frame_timeout_s: float = setting(
+        3.0,
+        label="frame timeout",
+        unit="s",
+        minimum=0.5,
+        maximum=60.0,
+        decimals=1,
+        help="no frame for this long: 'Log row' waits, and a row being collected is given up "
+        "(nothing logged)",
     )

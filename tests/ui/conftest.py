@@ -1,4 +1,5 @@
-"""Qt tests run offscreen; the app's config directory is always a temporary one."""
+"""Qt tests run offscreen; the app's config directory is always a temporary one, and a dialog the
+test did not answer fails the test instead of waiting for a click that never comes."""
 
 from __future__ import annotations
 
@@ -10,6 +11,22 @@ os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 from pathlib import Path
 
 import pytest
+
+
+@pytest.fixture(autouse=True)
+def no_unanswered_dialogs(monkeypatch, tmp_path: Path):
+    """The Session tab's questions raise unless a test answers them (monkeypatch the method);
+    the user's config folder (calibrations) is a temporary one."""
+    from ui.sessions_panel import SessionPanel
+
+    for name in ("ask_confirm", "ask_pending_choice", "ask_combo_choice", "ask_save_path", "ask_export_path"):
+
+        def unanswered(self, *args, _name=name, **kwargs):
+            raise AssertionError(f"the test did not answer {_name}{args}")
+
+        monkeypatch.setattr(SessionPanel, name, unanswered)
+    monkeypatch.setenv("QRFIELD_CONFIG_DIR", str(tmp_path / "user-config"))
+    monkeypatch.setenv("QRFIELD_DATA_DIR", str(tmp_path / "user-data"))
 
 
 @pytest.fixture

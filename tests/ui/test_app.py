@@ -81,7 +81,9 @@ def test_switching_source_to_a_folder(make_window, qtbot, tmp_path: Path, camera
     )
     # The status line is set by the queued sourceOpened signal, which may land after the redraw
     # timer has already drawn the folder's first frame: wait for it rather than race it.
-    qtbot.waitUntil(lambda: "folder" in window.status_source.text(), timeout=WAIT_MS)
+    qtbot.waitUntil(lambda: "folder" in window.status_source.toolTip(), timeout=WAIT_MS)
+    assert window.status_source.text() == "source: photos"  # short in the status bar, in full beside
+    assert "folder" in window.source_controls.state.text()
     qtbot.waitUntil(lambda: meets_seed_criteria(window.pose_panel.displayed("ippe"), pose), timeout=WAIT_MS)
     assert np.all(np.isnan(window.pose_panel.displayed("true")))  # no truth column for real sources
 
@@ -206,17 +208,14 @@ def qtbot_button_left():
 def test_every_tab_title_is_visible_without_scrolling(make_window, qtbot) -> None:
     window = make_window({"source": "virtual"})
     qtbot.waitExposed(window)
+    titles = [window.work_tabs.tabText(i) for i in range(window.work_tabs.count())]
+    assert titles == ["Session", "Live plots", "Analysis", "Simulation", "Setup"]
+    window.work_tabs.setCurrentIndex(titles.index("Setup"))
     for tabs in (window.tabs, window.work_tabs):
         bar = tabs.tabBar()
         assert bar.sizeHint().width() <= tabs.width(), [tabs.tabText(i) for i in range(tabs.count())]
-    titles = [window.work_tabs.tabText(i) for i in range(window.work_tabs.count())]
-    assert titles == ["Live plots", "Session", "Analysis", "Simulation"]
-    # A page of forms and tables under the preview gets at least about half of the height.
-    top, bottom = window.left_splitter.sizes()
-    assert bottom < top
-    window.work_tabs.setCurrentIndex(titles.index("Session"))
-    top, bottom = window.left_splitter.sizes()
-    assert bottom >= top
+    setup = [window.tabs.tabText(i) for i in range(window.tabs.count())]
+    assert setup == ["Source", "Detect && solve", "Camera", "Virtual bench", "Serial"]
 
 
 def test_choosing_a_new_source_opens_it_once(make_window, qtbot, tmp_path: Path) -> None:

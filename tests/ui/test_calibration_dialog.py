@@ -29,9 +29,8 @@ CAMERA = "picam-v2@640x480"
 
 @pytest.fixture(autouse=True)
 def _in_tmp_path(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.chdir(tmp_path)
-    # Save writes NAME.json to the user's profile folder (qrfield.paths.user_calib_dir): here, not ~.
-    monkeypatch.setenv("QRFIELD_CONFIG_DIR", str(tmp_path / "config"))
+    monkeypatch.chdir(tmp_path)  # nothing may land in ./calib (the checkout's shipped presets)
+    monkeypatch.setenv("QRFIELD_CONFIG_DIR", str(tmp_path / "user-config"))  # Save writes its calib/
 
 
 def click(qtbot, widget) -> None:
@@ -96,12 +95,14 @@ def test_virtual_chessboard_views_calibrate_back_to_the_camera(make_window, qtbo
     assert "RMS reprojection error" in text and f"fx = {cam.fx:.2f} ±" in text and "advice:" in text
     assert all("px RMS" in dialog.views.item(i).text() for i in range(8))
 
-    # Save: NAME.json in the user's profile folder, found by name by the core (./calib is not searched
-    # by name since issue 15); no overwrite unless confirmed.
-    dialog.form.widgets["name"].setText("bench-cam")
+    # Save: NAME.json in the user's calib folder (the name given, made file-safe), read back by
+    # the core and found by that name; no overwrite unless confirmed.
+    dialog.form.widgets["name"].setText("bench cam")
     dialog.form.widgets["name"].editingFinished.emit()
     click(qtbot, dialog.save_button)
-    path = tmp_path / "config" / "calib" / "bench-cam.json"
+    path = tmp_path / "user-config" / "calib" / "bench-cam.json"
+    assert not (tmp_path / "calib").exists()
+    assert resolve_camera("bench-cam").fx == pytest.approx(cam.fx)
     loaded = CameraModel.load(path)
     assert resolve_camera("bench-cam").fx == pytest.approx(cam.fx)  # --camera bench-cam finds it
     assert (loaded.fx, loaded.fy, loaded.cx, loaded.cy) == pytest.approx((cam.fx, cam.fy, cam.cx, cam.cy))

@@ -82,6 +82,8 @@ def test_cli_rows_are_the_apps_rows_column_by_column(make_window, qtbot, tmp_pat
         {"x": "10", "y": "-5", "z": "300", "alpha": "15", "beta": "-20", "gamma": "10", "combo": "alpha"}
     )
     panel.form.note.setText("same note")
+    panel.ask_combo_choice = lambda message, suggestion: "keep"  # "alpha" for (15, -20, 10), as the CLI row
+    qtbot.waitUntil(panel.log_button.isEnabled, timeout=WAIT_MS)  # Log row waits for live frames
     with qtbot.waitSignal(panel.rowLogged, timeout=WAIT_MS):
         assert panel.log_row()
     app_header, (app_row,) = read_rows(session.path)

@@ -53,9 +53,10 @@ def test_panel_shows_each_method_the_truth_and_the_verdict(qtbot) -> None:
     panel.show_result(result, ("numerical", "ippe"))
     assert np.allclose(panel.displayed("numerical"), [10.4, -5.2, 301.0, 15.5, -19.0, 10.2])
     assert np.allclose(panel.displayed("true"), [10.0, -5.0, 300.0, 15.0, -20.0, 10.0])
-    verdict = panel.verdict.text()
-    assert "numerical: Δpos 1.10 mm, Δangle ≤ 1.00°" in verdict and "✔ meets" in verdict  # sqrt(1.2) = 1.095
-    assert "ippe: Δpos 9.22 mm, Δangle ≤ 3.00°" in verdict and "✘ fails" in verdict  # sqrt(85) = 9.220
+    lines = panel.verdict.text().splitlines()
+    assert lines[0] == "vs true pose (✔ = within 2° and 5\u00a0mm):"  # the seed's criteria
+    assert lines[1] == "✔ numerical: Δpos 1.10 mm, Δangle ≤ 1.00°"  # sqrt(1.2) = 1.095
+    assert lines[2] == "✘ ippe: Δpos 9.22 mm, Δangle ≤ 3.00°"  # sqrt(85) = 9.220
     assert "flip risk" in panel.findChild(type(panel.headline), "status_ippe").text()
     assert "flip risk" not in panel.findChild(type(panel.headline), "status_numerical").text()
 
@@ -109,13 +110,16 @@ def test_the_verdict_uses_the_criteria_it_is_given(qtbot) -> None:
     detection = SimpleNamespace(text="", corners_px=np.zeros((4, 2)))
     result = FrameResult(3, 100, "OK", detection=detection, poses=poses, truth=truth)
     panel.show_result(result, ("numerical",))
-    assert "✔ meets 2°/5 mm" in panel.verdict.text()  # the seed's, by default
+    lines = panel.verdict.text().splitlines()
+    assert "within 2° and 5\u00a0mm" in lines[0] and lines[1].startswith("✔ numerical")  # the seed's
     panel.set_criteria(AcceptanceCriteria(max_angle_error_deg=0.5, max_position_error_mm=5.0))
     panel.show_result(result, ("numerical",))
-    assert "✘ fails 0.5°/5 mm" in panel.verdict.text()
+    lines = panel.verdict.text().splitlines()
+    assert "within 0.5° and 5\u00a0mm" in lines[0] and lines[1].startswith("✘ numerical")
     panel.set_criteria(AcceptanceCriteria(max_angle_error_deg=2.0, max_position_error_mm=1.0))
     panel.show_result(result, ("numerical",))
-    assert "✘ fails 2°/1 mm" in panel.verdict.text()
+    lines = panel.verdict.text().splitlines()
+    assert "within 2° and 1\u00a0mm" in lines[0] and lines[1].startswith("✘ numerical")
 
 
 def test_the_window_judges_by_the_open_sessions_criteria(make_window, tmp_path, monkeypatch) -> None:
@@ -131,3 +135,35 @@ def test_the_window_judges_by_the_open_sessions_criteria(make_window, tmp_path, 
     panel.criteria_form.widgets["max_angle_error_deg"].setValue(3.0)  # for the next session, not this one
     assert session is not None and window.pose_panel.criteria == session.info.criteria
     assert window.pose_panel.criteria.max_angle_error_deg == 1.0
+
+
+def test_no_negative_zero_and_stale_only_after_a_real_pose(qtbot) -> None:
+    panel = PosePanel()
+    qtbot.addWidget(panel)
+    panel.mark_stale("no source")  # nothing was ever measured: nothing can be stale
+    assert panel.headline.text().startswith("NO SOURCE") and "STALE" not in panel.headline.text()
+    result = FrameResult(
+        4,
+        101,
+        "OK",
+        detection=SimpleNamespace(text="qrfield", corners_px=np.zeros((4, 2))),
+        poses={"numerical": pose_result("numerical", [-0.04, 0.0, 300.0], [-0.004, 0.001, -0.0])},
+    )
+    panel.show_result(result, ("numerical",))
+    texts = [panel.findChild(type(panel.headline), f"numerical_{r}").text() for r in range(6)]
+    assert texts == ["0.0", "0.0", "300.0", "0.00", "0.00", "0.00"]  # -0.04 mm and -0.004 deg round to 0
+    panel.mark_stale("no source")
+    assert panel.headline.text().startswith("STALE")
+    panel.source_opened()  # a new source has shown no pose of its own yet
+    panel.mark_stale("no source")
+    assert panel.headline.text().startswith("NO SOURCE")
+
+
+def test_numbers_on_screen_never_read_minus_zero() -> None:
+    from ui.plots import ZeroSafeAxis
+    from ui.text import fixed
+
+    assert fixed(-0.004, 2) == "0.00" and fixed(-0.005001, 2) == "-0.01" and fixed(float("nan"), 1) == "—"
+    assert fixed(-0.0, 0) == "0" and fixed(None, 1, missing="-") == "-"
+    axis = ZeroSafeAxis("left")
+    assert axis.tickStrings([-1e-17, 0.01, -0.01], 1.0, 0.01) == ["0", "0.01", "-0.01"]  # not "-1e-17"

@@ -1,19 +1,34 @@
 """The Session and Analysis tabs on the virtual bench, offscreen with pytest-qt: a session made in
 tmp_path, rows logged by typing the ground truth, the CSV checked against the bench's true pose,
-a bad field blocking the row, undo, resume in a new window, analysis, a failed write kept pending."""
+a bad field blocking the row, undo, the last session offered again in a new window, analysis
+into the session folder, a failed write kept pending."""
 
 from __future__ import annotations
 
 import csv
 import dataclasses
 import errno
+import json
 import math
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
-from PySide6 import QtCore, QtWidgets
+from PySide6 import QtCore
+from session_steps import (
+    COMBO,
+    FRAMES,
+    POSE_FIELDS,
+    bench,
+    click_box,
+    create_session,
+    log_by_enter,
+    pick,
+    rows_csv,
+    show_tab,
+    type_truth,
+)
 
 from qrfield.geometry import angle_difference
 from qrfield.sessions.files import FileOps
@@ -48,10 +63,6 @@ DESIGN_COLUMNS = [
     "pass",
     "note",
 ]
-FRAMES = 3
-POSE_FIELDS = ("x", "y", "z", "alpha", "beta", "gamma")
-# The virtual bench's default pose: x 10, y -5, z 300 mm; alpha 15, beta -20, gamma 10 degrees.
-COMBO = "alpha+beta-gamma+"
 
 
 @pytest.fixture
@@ -66,72 +77,6 @@ def session_window(make_window, tmp_path: Path, monkeypatch):
         return window
 
     return make
-
-
-def show_tab(window, widget) -> None:
-    """Bring the tab holding ``widget`` (inside its scroll area) to the front."""
-    tabs = window.work_tabs
-    pages = [tabs.widget(i) for i in range(tabs.count())]
-    index = next(i for i, page in enumerate(pages) if widget is page or page.isAncestorOf(widget))
-    tabs.setCurrentIndex(index)
-    assert tabs.tabText(index) in ("Session", "Analysis")
-
-
-def click_box(qtbot, box: QtWidgets.QCheckBox) -> None:
-    """Click a check box on its indicator (a click right of its text does not toggle it)."""
-    was = box.isChecked()
-    option = QtWidgets.QStyleOptionButton()
-    box.initStyleOption(option)
-    indicator = box.style().subElementRect(QtWidgets.QStyle.SubElement.SE_CheckBoxIndicator, option, box)
-    qtbot.mouseClick(box, LEFT, pos=indicator.center())
-    assert box.isChecked() != was
-
-
-def rows_csv(session_dir: Path) -> tuple[list[str], list[dict[str, str]]]:
-    with open(session_dir / "rows.csv", newline="", encoding="utf-8") as f:
-        reader = csv.reader(f)
-        header = next(reader)
-        return header, [dict(zip(header, line, strict=True)) for line in reader]
-
-
-def create_session(qtbot, window, name: str = "bench test"):
-    panel = window.session_panel
-    panel.row_settings.widgets["frames_per_row"].setValue(FRAMES)
-    qtbot.keyClicks(panel.name_edit, name)
-    qtbot.keyClicks(panel.operator_edit, "tester")
-    qtbot.mouseClick(panel.create_button, LEFT)
-    assert panel.session is not None, panel.status.text()
-    qtbot.waitUntil(lambda: panel.form.follow_box.isEnabled(), timeout=WAIT_MS)  # frames with truth came
-    return panel
-
-
-def bench(window) -> dict[str, float]:
-    pose = window.virtual_form.value().pose
-    return dict(zip(POSE_FIELDS, [*pose.position_mm, *pose.angles_deg], strict=True))
-
-
-def type_truth(qtbot, panel, texts: dict[str, str], combo: str = COMBO) -> None:
-    """Type the ground truth as an operator: select the field's text, type, Tab to the next field."""
-    form = panel.form
-    if form.follow_box.isChecked():
-        click_box(qtbot, form.follow_box)
-    widget: QtWidgets.QWidget = form.edits["x"]
-    for name in POSE_FIELDS:
-        assert widget is form.edits[name]  # the Tab order is x, y, z, alpha, beta, gamma
-        widget.selectAll()
-        qtbot.keyClicks(widget, texts[name])
-        widget = widget.nextInFocusChain()
-        while not widget.focusPolicy() & QtCore.Qt.FocusPolicy.TabFocus:
-            widget = widget.nextInFocusChain()
-    assert widget is form.combo  # then the combination
-    qtbot.keyClicks(form.combo, combo)
-    assert form.combo.currentText() == combo
-
-
-def log_by_enter(qtbot, panel, row: int, widget: QtWidgets.QWidget | None = None) -> None:
-    with qtbot.waitSignal(panel.rowLogged, timeout=WAIT_MS) as blocker:
-        qtbot.keyClick(widget or panel.form.edits["gamma"], QtCore.Qt.Key.Key_Return)
-    assert blocker.args == [row]
 
 
 def meets_criteria(row: dict[str, str], truth: dict[str, float]) -> bool:
@@ -201,18 +146,27 @@ def test_a_bad_field_blocks_the_row_with_its_message(session_window, qtbot) -> N
     texts = {k: f"{v:g}" for k, v in bench(window).items()}
     type_truth(qtbot, panel, {**texts, "z": "3OO"})  # letter O, not zero
     z = panel.form.edits["z"]
-    message = panel.form.messages["z"].text()
-    assert message and not panel.log_button.isEnabled()
-    assert message in z.toolTip() and "border" in z.styleSheet()
-    assert "z" in panel.why.text()
+    message = panel.form.errors["z"]
+    assert "not a number" in message and not panel.log_button.isEnabled()
+    assert message in z.toolTip() and "border" in z.styleSheet() and message in panel.form.problems.text()
+    assert panel.why.text() == "fix z first"
+    # Fixing z and breaking beta: the hint names beta, not z.
+    beta = panel.form.edits["beta"]
+    beta.selectAll()
+    qtbot.keyClicks(beta, "95")
+    assert panel.why.text() == "fix z, beta first"
+    beta.selectAll()
+    qtbot.keyClicks(beta, texts["beta"])
+    assert panel.why.text() == "fix z first" and beta.styleSheet() == ""
     shown = window.frames_shown
     qtbot.keyClick(z, QtCore.Qt.Key.Key_Return)  # Enter must not log a half row
     qtbot.waitUntil(lambda: window.frames_shown >= shown + 2 * FRAMES, timeout=WAIT_MS)
     assert rows_csv(panel.session.path)[1] == [] and not panel.collecting
-    assert panel.status.text().startswith("cannot log")
+    assert panel.status.text().startswith("cannot log") and panel.status.property("kind") == "error"
     z.selectAll()
     qtbot.keyClicks(z, "300")
-    assert panel.log_button.isEnabled() and panel.form.messages["z"].text() == "" and z.styleSheet() == ""
+    assert panel.log_button.isEnabled() and "z" not in panel.form.errors and z.styleSheet() == ""
+    assert not panel.form.problems.isVisible()
 
     # The session measures with "numerical": with only IPPE running a row cannot be logged.
     window.set_method("ippe")
@@ -256,16 +210,18 @@ def test_undo_resume_and_analysis(session_window, qtbot, tmp_path: Path, monkeyp
     with open(session_dir / "rows.csv", "ab") as f:
         f.write(b"4,2026-11-23T00:00:00+00:00,alph")  # a crash in the middle of a line
 
+    # The next start offers the last session, and asks first: nothing is open until Reopen.
     second = session_window()
     assert second.session_panel.row_settings.value().frames_per_row == FRAMES  # saved with the app
     panel2 = second.session_panel
-    panel2.manage.setCurrentIndex(1)
-    assert panel2.resume_combo.currentData() == str(session_dir)
-    qtbot.mouseClick(panel2.resume_button, LEFT)
+    assert panel2.session is None and panel2.reopen_banner.isVisible()
+    assert "resume me (2 rows)" in panel2.reopen_text.text()  # rows 1 and 2 in force, 3 withdrawn
+    qtbot.mouseClick(panel2.reopen_button, LEFT)
     assert panel2.session is not None and panel2.session.path == session_dir
+    assert not panel2.reopen_banner.isVisible()
     assert panel2.table.model().rowCount() == 3
     assert "(withdrawn)" in panel2.table.cell_text(2, "pass") and panel2.table.cell_text(1, "pass") == "fail"
-    assert "next row 4" in panel2.count.text()
+    assert "next row 4" in panel2.title.text() and str(session_dir) == panel2.count.toolTip()
     assert panel2.warnings.isVisible() and "unfinished line" in panel2.warnings.text()
     qtbot.waitUntil(lambda: panel2.form.follow_box.isEnabled(), timeout=WAIT_MS)
     type_truth(qtbot, panel2, texts)
@@ -287,6 +243,16 @@ def test_undo_resume_and_analysis(session_window, qtbot, tmp_path: Path, monkeyp
     last = tab.table.rowCount() - 1
     assert tab.table.item(last, 0).text() == "all" and tab.table.item(last, 1).text() == "3"
     assert all(not label.pixmap().isNull() for label in tab.plots)
+    # The results live in the session folder, not in /tmp; Save as… copies them.
+    analysis = session_dir / "analysis"
+    assert tab.result["out_dir"] == str(analysis)
+    assert f"pass rate {expected:.2f}%" in (analysis / "report.txt").read_text()
+    assert json.loads((analysis / "analysis.json").read_text())["rows"] == 3
+    assert {p.name for p in analysis.iterdir()} >= {"errors_vs_tilt.png", "measured_vs_truth.png"}
+    monkeypatch.setattr(tab, "ask_save_folder", lambda: str(tmp_path))
+    qtbot.mouseClick(tab.save_button, LEFT)
+    copy = tmp_path / f"{session_dir.name}-report.txt"
+    assert copy.read_text() == (analysis / "report.txt").read_text()
 
     show_tab(second, panel2)
     path = tmp_path / "session_tab.png"
@@ -348,6 +314,7 @@ def test_analysis_of_a_folder_that_is_no_session_says_why(qtbot, tmp_path: Path)
     qtbot.mouseClick(tab.run_button, LEFT)
     qtbot.waitUntil(lambda: tab.run_button.isEnabled(), timeout=WAIT_MS)
     assert "failed" in tab.state.text() and "session.json" in tab.state.text() and tab.result is None
+    assert not (tmp_path / "not-a-session" / "analysis").exists()  # nothing written into it
     tab.shutdown()
 
 
@@ -356,12 +323,15 @@ def test_a_row_on_a_wobbling_bench_compares_with_its_mean_true_pose(session_wind
     window.virtual_form.widgets["wobble_period_s"].setValue(0.5)
     window.virtual_form.widgets["wobble_deg"].setValue(20.0)  # alpha and beta swing by +-20 degrees
     panel = window.session_panel
+    qtbot.mouseClick(panel.new_button, LEFT)
     panel.row_settings.widgets["frames_per_row"].setValue(10)
     panel.name_edit.setText("wobble")
     qtbot.mouseClick(panel.create_button, LEFT)
+    # The followed angles swing through 0 and the suggested label with them: keep the one typed.
+    panel.ask_combo_choice = lambda message, suggestion: "keep"
     qtbot.waitUntil(lambda: panel.form.follow_box.isEnabled(), timeout=WAIT_MS)
     assert panel.form.follow_box.isChecked()  # on by default on the virtual bench
-    qtbot.keyClicks(panel.form.combo, COMBO)
+    pick(panel.form.combo, COMBO)
     log_by_enter(qtbot, panel, 1, panel.form.combo)
     row = rows_csv(panel.session.path)[1][0]
     # Over a whole 0.5 s swing, the truth at the press and the mean over the frames differ by

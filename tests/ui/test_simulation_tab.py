@@ -355,7 +355,8 @@ def test_the_main_window_has_the_tab_and_persists_it(qtbot, tmp_path: Path) -> N
 
     first = window()
     tab = first.simulation_tab
-    assert first.work_tabs.tabText(first.work_tabs.count() - 1) == "Simulation"
+    titles = [first.work_tabs.tabText(i) for i in range(first.work_tabs.count())]
+    assert first.work_tabs.widget(titles.index("Simulation")) is tab
     assert tab.config is not None and tab.config.side_mm == 42.0
     type_into(qtbot, tab, "y_range", "-20, 20, 20")
     first.shutdown()
