@@ -127,3 +127,19 @@ def test_a_folder_that_is_no_session_is_named(tmp_path) -> None:
 )
 def test_column_names_carry_their_unit(column, named) -> None:
     assert column_with_unit(column) == named
+
+
+def test_the_session_export_command_writes_the_same_file(session_dir, tmp_path, capsys) -> None:
+    from qrfield.cli import main
+
+    out = tmp_path / "clean.csv"
+    assert main(["session", "export", str(session_dir), "--out", str(out)]) == 0
+    assert out.read_bytes() == EXPECTED.encode("utf-8")
+    assert f"exported 3 rows to {out}" in capsys.readouterr().out
+    # A folder that does not hold a session is one clear error, and nothing is written.
+    assert main(["session", "export", str(tmp_path / "nothing"), "--out", str(tmp_path / "x.csv")]) == 2
+    assert not (tmp_path / "x.csv").exists()
+    # Folders above the one named are never created (the shared folder rule).
+    deep = tmp_path / "a" / "b" / "c.csv"
+    assert main(["session", "export", str(session_dir), "--out", str(deep)]) != 0
+    assert not (tmp_path / "a").exists()

@@ -1,4 +1,4 @@
-"""``qrfield session``: experiment sessions without a screen (new, log, undo, list, show).
+"""``qrfield session``: experiment sessions without a screen (new, log, undo, list, show, export).
 
 The same files as the app's Session tab (docs/conventions.md, "Experiment sessions on disk"), made by
 the same core (:mod:`qrfield.sessions`): a row is the average of N frames of the session's solver,
@@ -21,11 +21,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-HELP = "make experiment sessions and log rows without the app (new, log, undo, list, show)"
+HELP = "make experiment sessions and log rows without the app (new, log, undo, list, show, export)"
 DESCRIPTION = (
     "Experiment sessions on disk, as the app's Session tab makes them: 'new' creates one, 'log' "
     "measures a row (averaged frames against a ground truth measured by hand), 'undo' withdraws the "
-    "last row, 'list' and 'show' read them."
+    "last row, 'list' and 'show' read them, 'export' writes the rows in force for a spreadsheet."
 )
 
 
@@ -374,6 +374,28 @@ def _run_show(args: argparse.Namespace) -> int:
     return 0
 
 
+# ------------------------------------------------------------------------------------ export
+def _add_export(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("folder", metavar="FOLDER", help="the session folder")
+    parser.add_argument(
+        "--out",
+        required=True,
+        metavar="PATH",
+        help="the CSV to write (a folder: rows-clean.csv in it); only the rows still in force, "
+        "units in the column names (gt_x_mm, err_alpha_deg, ...)",
+    )
+
+
+def _run_export(args: argparse.Namespace) -> int:
+    from qrfield.sessions.export import clean_table, export_path, export_session
+
+    for warning in clean_table(args.folder).warnings:
+        say(f"warning: {warning}")
+    written = export_session(args.folder, args.out)
+    print(f"exported {written} rows to {export_path(args.folder, args.out)}")
+    return 0
+
+
 SUBCOMMANDS: dict[str, Subcommand] = {
     "new": Subcommand(
         "create a session folder (camera, QR side, solver from the options or the config)", _add_new, _run_new
@@ -384,6 +406,9 @@ SUBCOMMANDS: dict[str, Subcommand] = {
     "undo": Subcommand("withdraw the last row (a withdrawal record is appended)", _add_undo, _run_undo),
     "list": Subcommand("list the sessions in a folder", _add_list, _run_list),
     "show": Subcommand("print a session's setup and rows", _add_show, _run_show),
+    "export": Subcommand(
+        "write the rows still in force as a clean CSV (units in the column names)", _add_export, _run_export
+    ),
 }
 
 

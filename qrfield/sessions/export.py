@@ -29,6 +29,7 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from qrfield.files import make_folder
 from qrfield.sessions.files import atomic_write
 from qrfield.sessions.store import ROWS_FILE, SESSION_FILE, SessionError, read_session
 
@@ -112,13 +113,14 @@ def export_session(folder: str | os.PathLike[str], out_path: str | os.PathLike[s
     """Write the rows still in force of the session in ``folder`` to ``out_path`` (see the module
     doc); returns how many rows were written.
 
-    ``out_path`` may be a file (its folder is created when missing) or an existing folder (the
-    file is then ``rows-clean.csv`` in it, see :func:`export_path`). Raises SessionError when
+    ``out_path`` may be a file (its folder is created when missing and its parent exists: the
+    folder rule of :func:`qrfield.files.make_folder`) or an existing folder (the file is then
+    ``rows-clean.csv`` in it, see :func:`export_path`). Raises SessionError when
     ``folder`` is not a readable session or ``out_path`` is one of its own files, OSError when the
     file cannot be written (nothing is left half-written).
     """
     table = clean_table(folder)
     target = export_path(folder, out_path)
-    target.parent.mkdir(parents=True, exist_ok=True)
+    make_folder(target.parent, "export folder")
     atomic_write(target, table_bytes(table))
     return len(table.rows)
