@@ -200,8 +200,12 @@ class Pipeline:
                 else detect.Tracker(detector_settings or detect.DetectorSettings())
             )
             select = select or detect.select_code
+        # The default solves every method in one call (what they share is done once).
+        self._solve_methods = None
         if solve is None:
-            from qrfield.solvers import solve
+            from qrfield.solvers import solve, solve_methods
+
+            self._solve_methods = solve_methods
         self._tracker = tracker
         self._detector_settings = detector_settings
         self._solve = solve
@@ -266,7 +270,14 @@ class Pipeline:
         cov = getattr(result.detection, "pose_cov", getattr(result.detection, "corners_cov", None))
         t = time.perf_counter()
         errors = []
-        for method in self.methods:
+        if self._solve_methods is not None:
+            try:
+                result.poses = self._solve_methods(
+                    result.detection.corners_px, camera, self.side_mm, self.methods, self.solver_settings, cov
+                )
+            except Exception:  # then method by method, to say which one failed
+                result.poses = {}
+        for method in self.methods if not result.poses else ():
             try:
                 result.poses[method] = self._solve(
                     result.detection.corners_px,

@@ -335,10 +335,12 @@ def solve_numerical(
     camera: CameraModel,
     side: float,
     settings: NumericalSettings | None,
+    xy: tuple[list[float], list[float]] | None = None,
 ) -> PoseResult:
-    """One pose by the numerical model, from checked corners (see :func:`qrfield.solvers.solve`)."""
+    """One pose by the numerical model, from checked corners (see :func:`qrfield.solvers.solve`);
+    ``xy``: their normalised coordinates (qrfield.solvers.rays.normalised_single) when known."""
     s = checked_settings(settings)
-    x, y = normalised_single(corners, flat, camera)
+    x, y = xy if xy is not None else normalised_single(corners, flat, camera)
     lengths = kernel.lengths_for(side)
     z0 = _initial_single(x, y, lengths, side, s)
     z, n, status, worst = iterate_single(z0, x, y, lengths, s)
