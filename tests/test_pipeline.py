@@ -295,10 +295,10 @@ def test_edge_line_corners_get_an_assumed_covariance_whose_pose_std_covers_the_e
         view = render_view(camera_vga, 40.0, truth, noise_sigma=2.0, blur_px=0.8, seed=i)
         pipeline.reset()
         result = pipeline.process(Frame(view.image, 100.0, 0))
-        if result.detection is None:
-            continue
         d = result.detection
-        assert d.refined and d.corners_cov is None and result.status == OK
+        if d is None or not d.refined:
+            continue  # not found, or not refined (no pose: the test above)
+        assert d.corners_cov is None and result.status == OK
         std = np.sqrt(d.pose_cov[:, [0, 1], [0, 1]])
         corner_z.extend(((d.corners_px - view.corners_px) / std).ravel())
         for pose in result.poses.values():
