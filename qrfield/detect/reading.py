@@ -64,7 +64,8 @@ def read_symbol(
     lens: Lens | None = None,
     offset: tuple[int, int] = (0, 0),
 ) -> tuple[str | None, np.ndarray | None]:
-    """(text, (n, n) bool module matrix, True = dark, upright) of the symbol with corners V1..V4
+    """(text, (n, n) bool module matrix as read, True = dark, upright: a few modules may be wrong,
+    which the error correction put right for the text) of the symbol with corners V1..V4
     ``corners_px`` (sub-pixel, pixels of ``grey``, an image whose top-left pixel is at ``offset`` in
     the camera's) and ``modules`` per side seen through a blur of ``blur_px`` (standard deviation,
     px); (None, None) when zxing-cpp cannot decode what the least squares read."""

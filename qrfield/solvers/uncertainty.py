@@ -288,8 +288,13 @@ def euler_jacobian(angles_deg: np.ndarray) -> np.ndarray:
 
 def pose_covariance(jac: np.ndarray, cov_n: np.ndarray, angles_deg: np.ndarray) -> np.ndarray:
     """(..., 6, 6) covariance of (x, y, z mm, alpha, beta, gamma deg) from the Jacobian (..., 6, 8)
-    of p = (omega, t) over the normalised corners and their covariance (..., 4, 2, 2)."""
-    full = np.concatenate([jac[..., 3:, :], euler_jacobian(angles_deg) @ jac[..., :3, :]], axis=-2)
+    of p = (omega, t) over the normalised corners and their covariance (..., 4, 2, 2), or one
+    (4, 2, 2) shared by every row."""
+    if np.ndim(angles_deg) == 2 and len(angles_deg) <= 8:  # a few poses: the scalar Euler path
+        euler = np.array([euler_jacobian(a) for a in angles_deg])
+    else:
+        euler = euler_jacobian(angles_deg)
+    full = np.concatenate([jac[..., 3:, :], euler @ jac[..., :3, :]], axis=-2)
     sigma = np.zeros((*cov_n.shape[:-3], 64))
     sigma[..., _BLOCK_DIAGONAL] = cov_n.reshape(*cov_n.shape[:-3], 16)  # corners independent
     sigma = sigma.reshape(*cov_n.shape[:-3], 8, 8)
@@ -412,7 +417,7 @@ def with_uncertainties(
             else:
                 jac[k] = least_squares_jacobian(projection[1][k], camera)
         angles = np.array([results[i].angles_deg for i in solved])
-        pose_cov = pose_covariance(jac, np.broadcast_to(cov_n, (len(solved), 4, 2, 2)), angles)
+        pose_cov = pose_covariance(jac, cov_n, angles)
         pos_std, ang_std = pose_std(pose_cov)
         n_obs = np.array([v for pair in zip(x_list, y_list, strict=True) for v in pair])
         chi2 = branch_chi2(projection, n_obs, information_matrix(cov_n))
