@@ -58,6 +58,9 @@ class Solved:
     ambiguous: bool = False
     chi2: float = math.nan
     mirror_chi2: float = math.nan
+    #: the mirror candidate (the solver's alternative) is nearer the truth than the answer (None
+    #: without one): the answer is on the wrong branch of the ambiguity, flip or not
+    wrong_branch: bool | None = None
 
     @property
     def flip(self) -> bool:
@@ -86,6 +89,10 @@ def _solved(result: Any, view: Any) -> Solved:
     if result is None or not result.converged:
         return Solved()
     error = pose_errors(result, view.truth)
+    wrong = None
+    alt = result.alternative
+    if alt is not None and np.all(np.isfinite(alt.angles_deg)):
+        wrong = bool(np.abs(pose_errors(alt, view.truth)[3:]).max() < np.abs(error[3:]).max())
     return Solved(
         True,
         _meets(error),
@@ -94,6 +101,7 @@ def _solved(result: Any, view: Any) -> Solved:
         bool(result.ambiguous),
         float(result.chi2),
         float(result.mirror_chi2),
+        wrong,
     )
 
 
@@ -333,21 +341,24 @@ def _print_flips(outcomes: list[Outcome]) -> None:
         "   the precision bound: where both branches fit, the mirror's posterior is\n"
         "   p = exp(-d/2) / (1 + exp(-d/2)), d = mirror chi2 - answer chi2 "
         f"(flagged: d < {FLIP_DELTA_CHI2:g});\n"
-        "   if the std is right the share of flips among such views is the mean p, at most 50 % where\n"
-        "   d >= 0 (a solver that reports the better fit):"
+        "   if the std is right the share of answers on the wrong branch among such views is the mean\n"
+        "   p, at most 50 % where d >= 0 (a solver that reports the better fit); a wrong branch is a flip\n"
+        f"   (> {FLIP_DEG:g} deg) only where the two branches lie that far apart:"
     )
-    print(f"{'method, d':<34}{'views':>7}{'flips':>7}{'share':>8}{'mean p':>8}")
+    print(f"{'method, d':<34}{'views':>7}{'wrong branch':>14}{'mean p':>8}{'flips':>7}")
     for name in outcomes[0].poses:
         solved = [o.poses[name] for o in outcomes if o.poses[name].converged]
         delta = np.array([s.mirror_chi2 - s.chi2 for s in solved])
         flip = np.array([s.flip for s in solved], bool)
+        wrong = np.array([bool(s.wrong_branch) for s in solved], bool)
+        known = np.array([s.wrong_branch is not None for s in solved], bool)
         for low, high in ((-math.inf, 0.0), (0.0, 2.0), (2.0, 5.0), (5.0, FLIP_DELTA_CHI2)):
-            sel = (delta >= low) & (delta < high)
+            sel = (delta >= low) & (delta < high) & known
             if not sel.any():
                 continue
             p = 1.0 / (1.0 + np.exp(np.clip(delta[sel], -50, 50) / 2.0))
             label = f"{name}, d {low:g}..{high:g}"
             print(
-                f"{label:<34}{int(sel.sum()):>7}{int(flip[sel].sum()):>7}"
-                f"{100 * flip[sel].mean():>7.0f}%{100 * p.mean():>7.0f}%"
+                f"{label:<34}{int(sel.sum()):>7}{int(wrong[sel].sum()):>6} ({100 * wrong[sel].mean():>3.0f}%)"
+                f"{100 * p.mean():>7.0f}%{int(flip[sel].sum()):>7}"
             )
