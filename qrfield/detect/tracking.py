@@ -28,7 +28,7 @@ from qrfield.detect.backends import Candidate, find_candidates
 from qrfield.detect.detection import Detection, DetectorSettings, quality_of
 from qrfield.detect.detector import Detector, Refined, as_grey, same_code, symbol_cells
 from qrfield.detect.patterns import check_patterns
-from qrfield.detect.symbol_fit import START_EDGE_PX, FitState, fit_symbol
+from qrfield.detect.symbol_fit import START_EDGE_PX, FitState, SymbolFit, fit_symbol
 from qrfield.detect.symbol_track import WarmFit
 
 #: Gauss-Newton steps of a warm fit (one step from a prediction 0.1-0.2 px off leaves 0.013-0.021
@@ -120,6 +120,23 @@ class _Track:
         if self.previous_corners is None:
             return corners.copy()
         return corners + (corners - self.previous_corners)
+
+
+def _warm_holds(fit: SymbolFit, track: _Track) -> bool:
+    """A warm fit still sees the tracked code: its polarity, its residual against its contrast and
+    against the last frame's."""
+    return bool(
+        fit.ok
+        and (fit.contrast < 0) == track.inverted
+        and fit.residual < MAX_RESIDUAL_SHARE * abs(fit.contrast)
+        and not fit.residual > MAX_RESIDUAL_GROWTH * track.residual + 2.0
+    )
+
+
+def _refined(fit: SymbolFit, score: float, cells: np.ndarray) -> Refined:
+    return Refined(
+        fit.corners_px, fit.corners_cov, fit.corners_std_px, score, True, fit.state, fit.residual, cells
+    )
 
 
 class Tracker:
@@ -272,41 +289,16 @@ class Tracker:
             if track.warm is None or track.warm.cells is not cells or track.warm.lens is not lens:
                 track.warm = WarmFit(cells, lens)
             fit = track.warm.fit(grey, predicted, track.fit_state, offset, TRACK_ITERATIONS)
-            holds = (
-                fit.ok
-                and (fit.contrast < 0) == track.inverted
-                and fit.residual < MAX_RESIDUAL_SHARE * abs(fit.contrast)
-                and not fit.residual > MAX_RESIDUAL_GROWTH * track.residual + 2.0
-            )
-            if holds:
-                result = Refined(
-                    fit.corners_px,
-                    fit.corners_cov,
-                    fit.corners_std_px,
-                    track.detection.quality if track.score is None else track.score,
-                    True,
-                    fit.state,
-                    fit.residual,
-                    cells,
-                )
+            if _warm_holds(fit, track):
+                score = track.detection.quality if track.score is None else track.score
+                result = _refined(fit, score, cells)
             elif track.motion is not None and image is not None:
                 result = self._jump(grey, track, cells, offset, image)
         if result is None and track.fit_state is not None and settings.symbol_fit:
             # A prediction too far for the warm fit (a new track, a jerk): the full fit from it.
             fit = fit_symbol(grey, predicted, cells, lens=lens, offset=offset, image_shape=shape)
             if fit.ok and fit.residual < MAX_RESIDUAL_SHARE * abs(fit.contrast):
-                check = check_patterns(grey, fit.corners_px, last.modules, lens, offset)
-                if check.score >= settings.min_quality and check.inverted == track.inverted:
-                    result = Refined(
-                        fit.corners_px,
-                        fit.corners_cov,
-                        fit.corners_std_px,
-                        check.score,
-                        True,
-                        fit.state,
-                        fit.residual,
-                        cells,
-                    )
+                result = self._checked(grey, fit, track, cells, offset)
         if result is None:
             # Cold: the edge lines and the whole symbol fit from the prediction (V3 is not
             # re-sought: it comes with the prediction).
@@ -351,29 +343,19 @@ class Tracker:
         move = measured_move(track.motion, image)
         if move is None:
             return None
-        last = track.detection
-        start = last.corners_px + move - np.array(offset, dtype=np.float64)
+        start = track.detection.corners_px + move - np.array(offset, dtype=np.float64)
         fit = track.warm.fit(grey, start, track.fit_state, offset, JUMP_ITERATIONS)
-        if not (
-            fit.ok
-            and (fit.contrast < 0) == track.inverted
-            and fit.residual < MAX_RESIDUAL_SHARE * abs(fit.contrast)
-            and not fit.residual > MAX_RESIDUAL_GROWTH * track.residual + 2.0
-        ):
-            return None
-        check = check_patterns(grey, fit.corners_px, last.modules, self.detector.lens, offset)
+        return self._checked(grey, fit, track, cells, offset) if _warm_holds(fit, track) else None
+
+    def _checked(
+        self, grey: np.ndarray, fit: SymbolFit, track: _Track, cells: np.ndarray, offset: tuple[int, int]
+    ) -> Refined | None:
+        """A fit that moved the corners further than a warm step: kept when the symbol's fixed
+        patterns check out there (and its polarity is the track's)."""
+        check = check_patterns(grey, fit.corners_px, track.detection.modules, self.detector.lens, offset)
         if check.score < self.settings.min_quality or check.inverted != track.inverted:
             return None
-        return Refined(
-            fit.corners_px,
-            fit.corners_cov,
-            fit.corners_std_px,
-            check.score,
-            True,
-            fit.state,
-            fit.residual,
-            cells,
-        )
+        return _refined(fit, check.score, cells)
 
     def _search_around(self, grey: np.ndarray, track: _Track) -> Detection | None:
         """Step 2: the first backend on a region around the prediction, then the usual checks."""

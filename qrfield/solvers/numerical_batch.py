@@ -59,6 +59,11 @@ def _initial_batch(
     return z
 
 
+def _where(mask: np.ndarray, a: list[np.ndarray], b: list[np.ndarray]) -> list[np.ndarray]:
+    """Item by item, a where ``mask`` else b (rows of the lists of arrays of the kernel)."""
+    return [np.where(mask, x, y) for x, y in zip(a, b, strict=True)]
+
+
 #: Rows solved per pass: small enough that numpy's temporaries stay in the CPU cache.
 BATCH_CHUNK = 16384
 
@@ -170,11 +175,8 @@ def _solve_chunk(
                 rejected = has_kept & ~(misfit <= kept_misfit * (1.0 + RISE_RTOL))
             if rejected.any():
                 # The step raised the misfit: back to the last accepted point, half as far.
-                z = [np.where(rejected, a, b) for a, b in zip(kept_z, z, strict=True)]
-                system = tuple(
-                    [np.where(rejected, a, b) for a, b in zip(kept_part, part, strict=True)]
-                    for kept_part, part in zip(kept_system, system, strict=True)
-                )
+                z = _where(rejected, kept_z, z)
+                system = tuple(_where(rejected, a, b) for a, b in zip(kept_system, system, strict=True))
                 misfit = np.where(rejected, kept_misfit, misfit)
                 worst = np.where(rejected, kept_worst, worst)
                 scale = np.where(rejected, 0.5 * scale, scale)
@@ -192,16 +194,15 @@ def _solve_chunk(
             sing = accepted & singular
             finish(sing, SINGULAR, n, worst)
             done |= sing
-            dz = new_dz if dz is None else [np.where(accepted, a, b) for a, b in zip(new_dz, dz, strict=True)]
+            dz = new_dz if dz is None else _where(accepted, new_dz, dz)
             if not early:
                 if kept_z is None:
                     kept_z, kept_system = z, system
                     kept_misfit, kept_worst = misfit, worst
                 else:
-                    kept_z = [np.where(accepted, a, b) for a, b in zip(z, kept_z, strict=True)]
+                    kept_z = _where(accepted, z, kept_z)
                     kept_system = tuple(
-                        [np.where(accepted, a, b) for a, b in zip(part, kept_part, strict=True)]
-                        for part, kept_part in zip(system, kept_system, strict=True)
+                        _where(accepted, a, b) for a, b in zip(system, kept_system, strict=True)
                     )
                     kept_misfit = np.where(accepted, misfit, kept_misfit)
                     kept_worst = np.where(accepted, worst, kept_worst)

@@ -356,24 +356,6 @@ def ambiguity_ratio(error_answer: float, error_mirror: float) -> float:
 # ---------------------------------------------------------------------- one solve's result
 
 
-def with_uncertainty(
-    result: PoseResult,
-    corners: np.ndarray,
-    flat: list[float],
-    camera: CameraModel,
-    side: float,
-    cov: np.ndarray | None,
-    xy: tuple[list[float], list[float]] | None = None,
-) -> PoseResult:
-    """``result`` with its uncertainty fields and the mirror test filled (see :class:`PoseResult`).
-
-    ``cov`` is the checked (4, 2, 2) corner covariance in px^2, or None when unknown (then the std
-    fields stay NaN and the mirror test falls back on the ratio ``ambiguity``). A result that did
-    not converge gets only ``corners_std_px``. ``xy``: the corners' normalised coordinates when known.
-    """
-    return with_uncertainties([result], corners, flat, camera, side, cov, xy)[0]
-
-
 def with_uncertainties(
     results: list[PoseResult],
     corners: np.ndarray,
@@ -383,9 +365,15 @@ def with_uncertainties(
     cov: np.ndarray | None,
     xy: tuple[list[float], list[float]] | None = None,
 ) -> list[PoseResult]:
-    """:func:`with_uncertainty` for several results of the same corners (one per method), in one
-    vectorised pass: the corners' normalised covariance, the rigid projections of every answer and
-    mirror, the pose covariances and the chi-squares are each computed once for all of them."""
+    """``results`` (one per method, all of the same corners) with their uncertainty fields and the
+    mirror test filled (see :class:`PoseResult`), in one vectorised pass: the corners' normalised
+    covariance, the rigid projections of every answer and mirror, the pose covariances and the
+    chi-squares are each computed once for all of them.
+
+    ``cov`` is the checked (4, 2, 2) corner covariance in px^2, or None when unknown (then the std
+    fields stay NaN and the mirror test falls back on the ratio ``ambiguity``). A result that did
+    not converge gets only ``corners_std_px``. ``xy``: the corners' normalised coordinates when known.
+    """
     from qrfield.solvers.rays import normalised_single
 
     fields: list[dict[str, object]] = [{} for _ in results]
