@@ -7,7 +7,9 @@ result's ``status`` and ``reason``, so a frame loop keeps running.
 Statuses (those of the serial frame, docs/conventions.md, plus ERROR):
     OK      the first chosen method converged: a pose is given;
     NOQR    no code found (or none with the selected text);
-    NOCONV  a code was found but the first chosen method did not converge (its reason says why);
+    NOCONV  a code was found but the first chosen method did not converge (its reason says why), or
+            its corners are not fit for a pose (not refined: the backend's own, possibly several
+            px off; ``Detection.untrusted`` says why): then no method is run and no pose is given;
     ERROR   anything else (the camera model does not fit the frame, a solver raised): see reason.
 
 Timing: ``t_ms`` is the frame's capture time in ms since the stream started (the first frame
@@ -158,8 +160,8 @@ class Pipeline:
             qrfield.detect.select_code).
         t0: stream start, time.monotonic() s (None = the first frame's capture time).
         tracker, solve, select: replace qrfield.detect.Tracker(settings), qrfield.solvers.solve
-            (called with the detection's ``corners_cov`` keyword) and qrfield.detect.select_code
-            (tests, other detectors).
+            (called with the ``corners_cov`` keyword: the detection's ``pose_cov``) and
+            qrfield.detect.select_code (tests, other detectors).
     """
 
     def __init__(
@@ -198,8 +200,12 @@ class Pipeline:
                 else detect.Tracker(detector_settings or detect.DetectorSettings())
             )
             select = select or detect.select_code
+        # The default solves every method in one call (what they share is done once).
+        self._solve_methods = None
         if solve is None:
-            from qrfield.solvers import solve
+            from qrfield.solvers import solve, solve_methods
+
+            self._solve_methods = solve_methods
         self._tracker = tracker
         self._detector_settings = detector_settings
         self._solve = solve
@@ -256,9 +262,22 @@ class Pipeline:
                 else f"{found} code(s) found, none with the text {self.select_text!r}"
             )
             return
+        untrusted = getattr(result.detection, "untrusted", "")
+        if untrusted:
+            result.status, result.reason = NOCONV, untrusted
+            return
+        # The fit's covariance, or the one assumed for corners without (Detection.pose_cov).
+        cov = getattr(result.detection, "pose_cov", getattr(result.detection, "corners_cov", None))
         t = time.perf_counter()
         errors = []
-        for method in self.methods:
+        if self._solve_methods is not None:
+            try:
+                result.poses = self._solve_methods(
+                    result.detection.corners_px, camera, self.side_mm, self.methods, self.solver_settings, cov
+                )
+            except Exception:  # then method by method, to say which one failed
+                result.poses = {}
+        for method in self.methods if not result.poses else ():
             try:
                 result.poses[method] = self._solve(
                     result.detection.corners_px,
@@ -266,7 +285,7 @@ class Pipeline:
                     self.side_mm,
                     method=method,
                     settings=self.solver_settings.get(method),
-                    corners_cov=getattr(result.detection, "corners_cov", None),
+                    corners_cov=cov,
                 )
             except Exception as exc:  # one method failing must not hide the other's answer
                 errors.append(f"{method}: {type(exc).__name__}: {exc}")

@@ -119,3 +119,22 @@ def test_the_pipeline_gives_the_tracker_its_camera(camera_vga):
     image = np.zeros((camera_vga.height, camera_vga.width), np.uint8)
     pipeline.process(Frame(image=image, index=0, t_capture=0.0))
     assert recorder.cameras == [camera_vga]
+
+
+def test_a_new_track_follows_a_fast_first_move_without_a_full_fit(camera_vga, monkeypatch):
+    """The code moves 8-10 px a frame: on a new track's first frame the warm fit starts from the
+    move measured by phase correlation (before: a full whole-symbol fit, about 20 ms)."""
+    from qrfield.detect import tracking
+
+    full_fits = []
+    real = tracking.fit_symbol
+    monkeypatch.setattr(tracking, "fit_symbol", lambda *a, **k: full_fits.append(1) or real(*a, **k))
+    tracker = Tracker(camera=camera_vga)
+    for i in range(4):
+        pose = Pose([-70.0 + 9.0 * i, -20.0 + 2.0 * i, 380.0], [10.0, -15.0 + 0.5 * i, 30.0 + 1.5 * i])
+        view = render_view(camera_vga, 100.0, pose, noise_sigma=2.0, blur_px=0.6, seed=i)
+        (found,) = tracker.update(view.image)
+        assert np.abs(found.corners_px - view.corners_px).max() < 0.1, f"frame {i}"
+        assert found.corners_cov is not None
+        assert tracker.last_mode == ("full" if i == 0 else "refined")
+    assert full_fits == []  # the tracker never fell back on the full fit

@@ -254,3 +254,34 @@ def test_scalar_angle_extraction_is_the_geometry_one_also_at_gimbal_lock():
     angles[100, :] = [0.0, 0.0, 180.0]
     for r in rotation_matrix(angles):
         np.testing.assert_allclose(angles_single(r.tolist()), angles_from_rotation(r), rtol=0, atol=1e-9)
+
+
+def _near_square_on_views(count: int, seed: int, camera):
+    """Seeded codes tilted less than 12 degrees, their exact corners plus 0.03 px of noise."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(count):
+        tilt, turn = rng.uniform(0.0, 12.0), np.radians(rng.uniform(0.0, 360.0))
+        pose = Pose(
+            [rng.uniform(-60, 60), rng.uniform(-40, 40), rng.uniform(200, 500)],
+            [tilt * np.cos(turn), tilt * np.sin(turn), rng.uniform(-180, 180)],
+        )
+        out.append((pose, pose.corners_px(camera, SIDE_MM) + rng.normal(0.0, 0.03, (4, 2))))
+    return out
+
+
+def test_nearly_square_on_the_settled_rule_converges_and_meets_the_criteria():
+    """Seen nearly square-on the lengths change only to second order with the tilt; the full
+    Gauss-Newton step overshot and cycled until n_max with every length within 0.005 mm (NOCONV on
+    about one such view in ten: 3 of these 40, and 10 of the 60 frames of bench detect's sequence).
+    The damped step converges, to a pose within the seed's criteria."""
+    camera, *_ = cases(1, seed=1)
+    views = _near_square_on_views(40, seed=0, camera=camera)
+    for pose, corners in views:
+        r = solve(corners, camera, SIDE_MM)
+        assert r.converged, r.reason
+        assert r.iterations <= 30
+        pos_err, ang_err = errors(r.position_mm, r.angles_deg, pose.position_mm, pose.angles_deg)
+        assert pos_err < 5.0 and ang_err <= 2.0
+    # Damped or not, the batch path gives the same numbers.
+    _assert_batch_equals_single(np.array([c for _, c in views]), camera, None)

@@ -256,3 +256,24 @@ def test_distortion_jacobian_against_opencv_model_finite_differences():
         numeric[:, :, k] = (distorted(points + step) - distorted(points - step)) / 2e-7
     analytic = unc.distortion_jacobian(points[:, 0], points[:, 1], DISTORTED)
     np.testing.assert_allclose(analytic, numeric, atol=1e-6)
+
+
+@pytest.mark.parametrize("camera_name", ["picam-v2@640x480", DISTORTED.name])
+def test_solve_methods_gives_what_solve_gives_method_by_method(camera_name):
+    """The pipeline solves every method in one call (the checks, undistortion and uncertainty once):
+    the same poses, stds and flags as one solve per method, to float rounding."""
+    from qrfield.solvers import solve_methods
+
+    camera, _, corners, *_ = cases(30, seed=41, camera_name=camera_name)
+    rng = np.random.default_rng(4)
+    for c in corners:
+        cov = random_corner_cov(rng)
+        noisy = c + draw_noise(rng, cov)
+        together = solve_methods(noisy, camera, SIDE_MM, METHODS, None, cov)
+        assert list(together) == list(METHODS)
+        for method in METHODS:
+            alone, both = solve(noisy, camera, SIDE_MM, method, corners_cov=cov), together[method]
+            assert both.converged == alone.converged and both.ambiguous == alone.ambiguous
+            for name in ("position_mm", "angles_deg", "position_std_mm", "angles_std_deg", "corners_std_px"):
+                np.testing.assert_allclose(getattr(both, name), getattr(alone, name), rtol=1e-9, atol=1e-12)
+            assert both.chi2 == pytest.approx(alone.chi2, rel=1e-9, abs=1e-12)

@@ -46,6 +46,7 @@ class BenchView:
         corners_px: (4, 2) exact pixels of V1..V4 (distortion included).
         image: (H, W) uint8 grey, or None for a corner-level set (no picture).
         modules: modules per side (0 when there is no picture); text: the payload.
+        module_size_px: the set's own module size (px), NaN to take the mean side's.
     """
 
     camera: CameraModel
@@ -55,10 +56,15 @@ class BenchView:
     image: np.ndarray | None = None
     modules: int = 0
     text: str = ""
+    module_size_px: float = math.nan
 
     @property
     def module_px(self) -> float:
-        """Mean side of the corner quadrilateral over the module count (px; NaN without modules)."""
+        """The module size as the set defines it (``module_size_px``: the hard set's shortest side
+        over the module count), else the mean side of the corner quadrilateral over the module
+        count (px; NaN without modules)."""
+        if math.isfinite(self.module_size_px):
+            return self.module_size_px
         if not self.modules:
             return math.nan
         sides = np.linalg.norm(np.roll(self.corners_px, -1, axis=0) - self.corners_px, axis=1)
@@ -118,5 +124,17 @@ def render_set(count: int, seed: int) -> list[BenchView]:
     return out
 
 
+def hard_set(count: int, seed: int) -> list[BenchView]:
+    """The hard bench set of ``qrfield bench detect`` (qrfield.bench.hardset: segno symbols of versions
+    1-10, 30/50/100 mm codes, z 150-1000 mm, tilt up to 60 deg, noise 0-4, blur 0.3-1.2 px, lighting
+    gradients, pinhole and DISTORTED; module size its views' shortest side over the modules)."""
+    from qrfield.bench.hardset import hard_views
+
+    return [
+        BenchView(v.camera, v.side_mm, v.pose, v.corners_px, v.image, v.modules, v.text, v.module_px)
+        for v in hard_views(count, seed)
+    ]
+
+
 #: View sets with pictures, by name (``qrfield bench pose --view-set NAME``).
-VIEW_SETS: dict[str, Callable[[int, int], list[BenchView]]] = {"render": render_set}
+VIEW_SETS: dict[str, Callable[[int, int], list[BenchView]]] = {"hard": hard_set, "render": render_set}

@@ -62,6 +62,7 @@ def solve_images(
             cam, status = _camera_for(camera, args.focal_px, image)
         detections = []
         if cam is not None:
+            detector.set_camera(cam)  # the whole-symbol fit goes through this camera's lens
             detections = detector.detect(image)
             if not args.all_codes:
                 chosen = select_code(detections, detector_settings.select_text)
@@ -82,8 +83,9 @@ def solve_images(
             results = []
             for method in methods:
                 try:
-                    cov = getattr(d, "corners_cov", None)
-                    results.append(solve(d.corners_px, cam, args.side_mm, method, settings[method], cov))
+                    results.append(
+                        solve(d.corners_px, cam, args.side_mm, method, settings[method], d.pose_cov)
+                    )
                 except SolverError as exc:
                     entries.append(
                         {
@@ -97,12 +99,15 @@ def solve_images(
                     all_ok = False
             for r in results:
                 entry = {"image": path, "text": d.text, **r.to_json_dict()}
-                entry["status"] = "ok" if r.converged else f"not converged: {r.reason}"
+                if d.untrusted:
+                    entry["status"] = f"not trusted: {d.untrusted}"
+                else:
+                    entry["status"] = "ok" if r.converged else f"not converged: {r.reason}"
                 entry["detection"] = {
                     k: v for k, v in d.to_json_dict().items() if k not in ("corners", "text")
                 }
                 entries.append(entry)
-                all_ok &= bool(r.converged)
+                all_ok &= bool(r.converged) and not d.untrusted
             if not args.json:
                 kind = "sub-pixel" if d.refined else "backend corners, not refined"
                 print(
@@ -110,6 +115,8 @@ def solve_images(
                     f"camera {cam.name} ({cam.width}x{cam.height}), QR side {args.side_mm:g} mm"
                 )
                 print(format_table(results))
+                if d.untrusted:
+                    print(f"  not trusted: {d.untrusted}")
     if args.json:
         json.dump(entries, sys.stdout, allow_nan=False)
         print()

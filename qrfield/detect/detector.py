@@ -199,6 +199,8 @@ class Detector:
         corners = candidate.corners_px
         if corners.shape != (4, 2) or not np.all(np.isfinite(corners)):
             return None
+        if not candidate.text and candidate.modules and settings.refine and settings.symbol_fit:
+            candidate = self.read(grey, candidate) or candidate
         if settings.require_text and not candidate.text:
             return None
         if candidate.modules:
@@ -235,6 +237,41 @@ class Detector:
             fit_state=result.fit_state,
             corners_cov=result.corners_cov,
         )
+
+    def read(self, grey: np.ndarray, candidate: Candidate) -> Candidate | None:
+        """A located code that no backend read: its fixed patterns fitted, then its modules read by
+        least squares (qrfield.detect.reading); the candidate with the fitted corners, the text and
+        the module matrix, or None when it cannot be read."""
+        from qrfield.detect.reading import LOGISTIC_STD, read_symbol
+
+        n = int(candidate.modules or 0)
+        rough = check_patterns(grey, candidate.corners_px, n, self.lens)
+        if rough.reason and rough.score == 0.0:
+            return None
+        fit = self.refine(
+            grey,
+            candidate.corners_px,
+            n,
+            rough.score,
+            rough.inverted,
+            None,
+            self._seeds(grey, candidate.corners_px),
+        )
+        # The bar of a decoded code (accept()): at 1.2-2 px modules the pattern score is noisy
+        # (0.78-0.87 on well-fitted views); a successful decode is the stronger check.
+        if (
+            fit is None
+            or fit.fit_state is None
+            or fit.score < min(self.settings.min_quality, UNREFINED_MIN_SCORE)
+        ):
+            return None
+        # The fit's edge spread is a logistic of width s besides the pixel's footprint: its std.
+        blur = LOGISTIC_STD * fit.fit_state.edge_px
+        # (an inverted code needs nothing: its contrast B comes out negative)
+        text, matrix = read_symbol(grey, fit.corners_px, n, blur, self.lens)
+        if text is None:
+            return None
+        return Candidate(fit.corners_px, text, candidate.backend, n, matrix)
 
     def refine(
         self,

@@ -36,7 +36,6 @@ from qrfield.detect.symbol_fit import (
     MIN_CONTRAST,
     FitState,
     SymbolFit,
-    _homography,
     _layout,
     _windows,
     corner_covariance,
@@ -99,10 +98,36 @@ class _Template:
         self.basis = np.column_stack([one, xy])
         self.light_cols = np.concatenate([self.basis, -self.basis * t[:, None]], axis=1)
         self.n = n
+        # The Jacobian's buffer: its lighting columns do not change, the geometry's are -B dT/d dH.
+        self.jac = np.empty((len(t), 14))
+        self.jac[:, 8:] = self.light_cols
+        self.uv_cv = np.ascontiguousarray(uv.reshape(1, -1, 2))
 
     def fits(self, h: np.ndarray, edge_px: float) -> bool:
         change = np.abs(_scales(h, self.n) / self.scales - 1.0).max()
         return bool(change < TEMPLATE_TOLERANCE and abs(edge_px / self.edge_px - 1.0) < TEMPLATE_TOLERANCE)
+
+
+def _compose_inverse(h: np.ndarray, delta: np.ndarray) -> np.ndarray | None:
+    """H o dH^-1 for the step dH = I + [[d0 d1 d2], [d3 d4 d5], [d6 d7 0]] (delta[:8]), None when
+    dH is singular or the result not finite (in Python floats: a 3x3 inverse by its adjugate)."""
+    d0, d1, d2, d3, d4, d5, d6, d7 = delta[:8].tolist()
+    a, b, c = 1.0 + d0, d1, d2
+    d, e, f = d3, 1.0 + d4, d5
+    g, hh, i = d6, d7, 1.0
+    co = (e * i - f * hh, f * g - d * i, d * hh - e * g)
+    det = a * co[0] + b * co[1] + c * co[2]
+    if not (abs(det) > 1e-12 and math.isfinite(det)):
+        return None
+    inv = np.array(
+        [
+            [co[0], c * hh - b * i, b * f - c * e],
+            [co[1], a * i - c * g, c * d - a * f],
+            [co[2], b * g - a * hh, a * e - b * d],
+        ]
+    )
+    out = h @ (inv / det)
+    return out if np.isfinite(out).all() else None
 
 
 class WarmFit:
@@ -114,6 +139,19 @@ class WarmFit:
         self.lens = lens or Lens(None)
         self.points = points
         self._template: _Template | None = None
+        m = _SQUARE * self.n
+        self._corner_modules = np.ascontiguousarray(m.reshape(1, 4, 2))
+        self._square32 = m.astype(np.float32)
+        u, v = m[:, 0], m[:, 1]
+        zero, one = np.zeros(4), np.ones(4)
+        # d W(m_k; dH) / d dH at the identity for V1..V4, (4, 2, 8) (see _Template.geo).
+        self._dw = np.stack(
+            [
+                np.column_stack([u, v, one, zero, zero, zero, -u * u, -u * v]),
+                np.column_stack([zero, zero, zero, u, v, one, -u * v, -v * v]),
+            ],
+            axis=1,
+        )
 
     def fit(
         self,
@@ -126,7 +164,7 @@ class WarmFit:
         """Corners V1..V4 (pixels of ``grey``, a crop at ``offset`` of the camera's image) from the
         predicted corners and the last frame's edge width and lighting; never raises for content."""
         start = np.asarray(predicted_px, dtype=np.float64)
-        lens, n = self.lens, self.n
+        lens = self.lens
         shift = np.asarray(offset, dtype=np.float64)
 
         def fail(reason: str) -> SymbolFit:
@@ -139,8 +177,10 @@ class WarmFit:
         else:
             ideal = start + shift
         try:
-            h = _homography(_SQUARE * n, ideal)
-        except np.linalg.LinAlgError:
+            h = cv2.getPerspectiveTransform(self._square32, ideal.astype(np.float32))
+        except cv2.error:
+            return fail("degenerate corners")
+        if not np.all(np.isfinite(h)) or abs(np.linalg.det(h)) < 1e-12:
             return fail("degenerate corners")
         edge = state.edge_px
         template = self._template
@@ -152,20 +192,22 @@ class WarmFit:
         hh, ww = grey.shape
         light = np.asarray(state.lighting, dtype=np.float64)
         scale = state.scale if math.isfinite(state.scale) else 2.0
-        uv = template.uv.reshape(1, -1, 2)
+        huber = HUBER_K * scale
         k = len(template.t)
-        resid = np.zeros(k)
-        normal = None
-        jac = None
+        jac = template.jac
+        m4 = self._corner_modules
         with np.errstate(all="ignore"):
             for _ in range(iterations):
-                px = cv2.perspectiveTransform(uv, h).reshape(-1, 2)
+                px = cv2.perspectiveTransform(template.uv_cv, h).reshape(-1, 2)
                 if lens.distorted:
                     px = lens.distort(px)
                 px -= shift
-                inside = (px[:, 0] >= 0) & (px[:, 1] >= 0) & (px[:, 0] <= ww - 1) & (px[:, 1] <= hh - 1)
-                if inside.mean() < 0.9:
-                    return fail("the code leaves the region")
+                lo, hi = px.min(axis=0), px.max(axis=0)
+                inside = None  # all inside, the usual case
+                if lo[0] < 0 or lo[1] < 0 or hi[0] > ww - 1 or hi[1] > hh - 1:
+                    inside = (px[:, 0] >= 0) & (px[:, 1] >= 0) & (px[:, 0] <= ww - 1) & (px[:, 1] <= hh - 1)
+                    if inside.mean() < 0.9:
+                        return fail("the code leaves the region")
                 values = cv2.remap(
                     image,
                     px.astype(np.float32).reshape(1, -1, 2),
@@ -173,31 +215,28 @@ class WarmFit:
                     cv2.INTER_LANCZOS4,
                     borderMode=cv2.BORDER_REPLICATE,
                 ).reshape(-1)
-                ab = template.basis @ light.reshape(2, 3).T
-                b = ab[:, 1]
-                resid = values - ab[:, 0] + b * template.t
-                a = np.abs(resid)
-                w = np.where(
-                    inside, np.where(a <= HUBER_K * scale, 1.0, HUBER_K * scale / np.maximum(a, 1e-12)), 0.0
-                )
+                b = template.basis @ light[3:]
+                resid = values - template.basis @ light[:3] + b * template.t
+                # Huber weights (1 within HUBER_K robust scales), none outside the region.
+                w = np.minimum(1.0, huber / np.maximum(np.abs(resid), 1e-12))
+                if inside is not None:
+                    w *= inside
                 # d model / d dH = -B dT/d dH; d model / d light = (basis, -T basis)
-                jac = np.concatenate([-b[:, None] * template.geo, template.light_cols], axis=1)
+                np.multiply(template.geo, -b[:, None], out=jac[:, :8])
                 jw = jac * w[:, None]
                 normal = jw.T @ jac
+                normal.flat[::15] += 1e-9
                 try:
-                    delta = np.linalg.solve(normal + 1e-9 * np.eye(14), jw.T @ resid)
+                    delta = np.linalg.solve(normal, jw.T @ resid)
                 except np.linalg.LinAlgError:
                     return fail("the fit is singular")
-                d = delta[:8]
-                dh = np.array([[1 + d[0], d[1], d[2]], [d[3], 1 + d[4], d[5]], [d[6], d[7], 1.0]])
-                try:
-                    h = h @ np.linalg.inv(dh)
-                except np.linalg.LinAlgError:
+                h = _compose_inverse(h, delta)
+                if h is None:
                     return fail("the fit diverged")
                 light = light + delta[8:]
             half = k // 2
             robust = max(1.4826 * float(np.partition(np.abs(resid), half)[half]), 0.5)
-            corners_ideal = cv2.perspectiveTransform((_SQUARE * n).reshape(1, 4, 2), h).reshape(4, 2)
+            corners_ideal = cv2.perspectiveTransform(m4, h).reshape(4, 2)
             if not np.all(np.isfinite(corners_ideal)):
                 return fail("the fit diverged")
             corners = (lens.distort(corners_ideal) if lens.distorted else corners_ideal) - shift
@@ -209,21 +248,10 @@ class WarmFit:
             except np.linalg.LinAlgError:
                 return fail("the fit is singular")
             # Corner k is H (m_k - dW(m_k) dH) to first order: d corner / d dH = -dpx/dm dW/ddH.
-            m = _SQUARE * n
-            q = m @ h[:2, :2].T + h[:2, 2]
-            wm = m @ h[2, :2] + h[2, 2]
-            pm = q / wm[:, None]
-            dpx = (h[None, :2, :2] - pm[:, :, None] * h[None, 2:3, :2]) / wm[:, None, None]  # (4, 2, 2)
-            u, v = m[:, 0], m[:, 1]
-            zero, one = np.zeros(4), np.ones(4)
-            dw = np.stack(
-                [
-                    np.column_stack([u, v, one, zero, zero, zero, -u * u, -u * v]),
-                    np.column_stack([zero, zero, zero, u, v, one, -u * v, -v * v]),
-                ],
-                axis=1,
-            )  # (4, 2, 8)
-            corners_cov = corner_covariance(-(dpx @ dw), cov, corners_ideal, lens)
+            hm = h[None, :2, :2]
+            wm = m4[0] @ h[2, :2] + h[2, 2]
+            dpx = (hm - corners_ideal[:, :, None] * h[None, 2:3, :2]) / wm[:, None, None]  # (4, 2, 2)
+            corners_cov = corner_covariance(-(dpx @ self._dw), cov, corners_ideal, lens)
         if not np.all(np.isfinite(corners_cov)):
             return fail("the fit is singular")
         return SymbolFit(

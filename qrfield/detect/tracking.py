@@ -5,7 +5,11 @@ Per frame and per code tracked, cheapest first:
    velocity, with the last frame's edge width and lighting, two Gauss-Newton steps, on the
    module layout of the first decode (no decoding: the text is carried over); the fit must still
    see the code (its contrast and residual) and the symbol's fixed patterns must check out there.
-   If it does not hold, the edge-line refinement and a full symbol fit from the prediction;
+   A new track has no velocity yet: on its first frame, when the code moved beyond the warm
+   fit's reach (about a pixel), the move is measured by phase correlation of a small patch
+   around the code in both frames, and the warm fit starts from there (more steps, the patterns
+   checked). If it does not hold, the edge-line refinement and a full symbol fit from the
+   prediction;
 2. else run the first backend on a region around the prediction (``track_margin_px`` plus a quarter
    of the code's size), refine and check; the text must be the one tracked;
 3. else (any code lost) a full-frame detection with every backend. Every ``redetect_frames``
@@ -14,6 +18,7 @@ Per frame and per code tracked, cheapest first:
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,15 +28,77 @@ from qrfield.detect.backends import Candidate, find_candidates
 from qrfield.detect.detection import Detection, DetectorSettings, quality_of
 from qrfield.detect.detector import Detector, Refined, as_grey, same_code, symbol_cells
 from qrfield.detect.patterns import check_patterns
-from qrfield.detect.symbol_fit import START_EDGE_PX, FitState, fit_symbol
+from qrfield.detect.symbol_fit import START_EDGE_PX, FitState, SymbolFit, fit_symbol
 from qrfield.detect.symbol_track import WarmFit
 
-#: Gauss-Newton steps of a warm fit.
+#: Gauss-Newton steps of a warm fit (one step from a prediction 0.1-0.2 px off leaves 0.013-0.021
+#: px, twice the noise's share, and tracked corners lose 10-20 % in accuracy: measured).
 TRACK_ITERATIONS = 2
 #: A warm fit still sees the code while its residual stays below this share of its contrast ...
 MAX_RESIDUAL_SHARE = 0.2
 #: ... and below this multiple of the last frame's residual (plus 2 grey levels).
 MAX_RESIDUAL_GROWTH = 2.0
+#: Gauss-Newton steps of the warm fit from a measured move (a new track's first frame).
+JUMP_ITERATIONS = 5
+#: Side of the square patch (px) on which a new track's move is measured, and the margin (px)
+#: around the code it covers beyond a quarter of the code's size.
+MOTION_PATCH_PX = 128
+MOTION_MARGIN_PX = 16.0
+#: Least phase-correlation response for a measured move to be used.
+MIN_MOTION_RESPONSE = 0.3
+
+
+@dataclass(frozen=True)
+class _Motion:
+    """A new track's patch for measuring its first move: the region (x0, y0, x1, y1) of the image
+    around the code and that region resized to MOTION_PATCH_PX square (float32 grey)."""
+
+    region: tuple[int, int, int, int]
+    patch: np.ndarray
+
+
+def _motion_patch(image: np.ndarray, region: tuple[int, int, int, int]) -> np.ndarray:
+    import cv2
+
+    x0, y0, x1, y1 = region
+    grey = as_grey(image[y0:y1, x0:x1])
+    size = (MOTION_PATCH_PX, MOTION_PATCH_PX)
+    return cv2.resize(grey, size, interpolation=cv2.INTER_AREA).astype(np.float32)
+
+
+def motion_reference(image: np.ndarray, corners: np.ndarray) -> _Motion | None:
+    """The patch around ``corners`` (4, 2) px in ``image`` (grey or BGR) to measure a move from."""
+    h, w = image.shape[:2]
+    margin = MOTION_MARGIN_PX + 0.25 * float(np.ptp(corners, axis=0).max())
+    x0, y0 = (max(int(v), 0) for v in np.floor(corners.min(axis=0) - margin))
+    x1, y1 = (min(int(v), m) for v, m in zip(np.ceil(corners.max(axis=0) + margin) + 1, (w, h), strict=True))
+    if x1 - x0 < 21 or y1 - y0 < 21:
+        return None
+    region = (x0, y0, x1, y1)
+    return _Motion(region, _motion_patch(image, region))
+
+
+def measured_move(reference: _Motion, image: np.ndarray) -> np.ndarray | None:
+    """(dx, dy) px by which the content of the reference's region moved in ``image`` (phase
+    correlation of the two patches, Hann-windowed), or None when the correlation is unsure."""
+    import cv2
+
+    x0, y0, x1, y1 = reference.region
+    if image.shape[0] < y1 or image.shape[1] < x1:
+        return None
+    now = _motion_patch(image, reference.region)
+    window = _hann(MOTION_PATCH_PX)
+    (dx, dy), response = cv2.phaseCorrelate(reference.patch, now, window)
+    if not response >= MIN_MOTION_RESPONSE:
+        return None
+    return np.array([dx * (x1 - x0) / MOTION_PATCH_PX, dy * (y1 - y0) / MOTION_PATCH_PX])
+
+
+@functools.lru_cache(maxsize=2)
+def _hann(size: int) -> np.ndarray:
+    import cv2
+
+    return cv2.createHanningWindow((size, size), cv2.CV_32F)
 
 
 @dataclass
@@ -45,12 +112,31 @@ class _Track:
     warm: WarmFit | None = None
     #: the pattern score of the last check (the warm fit does not check the patterns each frame)
     score: float | None = None
+    #: for measuring the first move of a new track (None once it has a velocity)
+    motion: _Motion | None = None
 
     def predicted(self) -> np.ndarray:
         corners = self.detection.corners_px
         if self.previous_corners is None:
             return corners.copy()
         return corners + (corners - self.previous_corners)
+
+
+def _warm_holds(fit: SymbolFit, track: _Track) -> bool:
+    """A warm fit still sees the tracked code: its polarity, its residual against its contrast and
+    against the last frame's."""
+    return bool(
+        fit.ok
+        and (fit.contrast < 0) == track.inverted
+        and fit.residual < MAX_RESIDUAL_SHARE * abs(fit.contrast)
+        and not fit.residual > MAX_RESIDUAL_GROWTH * track.residual + 2.0
+    )
+
+
+def _refined(fit: SymbolFit, score: float, cells: np.ndarray) -> Refined:
+    return Refined(
+        fit.corners_px, fit.corners_cov, fit.corners_std_px, score, True, fit.state, fit.residual, cells
+    )
 
 
 class Tracker:
@@ -121,7 +207,8 @@ class Tracker:
         if state is None and detection.corners_cov is not None and np.isfinite(check.light - check.dark):
             # Warm from the start: the light level and contrast the pattern check saw.
             state = FitState(START_EDGE_PX, np.array([check.light, 0, 0, check.light - check.dark, 0, 0]))
-        return _Track(detection, inverted=check.inverted, cells=cells, fit_state=state)
+        motion = motion_reference(grey, detection.corners_px) if state is not None else None
+        return _Track(detection, inverted=check.inverted, cells=cells, fit_state=state, motion=motion)
 
     def _search_all(self, grey: np.ndarray) -> list[Detection] | None:
         """Step 2 for every track; None as soon as one is not found."""
@@ -139,6 +226,9 @@ class Tracker:
             if grey is not None:  # re-found by a backend: re-read its polarity and layout
                 fresh = self._new_track(grey, detection)
                 track.inverted, track.cells, track.fit_state = fresh.inverted, fresh.cells, fresh.fit_state
+                track.motion = fresh.motion
+            else:
+                track.motion = None  # it has a velocity now
             track.detection = detection
 
     def _refine_all(self, image: np.ndarray) -> list[Detection] | None:
@@ -152,8 +242,11 @@ class Tracker:
             float(np.ptp(p, axis=0).max()) / t.detection.modules
             for p, t in zip(predictions, self._tracks, strict=True)
         )
-        # Room for the edge profiles and the quiet-zone check (one module out) around the code.
+        # Room for the edge profiles and the quiet-zone check (one module out) around the code,
+        # and for a new track's first move (unknown yet).
         margin = 2.0 * module + settings.search_px + 6.0
+        if any(t.previous_corners is None for t in self._tracks):
+            margin += MOTION_MARGIN_PX
         h, w = image.shape[:2]
         x0, y0 = np.floor(everything.min(axis=0) - margin).astype(int)
         x1, y1 = np.ceil(everything.max(axis=0) + margin).astype(int) + 1
@@ -166,7 +259,7 @@ class Tracker:
         found = []
         for track, predicted in zip(self._tracks, predictions, strict=True):
             detection = self._follow(
-                grey, track, predicted - np.array(offset, dtype=np.float64), offset, shape
+                grey, track, predicted - np.array(offset, dtype=np.float64), offset, shape, image
             )
             if detection is None:
                 return None
@@ -180,9 +273,11 @@ class Tracker:
         predicted: np.ndarray,
         offset: tuple[int, int],
         shape: tuple[int, int],
+        image: np.ndarray | None = None,
     ) -> Detection | None:
         """Step 1 for one track on a crop ``grey`` at ``offset`` of an image of ``shape`` (H, W):
-        the warm whole-symbol fit, else the detector's refinement from the prediction."""
+        the warm whole-symbol fit (for a new track from its measured move in ``image``, the whole
+        frame, when needed), else the detector's refinement from the prediction."""
         settings = self.settings
         last = track.detection
         lens = self.detector.lens
@@ -194,39 +289,16 @@ class Tracker:
             if track.warm is None or track.warm.cells is not cells or track.warm.lens is not lens:
                 track.warm = WarmFit(cells, lens)
             fit = track.warm.fit(grey, predicted, track.fit_state, offset, TRACK_ITERATIONS)
-            holds = (
-                fit.ok
-                and (fit.contrast < 0) == track.inverted
-                and fit.residual < MAX_RESIDUAL_SHARE * abs(fit.contrast)
-                and not fit.residual > MAX_RESIDUAL_GROWTH * track.residual + 2.0
-            )
-            if holds:
-                result = Refined(
-                    fit.corners_px,
-                    fit.corners_cov,
-                    fit.corners_std_px,
-                    track.detection.quality if track.score is None else track.score,
-                    True,
-                    fit.state,
-                    fit.residual,
-                    cells,
-                )
+            if _warm_holds(fit, track):
+                score = track.detection.quality if track.score is None else track.score
+                result = _refined(fit, score, cells)
+            elif track.motion is not None and image is not None:
+                result = self._jump(grey, track, cells, offset, image)
         if result is None and track.fit_state is not None and settings.symbol_fit:
             # A prediction too far for the warm fit (a new track, a jerk): the full fit from it.
             fit = fit_symbol(grey, predicted, cells, lens=lens, offset=offset, image_shape=shape)
             if fit.ok and fit.residual < MAX_RESIDUAL_SHARE * abs(fit.contrast):
-                check = check_patterns(grey, fit.corners_px, last.modules, lens, offset)
-                if check.score >= settings.min_quality and check.inverted == track.inverted:
-                    result = Refined(
-                        fit.corners_px,
-                        fit.corners_cov,
-                        fit.corners_std_px,
-                        check.score,
-                        True,
-                        fit.state,
-                        fit.residual,
-                        cells,
-                    )
+                result = self._checked(grey, fit, track, cells, offset)
         if result is None:
             # Cold: the edge lines and the whole symbol fit from the prediction (V3 is not
             # re-sought: it comes with the prediction).
@@ -261,6 +333,29 @@ class Tracker:
             fit_state=result.fit_state,
             corners_cov=result.corners_cov,
         )
+
+    def _jump(
+        self, grey: np.ndarray, track: _Track, cells: np.ndarray, offset: tuple[int, int], image: np.ndarray
+    ) -> Refined | None:
+        """The warm fit of a new track from its move measured in ``image`` (the whole frame), with
+        the patterns checked there; None when the move cannot be measured or the fit does not hold."""
+        assert track.motion is not None and track.warm is not None and track.fit_state is not None
+        move = measured_move(track.motion, image)
+        if move is None:
+            return None
+        start = track.detection.corners_px + move - np.array(offset, dtype=np.float64)
+        fit = track.warm.fit(grey, start, track.fit_state, offset, JUMP_ITERATIONS)
+        return self._checked(grey, fit, track, cells, offset) if _warm_holds(fit, track) else None
+
+    def _checked(
+        self, grey: np.ndarray, fit: SymbolFit, track: _Track, cells: np.ndarray, offset: tuple[int, int]
+    ) -> Refined | None:
+        """A fit that moved the corners further than a warm step: kept when the symbol's fixed
+        patterns check out there (and its polarity is the track's)."""
+        check = check_patterns(grey, fit.corners_px, track.detection.modules, self.detector.lens, offset)
+        if check.score < self.settings.min_quality or check.inverted != track.inverted:
+            return None
+        return _refined(fit, check.score, cells)
 
     def _search_around(self, grey: np.ndarray, track: _Track) -> Detection | None:
         """Step 2: the first backend on a region around the prediction, then the usual checks."""

@@ -25,8 +25,9 @@ from qrfield.solvers.ippe import IppeSettings, solve_ippe
 from qrfield.solvers.ippe_batch import solve_ippe_vectorised
 from qrfield.solvers.numerical import SEED_SETTINGS, NumericalSettings, solve_numerical
 from qrfield.solvers.numerical_batch import solve_numerical_batch
+from qrfield.solvers.rays import normalised_single
 from qrfield.solvers.result import BatchResult, PoseResult, SolverError
-from qrfield.solvers.uncertainty import check_corners_cov, with_uncertainty
+from qrfield.solvers.uncertainty import check_corners_cov, with_uncertainties
 
 __all__ = [
     "METHODS",
@@ -39,6 +40,7 @@ __all__ = [
     "settings_class",
     "solve",
     "solve_batch",
+    "solve_methods",
 ]
 
 
@@ -70,16 +72,38 @@ def solve(
     are ValueErrors); otherwise returns a PoseResult, with ``converged`` False and a ``reason`` when
     no pose was found.
     """
-    settings_class(method)
+    return solve_methods(corners_px, camera, side_mm, (method,), {method: settings}, corners_cov)[method]
+
+
+def solve_methods(
+    corners_px: np.ndarray,
+    camera: CameraModel,
+    side_mm: float,
+    methods: tuple[str, ...] | list[str],
+    settings: dict[str, NumericalSettings | IppeSettings | None] | None = None,
+    corners_cov: np.ndarray | None = None,
+) -> dict[str, PoseResult]:
+    """:func:`solve` for each of ``methods`` on the same corners, in that order: method -> PoseResult.
+
+    The same numbers as :func:`solve` method by method; what they share is done once (the input
+    checks, the undistortion, the uncertainty's vectorised pass). ``settings``: method -> its
+    settings (missing: the defaults). Raises as :func:`solve` does.
+    """
+    settings = settings or {}
+    for method in methods:
+        settings_class(method)
     cam = check_camera(camera)
     side = check_side(side_mm)
     corners, flat = check_corners_single(corners_px)
     cov = None if corners_cov is None else check_corners_cov(corners_cov)
-    if method == "numerical":
-        result = solve_numerical(corners, flat, cam, side, settings)  # type: ignore[arg-type]
-    else:
-        result = solve_ippe(corners, flat, cam, side, settings)  # type: ignore[arg-type]
-    return with_uncertainty(result, corners, flat, cam, side, cov)
+    xy = normalised_single(corners, flat, cam)
+    results = []
+    for method in methods:
+        if method == "numerical":
+            results.append(solve_numerical(corners, flat, cam, side, settings.get(method), xy))  # type: ignore[arg-type]
+        else:
+            results.append(solve_ippe(corners, flat, cam, side, settings.get(method), xy))  # type: ignore[arg-type]
+    return dict(zip(methods, with_uncertainties(results, corners, flat, cam, side, cov, xy), strict=True))
 
 
 def solve_batch(

@@ -36,7 +36,7 @@ from qrfield.camera import CameraModel
 from qrfield.geometry import ippe_object_points, rotation_from_ippe, rotation_to_ippe
 from qrfield.settings import setting, validated
 from qrfield.solvers.floats import angles_single, reprojection_single
-from qrfield.solvers.rays import normalised_single, undistort
+from qrfield.solvers.rays import has_distortion, normalised_single
 from qrfield.solvers.result import BatchResult, PoseResult, SolverError
 from qrfield.solvers.uncertainty import ambiguity_ratio, batch_uncertainty
 
@@ -81,11 +81,15 @@ def _object_points(side: float) -> np.ndarray:
     return np.ascontiguousarray(ippe_object_points(side).reshape(4, 1, 3))
 
 
-def _ideal_pixels(corners: np.ndarray, camera: CameraModel) -> np.ndarray:
-    pts = np.ascontiguousarray(corners.reshape(4, 1, 2))
-    if camera.has_distortion:
-        pts = undistort(pts, camera, pixels=True)
-    return pts
+def _ideal_pixels(
+    corners: np.ndarray, camera: CameraModel, xy: tuple[list[float], list[float]]
+) -> np.ndarray:
+    """(4, 1, 2) ideal (undistorted) pixels of the corners from their normalised coordinates."""
+    if not has_distortion(camera):
+        return np.ascontiguousarray(corners.reshape(4, 1, 2))
+    x, y = xy
+    fx, fy, cx, cy = camera.fx, camera.fy, camera.cx, camera.cy
+    return np.array([[[fx * x[i] + cx, fy * y[i] + cy]] for i in range(4)])
 
 
 class _Candidate:
@@ -162,14 +166,21 @@ def _normal_angle(a: _Candidate, b: _Candidate) -> float:
 
 
 def solve_ippe(
-    corners: np.ndarray, flat: list[float], camera: CameraModel, side: float, settings: IppeSettings | None
+    corners: np.ndarray,
+    flat: list[float],
+    camera: CameraModel,
+    side: float,
+    settings: IppeSettings | None,
+    xy: tuple[list[float], list[float]] | None = None,
 ) -> PoseResult:
-    """One pose by IPPE_SQUARE from checked corners (see :func:`qrfield.solvers.solve`); never raises."""
+    """One pose by IPPE_SQUARE from checked corners (see :func:`qrfield.solvers.solve`); never
+    raises. ``xy``: their normalised coordinates (qrfield.solvers.rays.normalised_single) when known."""
     import cv2  # lazily: the CLI imports this module for its settings
 
     s = checked_settings(settings)
     obj = _object_points(side)
-    pts = _ideal_pixels(corners, camera)
+    xy = xy if xy is not None else normalised_single(corners, flat, camera)
+    pts = _ideal_pixels(corners, camera, xy)
     k = camera.K
     try:
         count, rvecs, tvecs, _ = cv2.solvePnPGeneric(obj, pts, k, None, flags=cv2.SOLVEPNP_IPPE_SQUARE)
@@ -177,10 +188,10 @@ def solve_ippe(
         return PoseResult.failed("ippe", corners, f"OpenCV IPPE_SQUARE failed: {exc.err}")
     if count < 1:
         return PoseResult.failed("ippe", corners, "OpenCV IPPE_SQUARE returned no pose")
-    rays = _unit_rays(*normalised_single(corners, flat, camera))
+    rays = _unit_rays(*xy)
     starts = list(zip(rvecs[:count], tvecs[:count], strict=True))
     candidates = _refined_candidates(starts, obj, pts, k, s, side, camera, flat, rays)
-    closed = _closed_form(corners, camera, side)
+    closed = _closed_form(corners, flat, camera, side, xy)
     best_error = min((c[0].error for c in candidates), default=math.inf)
     if closed is not None and closed.reprojection_px < best_error:
         start = (cv2.Rodrigues(rotation_to_ippe(closed.rotation))[0], closed.position_mm.reshape(3, 1).copy())
@@ -240,11 +251,17 @@ def _refined_candidates(starts, obj, pts, k, s: IppeSettings, side, camera, flat
     return out
 
 
-def _closed_form(corners: np.ndarray, camera: CameraModel, side: float) -> PoseResult | None:
+def _closed_form(
+    corners: np.ndarray,
+    flat: list[float],
+    camera: CameraModel,
+    side: float,
+    xy: tuple[list[float], list[float]],
+) -> PoseResult | None:
     """The numerical model's closed-form parallelogram pose (one update), or None if unusable."""
     from qrfield.solvers.numerical import solve_numerical
 
-    closed = solve_numerical(corners, corners.ravel().tolist(), camera, side, _closed_form_settings())
+    closed = solve_numerical(corners, flat, camera, side, _closed_form_settings(), xy)
     if not (np.all(np.isfinite(closed.rotation)) and math.isfinite(closed.reprojection_px)):
         return None
     return closed

@@ -106,6 +106,18 @@ def gn_system(
     return [r01, r12, r23, r30, r02, r13], diag, off, grad
 
 
+def misfit(diff: list[Num]) -> Num:
+    """Sum of the squared residuals diff_k (mm^2), in PAIRS order."""
+    return (
+        diff[0] * diff[0]
+        + diff[1] * diff[1]
+        + diff[2] * diff[2]
+        + diff[3] * diff[3]
+        + diff[4] * diff[4]
+        + diff[5] * diff[5]
+    )
+
+
 def solve4(
     diag: list[Num], off: dict[tuple[int, int], Num], grad: list[Num], maximum: Callable
 ) -> tuple[list[Num], Num]:

@@ -11,13 +11,20 @@ What is our reconstruction (the seed gives no equations):
   - unknowns: the four depths z_1..z_4 (mm) along the lines of sight of the undistorted corners;
   - residuals: diff = calculated minus actual length of the four sides (L) and two diagonals (L sqrt 2);
   - update: a Gauss-Newton step on the six residuals, scaled by tf (tf = 1 is the full step);
+    with the settled rule (ours) the step is damped: a step that raises the misfit (the sum of
+    squared diffs) is taken back and halved. Why: seen nearly square-on, the lengths change only
+    to second order with the tilt, the Gauss-Newton matrix is nearly singular along it and the
+    full step overshoots; undamped, it then cycles for ever (measured: 10 of 60 frames of the
+    moving sequence of ``qrfield bench detect``, 5 of 312 hard-set views, NOCONV with every
+    length within 0.005 mm), damped it creeps along that flat valley;
   - stop rule "seed" (our reading of the seed): converged as soon as max |diff_i| < tolerance;
     not converged when n reaches n_max, when the step falls below STALL_MM (a least-squares optimum
     whose residual stays above the tolerance, e.g. with noisy corners) or when the normal equations
     are singular;
   - stop rule "settled" (ours): iterate until the step falls below STALL_MM (the least-squares
-    optimum of the six lengths), then converged if max |diff_i| < tolerance there. With noisy
-    corners no depths fit all six lengths exactly, so the seed rule needs a tolerance loose enough
+    optimum of the six lengths), then converged if max |diff_i| < tolerance there; reaching n_max
+    still in the flat valley above, converged if max |diff_i| < tolerance (the thesis' own test).
+    With noisy corners no depths fit all six lengths exactly, so the seed rule needs a tolerance loose enough
     to stop early (and stopping early leaves the tilt inaccurate: lengths change only to second
     order with tilt); the settled rule reaches the optimum and judges it;
   - initial guess "seed": equal depths z = f L / (mean side in pixels), in normalised units so that
@@ -57,6 +64,9 @@ STALL_MM = 1e-4
 MIRROR_STALL_MM = 1e-2
 #: A mirror candidate whose depths all lie within this of the answer's is the answer again (mm).
 MIRROR_DISTINCT_MM = 0.1
+#: The settled rule takes a step back when it raises the misfit by more than this share (float
+#: rounding near the optimum is not a rise).
+RISE_RTOL = 1e-12
 #: Depths are kept at least this positive (mm) so that the vertices stay in front of the camera.
 Z_FLOOR_MM = 1e-3
 GUESSES = ("seed", "parallelogram")
@@ -205,26 +215,47 @@ def iterate_single(
     s: NumericalSettings,
     stall_mm: float = STALL_MM,
 ) -> tuple[list[float], int, int, float]:
-    """The damped Gauss-Newton iteration on one corner set; returns (z, n, status, max |diff|)."""
+    """The damped Gauss-Newton iteration on one corner set; returns (z, n, status, max |diff|).
+
+    Stop rule "seed": the full step times tf every time (the thesis' reading). Stop rule
+    "settled": a step that raises the misfit (the sum of squared diffs) is taken back and tried
+    at half the length (see :data:`RISE_RTOL`); the length grows back by 2 up to tf after each
+    step that lowers it; reaching n_max with every diff within the tolerance counts as converged.
+    Each evaluation of the lengths (a step tried) counts as one iteration.
+    """
     tf, tol, n_max = s.tf, s.tolerance_mm, s.n_max
     early = s.stop == "seed"
     sqrt = math.sqrt
+    system = kernel.gn_system(z, x, y, lengths, sqrt)
+    kept: tuple | None = None  # the settled rule's last accepted point: (z, system, misfit, worst, dz)
+    scale = tf
     for n in range(n_max + 1):
-        diff, diag, off, grad = kernel.gn_system(z, x, y, lengths, sqrt)
+        diff, diag, off, grad = system
         worst = max(abs(diff[0]), abs(diff[1]), abs(diff[2]), abs(diff[3]), abs(diff[4]), abs(diff[5]))
         if early and worst < tol:
             return z, n, CONVERGED, worst
-        if not math.isfinite(worst):
+        misfit = kernel.misfit(diff)
+        rejected = kept is not None and not misfit <= kept[2] * (1.0 + RISE_RTOL)
+        if rejected:
+            # The step raised the misfit (or left the valid region): back, and half as far.
+            z, system, misfit, worst, dz = kept  # type: ignore[misc]
+            scale = 0.5 * scale
+        elif not math.isfinite(worst):
             return z, n, DIVERGED, worst
         if n == n_max:
-            return z, n, N_MAX, worst
-        dz, singular = kernel.solve4(diag, off, grad, max)
-        if singular:
-            return z, n, SINGULAR, worst
-        step = [tf * dz[0], tf * dz[1], tf * dz[2], tf * dz[3]]
+            return z, n, CONVERGED if not early and worst < tol else N_MAX, worst
+        if not rejected:
+            dz, singular = kernel.solve4(diag, off, grad, max)
+            if singular:
+                return z, n, SINGULAR, worst
+            if not early:
+                kept = (z, system, misfit, worst, dz)
+                scale = min(tf, 2.0 * scale)
+        step = [scale * dz[0], scale * dz[1], scale * dz[2], scale * dz[3]]
         if max(abs(step[0]), abs(step[1]), abs(step[2]), abs(step[3])) < stall_mm:
             return z, n, CONVERGED if worst < tol else STALLED, worst
         z = [max(z[k] - step[k], Z_FLOOR_MM) for k in range(4)]
+        system = kernel.gn_system(z, x, y, lengths, sqrt)
     raise AssertionError("unreachable")  # pragma: no cover
 
 
@@ -304,10 +335,12 @@ def solve_numerical(
     camera: CameraModel,
     side: float,
     settings: NumericalSettings | None,
+    xy: tuple[list[float], list[float]] | None = None,
 ) -> PoseResult:
-    """One pose by the numerical model, from checked corners (see :func:`qrfield.solvers.solve`)."""
+    """One pose by the numerical model, from checked corners (see :func:`qrfield.solvers.solve`);
+    ``xy``: their normalised coordinates (qrfield.solvers.rays.normalised_single) when known."""
     s = checked_settings(settings)
-    x, y = normalised_single(corners, flat, camera)
+    x, y = xy if xy is not None else normalised_single(corners, flat, camera)
     lengths = kernel.lengths_for(side)
     z0 = _initial_single(x, y, lengths, side, s)
     z, n, status, worst = iterate_single(z0, x, y, lengths, s)

@@ -18,6 +18,7 @@ from qrfield.solvers.numerical import (
     DIVERGED,
     INVALID,
     N_MAX,
+    RISE_RTOL,
     SINGULAR,
     STALL_MM,
     STALLED,
@@ -56,6 +57,11 @@ def _initial_batch(
     for k in range(4):
         z[k][idx[good]] = zs[k][good]
     return z
+
+
+def _where(mask: np.ndarray, a: list[np.ndarray], b: list[np.ndarray]) -> list[np.ndarray]:
+    """Item by item, a where ``mask`` else b (rows of the lists of arrays of the kernel)."""
+    return [np.where(mask, x, y) for x, y in zip(a, b, strict=True)]
 
 
 #: Rows solved per pass: small enough that numpy's temporaries stay in the CPU cache.
@@ -144,10 +150,16 @@ def _solve_chunk(
         worst_out[rows] = worst[mask]
 
     with np.errstate(all="ignore"):
+        system = kernel.gn_system(z, x, y, lengths, np.sqrt)
+        # The settled rule's last accepted point per row (see iterate_single): z, the system, the
+        # misfit, max |diff|, the update; and the step's length (a share of the update).
+        kept_z, kept_system, kept_misfit, kept_worst, dz = None, None, None, None, None
+        has_kept = np.zeros(idx.size, bool)
+        scale = np.full(idx.size, float(tf))
         for n in range(s.n_max + 1):
             if idx.size == 0:
                 break
-            diff, diag, off, grad = kernel.gn_system(z, x, y, lengths, np.sqrt)
+            diff = system[0]
             worst = np.abs(diff[0])
             for k in range(1, 6):
                 worst = np.maximum(worst, np.abs(diff[k]))
@@ -156,17 +168,47 @@ def _solve_chunk(
                 conv = worst < tol
                 finish(conv, CONVERGED, n, worst)
                 done |= conv
-            bad = ~done & ~np.isfinite(worst)
+            misfit = kernel.misfit(diff)
+            if early or kept_misfit is None:
+                rejected = np.zeros(idx.size, bool)
+            else:
+                rejected = has_kept & ~(misfit <= kept_misfit * (1.0 + RISE_RTOL))
+            if rejected.any():
+                # The step raised the misfit: back to the last accepted point, half as far.
+                z = _where(rejected, kept_z, z)
+                system = tuple(_where(rejected, a, b) for a, b in zip(kept_system, system, strict=True))
+                misfit = np.where(rejected, kept_misfit, misfit)
+                worst = np.where(rejected, kept_worst, worst)
+                scale = np.where(rejected, 0.5 * scale, scale)
+            diff, diag, off, grad = system
+            bad = ~done & ~rejected & ~np.isfinite(worst)
             finish(bad, DIVERGED, n, worst)
             done |= bad
             if n == s.n_max:
-                finish(~done, N_MAX, n, worst)
+                conv = ~done & (worst < tol) if not early else np.zeros(idx.size, bool)
+                finish(conv, CONVERGED, n, worst)
+                finish(~done & ~conv, N_MAX, n, worst)
                 break
-            dz, singular = kernel.solve4(diag, off, grad, np.maximum)
-            sing = ~done & singular
+            new_dz, singular = kernel.solve4(diag, off, grad, np.maximum)
+            accepted = ~done & ~rejected
+            sing = accepted & singular
             finish(sing, SINGULAR, n, worst)
             done |= sing
-            step = [tf * v for v in dz]
+            dz = new_dz if dz is None else _where(accepted, new_dz, dz)
+            if not early:
+                if kept_z is None:
+                    kept_z, kept_system = z, system
+                    kept_misfit, kept_worst = misfit, worst
+                else:
+                    kept_z = _where(accepted, z, kept_z)
+                    kept_system = tuple(
+                        _where(accepted, a, b) for a, b in zip(system, kept_system, strict=True)
+                    )
+                    kept_misfit = np.where(accepted, misfit, kept_misfit)
+                    kept_worst = np.where(accepted, worst, kept_worst)
+                has_kept |= accepted
+                scale = np.where(accepted, np.minimum(tf, 2.0 * scale), scale)
+            step = [scale * v for v in dz]
             biggest = np.maximum(
                 np.maximum(np.abs(step[0]), np.abs(step[1])), np.maximum(np.abs(step[2]), np.abs(step[3]))
             )
@@ -181,7 +223,15 @@ def _solve_chunk(
                 y = [v[keep] for v in y]
                 z = [v[keep] for v in z]
                 step = [v[keep] for v in step]
+                dz = [v[keep] for v in dz]
+                scale = scale[keep]
+                has_kept = has_kept[keep]
+                if kept_z is not None:
+                    kept_z = [v[keep] for v in kept_z]
+                    kept_system = tuple([v[keep] for v in part] for part in kept_system)
+                    kept_misfit, kept_worst = kept_misfit[keep], kept_worst[keep]
             z = [np.maximum(z[k] - step[k], Z_FLOOR_MM) for k in range(4)]
+            system = kernel.gn_system(z, x, y, lengths, np.sqrt)
 
     result = _batch_result(z_out, n_out, status, worst_out, x_all, y_all, corners, valid, camera, side)
     if cov is None:

@@ -288,8 +288,13 @@ def euler_jacobian(angles_deg: np.ndarray) -> np.ndarray:
 
 def pose_covariance(jac: np.ndarray, cov_n: np.ndarray, angles_deg: np.ndarray) -> np.ndarray:
     """(..., 6, 6) covariance of (x, y, z mm, alpha, beta, gamma deg) from the Jacobian (..., 6, 8)
-    of p = (omega, t) over the normalised corners and their covariance (..., 4, 2, 2)."""
-    full = np.concatenate([jac[..., 3:, :], euler_jacobian(angles_deg) @ jac[..., :3, :]], axis=-2)
+    of p = (omega, t) over the normalised corners and their covariance (..., 4, 2, 2), or one
+    (4, 2, 2) shared by every row."""
+    if np.ndim(angles_deg) == 2 and len(angles_deg) <= 8:  # a few poses: the scalar Euler path
+        euler = np.array([euler_jacobian(a) for a in angles_deg])
+    else:
+        euler = euler_jacobian(angles_deg)
+    full = np.concatenate([jac[..., 3:, :], euler @ jac[..., :3, :]], axis=-2)
     sigma = np.zeros((*cov_n.shape[:-3], 64))
     sigma[..., _BLOCK_DIAGONAL] = cov_n.reshape(*cov_n.shape[:-3], 16)  # corners independent
     sigma = sigma.reshape(*cov_n.shape[:-3], 8, 8)
@@ -351,55 +356,70 @@ def ambiguity_ratio(error_answer: float, error_mirror: float) -> float:
 # ---------------------------------------------------------------------- one solve's result
 
 
-def with_uncertainty(
-    result: PoseResult,
+def with_uncertainties(
+    results: list[PoseResult],
     corners: np.ndarray,
     flat: list[float],
     camera: CameraModel,
     side: float,
     cov: np.ndarray | None,
-) -> PoseResult:
-    """``result`` with its uncertainty fields and the mirror test filled (see :class:`PoseResult`).
+    xy: tuple[list[float], list[float]] | None = None,
+) -> list[PoseResult]:
+    """``results`` (one per method, all of the same corners) with their uncertainty fields and the
+    mirror test filled (see :class:`PoseResult`), in one vectorised pass: the corners' normalised
+    covariance, the rigid projections of every answer and mirror, the pose covariances and the
+    chi-squares are each computed once for all of them.
 
     ``cov`` is the checked (4, 2, 2) corner covariance in px^2, or None when unknown (then the std
     fields stay NaN and the mirror test falls back on the ratio ``ambiguity``). A result that did
-    not converge gets only ``corners_std_px``.
+    not converge gets only ``corners_std_px``. ``xy``: the corners' normalised coordinates when known.
     """
     from qrfield.solvers.rays import normalised_single
 
-    fields: dict[str, object] = {}
+    fields: list[dict[str, object]] = [{} for _ in results]
     if cov is not None:
-        fields["corners_std_px"] = corners_std_px(cov)
-    if not (result.converged and np.isfinite(result.rotation).all()):
-        return replace(result, **fields) if fields else result
+        std = corners_std_px(cov)
+        for f in fields:
+            f["corners_std_px"] = std
+    solved = [i for i, r in enumerate(results) if r.converged and np.isfinite(r.rotation).all()]
     if cov is None:
-        alt = result.alternative
-        if alt is not None and result.ambiguity is not None:
-            better = alt.reprojection_px < result.reprojection_px
-            return replace(result, ambiguous=bool(better or result.ambiguity >= AMBIGUITY_FALLBACK))
-        return result
-    x_list, y_list = normalised_single(corners, flat, camera)
-    x, y = np.array(x_list), np.array(y_list)
-    cov_n = normalised_cov(cov, x, y, camera)
-    rotations, positions = [result.rotation], [result.position_mm]
-    mirror = _mirror_start(result, x_list, y_list)
-    if mirror is not None:
-        rotations.append(mirror[0])
-        positions.append(mirror[1])
-    projection = rigid_projection(np.array(rotations), np.array(positions), side)
-    if result.method == "numerical":
-        jac = numerical_jacobian(result.vertices_mm[:, 2], x, y)
-    else:
-        jac = least_squares_jacobian(projection[1][0], camera)
-    pose_cov = pose_covariance(jac, cov_n, result.angles_deg)
-    fields["pose_cov"] = pose_cov
-    fields["position_std_mm"], fields["angles_std_deg"] = pose_std(pose_cov)
-    n_obs = np.array([v for pair in zip(x_list, y_list, strict=True) for v in pair])
-    chi2 = branch_chi2(projection, n_obs, information_matrix(cov_n))
-    fields["chi2"] = float(chi2[0])
-    if mirror is not None:
-        fields.update(mirror_chi2=float(chi2[1]), ambiguous=is_ambiguous(chi2[0], chi2[1]))
-    return replace(result, **fields)
+        for i in solved:
+            r = results[i]
+            if r.alternative is not None and r.ambiguity is not None:
+                better = r.alternative.reprojection_px < r.reprojection_px
+                fields[i]["ambiguous"] = bool(better or r.ambiguity >= AMBIGUITY_FALLBACK)
+    elif solved:
+        x_list, y_list = xy if xy is not None else normalised_single(corners, flat, camera)
+        x, y = np.array(x_list), np.array(y_list)
+        cov_n = normalised_cov(cov, x, y, camera)
+        # Every answer, then the mirrors of those that have one.
+        mirrors = [(i, _mirror_start(results[i], x_list, y_list)) for i in solved]
+        mirrors = [(i, m) for i, m in mirrors if m is not None]
+        rotations = [results[i].rotation for i in solved] + [m[0] for _, m in mirrors]
+        positions = [results[i].position_mm for i in solved] + [m[1] for _, m in mirrors]
+        projection = rigid_projection(np.array(rotations), np.array(positions), side)
+        jac = np.empty((len(solved), 6, 8))
+        for k, i in enumerate(solved):
+            if results[i].method == "numerical":
+                jac[k] = numerical_jacobian(results[i].vertices_mm[:, 2], x, y)
+            else:
+                jac[k] = least_squares_jacobian(projection[1][k], camera)
+        angles = np.array([results[i].angles_deg for i in solved])
+        pose_cov = pose_covariance(jac, cov_n, angles)
+        pos_std, ang_std = pose_std(pose_cov)
+        n_obs = np.array([v for pair in zip(x_list, y_list, strict=True) for v in pair])
+        chi2 = branch_chi2(projection, n_obs, information_matrix(cov_n))
+        for k, i in enumerate(solved):
+            fields[i].update(
+                pose_cov=pose_cov[k],
+                position_std_mm=pos_std[k],
+                angles_std_deg=ang_std[k],
+                chi2=float(chi2[k]),
+            )
+        for k, (i, _) in enumerate(mirrors):
+            mirror_chi2 = float(chi2[len(solved) + k])
+            fields[i].update(mirror_chi2=mirror_chi2, ambiguous=is_ambiguous(fields[i]["chi2"], mirror_chi2))
+    return [replace(r, **f) if f else r for r, f in zip(results, fields, strict=True)]
 
 
 def _mirror_start(result: PoseResult, x: list[float], y: list[float]) -> tuple[np.ndarray, np.ndarray] | None:
