@@ -11,6 +11,8 @@ Statuses (those of the serial frame, docs/conventions.md, plus ERROR):
             its corners are not fit for a pose (not refined: the backend's own, possibly several
             px off; ``Detection.untrusted`` says why): then no method is run and no pose is given;
     ERROR   anything else (the camera model does not fit the frame, a solver raised): see reason.
+Reported to other programs (``qrfield run`` output), OK from a source that is not a live camera
+is SIM (:meth:`FrameResult.reported_status`), as on the serial link.
 
 Timing: ``t_ms`` is the frame's capture time in ms since the stream started (the first frame
 processed, or the ``t0`` given); ``latency_ms`` runs from capture to the finished result.
@@ -32,6 +34,8 @@ from qrfield.methods import METHODS
 from qrfield.sources.base import Frame
 
 OK, NOQR, NOCONV, ERROR = "OK", "NOQR", "NOCONV", "ERROR"
+#: What OK becomes in a result reported from a source that is not a live camera (JSON lines).
+SIM = "SIM"
 STATUSES = (OK, NOQR, NOCONV, ERROR)
 
 #: Keys of a pose result's JSON (those of ``qrfield solve --json``), null when there is no pose.
@@ -97,11 +101,18 @@ class FrameResult:
             return None
         return Pose(result.position_mm, result.angles_deg)
 
-    def to_json_dict(self) -> dict[str, Any]:
+    def reported_status(self, simulated: bool = False) -> str:
+        """The status as reported to other programs: SIM instead of OK when the frame did not come
+        from a live camera (``simulated``: the virtual bench, a video, a folder; the serial link's
+        rule, docs/conventions.md), so a program that acts only on OK never acts on a made-up pose."""
+        return SIM if simulated and self.status == OK else self.status
+
+    def to_json_dict(self, simulated: bool = False) -> dict[str, Any]:
         """One JSON line of ``qrfield run --json-lines``: the keys of ``qrfield solve --json``
-        (of the first method; null when there is no pose) plus t_ms, status, reason, frame, text,
-        latency_ms; ``methods`` (every method's result) when more than one ran; ``truth`` on the
-        virtual bench."""
+        (of the first method; null when there is no pose) plus t_ms, status (SIM for a converged
+        pose from a source that is not a live camera, see :meth:`reported_status`), simulated,
+        reason, frame, text, latency_ms; ``methods`` (every method's result) when more than one
+        ran; ``truth`` on the virtual bench."""
         primary = self.primary
         out: dict[str, Any] = dict.fromkeys(POSE_JSON_KEYS)
         if primary is not None:
@@ -110,7 +121,8 @@ class FrameResult:
             out["corners"] = [[float(u), float(v)] for u, v in self.detection.corners_px]
         out.update(
             t_ms=self.t_ms,
-            status=self.status,
+            status=self.reported_status(simulated),
+            simulated=bool(simulated),
             reason=self.reason,
             frame=self.index,
             text=None if self.detection is None else self.detection.text,
@@ -127,9 +139,9 @@ class FrameResult:
             out["label"] = self.label
         return out
 
-    def summary(self) -> str:
-        """One compact human line: frame, time, status and each method's pose."""
-        line = f"#{self.index:<5d} t={self.t_ms / 1000:8.3f}s {self.status:<6s}"
+    def summary(self, simulated: bool = False) -> str:
+        """One compact human line: frame, time, status (:meth:`reported_status`) and each method's pose."""
+        line = f"#{self.index:<5d} t={self.t_ms / 1000:8.3f}s {self.reported_status(simulated):<6s}"
         for k, (name, pose) in enumerate(self.poses.items()):
             if not np.all(np.isfinite(pose.position_mm)):
                 line += f"{' |' if k else ''} {name}: no pose"

@@ -104,7 +104,7 @@ class _StdoutSink:
         self.writer, self.json_lines = writer, json_lines
 
     def on_result(self, result: Any, simulated: bool) -> None:
-        line = (_json_line if self.json_lines else _human_line)(result)
+        line = (_json_line if self.json_lines else _human_line)(result, simulated)
         self.writer.write(line)
 
     def on_source_down(self, reason: str) -> None:
@@ -206,9 +206,9 @@ def run(args: argparse.Namespace) -> int:
     return code
 
 
-def _json_line(result: Any) -> str:
-    return json.dumps(result.to_json_dict())
+def _json_line(result: Any, simulated: bool) -> str:
+    return json.dumps(result.to_json_dict(simulated))
 
 
-def _human_line(result: Any) -> str:
-    return result.summary()
+def _human_line(result: Any, simulated: bool) -> str:
+    return result.summary(simulated)
