@@ -72,9 +72,9 @@ def run_on(monkeypatch, capsys, source: FrameSource, frames: int) -> tuple[list[
     emitted_at: list[float] = []
     original_emit = run_cmd._json_line
 
-    def emit(result) -> str:
+    def emit(result, simulated: bool) -> str:
         emitted_at.append(time.monotonic())
-        return original_emit(result)
+        return original_emit(result, simulated)
 
     monkeypatch.setattr(sources, "open_source", fake_open)
     monkeypatch.setattr(run_cmd, "_json_line", emit)
