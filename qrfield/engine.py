@@ -20,9 +20,16 @@ is closed and, with ``retry_s`` > 0, reopened every ``retry_s`` seconds; else th
 configuration (``hold_when_down`` True: the app). New settings (:meth:`FrameLoop.configure`, any
 thread) apply before the next frame and reopen the source only when they must.
 
-Events for the owner (all optional methods of ``events``, called on the loop's thread):
-``opened(description, again)``, ``failed(message, ended)``, ``note(message)`` (each source note once,
-pipeline problems) and ``processed(frame, result, frames_behind)``.
+Events for the owner (all optional methods of ``events``, called on the loop's thread, except
+``source_down`` which also comes from the opening timer's thread): ``opened(description, again)``,
+``failed(message, ended)``, ``note(message)`` (each source note once, pipeline problems),
+``processed(frame, result, frames_behind)``, and ``source_down(reason)`` / ``source_up()`` with the
+sinks' calls of the same names.
+
+Every :meth:`FrameLoop.configure` and :meth:`FrameLoop.reopen` returns a request number; the
+source the loop opens records the number of the newest request applied before it opened
+(:attr:`FrameLoop.source_generation`), so an owner that asked for a new source can drop, strictly,
+every result of the sources before it (the app's preview).
 """
 
 from __future__ import annotations
@@ -67,6 +74,8 @@ class FrameLoop:
         self._lock = threading.Lock()
         self._pending: RunConfig | None = config
         self._reopen_requested = False
+        self._requests = 0  # configure() and reopen() calls so far (each returns its number)
+        self._applied_request = 0
         self._stop = False
         self._wake = threading.Event()
         self.config: RunConfig | None = None
@@ -78,6 +87,8 @@ class FrameLoop:
         self.source_camera: Any = None
         self.stream_report: list[str] = []
         self.simulated = True
+        #: The request number (configure / reopen) the open source was opened for.
+        self.source_generation = 0
         self.frames_processed = 0
         self._dropped_before = 0
         self._notes_seen = 0
@@ -89,19 +100,27 @@ class FrameLoop:
         self._down = False
 
     # ---------------------------------------------------------------- any thread
-    def configure(self, config: RunConfig, *, reopen: bool = False) -> None:
+    def configure(self, config: RunConfig, *, reopen: bool = False) -> int:
         """Use ``config`` from the next frame on (the source is reopened only if it must be, or
-        when ``reopen``: then once, with ``config``)."""
+        when ``reopen``: then once, with ``config``). Returns the request's number: a source
+        opened after it has a :attr:`source_generation` at least this."""
         with self._lock:
             self._pending = config
             self._reopen_requested = self._reopen_requested or reopen
+            self._requests += 1
+            number = self._requests
         self._wake.set()
+        return number
 
-    def reopen(self) -> None:
-        """Close and open the source again (after a failure, or to restart a file)."""
+    def reopen(self) -> int:
+        """Close and open the source again (after a failure, or to restart a file); returns the
+        request's number (see :meth:`configure`)."""
         with self._lock:
             self._reopen_requested = True
+            self._requests += 1
+            number = self._requests
         self._wake.set()
+        return number
 
     def stop(self) -> None:
         """End the loop after the current frame (thread-safe; not from a signal handler)."""
@@ -162,6 +181,7 @@ class FrameLoop:
         with self._lock:
             config, self._pending = self._pending, None
             reopen, self._reopen_requested = self._reopen_requested, False
+            self._applied_request = self._requests
         opened = False
         if config is not None:
             old, self.config = self.config, config
@@ -214,6 +234,7 @@ class FrameLoop:
         finally:
             timer.cancel()
         self.source = source
+        self.source_generation = self._applied_request
         self.simulated = not is_live_camera(source)
         own = stream_camera(source, config.camera)
         self.source_camera = own if own is not config.camera else None
@@ -282,22 +303,23 @@ class FrameLoop:
             if self._down:
                 return
             self._down = True
-        for sink in self.sinks:
-            try:
-                sink.on_source_down(reason)
-            except Exception as exc:
-                self._event("note", f"sink failed: {exc!r}")
+        self._tell_down_up("source_down", reason)
 
     def _mark_up(self) -> None:
         with self._down_lock:
             if not self._down:
                 return
             self._down = False
+        self._tell_down_up("source_up")
+
+    def _tell_down_up(self, name: str, *args: Any) -> None:
+        """Every sink's ``on_<name>(*args)``, then the owner's event ``name``."""
         for sink in self.sinks:
             try:
-                sink.on_source_up()
-            except Exception as exc:
+                getattr(sink, f"on_{name}")(*args)
+            except Exception as exc:  # a faulty sink must not stop the loop
                 self._event("note", f"sink failed: {exc!r}")
+        self._event(name, *args)
 
     def _forward_notes(self) -> None:
         source = self.source

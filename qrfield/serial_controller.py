@@ -40,6 +40,7 @@ from qrfield.serial_frames import (
     FrameError,
     encode_answer,
     encode_measurement,
+    pose_status,
 )
 from qrfield.serial_link import LinkStatus, SerialLink, SerialLinkSettings, publish_result
 
@@ -193,7 +194,7 @@ class CommandHandler:
         average = average_frames(meas.poses)
         std_pos = np.nan_to_num(average.std_position_mm, nan=0.0)  # one frame: no spread to give
         std_ang = np.nan_to_num(average.std_angles_deg, nan=0.0)
-        status = "SIM" if meas.simulated else "OK"
+        status = pose_status(meas.simulated)
         try:
             return encode_measurement(
                 self._next_seq(),

@@ -78,6 +78,13 @@ class PoseValueError(FrameError):
     """The pose has the right shape but a value is not finite or out of range (see MAX_*)."""
 
 
+def pose_status(simulated: bool) -> str:
+    """The status a measured pose goes out with: OK only from a live camera, SIM from anything
+    else (the virtual bench, a recording, a stand-in; docs/conventions.md). The app's pose panel
+    shows the same word."""
+    return "SIM" if simulated else "OK"
+
+
 def checksum(body: bytes) -> int:
     """XOR of the bytes of ``body`` (the text between '$' and '*')."""
     value = 0

@@ -6,8 +6,9 @@ frame every :data:`NOSRC_INTERVAL_S` from its own thread, so the controller can 
 "cable cut" even while opening a camera blocks the frame loop. Answers to the controller's commands
 (:mod:`qrfield.serial_controller`) go out through :meth:`SerialLink.send_line`, ahead of any pose;
 :meth:`SerialLink.set_streaming` starts and stops the $QRF lines (``$QRC,STREAM,OFF``).
-The pose goes into a one-slot mailbox: a newer pose replaces one not yet written (counted in
-``frames_dropped``), so the queue can never grow and the controller always gets the newest pose.
+The pose goes into a one-slot :class:`~qrfield.mailbox.Mailbox`: a newer pose replaces one not yet
+written (counted in ``frames_dropped``), so the queue can never grow and the controller always gets
+the newest pose.
 The link's thread owns the port: it writes at most ``max_rate_hz`` frames per second, numbers them
 (``seq``), reads and decodes what the controller sends, and when the port vanishes (a write or read
 raises) it reports ``disconnected`` and reopens the port every ``reconnect_interval_s`` until it is
@@ -33,6 +34,7 @@ from typing import Protocol
 
 import numpy as np
 
+from qrfield.mailbox import Mailbox
 from qrfield.serial_frames import (  # re-exported: one import gives the whole serial API
     MAX_LINE_BYTES,
     SEQ_MODULUS,
@@ -53,6 +55,7 @@ from qrfield.serial_frames import (  # re-exported: one import gives the whole s
     encode_command,
     encode_frame,
     encode_measurement,
+    pose_status,
 )
 from qrfield.settings import setting, validated
 
@@ -89,6 +92,7 @@ __all__ = [
     "encode_measurement",
     "list_ports",
     "open_pyserial",
+    "pose_status",
     "publish_result",
 ]
 
@@ -287,7 +291,9 @@ class SerialLink:
         self._ever_connected = False
         self._seq = first_seq
         self._lock = threading.Condition()
-        self._pending: _Pending | None = None
+        # The newest pose not yet written: a newer one replaces it (frames_dropped). It shares the
+        # link's condition: the thread waits for a pose, an answer, NOSRC's time or a stop at once.
+        self._pose: Mailbox[_Pending] = Mailbox(self._lock)
         self._last_frame: _Pending | None = None
         self._stop = False
         self._thread: threading.Thread | None = None
@@ -297,7 +303,7 @@ class SerialLink:
         self._state = CONNECTING
         self._counts = {
             "frames_sent": 0,
-            "frames_dropped": 0,
+            "frames_dropped": 0,  # lost to a write timeout (the superseded ones: self._pose.dropped)
             "errors": 0,
             "reconnects": 0,
             "answers_sent": 0,
@@ -365,10 +371,7 @@ class SerialLink:
             self._clock = (t, time.monotonic())
             if not self._streaming:
                 return True  # the controller asked for no $QRF lines
-            if self._pending is not None:
-                self._counts["frames_dropped"] += 1
-            self._pending = item
-            self._lock.notify()
+            self._pose.put(item)
         return True
 
     def send_line(self, line: bytes) -> bool:
@@ -386,7 +389,7 @@ class SerialLink:
         with self._lock:
             self._streaming = bool(on)
             if not on:
-                self._pending = None
+                self._pose.clear()
                 self._last_frame = None  # nothing to repeat as STALE once the stream resumes
             self._lock.notify()
 
@@ -441,13 +444,13 @@ class SerialLink:
             state=self._state,
             port=self.settings.port,
             last_error=self._last_error,
-            pending=0 if self._pending is None else 1,
+            pending=1 if self._pose.full else 0,
             received=self._decoder.counters.as_dict(),
             last_sent=self._last_sent,
             ever_connected=self._ever_connected,
             streaming=self._streaming,
             source_down=self._source_down,
-            **self._counts,
+            **{**self._counts, "frames_dropped": self._counts["frames_dropped"] + self._pose.dropped},
         )
 
     def _notify(self) -> None:
@@ -531,7 +534,7 @@ class SerialLink:
                 if stopping:
                     # Closing: the newest pose not yet written still goes out, once, rate limit or
                     # not (a run that stops right after its last frame must not lose that pose).
-                    item, self._pending = self._pending, None
+                    item = self._pose.take()
             if stopping:
                 self._write_answers()
                 if item is not None:
@@ -549,16 +552,17 @@ class SerialLink:
                     if stale_after > 0 and self._last_frame is not None and not down
                     else None
                 )
-                if self._pending is not None and now >= next_send:
-                    item, self._pending = self._pending, None
-                elif down and self._pending is None and now >= self._nosrc_due:
+                waiting = self._pose.full
+                if waiting and now >= next_send:
+                    item = self._pose.take()
+                elif down and not waiting and now >= self._nosrc_due:
                     item = _Pending(self._now_t_ms(), None, None, "NOSRC", time.perf_counter())
                     self._nosrc_due = now + NOSRC_INTERVAL_S
-                elif self._pending is None and stale_due is not None and now >= max(stale_due, next_send):
+                elif not waiting and stale_due is not None and now >= max(stale_due, next_send):
                     item, is_stale = self._last_frame, True
                 else:
                     wake = now + self.POLL_S
-                    if self._pending is not None:
+                    if waiting:
                         wake = min(wake, next_send)
                     elif stale_due is not None:
                         wake = min(wake, max(stale_due, next_send))
@@ -615,9 +619,8 @@ class SerialLink:
                 self._error(f"write to {self.settings.port} timed out: {exc!r}")
                 return
             self._lose_port(exc, "writing to")
-            with self._lock:  # not sent: offer it again after reconnecting unless a newer pose came
-                if self._pending is None and not is_stale:
-                    self._pending = item
+            if not is_stale:  # not sent: offer it again after reconnecting unless a newer pose came
+                self._pose.put_if_empty(item)
             return
         sent_at = time.perf_counter()
         with self._lock:
@@ -664,4 +667,4 @@ def publish_result(link: SerialLink, result: object, simulated: bool = True) -> 
     t_ms = getattr(result, "t_ms", None)
     if pose is None:
         return link.publish(t_ms, None, None, "NOQR" if status == "NOQR" else "NOCONV")
-    return link.publish(t_ms, pose.position_mm, pose.angles_deg, "SIM" if simulated else "OK")
+    return link.publish(t_ms, pose.position_mm, pose.angles_deg, pose_status(simulated))

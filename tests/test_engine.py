@@ -168,20 +168,36 @@ def test_without_retry_a_failed_source_ends_the_loop_or_waits_for_reopen() -> No
     assert not thread.is_alive() and held.source is None
 
 
+class OwnerEvents:
+    """The owner's down/up events (the app's worker turns them into signals), into ``rec``."""
+
+    def __init__(self, rec: Recorder) -> None:
+        self.rec = rec
+
+    def source_down(self, reason):
+        self.rec._add("owner down", reason)
+
+    def source_up(self):
+        self.rec._add("owner up")
+
+
 def test_a_live_camera_that_stops_delivering_is_down_until_frames_come_again() -> None:
     source = FakeSource("usb:0", live=True, stall_at=3)
     rec = Recorder()
-    loop = FrameLoop(config(), events=rec, sinks=[rec], opener=opener_of(source))
+    loop = FrameLoop(config(), events=OwnerEvents(rec), sinks=[rec], opener=opener_of(source))
     loop.NO_FRAMES_S = 0.3
     thread = threading.Thread(target=loop.run, daemon=True)
     thread.start()
-    wait_for(lambda: "down" in rec.kinds())
+    wait_for(lambda: "owner down" in rec.kinds())
     source.release.set()
-    wait_for(lambda: "up" in rec.kinds())
+    wait_for(lambda: "owner up" in rec.kinds())
     loop.stop()
     thread.join(10)
     down = next(c for c in rec.calls if c[0] == "down")
     assert "no frame for" in down[1]
+    # The sinks first (the serial link's NOSRC must not wait), then the owner, with the same reason.
+    assert [k for k in rec.kinds() if k != "result"][:4] == ["down", "owner down", "up", "owner up"]
+    assert next(c for c in rec.calls if c[0] == "owner down")[1] == down[1]
 
 
 def test_the_end_of_a_file_ends_the_loop_and_a_stop_request_stops_it() -> None:
@@ -220,3 +236,30 @@ def test_new_bench_settings_apply_live_and_a_new_source_reopens() -> None:
     rec.processed = processed
     assert loop.run() == STOPPED
     assert opened == ["virtual"] and truths[0] == 300.0 and truths[-1] == 350.0  # one open, live change
+
+
+def test_each_source_records_the_request_it_was_opened_for() -> None:
+    """configure() and reopen() return request numbers; a source opened after request k has
+    generation k, so an owner drops the results of the sources before its request strictly."""
+    first, second = FakeSource("one"), FakeSource("two")
+    seen: list[tuple[str, int]] = []  # (source, generation) of each processed frame
+
+    class Events:
+        def processed(self, frame, result, behind):
+            seen.append((loop.source.name, loop.source_generation))
+
+    loop = FrameLoop(config(), events=Events(), opener=opener_of(first, second))
+    thread = threading.Thread(target=loop.run, daemon=True)
+    thread.start()
+    wait_for(lambda: len(seen) >= 2)
+    same = loop.configure(config())  # nothing to reopen: the source and its generation stay
+    wait_for(lambda: loop._pending is None and len(seen) >= 4)
+    request = loop.reopen()
+    assert request > same > 0
+    wait_for(lambda: any(name == "two" for name, _ in seen[-3:]))
+    loop.stop()
+    thread.join(10)
+    assert {g for name, g in seen if name == "one"} == {0}  # opened for the first configuration
+    assert {g for name, g in seen if name == "two"} == {request}
+    switch = next(i for i, (name, _) in enumerate(seen) if name == "two")
+    assert all(name == "two" for name, _ in seen[switch:])  # no frame of the old source after it

@@ -3,9 +3,10 @@
 Frames come from the app's worker (the main window forwards each frame it draws; the dialog never
 calls the camera) or, in *virtual chessboard* mode, from :class:`qrfield.virtual_board.VirtualChessboard`
 rendering seeded board poses through the app's current camera model (so the dialog can be tried,
-and tested, without hardware). A :class:`BoardFinder` runs :func:`qrfield.calibration.detect_board`
-(``thorough=False`` for live frames) and draws the corners on its own thread, one frame at a time:
-a frame arriving while it is busy replaces the waiting one (frames are dropped, never queued).
+and tested, without hardware). The board finder, a :class:`ui.background.BackgroundJob` fed with
+:meth:`~ui.background.BackgroundJob.submit`, runs :func:`qrfield.calibration.detect_board`
+(``thorough=False`` for live frames) and draws the corners off the GUI thread, one frame at a
+time: a frame arriving while it is busy replaces the waiting one (frames are dropped, never queued).
 Saving writes the CameraModel JSON as ``NAME.json`` in the user's calib folder
 (:func:`qrfield.paths.user_calib_dir`, never the checkout's shipped presets; no silent
 overwrite), NAME being the camera name the operator gives; "Use" makes it the app's camera model.
@@ -15,10 +16,8 @@ fits an 800x480 screen: its controls scroll beside the picture.
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import re
-import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -114,62 +113,6 @@ def make_preview(
     return BoardPreview(rgb, detection, board, source, truth_px)
 
 
-class BoardFinder(QtCore.QObject):
-    """Runs preview jobs on its own thread; ``submit`` replaces a job not yet started (counted)."""
-
-    previewReady = QtCore.Signal(object)  # BoardPreview
-    failed = QtCore.Signal(str)
-
-    def __init__(self) -> None:
-        super().__init__()
-        self._cond = threading.Condition()
-        self._job: Callable[[], BoardPreview] | None = None
-        self._stop = False
-        self.dropped = 0
-        self.done = 0
-        self._thread = threading.Thread(target=self._run, name="calibration-preview", daemon=True)
-        self._thread.start()
-
-    def submit(self, job: Callable[[], BoardPreview]) -> None:
-        with self._cond:
-            if self._job is not None:
-                self.dropped += 1
-            self._job = job
-            self._cond.notify()
-
-    def busy(self) -> bool:
-        with self._cond:
-            return self._job is not None
-
-    def stop(self, timeout: float = 5.0) -> None:
-        with self._cond:
-            self._stop = True
-            self._job = None
-            self._cond.notify()
-        self._thread.join(timeout)
-
-    def _run(self) -> None:
-        while True:
-            with self._cond:
-                while self._job is None and not self._stop:
-                    self._cond.wait()
-                if self._stop:
-                    return
-                job = self._job
-            try:
-                preview = job()
-            except Exception as exc:  # a bad frame or setting must not end the thread
-                self.failed.emit(f"{type(exc).__name__}: {exc}")
-                preview = None
-            with self._cond:
-                if self._job is job:
-                    self._job = None
-                self.done += 1
-            if preview is not None:
-                with contextlib.suppress(RuntimeError):  # the dialog was deleted meanwhile
-                    self.previewReady.emit(preview)
-
-
 class CalibrationDialog(QtWidgets.QDialog):
     """Capture views, compute, save and use a camera calibration.
 
@@ -199,19 +142,12 @@ class CalibrationDialog(QtWidgets.QDialog):
         self.computing = False
         self._virtual: VirtualChessboard | None = None
         self._virtual_key: tuple[Any, ...] | None = None
-        self.finder = BoardFinder()
+        #: Finds and draws the board in the newest frame (newest replaces older: ``submit``).
+        self.finder = BackgroundJob("calibration-preview", self)
         self.job = BackgroundJob("calibrate", self)
-        left = self._build_picture()
-        right = QtWidgets.QScrollArea()  # the controls scroll on a small screen; the picture stays
-        page = self._build_controls()
-        right.setWidget(page)
-        right.setWidgetResizable(True)
-        right.setHorizontalScrollBarPolicy(QtCore.Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
-        scrollbar = right.style().pixelMetric(QtWidgets.QStyle.PixelMetric.PM_ScrollBarExtent)
-        right.setMinimumWidth(page.minimumSizeHint().width() + scrollbar + 2 * right.frameWidth())
         layout = QtWidgets.QHBoxLayout(self)
-        layout.addLayout(left, 3)
-        layout.addWidget(right, 2)
+        layout.addLayout(self._build_picture(), 3)
+        layout.addWidget(self._build_scrolled_controls(), 2)
         self._fit_screen()
         self._wire()
         self._board = self._parse_board()
@@ -235,8 +171,32 @@ class CalibrationDialog(QtWidgets.QDialog):
         left.addWidget(self.found_label)
         return left
 
+    def _build_scrolled_controls(self) -> QtWidgets.QScrollArea:
+        """The controls, scrolling on a small screen (the picture beside them stays)."""
+        page = self._build_controls()
+        area = QtWidgets.QScrollArea()
+        area.setWidget(page)
+        area.setWidgetResizable(True)
+        area.setHorizontalScrollBarPolicy(QtCore.Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
+        scrollbar = area.style().pixelMetric(QtWidgets.QStyle.PixelMetric.PM_ScrollBarExtent)
+        area.setMinimumWidth(page.minimumSizeHint().width() + scrollbar + 2 * area.frameWidth())
+        return area
+
     def _build_controls(self) -> QtWidgets.QWidget:
+        """Top to bottom: the settings, capturing, the views, the coverage, computing, saving."""
         self.form = SettingsForm(CalibrationDialogSettings, self._initial_settings)
+        page = QtWidgets.QWidget()
+        layout = QtWidgets.QVBoxLayout(page)
+        layout.addWidget(self.form)
+        self._build_capture(layout)
+        self._build_views(layout)
+        layout.addWidget(self._build_coverage())
+        self._build_compute(layout)
+        self._build_save(layout)
+        return page
+
+    def _build_capture(self, layout: QtWidgets.QVBoxLayout) -> None:
+        """The virtual chessboard switch, Capture view and Next pose."""
         self.virtual_check = QtWidgets.QCheckBox("virtual chessboard")
         self.virtual_check.setToolTip("seeded board poses rendered through the app's camera model")
         self.virtual_check.setObjectName("virtual")
@@ -248,17 +208,27 @@ class CalibrationDialog(QtWidgets.QDialog):
         self.capture_button = QtWidgets.QPushButton("Capture view")
         self.capture_button.setObjectName("capture")
         self.capture_button.setEnabled(False)
-        capture_row = QtWidgets.QHBoxLayout()
-        capture_row.addWidget(self.capture_button, 2)
-        capture_row.addWidget(self.next_button, 1)
+        row = QtWidgets.QHBoxLayout()
+        row.addWidget(self.capture_button, 2)
+        row.addWidget(self.next_button, 1)
+        layout.addWidget(self.virtual_check)
+        layout.addLayout(row)
+
+    def _build_views(self, layout: QtWidgets.QVBoxLayout) -> None:
+        """The captured views' list with Remove view and Clear views."""
         self.views = QtWidgets.QListWidget()
         self.views.setObjectName("views")
         self.views.setMaximumHeight(110)
         self.remove_button = QtWidgets.QPushButton("Remove view")
         self.clear_button = QtWidgets.QPushButton("Clear views")
-        views_row = QtWidgets.QHBoxLayout()
-        views_row.addWidget(self.remove_button)
-        views_row.addWidget(self.clear_button)
+        row = QtWidgets.QHBoxLayout()
+        row.addWidget(self.remove_button)
+        row.addWidget(self.clear_button)
+        layout.addWidget(self.views)
+        layout.addLayout(row)
+
+    def _build_compute(self, layout: QtWidgets.QVBoxLayout) -> None:
+        """Compute and the text of its result."""
         self.compute_button = QtWidgets.QPushButton(f"Compute (needs {MIN_VIEWS} views)")
         self.compute_button.setObjectName("compute")
         self.compute_button.setEnabled(False)
@@ -266,6 +236,11 @@ class CalibrationDialog(QtWidgets.QDialog):
         self.results.setObjectName("results")
         self.results.setReadOnly(True)
         self.results.setMinimumHeight(100)
+        layout.addWidget(self.compute_button)
+        layout.addWidget(self.results, 1)
+
+    def _build_save(self, layout: QtWidgets.QVBoxLayout) -> None:
+        """Where Save writes, Save and Use, and the note line."""
         self.path_label = QtWidgets.QLabel("")
         self.path_label.setWordWrap(True)
         self.save_button = QtWidgets.QPushButton("Save")
@@ -275,26 +250,15 @@ class CalibrationDialog(QtWidgets.QDialog):
         self.use_button.setToolTip("save (if not yet saved) and make it the app's camera model")
         for button in (self.save_button, self.use_button):
             button.setEnabled(False)
-        out_row = QtWidgets.QHBoxLayout()
-        out_row.addWidget(self.save_button)
-        out_row.addWidget(self.use_button)
+        row = QtWidgets.QHBoxLayout()
+        row.addWidget(self.save_button)
+        row.addWidget(self.use_button)
         self.note = QtWidgets.QLabel("")
         self.note.setObjectName("note")
         self.note.setWordWrap(True)
-        page = QtWidgets.QWidget()
-        right = QtWidgets.QVBoxLayout(page)
-        right.addWidget(self.form)
-        right.addWidget(self.virtual_check)
-        right.addLayout(capture_row)
-        right.addWidget(self.views)
-        right.addLayout(views_row)
-        right.addWidget(self._build_coverage())
-        right.addWidget(self.compute_button)
-        right.addWidget(self.results, 1)
-        right.addWidget(self.path_label)
-        right.addLayout(out_row)
-        right.addWidget(self.note)
-        return page
+        layout.addWidget(self.path_label)
+        layout.addLayout(row)
+        layout.addWidget(self.note)
 
     def _build_coverage(self) -> QtWidgets.QGroupBox:
         box = QtWidgets.QGroupBox("views per image cell")
@@ -326,7 +290,7 @@ class CalibrationDialog(QtWidgets.QDialog):
         self.resize(min(1100, free.width()), min(820, free.height()))
 
     def _wire(self) -> None:
-        self.finder.previewReady.connect(self._on_preview)
+        self.finder.finished.connect(self._on_preview)
         self.finder.failed.connect(lambda text: self.note.setText(f"⚠ preview: {text}"))
         self.job.finished.connect(self._on_computed)
         self.job.failed.connect(lambda text: self._on_computed(f"calibration failed: {text}"))
@@ -382,12 +346,13 @@ class CalibrationDialog(QtWidgets.QDialog):
 
     # ---------------------------------------------------------------- frames in
     def on_frame(self, image: np.ndarray) -> None:
-        """A frame the app drew (GUI thread); detected on the finder thread (dropped while it is busy)."""
+        """A frame the app drew (GUI thread): the finder detects the board in it off the GUI thread (a
+        frame still waiting when the next one comes is replaced)."""
         if self.virtual_check.isChecked() or not self.isVisible() or self._board is None:
             return
         board = self._board
         image = np.ascontiguousarray(image)
-        self.finder.submit(lambda: make_preview(image, board, "live"))
+        self.finder.submit(make_preview, image, board, "live")
 
     def _on_virtual_toggled(self, on: bool) -> None:
         self.next_button.setEnabled(on)
@@ -408,7 +373,7 @@ class CalibrationDialog(QtWidgets.QDialog):
         return self._virtual
 
     def request_virtual_view(self) -> None:
-        """Render the virtual chessboard at its next seeded pose (on the finder's thread)."""
+        """Render the virtual chessboard at its next seeded pose (in the finder's run)."""
         if not self.virtual_check.isChecked() or self._board is None:
             return
         board = self._board
@@ -615,7 +580,8 @@ class CalibrationDialog(QtWidgets.QDialog):
 
     # ---------------------------------------------------------------- shutdown
     def shutdown(self) -> None:
-        self.finder.stop()
+        self.finder.cancel()
+        self.finder.join(5.0)
         self.job.join(5.0)
 
     def showEvent(self, event: QtGui.QShowEvent) -> None:

@@ -41,17 +41,31 @@ class SourceControls(QtWidgets.QWidget):
     def __init__(self, picamera: Any = None, parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__(parent)
         outer = QtWidgets.QVBoxLayout(self)
+        outer.addLayout(self._build_source_form())
+        box = QtWidgets.QGroupBox("Raspberry Pi camera (picamera2)")
+        self.picamera = SettingsForm(Picamera2Settings, picamera)
+        QtWidgets.QVBoxLayout(box).addWidget(self.picamera)
+        outer.addWidget(box)
+        outer.addStretch(1)
+        self.picamera.changed.connect(lambda *_: self.changed.emit())
+        self.open_button.clicked.connect(self.openRequested)
+        self.combo.activated.connect(lambda *_: self.openRequested.emit())
+        self.loop.toggled.connect(lambda *_: self.changed.emit())
+
+    def _build_source_form(self) -> QtWidgets.QFormLayout:
+        """The source chooser with its Video file… and Folder… buttons, loop, Open and the state line."""
         layout = QtWidgets.QFormLayout()
-        outer.addLayout(layout)
         self.combo = QtWidgets.QComboBox()
         self.combo.setEditable(True)
         self.combo.addItems(list(SOURCE_CHOICES))
         self.combo.setToolTip(_spec("source").describe())
         self.combo.setObjectName("source")
-        row = QtWidgets.QHBoxLayout()
-        row.addWidget(self.combo, 1)
         file_button = QtWidgets.QPushButton("Video file…")
         folder_button = QtWidgets.QPushButton("Folder…")
+        file_button.clicked.connect(self._choose_file)
+        folder_button.clicked.connect(self._choose_folder)
+        row = QtWidgets.QHBoxLayout()
+        row.addWidget(self.combo, 1)
         row.addWidget(file_button)
         row.addWidget(folder_button)
         layout.addRow("source", row)
@@ -64,18 +78,7 @@ class SourceControls(QtWidgets.QWidget):
         self.state.setObjectName("source_state")
         self.state.setWordWrap(True)
         layout.addRow(self.state)
-        box = QtWidgets.QGroupBox("Raspberry Pi camera (picamera2)")
-        box_layout = QtWidgets.QVBoxLayout(box)
-        self.picamera = SettingsForm(Picamera2Settings, picamera)
-        box_layout.addWidget(self.picamera)
-        outer.addWidget(box)
-        outer.addStretch(1)
-        self.picamera.changed.connect(lambda *_: self.changed.emit())
-        file_button.clicked.connect(self._choose_file)
-        folder_button.clicked.connect(self._choose_folder)
-        self.open_button.clicked.connect(self.openRequested)
-        self.combo.activated.connect(lambda *_: self.openRequested.emit())
-        self.loop.toggled.connect(lambda *_: self.changed.emit())
+        return layout
 
     def source(self) -> str:
         return self.combo.currentText().strip() or "auto"
@@ -122,24 +125,21 @@ class SolverControls(QtWidgets.QWidget):
         self.method = widget_for(_spec("method"))
         form.addRow(_spec("method").label, self.method)
         layout.addLayout(form)
+        self.detector = None if detector is None else self._add_form(layout, "detector", *detector)
         self.forms: dict[str, SettingsForm] = {}
-        self.detector: SettingsForm | None = None
-        if detector is not None:
-            box = QtWidgets.QGroupBox("detector settings")
-            box_layout = QtWidgets.QVBoxLayout(box)
-            self.detector = SettingsForm(*detector)
-            box_layout.addWidget(self.detector)
-            layout.addWidget(box)
-            self.detector.changed.connect(lambda *_: self.changed.emit())
         for name, cls in settings_classes.items():
-            box = QtWidgets.QGroupBox(f"{name} settings")
-            box_layout = QtWidgets.QVBoxLayout(box)
-            self.forms[name] = SettingsForm(cls, values.get(name))
-            box_layout.addWidget(self.forms[name])
-            layout.addWidget(box)
-            self.forms[name].changed.connect(lambda *_: self.changed.emit())
+            self.forms[name] = self._add_form(layout, name, cls, values.get(name))
         layout.addStretch(1)
         self.method.currentTextChanged.connect(lambda *_: self.changed.emit())
+
+    def _add_form(self, layout: QtWidgets.QVBoxLayout, name: str, cls: type, value: Any) -> SettingsForm:
+        """A "NAME settings" box holding the form of ``cls``; its changes are this tab's."""
+        box = QtWidgets.QGroupBox(f"{name} settings")
+        form = SettingsForm(cls, value)
+        QtWidgets.QVBoxLayout(box).addWidget(form)
+        layout.addWidget(box)
+        form.changed.connect(lambda *_: self.changed.emit())
+        return form
 
     def settings(self) -> dict[str, Any]:
         return {name: form.value() for name, form in self.forms.items()}

@@ -39,7 +39,7 @@ from ui.controls import (
     view_settings_from,
 )
 from ui.plots import PosePlots
-from ui.pose_panel import PosePanel
+from ui.pose_panel import PosePanel, shown_status, simulated_source_name
 from ui.preview import PreviewPane, PreviewView
 from ui.serial_panel import SerialPanel
 from ui.session_dialogs import touch_button
@@ -201,13 +201,21 @@ class MainWindow(QtWidgets.QMainWindow):
         # raise its minimum height to their height at the narrowest width and grow it past an
         # 800x480 screen. That everything fits is checked by tests/ui/test_app_layout.py.
         self.layout().setSizeConstraint(QtWidgets.QLayout.SizeConstraint.SetNoConstraint)
+        self._build_status_bar()
+        QtGui.QShortcut(QtGui.QKeySequence(QtCore.Qt.Key.Key_F11), self, self.toggle_full_screen)
+        self._restore_geometry()
+
+    def _build_status_bar(self) -> None:
+        """The source on the left, the rates on the right; notes show between them for a while."""
         self.status_source = QtWidgets.QLabel("")
         self.status_source.setObjectName("status_source")
         self.status_rate = QtWidgets.QLabel("")
         self.status_rate.setObjectName("status_rate")
         self.statusBar().addWidget(self.status_source)
         self.statusBar().addPermanentWidget(self.status_rate)
-        QtGui.QShortcut(QtGui.QKeySequence(QtCore.Qt.Key.Key_F11), self, self.toggle_full_screen)
+
+    def _restore_geometry(self) -> None:
+        """The size and place of the last session, else the desktop size; never beyond the screen."""
         geometry = self.store.value("window")
         if isinstance(geometry, str):
             self.restoreGeometry(QtCore.QByteArray.fromBase64(geometry.encode()))
@@ -220,6 +228,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.worker.sourceOpened.connect(self._on_source_opened)
         self.worker.sourceFailed.connect(self._on_source_failed)
         self.worker.sourceNote.connect(self._on_note)
+        self.worker.sourceDown.connect(self._on_source_down)
         self.worker.result_sinks = (self.serial_panel.publisher,)  # every result, on the worker thread
         self.thread = start_worker(self.worker)
         self._closed = False
@@ -243,7 +252,9 @@ class MainWindow(QtWidgets.QMainWindow):
         self.last: Processed | None = None
         self.frames_shown = 0
         self._frames_since_open = 0
-        self._t_open_request = 0.0  # when the operator last asked for a source (monotonic s)
+        # The worker's request number of the operator's last "open this source": results of the
+        # sources before it (Processed.generation lower) are never drawn.
+        self._generation = 0
         self._t0 = time.monotonic()
         self._last_plot = 0.0
         self._rate_t = time.monotonic()
@@ -313,16 +324,18 @@ class MainWindow(QtWidgets.QMainWindow):
         """Controls changed: new settings for the worker, plots and panel."""
         self._reconfigure(reopen=False)
 
-    def _reconfigure(self, reopen: bool) -> None:
-        """New settings for the worker (``reopen``: and open the source again), plots and panel."""
+    def _reconfigure(self, reopen: bool) -> int:
+        """New settings for the worker (``reopen``: and open the source again), plots and panel;
+        the worker's request number."""
         self.app_settings = app_settings_from(
             self.app_settings, self.source_controls, self.solver_controls, self.camera_controls
         )
         self.view_settings = view_settings_from(self.camera_controls)
         self.plots.set_window(self.view_settings.plot_window_s)
         self.simulation_tab.set_app_camera(self.app_settings.camera, self.app_settings.side_mm)
-        self.worker.configure(self._run_config(), reopen=reopen)
+        request = self.worker.configure(self._run_config(), reopen=reopen)
         self.session_panel.refresh_state()
+        return request
 
     def _show_criteria(self) -> None:
         session = self.session_panel.session
@@ -331,12 +344,11 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def _open_source(self) -> None:
         """Open the chosen source (again), e.g. after a failure."""
-        self.worker.latest.take()  # a result of the source being replaced is not drawn any more
+        self.worker.latest.clear()  # a result of the source being replaced is not drawn any more
         self._frames_since_open = 0
-        self._t_open_request = time.monotonic()
         self.pose_panel.source_opened()  # its poses cannot be "stale" values of the new source
         self.preview_pane.show_empty(f"Opening the source “{self.source_controls.source()}” …")
-        self._reconfigure(reopen=True)
+        self._generation = self._reconfigure(reopen=True)
         self.banner_row.hide()
 
     def set_source(self, spec: str) -> None:
@@ -384,6 +396,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.status_source.setText(f"source: {short_source(self.app_settings.source)}")
         self.status_source.setToolTip(description)
         self.source_controls.show_state(f"open: {description}")
+        self.pose_panel.set_source_name(simulated_source_name(str(getattr(self.worker.source, "name", ""))))
         self.plots.clear_history()
         self.session_panel.source_opened()
         if self._frames_since_open == 0:
@@ -391,7 +404,7 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def _on_source_failed(self, message: str) -> None:
         last = self.worker.latest.take()  # the worker stored it before failing: draw it, then mark it old
-        if last is not None and last.frame.t_capture >= self._t_open_request:  # of this source
+        if last is not None and last.generation >= self._generation:  # of this source
             self._draw(last)
         self.banner.setText(message)  # what to do is on its button and in Setup › Source
         self.banner_row.show()
@@ -404,7 +417,12 @@ class MainWindow(QtWidgets.QMainWindow):
                 "No picture: the source is closed.\n\n"
                 "Choose a source in Setup › Source, or press Reopen source."
             )
-        self.pose_panel.mark_stale("the last values measured")
+        self.pose_panel.show_source_down()  # why is in the banner
+
+    def _on_source_down(self, reason: str) -> None:
+        """No frames come (opening hangs, a camera stalls; also just before a failure): NOSRC, or
+        STALE over the last real pose, in the pose panel."""
+        self.pose_panel.show_source_down(reason)
 
     def _on_note(self, message: str) -> None:
         """A note from the worker or the settings: in the status bar for a while (shortened with
@@ -420,7 +438,7 @@ class MainWindow(QtWidgets.QMainWindow):
     def _redraw(self) -> None:
         item: Processed | None = self.worker.latest.take()
         now = time.monotonic()
-        if item is not None and item.frame.t_capture < self._t_open_request:
+        if item is not None and item.generation < self._generation:
             item = None  # a frame of the source being replaced: not drawn (nor averaged into a row)
         if item is not None:
             self._draw(item)
@@ -459,12 +477,13 @@ class MainWindow(QtWidgets.QMainWindow):
                 result_side(self),
                 camera,
             )
+        status = shown_status(result.status, item.simulated)
         self.preview.show_info(
-            f"{result.status}  {self._rates[0]:.1f} fps  latency {result.latency_ms:.0f} ms "
+            f"{status}  {self._rates[0]:.1f} fps  latency {result.latency_ms:.0f} ms "
             f"(detect {result.detect_ms:.0f}, solve {result.solve_ms:.1f})  #{result.index}"
             + (f"  {item.frames_behind} behind" if item.frames_behind else "")
         )
-        self.pose_panel.show_result(result, self.methods())
+        self.pose_panel.show_result(result, self.methods(), item.simulated)
         t = item.frame.t_capture - self._t0
         for name in self.methods():
             pose = result.poses.get(name)
@@ -508,6 +527,7 @@ class MainWindow(QtWidgets.QMainWindow):
             self.calibration_dialog.shutdown()
         self.session_panel.shutdown()
         self.analysis_tab.shutdown()
+        self.camera_controls.report.shutdown()
 
     def showEvent(self, event: QtGui.QShowEvent) -> None:
         super().showEvent(event)

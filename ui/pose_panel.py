@@ -3,9 +3,14 @@ method (and the virtual bench's true pose beside them), each value with its stan
 (+- in small type, when the corners' covariance is known: docs/uncertainty.md), and each solver's
 status below (with the flip warning of the core's mirror test, ``PoseResult.ambiguous``).
 
-On a small screen (:meth:`PosePanel.set_compact`) the type is smaller and a solver's status line
-is shown only when it warns. "STALE" is said only when a real pose was shown before the source
-stopped; without one the panel says there is no source."""
+The headline shows the engine's state, in the serial link's words (docs/conventions.md): the
+pipeline's status (NOQR, NOCONV, ERROR), OK only for a pose from a live camera and SIM for one from
+anything else (the virtual bench, a recording, a stand-in: ``simulated``), with a badge beside the
+values that cannot be missed ("SIMULATED — virtual bench, not a camera"). While no frames come
+(:meth:`PosePanel.show_source_down`) it says NOSRC with dashes, or, when a real pose was shown
+before, STALE over the last values (their +- kept). On a small screen
+(:meth:`PosePanel.set_compact`) the type is smaller and a solver's status line is shown only when
+it warns."""
 
 from __future__ import annotations
 
@@ -16,6 +21,8 @@ import numpy as np
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from qrfield.geometry import Pose, angle_difference
+from qrfield.pipeline import OK
+from qrfield.serial_frames import pose_status
 from qrfield.sessions.criteria import AcceptanceCriteria
 from ui.text import fixed
 
@@ -26,7 +33,43 @@ TRUTH = "true"
 #: Point sizes (values, headline, column headers, the "+- std" beside a value) and the value
 #: columns' width (px), by layout (compact: a small screen).
 SIZES = {False: (22, 15, 12, 11, 100), True: (13, 11, 9, 7, 56)}
+#: Grid rows: the headline, the simulated-source badge, the column headers, then the six values.
+FIRST_VALUE_ROW = 3
 NBSP = "\u00a0"
+#: The states the headline shows besides the pipeline's and the link's statuses.
+NOSRC, STALE = "NOSRC", "STALE"
+#: Headline colours by state (SIM is not green: a made-up pose never looks like a measured one).
+SIM_COLOUR = "#7b3fc4"
+STATE_COLOURS = {
+    "OK": "#2a2",
+    "SIM": SIM_COLOUR,
+    "NOQR": "#c80",
+    "NOCONV": "#c40",
+    NOSRC: "#888",
+    STALE: "#888",
+}
+#: The simulated-source badge: white on the SIM colour.
+BADGE_STYLE = f"color: white; background: {SIM_COLOUR}; font-weight: bold; padding: 1px 6px;"
+
+
+#: What the simulated-source badge calls a source, by the start of its name (FrameSource.name).
+SIMULATED_SOURCE_NAMES = {
+    "virtual": "virtual bench",
+    "picamera2-sim": "picamera2 stand-in",
+    "video": "video file",
+    "folder": "image folder",
+}
+
+
+def simulated_source_name(source_name: str) -> str:
+    """The badge's words for an opened source's ``name`` ("virtual" -> "virtual bench")."""
+    return SIMULATED_SOURCE_NAMES.get(source_name.partition(":")[0], "this source")
+
+
+def shown_status(status: str, simulated: bool) -> str:
+    """A pipeline status as the app shows it: OK becomes SIM when the frame is not from a live
+    camera (the serial link's rule, :func:`qrfield.serial_frames.pose_status`)."""
+    return pose_status(simulated) if status == OK else status
 
 
 def format_value(value: float, row: int) -> str:
@@ -81,28 +124,38 @@ class PosePanel(QtWidgets.QWidget):
     def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__(parent)
         self._grid = QtWidgets.QGridLayout(self)
-        self._grid.setHorizontalSpacing(18)
         self._columns: list[str] = []
         self._cells: dict[str, list[QtWidgets.QLabel]] = {}
         self._headers: dict[str, QtWidgets.QLabel] = {}
         self._status: dict[str, QtWidgets.QLabel] = {}
-        self.headline = QtWidgets.QLabel("waiting for frames…")
-        self.headline.setObjectName("headline")
-        self.headline.setStyleSheet("font-size: 15pt; font-weight: bold;")
-        self.headline.setWordWrap(True)
-        self.verdict = QtWidgets.QLabel("")
-        self.verdict.setObjectName("verdict")
-        self.verdict.setWordWrap(True)
+        #: What the badge calls a simulated source (:meth:`set_source_name`).
+        self.source_name = "this source"
+        #: The state the headline shows: a status of the pipeline or the link, NOSRC or STALE.
+        self.state = NOSRC
         self.compact = False
         self.has_pose = False  # a real pose has been shown (only then can values be stale)
-        self._big = QtGui.QFont()
-        self._big.setBold(True)
-        self._big.setStyleHint(QtGui.QFont.StyleHint.Monospace)
         self._methods: tuple[str, ...] = ("numerical",)
         #: What the verdict against the true pose judges by (the session's; the seed's by default).
         self.criteria = AcceptanceCriteria()
+        self._build_labels()
         self._apply_sizes()
         self.set_columns(self._methods, truth=False)
+
+    def _build_labels(self) -> None:
+        """The labels that stay while the columns change: headline, badge, verdict; the values' font."""
+        self.headline = QtWidgets.QLabel("waiting for frames…")
+        self.headline.setObjectName("headline")
+        self.headline.setWordWrap(True)
+        self.badge = QtWidgets.QLabel("")
+        self.badge.setObjectName("sim_badge")
+        self.badge.setWordWrap(True)
+        self.badge.hide()
+        self.verdict = QtWidgets.QLabel("")
+        self.verdict.setObjectName("verdict")
+        self.verdict.setWordWrap(True)
+        self._big = QtGui.QFont()
+        self._big.setBold(True)
+        self._big.setStyleHint(QtGui.QFont.StyleHint.Monospace)
 
     def set_criteria(self, criteria: AcceptanceCriteria) -> None:
         """Judge against ``criteria`` from the next result on."""
@@ -126,6 +179,7 @@ class PosePanel(QtWidgets.QWidget):
         self._grid.setVerticalSpacing(0 if self.compact else 6)
         self._style_headline(self.headline.property("colour") or "")
         self.verdict.setStyleSheet("font-size: 8pt;" if self.compact else "")
+        self.badge.setStyleSheet(BADGE_STYLE + (" font-size: 8pt;" if self.compact else ""))
 
     def _style_headline(self, colour: str) -> None:
         self.headline.setProperty("colour", colour)
@@ -140,58 +194,72 @@ class PosePanel(QtWidgets.QWidget):
             return
         while self._grid.count():
             item = self._grid.takeAt(0)
-            if item.widget() is not None and item.widget() not in (self.headline, self.verdict):
+            if item.widget() is not None and item.widget() not in (self.headline, self.badge, self.verdict):
                 item.widget().deleteLater()
         self._columns = columns
         self._methods = tuple(methods)
         self._cells, self._headers, self._status = {}, {}, {}
-        _big, _headline, header_pt, _std, width = SIZES[self.compact]
-        self._grid.addWidget(self.headline, 0, 0, 1, len(columns) + 2)
+        span = len(columns) + 2  # the row names, the columns, the units
+        self._grid.addWidget(self.headline, 0, 0, 1, span)
+        self._grid.addWidget(self.badge, 1, 0, 1, span)
         for c, name in enumerate(columns):
-            header = QtWidgets.QLabel(name)
-            header.setAlignment(QtCore.Qt.AlignmentFlag.AlignRight)
-            header.setStyleSheet(f"font-size: {header_pt}pt;" + (" color: #888;" if name == TRUTH else ""))
-            self._grid.addWidget(header, 1, c + 1)
-            self._headers[name] = header
-            cells = []
-            for r, _ in enumerate(ROWS):
-                cell = QtWidgets.QLabel("—")
-                cell.setProperty("value", "—")
-                cell.setTextFormat(QtCore.Qt.TextFormat.RichText)
-                cell.setFont(self._big)
-                cell.setAlignment(QtCore.Qt.AlignmentFlag.AlignRight | QtCore.Qt.AlignmentFlag.AlignVCenter)
-                cell.setMinimumWidth(width)
-                cell.setObjectName(f"{name}_{r}")
-                if name == TRUTH:
-                    cell.setStyleSheet("color: #888;")
-                self._grid.addWidget(cell, r + 2, c + 1)
-                cells.append(cell)
-            self._cells[name] = cells
+            self._add_column(c + 1, name)
         for r, (symbol, unit) in enumerate(ROWS):
             name_label = QtWidgets.QLabel(symbol)
             name_label.setFont(self._big)
-            self._grid.addWidget(name_label, r + 2, 0)
-            self._grid.addWidget(QtWidgets.QLabel(unit), r + 2, len(columns) + 1)
-        row = len(ROWS) + 2
-        for name in methods:
+            self._grid.addWidget(name_label, r + FIRST_VALUE_ROW, 0)
+            self._grid.addWidget(QtWidgets.QLabel(unit), r + FIRST_VALUE_ROW, span - 1)
+        row = len(ROWS) + FIRST_VALUE_ROW
+        for name in methods:  # each solver's status line, then the verdict, across the panel
             status = QtWidgets.QLabel("")
             status.setWordWrap(True)
             status.setObjectName(f"status_{name}")
-            self._grid.addWidget(status, row, 0, 1, len(columns) + 2)
+            self._grid.addWidget(status, row, 0, 1, span)
             self._status[name] = status
             row += 1
-        self._grid.addWidget(self.verdict, row, 0, 1, len(columns) + 2)
+        self._grid.addWidget(self.verdict, row, 0, 1, span)
 
-    def show_result(self, result: Any, methods: tuple[str, ...]) -> None:
-        """Show a qrfield.pipeline.FrameResult."""
+    def _add_column(self, column: int, name: str) -> None:
+        """The header and the six value cells of method (or true pose) ``name`` in grid ``column``."""
+        _big, _headline, header_pt, _std, width = SIZES[self.compact]
+        header = QtWidgets.QLabel(name)
+        header.setAlignment(QtCore.Qt.AlignmentFlag.AlignRight)
+        header.setStyleSheet(f"font-size: {header_pt}pt;" + (" color: #888;" if name == TRUTH else ""))
+        self._grid.addWidget(header, FIRST_VALUE_ROW - 1, column)
+        self._headers[name] = header
+        cells = []
+        for r, _ in enumerate(ROWS):
+            cell = QtWidgets.QLabel("—")
+            cell.setProperty("value", "—")
+            cell.setTextFormat(QtCore.Qt.TextFormat.RichText)
+            cell.setFont(self._big)
+            cell.setAlignment(QtCore.Qt.AlignmentFlag.AlignRight | QtCore.Qt.AlignmentFlag.AlignVCenter)
+            cell.setMinimumWidth(width)
+            cell.setObjectName(f"{name}_{r}")
+            if name == TRUTH:
+                cell.setStyleSheet("color: #888;")
+            self._grid.addWidget(cell, r + FIRST_VALUE_ROW, column)
+            cells.append(cell)
+        self._cells[name] = cells
+
+    def set_source_name(self, name: str) -> None:
+        """What the badge calls the source when its frames are simulated ("virtual bench")."""
+        self.source_name = name
+
+    def show_result(self, result: Any, methods: tuple[str, ...], simulated: bool = False) -> None:
+        """Show a qrfield.pipeline.FrameResult; ``simulated``: its frame is not from a live camera
+        (``ui.worker.Processed.simulated``), so a pose is SIM, never OK, and the badge shows."""
         self.set_columns(methods, truth=result.truth is not None)
-        text = f"{result.status}"
+        self.state = shown_status(result.status, simulated)
+        text = self.state
         if result.detection is not None and result.detection.text:
             text += f"   “{result.detection.text}”"
         if result.reason:
             text += f"   {result.reason}"
         self.headline.setText(text)
-        self._style_headline({"OK": "#2a2", "NOQR": "#c80", "NOCONV": "#c40"}.get(result.status, "#d22"))
+        self._style_headline(STATE_COLOURS.get(self.state, "#d22"))
+        self.badge.setText(f"SIMULATED — {self.source_name}, not a camera")
+        self.badge.setVisible(simulated)
         for name in methods:
             pose = result.poses.get(name)
             values = (
@@ -222,19 +290,25 @@ class PosePanel(QtWidgets.QWidget):
         cell.setProperty("std", std)
         cell.setText(value + (f'<span style="{std_style(self.compact)}"> {std}</span>' if std else ""))
 
-    def mark_stale(self, why: str) -> None:
-        """The source stopped: "STALE" over the last real pose shown, or, when none was ever shown,
-        "no source" and dashes (nothing measured can be stale)."""
+    def show_source_down(self, why: str = "") -> None:
+        """No frames come (``why``: "" when a banner says it): STALE over the last real pose shown
+        (the values and their +- stay, the badge too if they were simulated), or, when none was
+        ever shown, NOSRC and dashes (nothing measured can be stale)."""
         if not self.has_pose:
-            self.show_no_source("")  # the banner says why
+            self.show_no_source(why)
             return
-        self.headline.setText(f"STALE: {why}" if why else "STALE")
-        self._style_headline("#888")
+        self.state = STALE
+        self.headline.setText(
+            "STALE: no frames" + (f" ({why})" if why else "") + "; the values are the last measured"
+        )
+        self._style_headline(STATE_COLOURS[STALE])
 
-    def show_no_source(self, why: str) -> None:
-        """No frames: dashes in every value, and why."""
-        self.headline.setText(f"NO SOURCE   {why}" if why else "NO SOURCE")
-        self._style_headline("#888")
+    def show_no_source(self, why: str = "") -> None:
+        """No frames and no values: NOSRC (the serial link's word), why, and dashes everywhere."""
+        self.state = NOSRC
+        self.headline.setText("NOSRC: no frames" + (f" ({why})" if why else " from the source"))
+        self._style_headline(STATE_COLOURS[NOSRC])
+        self.badge.hide()
         for cells in self._cells.values():
             for cell in cells:
                 self._set_cell(cell, "—", "")

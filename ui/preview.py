@@ -46,6 +46,16 @@ class PreviewView(pg.GraphicsLayoutWidget):
         # convention (pixel centres at integers): shift the image so that both agree.
         self.image_item.setPos(-0.5, -0.5)
         self.view.addItem(self.image_item)
+        self._build_detection_overlay()
+        self._build_axes()
+        self.info = pg.TextItem("", color="#ffffff", anchor=(0, 0), fill=pg.mkBrush(0, 0, 0, 150))
+        self.info.setFont(QtGui.QFont("Monospace", 9))
+        self.info.setVisible(False)  # until there is something to say
+        self.view.addItem(self.info)
+        self._size: tuple[int, int] | None = None
+
+    def _build_detection_overlay(self) -> None:
+        """The code's outline, its four vertices and their V1..V4 labels (hidden until a code is found)."""
         self.outline = pg.PlotDataItem(pen=pg.mkPen("#00ff66", width=2))
         self.view.addItem(self.outline)
         self.vertices = pg.ScatterPlotItem(size=10, pen=pg.mkPen("k"))
@@ -57,8 +67,11 @@ class PreviewView(pg.GraphicsLayoutWidget):
             label.setVisible(False)  # until a code is found
             self.view.addItem(label)
             self.labels.append(label)
+
+    def _build_axes(self) -> None:
+        """Three axis lines per method: the first method's solid, the second's (when both run) dashed."""
         self.axes: list[list[pg.PlotDataItem]] = []
-        for k in range(2):  # the first method solid, the second (when both run) dashed
+        for k in range(2):
             lines = []
             for colour in AXIS_COLOURS:
                 pen = pg.mkPen(colour, width=3 if k == 0 else 2)
@@ -68,11 +81,6 @@ class PreviewView(pg.GraphicsLayoutWidget):
                 self.view.addItem(item)
                 lines.append(item)
             self.axes.append(lines)
-        self.info = pg.TextItem("", color="#ffffff", anchor=(0, 0), fill=pg.mkBrush(0, 0, 0, 150))
-        self.info.setFont(QtGui.QFont("Monospace", 9))
-        self.info.setVisible(False)  # until there is something to say
-        self.view.addItem(self.info)
-        self._size: tuple[int, int] | None = None
 
     def resizeEvent(self, event: QtGui.QResizeEvent | None) -> None:
         super().resizeEvent(event)

@@ -7,7 +7,8 @@ result to :class:`LinkPublisher` on the worker thread (OK from a live camera, el
 the source is down); publishing returns at once (the link keeps only the newest pose), so neither
 the worker nor the GUI ever waits for the port. The GUI reads ``link.status()`` on its redraw timer
 (:meth:`SerialPanel.refresh`): nothing from the link's thread touches a widget. Disconnecting closes
-the link on a short-lived plain thread, since ``close`` joins the link's thread (up to a write timeout).
+the link as a :class:`ui.background.BackgroundJob`, since ``close`` joins the link's thread (up to a
+write timeout).
 """
 
 from __future__ import annotations
@@ -28,10 +29,19 @@ from qrfield.serial_link import (
     list_ports,
 )
 from qrfield.settings import SettingError, specs, validated
+from ui.background import BackgroundJob
 from ui.settings_form import set_widget_value, widget_for, widget_value
 
 #: Colour of the state label: connected green, trying amber, closed grey.
 STATE_COLOURS = {CONNECTED: "#1e8c1e", "connecting": "#c78400", "disconnected": "#c78400", CLOSED: "#808080"}
+#: The link's counters shown (LinkStatus field, label).
+COUNTERS = (
+    ("frames_sent", "frames sent"),
+    ("answers_sent", "answers to commands"),
+    ("frames_dropped", "superseded / dropped"),
+    ("errors", "errors"),
+    ("reconnects", "reconnects"),
+)
 
 
 class LinkPublisher:
@@ -97,14 +107,27 @@ class SerialPanel(QtWidgets.QWidget):
         self._opener = opener
         self.link: GripperLink | None = None
         self.publisher = LinkPublisher()
-        self._closers: list[threading.Thread] = []
+        self._closers: list[BackgroundJob] = []  # one job per link being closed
         self._shown: tuple[str, LinkStatus] | None = None
         self._specs = {s.name: s for s in specs(SerialLinkSettings)}
         settings = validated(settings or SerialLinkSettings())
-
         outer = QtWidgets.QVBoxLayout(self)
+        outer.addLayout(self._build_settings_form())
+        outer.addWidget(self._build_link_box())
+        self.note = QtWidgets.QLabel("")
+        self.note.setWordWrap(True)
+        outer.addWidget(self.note)
+        outer.addStretch(1)
+        self.refresh_ports()
+        self.set_settings(settings)
+        self._show_state(CLOSED, "")
+        self.refresh_button.clicked.connect(self.refresh_ports)
+        self.connect_button.clicked.connect(self.toggle)
+
+    # ---------------------------------------------------------------- builders
+    def _build_settings_form(self) -> QtWidgets.QFormLayout:
+        """The port (chooser and Refresh), one widget per other link setting, and Connect."""
         form = QtWidgets.QFormLayout()
-        outer.addLayout(form)
         self.port = QtWidgets.QComboBox()
         self.port.setEditable(True)
         self.port.setObjectName("port")
@@ -119,27 +142,23 @@ class SerialPanel(QtWidgets.QWidget):
         form.addRow(self._specs["port"].label, row)
         self.fields: dict[str, QtWidgets.QWidget] = {}
         for name, spec in self._specs.items():
-            if name == "port":
-                continue
-            self.fields[name] = widget_for(spec)
-            form.addRow(spec.label, self.fields[name])
+            if name != "port":
+                self.fields[name] = widget_for(spec)
+                form.addRow(spec.label, self.fields[name])
         self.connect_button = QtWidgets.QPushButton("Connect")
         self.connect_button.setObjectName("connect")
         form.addRow(self.connect_button)
+        return form
 
+    def _build_link_box(self) -> QtWidgets.QGroupBox:
+        """The link's state, its counters, the last error and the last line sent."""
         box = QtWidgets.QGroupBox("link")
         grid = QtWidgets.QFormLayout(box)
         self.state_label = QtWidgets.QLabel()
         self.state_label.setObjectName("state")
-        self.counter_labels: dict[str, QtWidgets.QLabel] = {}
         grid.addRow("state", self.state_label)
-        for key, text in (
-            ("frames_sent", "frames sent"),
-            ("answers_sent", "answers to commands"),
-            ("frames_dropped", "superseded / dropped"),
-            ("errors", "errors"),
-            ("reconnects", "reconnects"),
-        ):
+        self.counter_labels: dict[str, QtWidgets.QLabel] = {}
+        for key, text in COUNTERS:
             label = QtWidgets.QLabel("0")
             label.setObjectName(key)
             self.counter_labels[key] = label
@@ -153,17 +172,7 @@ class SerialPanel(QtWidgets.QWidget):
         self.last_sent.setReadOnly(True)
         self.last_sent.setToolTip("the last $QRF line written to the port (without CR LF)")
         grid.addRow("last line sent", self.last_sent)
-        outer.addWidget(box)
-        self.note = QtWidgets.QLabel("")
-        self.note.setWordWrap(True)
-        outer.addWidget(self.note)
-        outer.addStretch(1)
-
-        self.refresh_ports()
-        self.set_settings(settings)
-        self._show_state(CLOSED, "")
-        self.refresh_button.clicked.connect(self.refresh_ports)
-        self.connect_button.clicked.connect(self.toggle)
+        return box
 
     # ---------------------------------------------------------------- settings
     def refresh_ports(self) -> None:
@@ -241,17 +250,17 @@ class SerialPanel(QtWidgets.QWidget):
         self.connect_button.setText("Connect")
         if link is None:
             return
-        closer = threading.Thread(target=link.close, name="serial-link close", daemon=True)
-        closer.start()
-        self._closers = [t for t in self._closers if t.is_alive()] + [closer]
+        closer = BackgroundJob("serial-link close")  # no signal wanted: kept only while it runs
+        closer.start(link.close)
+        self._closers = [job for job in self._closers if job.busy] + [closer]
         self._last_link = link
         if wait:
             self.join_closers()
         self.refresh()
 
     def join_closers(self, timeout: float = 3.0) -> None:
-        for thread in self._closers:
-            thread.join(timeout)
+        for job in self._closers:
+            job.join(timeout)
         self._closers = []
 
     def shutdown(self) -> None:

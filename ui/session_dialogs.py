@@ -167,6 +167,15 @@ class ResumeDialog(QtWidgets.QDialog):
         )
         note.setStyleSheet("color: #555;")
         self.message = _message_label()
+        layout = QtWidgets.QVBoxLayout(self)
+        layout.addWidget(self.where)
+        layout.addWidget(self.list, 1)
+        layout.addWidget(note)
+        layout.addWidget(self.message)
+        layout.addLayout(self._build_buttons())
+
+    def _build_buttons(self) -> QtWidgets.QHBoxLayout:
+        """Other folder… on the left; Cancel and Resume (the default) on the right."""
         self.resume_button = touch_button("Resume", "resume_session")
         self.resume_button.setDefault(True)
         other = touch_button("Other folder…", "resume_other")
@@ -176,15 +185,10 @@ class ResumeDialog(QtWidgets.QDialog):
         buttons.addStretch(1)
         buttons.addWidget(cancel)
         buttons.addWidget(self.resume_button)
-        layout = QtWidgets.QVBoxLayout(self)
-        layout.addWidget(self.where)
-        layout.addWidget(self.list, 1)
-        layout.addWidget(note)
-        layout.addWidget(self.message)
-        layout.addLayout(buttons)
         self.resume_button.clicked.connect(self._resume_chosen)
         other.clicked.connect(self._other_folder)
         cancel.clicked.connect(self.reject)
+        return buttons
 
     def refresh(self) -> None:
         """List the sessions folder again (newest first)."""

@@ -114,26 +114,28 @@ class SessionPanel(QtWidgets.QWidget):
         self._build_row_box()
         self.table = RowsTable()
         self.table.setMinimumHeight(60)
-        layout = QtWidgets.QVBoxLayout(self)
-        layout.setContentsMargins(4, 4, 4, 4)
-        layout.setSpacing(3)
-        layout.addLayout(self.session_bar)
-        layout.addWidget(self.title)
-        layout.addWidget(self.count)
-        for widget in (self.reopen_banner, self.warnings, self.banner):
-            layout.addWidget(widget)
-        layout.addWidget(self.form)
-        layout.addLayout(self.actions)
-        layout.addWidget(self.why)
-        layout.addWidget(self.status)
-        layout.addWidget(self.table, 1)
+        self._build_layout()
         self._wire()
-        self.timer = QtCore.QTimer(self)
+        self.timer = QtCore.QTimer(self)  # frames still arriving? (tick)
         self.timer.timeout.connect(self.tick)
         self.timer.start(LIVENESS_MS)
         self._update_state()
 
     # ---------------------------------------------------------------- builders
+    def _build_layout(self) -> None:
+        """Top to bottom: the session bar and its lines, the banners, the form, the actions with
+        why they are blocked, the status line, and the rows table (the part that scrolls)."""
+        layout = QtWidgets.QVBoxLayout(self)
+        layout.setContentsMargins(4, 4, 4, 4)
+        layout.setSpacing(3)
+        layout.addLayout(self.session_bar)
+        for widget in (self.title, self.count, self.reopen_banner, self.warnings, self.banner, self.form):
+            layout.addWidget(widget)
+        layout.addLayout(self.actions)
+        layout.addWidget(self.why)
+        layout.addWidget(self.status)
+        layout.addWidget(self.table, 1)
+
     def _build_session_bar(self) -> None:
         self.new_button = touch_button("New session…", "new_session")
         self.resume_button = touch_button("Resume…", "resume")

@@ -6,12 +6,13 @@ ranges and the solver list are text, read by the study's own parser) and validat
 itself, whose error is shown next to the field it names; Run is disabled while any field is bad.
 The camera model and QR side follow the app's (editable when "use the app's camera" is off).
 
-Run starts :func:`qrfield.simulation.run_study` on a plain worker thread that reports by Qt signal
-(progress, then the result); the GUI thread never computes (a large study spreads over every core
-in worker processes; the small one runs in well under a second). Stop sets the run's stop event:
-the grid points done are kept and shown as a partial result. When a run started by Run ends, the
-worker writes the study's output folder (:func:`qrfield.simulation.write_outputs`: summary,
-samples, heatmap PNGs) into a new ``<YYYYmmdd-HHMMSS>`` folder under the output folder (default
+Run starts :func:`qrfield.simulation.run_study` as a :class:`ui.background.BackgroundJob` that
+reports by Qt signal (progress, then the result); the GUI thread never computes (a large study
+spreads over every core in worker processes; the small one runs in well under a second). Stop
+cancels the job (the run's stop event): the grid points done are kept and shown as a partial
+result. When a run started by Run ends, the job writes the study's output folder
+(:func:`qrfield.simulation.write_outputs`: summary, samples, heatmap PNGs) into a new
+``<YYYYmmdd-HHMMSS>`` folder under the output folder (default
 :func:`qrfield.paths.simulations_dir`); "Open folder" opens it (or, with no file manager, says
 where it is). With "re-run on change" ticked, once a study has been run, every change of a field
 runs it again after a short pause (a run in progress is stopped and superseded): such a preview
@@ -22,9 +23,7 @@ beside it) and the heatmap of the largest solvable angle for a chosen combinatio
 
 from __future__ import annotations
 
-import contextlib
 import re
-import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -43,6 +42,7 @@ from qrfield.simulation.outputs import (
     write_outputs,
 )
 from qrfield.simulation.study import SMALL_STUDY, field_specs, parse_override
+from ui.background import BackgroundJob, JobControl
 from ui.settings_form import set_widget_value, widget_for, widget_value
 
 RANGE_FIELDS = ("x_range", "y_range", "z_range")
@@ -112,50 +112,31 @@ class RunOutcome:
     superseded: bool = False
 
 
-class StudyRun(QtCore.QObject):
-    """One run of a study on a plain daemon thread; reports by Qt signal (queued to the GUI thread).
+@dataclass
+class StudyRun:
+    """One run of the tab's study: what :func:`run_and_write` gets. ``superseded`` is set by the GUI
+    thread when the form changed during the run: the run then writes nothing."""
 
-    ``progressed(Progress)`` after every task; ``done(RunOutcome)`` once, after the outputs are
-    written into ``out_dir`` (none for a preview; also after a stop: the result is then partial;
-    or with ``error`` set). A superseded run (the study changed meanwhile) writes nothing.
-    """
+    config: StudyConfig
+    out_dir: Path | None
+    superseded: bool = False
 
-    progressed = QtCore.Signal(object)
-    done = QtCore.Signal(object)
 
-    def __init__(self, config: StudyConfig, out_dir: Path | None) -> None:
-        super().__init__()
-        self.config = config
-        self.out_dir = out_dir
-        self.superseded = False
-        self.stop_event = threading.Event()
-        self.thread = threading.Thread(target=self._run, name="simulation study", daemon=True)
-
-    def start(self) -> None:
-        self.thread.start()
-
-    def stop(self) -> None:
-        self.stop_event.set()
-
-    def _emit(self, signal: Any, value: Any) -> None:
-        with contextlib.suppress(RuntimeError):  # the tab was deleted during the run: nobody to tell
-            signal.emit(value)
-
-    def _run(self) -> None:
+def run_and_write(control: JobControl, run: StudyRun) -> RunOutcome:
+    """Run ``run``'s study (progress to ``control``, stopping when it is cancelled: the grid points
+    done are kept, the result partial) and write its outputs into ``run.out_dir`` (none for a
+    preview or a superseded run). Never raises: a failure is the outcome's ``error``."""
+    try:
+        result = run_study(run.config, progress=control.progress, stop=control.stop)
+    except Exception as exc:  # report, never crash the app
+        return RunOutcome(None, run.out_dir, error=f"{type(exc).__name__}: {exc}")
+    outcome = RunOutcome(result, run.out_dir, superseded=run.superseded)
+    if run.out_dir is not None and not run.superseded:
         try:
-            result = run_study(
-                self.config, progress=lambda p: self._emit(self.progressed, p), stop=self.stop_event
-            )
-        except Exception as exc:  # report, never crash the app
-            self._emit(self.done, RunOutcome(None, self.out_dir, error=f"{type(exc).__name__}: {exc}"))
-            return
-        outcome = RunOutcome(result, self.out_dir, superseded=self.superseded)
-        if self.out_dir is not None and not self.superseded:
-            try:
-                outcome.paths = write_outputs(result, self.out_dir, command="qrfield app, simulation tab")
-            except Exception as exc:
-                outcome.error = f"outputs not written to {self.out_dir}: {type(exc).__name__}: {exc}"
-        self._emit(self.done, outcome)
+            outcome.paths = write_outputs(result, run.out_dir, command="qrfield app, simulation tab")
+        except Exception as exc:
+            outcome.error = f"outputs not written to {run.out_dir}: {type(exc).__name__}: {exc}"
+    return outcome
 
 
 class ImageView(QtWidgets.QWidget):
@@ -219,69 +200,27 @@ class SimulationTab(QtWidgets.QWidget):
         self.config: StudyConfig | None = None
         self.result: StudyResult | None = None
         self.outcome: RunOutcome | None = None
-        self.run: StudyRun | None = None
+        self.run: StudyRun | None = None  # the run in progress
         self.problems: list[str] = []
-        specs = {spec.name: spec for spec in field_specs()}
-        self.specs: dict[str, SettingSpec] = specs
+        self.specs: dict[str, SettingSpec] = {spec.name: spec for spec in field_specs()}
+        self.job = BackgroundJob("simulation study", self)
+        self._has_run = False
+        self._ready = False
+        self._build_run_controls()
+        self.pages = QtWidgets.QTabWidget()
+        self.pages.addTab(_scrolled(self._build_study_page()), "Study")
+        self.pages.addTab(_scrolled(self._build_results_page()), "Results")
+        self._build_layout()
+        self._connect_signals()
+        self.apply_preset(SMALL_STUDY)
+        if saved:
+            self.restore(saved)
+        self._follow_toggled(self.follow_app.isChecked())
+        self._ready = True
 
-        # ----- the study form
-        self.widgets: dict[str, QtWidgets.QWidget] = {}
-        self.errors: dict[str, QtWidgets.QLabel] = {}
-        form = QtWidgets.QFormLayout()
-        form.setFieldGrowthPolicy(QtWidgets.QFormLayout.FieldGrowthPolicy.AllNonFixedFieldsGrow)
-        self.follow_app = QtWidgets.QCheckBox("use the app's camera model and QR side")
-        self.follow_app.setChecked(True)
-        form.addRow(self.follow_app)
-        for name in FIELD_ORDER:
-            if name in TEXT_FIELDS:
-                label, tip = TEXT_LABELS[name]
-                widget: QtWidgets.QWidget = QtWidgets.QLineEdit()
-                widget.setToolTip(tip)
-                widget.setObjectName(name)
-                widget.textChanged.connect(self._validate)
-            else:
-                spec = specs[name]
-                label = spec.label
-                widget = widget_for(spec)
-                for signal_name in ("toggled", "currentTextChanged", "valueChanged", "textChanged"):
-                    signal = getattr(widget, signal_name, None)
-                    if signal is not None:
-                        signal.connect(self._validate)
-                        break
-            error = QtWidgets.QLabel("")
-            error.setObjectName(f"error:{name}")
-            error.setWordWrap(True)
-            error.setStyleSheet(ERROR_STYLE)
-            error.hide()
-            cell = QtWidgets.QWidget()
-            cell_layout = QtWidgets.QVBoxLayout(cell)
-            cell_layout.setContentsMargins(0, 0, 0, 0)
-            cell_layout.setSpacing(1)
-            cell_layout.addWidget(widget)
-            cell_layout.addWidget(error)
-            row_label = QtWidgets.QLabel(label)
-            row_label.setToolTip(widget.toolTip())
-            form.addRow(row_label, cell)
-            self.widgets[name] = widget
-            self.errors[name] = error
-        self.general_error = QtWidgets.QLabel("")
-        self.general_error.setWordWrap(True)
-        self.general_error.setStyleSheet(ERROR_STYLE)
-        self.general_error.hide()
-        form.addRow(self.general_error)
-        self.output_dir = QtWidgets.QLineEdit()
-        self.output_dir.setPlaceholderText(f"(each run in a new folder under {default_output_base()})")
-        self.output_dir.setToolTip(
-            "each run started by Run writes its outputs into a new <YYYYmmdd-HHMMSS> folder inside this one"
-        )
-        browse = QtWidgets.QPushButton("…")
-        browse.setFixedWidth(32)
-        browse.clicked.connect(self._browse_output)
-        out_row = QtWidgets.QHBoxLayout()
-        out_row.addWidget(self.output_dir, 1)
-        out_row.addWidget(browse)
-        form.addRow("output folder", out_row)
-
+    # ---------------------------------------------------------------- builders
+    def _build_study_page(self) -> QtWidgets.QWidget:
+        """The presets over the study form (one row per field, its error under it) and the output folder."""
         self.small_button = QtWidgets.QPushButton("Small study")
         self.small_button.setToolTip("5 x 3 x 2 grid, 12 combinations, sweep 0..60 deg step 5: a few seconds")
         self.default_button = QtWidgets.QPushButton("Default study")
@@ -291,13 +230,71 @@ class SimulationTab(QtWidgets.QWidget):
         presets.addWidget(self.small_button)
         presets.addWidget(self.default_button)
         presets.addStretch(1)
-        study_page = QtWidgets.QWidget()
-        study_layout = QtWidgets.QVBoxLayout(study_page)
-        study_layout.addLayout(presets)
-        study_layout.addLayout(form)
-        study_layout.addStretch(1)
+        form = QtWidgets.QFormLayout()
+        form.setFieldGrowthPolicy(QtWidgets.QFormLayout.FieldGrowthPolicy.AllNonFixedFieldsGrow)
+        self.follow_app = QtWidgets.QCheckBox("use the app's camera model and QR side")
+        self.follow_app.setChecked(True)
+        form.addRow(self.follow_app)
+        self.widgets: dict[str, QtWidgets.QWidget] = {}
+        self.errors: dict[str, QtWidgets.QLabel] = {}
+        for name in FIELD_ORDER:
+            self._add_field_row(form, name)
+        self.general_error = _error_label("")
+        form.addRow(self.general_error)
+        form.addRow("output folder", self._build_output_row())
+        page = QtWidgets.QWidget()
+        layout = QtWidgets.QVBoxLayout(page)
+        layout.addLayout(presets)
+        layout.addLayout(form)
+        layout.addStretch(1)
+        return page
 
-        # ----- results
+    def _add_field_row(self, form: QtWidgets.QFormLayout, name: str) -> None:
+        """One study field: its widget (text for ranges and solvers, else from its SettingSpec)
+        with its error label under it; every change validates the form."""
+        if name in TEXT_FIELDS:
+            label, tip = TEXT_LABELS[name]
+            widget: QtWidgets.QWidget = QtWidgets.QLineEdit()
+            widget.setToolTip(tip)
+            widget.setObjectName(name)
+            widget.textChanged.connect(self._validate)
+        else:
+            label = self.specs[name].label
+            widget = widget_for(self.specs[name])
+            for signal_name in ("toggled", "currentTextChanged", "valueChanged", "textChanged"):
+                signal = getattr(widget, signal_name, None)
+                if signal is not None:
+                    signal.connect(self._validate)
+                    break
+        error = _error_label(f"error:{name}")
+        cell = QtWidgets.QWidget()
+        cell_layout = QtWidgets.QVBoxLayout(cell)
+        cell_layout.setContentsMargins(0, 0, 0, 0)
+        cell_layout.setSpacing(1)
+        cell_layout.addWidget(widget)
+        cell_layout.addWidget(error)
+        row_label = QtWidgets.QLabel(label)
+        row_label.setToolTip(widget.toolTip())
+        form.addRow(row_label, cell)
+        self.widgets[name] = widget
+        self.errors[name] = error
+
+    def _build_output_row(self) -> QtWidgets.QHBoxLayout:
+        self.output_dir = QtWidgets.QLineEdit()
+        self.output_dir.setPlaceholderText(f"(each run in a new folder under {default_output_base()})")
+        self.output_dir.setToolTip(
+            "each run started by Run writes its outputs into a new <YYYYmmdd-HHMMSS> folder inside this one"
+        )
+        browse = QtWidgets.QPushButton("…")
+        browse.setFixedWidth(32)
+        browse.clicked.connect(self._browse_output)
+        row = QtWidgets.QHBoxLayout()
+        row.addWidget(self.output_dir, 1)
+        row.addWidget(browse)
+        return row
+
+    def _build_results_page(self) -> QtWidgets.QWidget:
+        """The coverage table, the heatmap with its choice of combination and z, the run folder."""
         self.table = QtWidgets.QTableWidget(0, 0)
         self.table.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
         self.table.verticalHeader().setDefaultSectionSize(20)
@@ -310,41 +307,35 @@ class SimulationTab(QtWidgets.QWidget):
         choose.addWidget(QtWidgets.QLabel("z"))
         choose.addWidget(self.z_choice)
         self.heatmap = ImageView()
-        self.heatmap_path = QtWidgets.QLabel("")
-        self.heatmap_path.setWordWrap(True)
-        self.heatmap_path.setTextInteractionFlags(QtCore.Qt.TextInteractionFlag.TextSelectableByMouse)
-        self.output_label = QtWidgets.QLabel("no run yet")
-        self.output_label.setWordWrap(True)
-        self.output_label.setTextInteractionFlags(QtCore.Qt.TextInteractionFlag.TextSelectableByMouse)
+        self.heatmap_path = _selectable_label("")
+        self.output_label = _selectable_label("no run yet")
         self.full_size_button = QtWidgets.QPushButton("Full size…")
         self.full_size_button.setToolTip("the heatmap at its own size, in a window of its own")
         self.full_size_button.setEnabled(False)
         self.open_button = QtWidgets.QPushButton("Open folder")
         self.open_button.setToolTip("open the last saved run's folder in the file manager")
         self.open_button.setEnabled(False)
-        results_page = QtWidgets.QWidget()
-        results_layout = QtWidgets.QVBoxLayout(results_page)
         coverage_label = QtWidgets.QLabel(
             "Coverage: share of in-view samples meeting the criteria. <i>within</i>: the pose meets "
             "them and the solver stopped before n_max; <i>converged</i>: its own converged flag holds too"
         )
         coverage_label.setWordWrap(True)
-        results_layout.addWidget(coverage_label)
-        results_layout.addWidget(self.table)
-        results_layout.addWidget(QtWidgets.QLabel("Largest solvable angle (deg) over the x-y grid"))
-        results_layout.addLayout(choose)
-        results_layout.addWidget(self.heatmap)
-        results_layout.addWidget(self.heatmap_path)
-        results_layout.addWidget(self.full_size_button)
-        results_layout.addWidget(self.output_label)
-        results_layout.addWidget(self.open_button)
-        results_layout.addStretch(1)
+        page = QtWidgets.QWidget()
+        layout = QtWidgets.QVBoxLayout(page)
+        layout.addWidget(coverage_label)
+        layout.addWidget(self.table)
+        layout.addWidget(QtWidgets.QLabel("Largest solvable angle (deg) over the x-y grid"))
+        layout.addLayout(choose)
+        layout.addWidget(self.heatmap)
+        layout.addWidget(self.heatmap_path)
+        layout.addWidget(self.full_size_button)
+        layout.addWidget(self.output_label)
+        layout.addWidget(self.open_button)
+        layout.addStretch(1)
+        return page
 
-        self.pages = QtWidgets.QTabWidget()
-        self.pages.addTab(_scrolled(study_page), "Study")
-        self.pages.addTab(_scrolled(results_page), "Results")
-
-        # ----- run controls
+    def _build_run_controls(self) -> None:
+        """Run, Stop, "re-run on change" (with its debounce timer), the progress bar and status lines."""
         self.run_button = QtWidgets.QPushButton("Run")
         self.run_button.setToolTip("run the study and save its outputs in a new folder")
         self.stop_button = QtWidgets.QPushButton("Stop")
@@ -358,9 +349,6 @@ class SimulationTab(QtWidgets.QWidget):
         self._rerun_timer = QtCore.QTimer(self)
         self._rerun_timer.setSingleShot(True)
         self._rerun_timer.setInterval(RERUN_DELAY_MS)
-        self._rerun_timer.timeout.connect(self._rerun)
-        self._has_run = False
-        self._ready = False
         self.progress = QtWidgets.QProgressBar()
         self.progress.setRange(0, 1000)
         self.progress.setValue(0)
@@ -369,6 +357,8 @@ class SimulationTab(QtWidgets.QWidget):
         self.size_label.setWordWrap(True)
         self.status = QtWidgets.QLabel("")
         self.status.setWordWrap(True)
+
+    def _build_layout(self) -> None:
         controls = QtWidgets.QHBoxLayout()
         controls.addWidget(self.run_button)
         controls.addWidget(self.stop_button)
@@ -380,7 +370,11 @@ class SimulationTab(QtWidgets.QWidget):
         layout.addWidget(self.size_label)
         layout.addWidget(self.pages, 1)
 
-        # ----- wiring
+    def _connect_signals(self) -> None:
+        self.job.progressed.connect(self._on_progress)
+        self.job.finished.connect(self._on_done)
+        self.job.failed.connect(self._on_failed)
+        self._rerun_timer.timeout.connect(self._rerun)
         self.run_button.clicked.connect(lambda: self.start(save=True))  # not clicked(checked)
         self.stop_button.clicked.connect(self.stop)
         self.small_button.clicked.connect(lambda: self.apply_preset(SMALL_STUDY))
@@ -390,12 +384,6 @@ class SimulationTab(QtWidgets.QWidget):
         self.z_choice.currentIndexChanged.connect(self._show_heatmap)
         self.open_button.clicked.connect(self._open_output)
         self.full_size_button.clicked.connect(self.show_full_size)
-
-        self.apply_preset(SMALL_STUDY)
-        if saved:
-            self.restore(saved)
-        self._follow_toggled(self.follow_app.isChecked())
-        self._ready = True
 
     # ---------------------------------------------------------------- the form
     def raw_study(self) -> dict[str, Any]:
@@ -503,7 +491,7 @@ class SimulationTab(QtWidgets.QWidget):
                 return
             # Supersede the run in progress; _on_done starts the new one.
             self.run.superseded = True
-            self.run.stop()
+            self.job.cancel()
             return
         self.start(save=False)
 
@@ -571,7 +559,7 @@ class SimulationTab(QtWidgets.QWidget):
         return new_run_folder(Path(text).expanduser() if text else default_output_base())
 
     def start(self, save: bool = True) -> None:
-        """Run the form's study on a worker thread: the Run button (``save``: write its outputs),
+        """Run the form's study in the background: the Run button (``save``: write its outputs),
         or a re-run after a change (a preview, not written)."""
         if self.run is not None or self.config is None:
             return
@@ -583,21 +571,21 @@ class SimulationTab(QtWidgets.QWidget):
             except OSError as exc:
                 self.status.setText(f"⚠ cannot create the output folder: {exc}")
                 return
+        run = StudyRun(self.config, out_dir)
+        if not self.job.start_controlled(run_and_write, run):
+            return  # the last run's thread is still ending; its outcome starts the next one
         self._has_run = True
-        self.run = StudyRun(self.config, out_dir)
-        self.run.progressed.connect(self._on_progress)
-        self.run.done.connect(self._on_done)
+        self.run = run
         self.progress.setValue(0)
         self.status.setText(f"running: {self.config.size()['poses']} poses …")
         self._update_buttons()
-        self.run.start()
 
     def stop(self) -> None:
         """Ask the run to stop after the tasks in progress; what is done is kept (Stop button)."""
         if self.run is not None:
             self._rerun_timer.stop()
             self.run.superseded = False
-            self.run.stop()
+            self.job.cancel()
             self.status.setText("stopping after the tasks in progress …")
             self.stop_button.setEnabled(False)
 
@@ -608,6 +596,10 @@ class SimulationTab(QtWidgets.QWidget):
             f"{p.seconds:.1f} s; combination {p.combination}"
         )
         self.progressed.emit(p)
+
+    def _on_failed(self, message: str) -> None:
+        """run_and_write never raises; should it, the run still ends with a message."""
+        self._on_done(RunOutcome(None, self.run.out_dir if self.run else None, error=message))
 
     def _on_done(self, outcome: RunOutcome) -> None:
         self.run = None
@@ -647,6 +639,20 @@ class SimulationTab(QtWidgets.QWidget):
     # ---------------------------------------------------------------- results
     def show_result(self, result: StudyResult, paths: list[Path], out_dir: Path | None) -> None:
         """Fill the coverage table (two readings per solver) and the heatmap choices."""
+        self._fill_coverage_table(result)
+        self._fill_heatmap_choices(result, paths)
+        saved = self.outcome.out_dir if self.outcome is not None else None
+        if out_dir is not None:
+            self.output_label.setText(f"run folder: {out_dir}")
+        elif saved is not None:
+            self.output_label.setText(f"preview, not saved; the last saved run: {saved}")
+        else:
+            self.output_label.setText("preview, not saved (Run saves the study in a new folder)")
+        self.open_button.setEnabled(saved is not None and saved.is_dir())
+        self._show_heatmap()
+
+    def _fill_coverage_table(self, result: StudyResult) -> None:
+        """Per combination (and the mean), two readings per solver; the seed's mean beside them."""
         solvers = list(result.solvers)
         rows = [c.name for c in result.combinations] + ["mean"]
         readings = (("within criteria", False), ("converged + within", True))
@@ -680,6 +686,8 @@ class SimulationTab(QtWidgets.QWidget):
         rows_h = sum(self.table.rowHeight(r) for r in range(len(rows)))
         self.table.setMinimumHeight(min(header_h + rows_h + 2 * self.table.frameWidth() + 18, 280))
 
+    def _fill_heatmap_choices(self, result: StudyResult, paths: list[Path]) -> None:
+        """The combinations with samples and the z values to choose from; the PNGs written for them."""
         written = {p.name: p for p in paths if p.parent.name == "heatmaps"}
         self._heatmaps: dict[tuple[int, int], Path] = {}
         for c, combo in enumerate(result.combinations):
@@ -697,15 +705,6 @@ class SimulationTab(QtWidgets.QWidget):
         for iz, z in enumerate(result.z_mm):
             self.z_choice.addItem(f"{z:g} mm", iz)
         del blockers
-        saved = self.outcome.out_dir if self.outcome is not None else None
-        if out_dir is not None:
-            self.output_label.setText(f"run folder: {out_dir}")
-        elif saved is not None:
-            self.output_label.setText(f"preview, not saved; the last saved run: {saved}")
-        else:
-            self.output_label.setText("preview, not saved (Run saves the study in a new folder)")
-        self.open_button.setEnabled(saved is not None and saved.is_dir())
-        self._show_heatmap()
 
     def heatmap_shown(self) -> Path | None:
         """The PNG shown now (None when none)."""
@@ -767,17 +766,32 @@ class SimulationTab(QtWidgets.QWidget):
         return opened
 
     def shutdown(self, timeout_s: float = 5.0) -> None:
-        """Stop a running study and wait up to ``timeout_s`` for its thread (the app is closing)."""
-        run = self.run
-        if run is not None:
-            run.stop()
-            run.thread.join(timeout_s)
+        """Stop a running study and wait up to ``timeout_s`` for it (the app is closing)."""
+        self.job.cancel()
+        self.job.join(timeout_s)
 
 
 def _cell(text: str) -> QtWidgets.QTableWidgetItem:
     item = QtWidgets.QTableWidgetItem(text)
     item.setTextAlignment(QtCore.Qt.AlignmentFlag.AlignRight | QtCore.Qt.AlignmentFlag.AlignVCenter)
     return item
+
+
+def _error_label(name: str) -> QtWidgets.QLabel:
+    """A hidden, wrapped, red label for a field's (or the form's) error."""
+    label = QtWidgets.QLabel("")
+    label.setObjectName(name)
+    label.setWordWrap(True)
+    label.setStyleSheet(ERROR_STYLE)
+    label.hide()
+    return label
+
+
+def _selectable_label(text: str) -> QtWidgets.QLabel:
+    label = QtWidgets.QLabel(text)
+    label.setWordWrap(True)
+    label.setTextInteractionFlags(QtCore.Qt.TextInteractionFlag.TextSelectableByMouse)
+    return label
 
 
 def _scrolled(widget: QtWidgets.QWidget) -> QtWidgets.QScrollArea:

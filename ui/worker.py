@@ -2,16 +2,21 @@
 
 The loop owns the camera source (opened, read and closed on the worker's thread only), reads only
 the newest frame, measures and hands every result to the sinks (the serial panel's publisher).
-Each result also goes into a one-slot :class:`LatestBox` (a newer result replaces an unread one:
-the GUI drops frames, it never queues them), which the GUI takes on its redraw timer. The GUI hands
-over new settings with :meth:`PipelineWorker.configure` (thread-safe, applied before the next frame)
-and never touches the camera. A source that fails is reported by ``sourceFailed`` and stays closed
-until :meth:`PipelineWorker.reopen` (or, with a retry interval set, until the loop reopens it).
+Each result also goes, as a :class:`Processed`, into a :class:`qrfield.mailbox.Mailbox` (a newer
+result replaces an unread one: the GUI drops frames, it never queues them), which the GUI takes on
+its redraw timer. The GUI hands over new settings with :meth:`PipelineWorker.configure`
+(thread-safe, applied before the next frame) and never touches the camera. A source that fails is
+reported by ``sourceFailed`` and stays closed until :meth:`PipelineWorker.reopen` (or, with a retry
+interval set, until the loop reopens it); ``sourceDown(reason)`` says that no frames come (opening
+hangs, a live camera stalls, or the source failed: the serial link's NOSRC), until the next result.
+
+This long-lived QThread is the app's one exception to :class:`ui.background.BackgroundJob`, the
+app's way of running other work off the GUI thread: the frame loop is not a job that ends with a
+result but the engine itself, running for the window's whole life.
 """
 
 from __future__ import annotations
 
-import threading
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -19,34 +24,12 @@ from typing import Any
 from PySide6 import QtCore
 
 from qrfield.engine import FrameLoop
+from qrfield.mailbox import Mailbox
 from qrfield.pipeline import FrameResult
 from qrfield.runconfig import RunConfig
 from qrfield.sources import Frame
 
-__all__ = ["LatestBox", "PipelineWorker", "Processed", "RunConfig", "start_worker", "stop_worker"]
-
-
-class LatestBox:
-    """Holds one item; ``put`` replaces an unread one (counted as dropped); ``take`` empties it."""
-
-    def __init__(self) -> None:
-        self._lock = threading.Lock()
-        self._item: Any = None
-        self.dropped = 0
-
-    def put(self, item: Any) -> bool:
-        """Store ``item``; True if the box was empty, False if it replaced an unread item."""
-        with self._lock:
-            was_empty = self._item is None
-            if not was_empty:
-                self.dropped += 1
-            self._item = item
-            return was_empty
-
-    def take(self) -> Any:
-        with self._lock:
-            item, self._item = self._item, None
-            return item
+__all__ = ["PipelineWorker", "Processed", "RunConfig", "start_worker", "stop_worker"]
 
 
 @dataclass(frozen=True)
@@ -59,6 +42,10 @@ class Processed:
     #: frames the source delivered after this one by the time its result was ready (0 = it is the
     #: newest frame; a live camera's preview lags by this many frames)
     frames_behind: int = 0
+    #: the source is not a live camera (qrfield.sources.is_live_camera): its poses are SIM, never OK
+    simulated: bool = True
+    #: the request number (:meth:`PipelineWorker.configure` / ``reopen``) its source was opened for
+    generation: int = 0
 
 
 class PipelineWorker(QtCore.QObject):
@@ -67,20 +54,23 @@ class PipelineWorker(QtCore.QObject):
     sourceOpened = QtCore.Signal(str)  # description
     sourceFailed = QtCore.Signal(str)  # why; the source is closed until reopen()
     sourceNote = QtCore.Signal(str)
+    sourceDown = QtCore.Signal(str)  # why no frames come (the serial link says NOSRC meanwhile)
     finished = QtCore.Signal()
 
     def __init__(self, config: RunConfig, *, source_factory: Any = None) -> None:
         super().__init__()
-        self.latest = LatestBox()
+        #: The newest result not yet drawn (the GUI takes it on its redraw timer).
+        self.latest: Mailbox[Processed] = Mailbox()
         self.loop = FrameLoop(config, events=self, opener=source_factory, hold_when_down=True)
 
     # ---------------------------------------------------------------- called from the GUI thread
-    def configure(self, config: RunConfig, *, reopen: bool = False) -> None:
-        """Use ``config`` from the next frame on (see FrameLoop.configure)."""
-        self.loop.configure(config, reopen=reopen)
+    def configure(self, config: RunConfig, *, reopen: bool = False) -> int:
+        """Use ``config`` from the next frame on; the request's number (see FrameLoop.configure:
+        results of a source opened for it or later have a ``generation`` at least this)."""
+        return self.loop.configure(config, reopen=reopen)
 
-    def reopen(self) -> None:
-        self.loop.reopen()
+    def reopen(self) -> int:
+        return self.loop.reopen()
 
     def stop(self) -> None:
         self.loop.stop()
@@ -139,8 +129,13 @@ class PipelineWorker(QtCore.QObject):
     def note(self, message: str) -> None:
         self.sourceNote.emit(message)
 
+    def source_down(self, reason: str) -> None:
+        self.sourceDown.emit(reason)
+
     def processed(self, frame: Frame, result: FrameResult, behind: int) -> None:
-        self.latest.put(Processed(frame, result, time.monotonic(), behind))
+        loop = self.loop  # read on the loop's thread: the source this frame came from
+        item = Processed(frame, result, time.monotonic(), behind, loop.simulated, loop.source_generation)
+        self.latest.put(item)
 
 
 def start_worker(worker: PipelineWorker) -> QtCore.QThread:

@@ -226,6 +226,6 @@ def test_a_source_that_failed_cuts_no_text_at_800x480(make_window, qtbot, tmp_pa
     assert panel.create_from_form() is not None
     settle(qtbot)
     assert (window.width(), window.height()) == (800, 480)
-    assert window.preview_pane.is_empty and window.pose_panel.headline.text().startswith("NO SOURCE")
+    assert window.preview_pane.is_empty and window.pose_panel.headline.text().startswith("NOSRC")
     assert not cut_labels(window) and not overlaps(window), (cut_labels(window), overlaps(window))
     assert window.preview_pane.height() >= 100  # the empty state stays readable under the banner

@@ -140,8 +140,8 @@ def test_the_window_judges_by_the_open_sessions_criteria(make_window, tmp_path, 
 def test_no_negative_zero_and_stale_only_after_a_real_pose(qtbot) -> None:
     panel = PosePanel()
     qtbot.addWidget(panel)
-    panel.mark_stale("no source")  # nothing was ever measured: nothing can be stale
-    assert panel.headline.text().startswith("NO SOURCE") and "STALE" not in panel.headline.text()
+    panel.show_source_down()  # nothing was ever measured: nothing can be stale
+    assert panel.headline.text().startswith("NOSRC") and "STALE" not in panel.headline.text()
     result = FrameResult(
         4,
         101,
@@ -152,11 +152,11 @@ def test_no_negative_zero_and_stale_only_after_a_real_pose(qtbot) -> None:
     panel.show_result(result, ("numerical",))
     texts = [panel.findChild(type(panel.headline), f"numerical_{r}").text() for r in range(6)]
     assert texts == ["0.0", "0.0", "300.0", "0.00", "0.00", "0.00"]  # -0.04 mm and -0.004 deg round to 0
-    panel.mark_stale("no source")
+    panel.show_source_down()
     assert panel.headline.text().startswith("STALE")
     panel.source_opened()  # a new source has shown no pose of its own yet
-    panel.mark_stale("no source")
-    assert panel.headline.text().startswith("NO SOURCE")
+    panel.show_source_down()
+    assert panel.headline.text().startswith("NOSRC")
 
 
 def test_numbers_on_screen_never_read_minus_zero() -> None:

@@ -62,7 +62,7 @@ def test_log_row_is_disabled_without_a_source(make_window, qtbot, sessions, tmp_
     # One clear empty state in the preview; nothing was measured, so nothing is "STALE".
     assert window.preview_pane.is_empty and "No picture" in window.preview_pane.empty.text()
     assert "no-such-video.avi" in window.banner.text()  # why, once, in the banner
-    assert window.pose_panel.headline.text().startswith("NO SOURCE")
+    assert window.pose_panel.headline.text().startswith("NOSRC")
     panel = window.session_panel
     qtbot.mouseClick(panel.new_button, LEFT)
     panel.name_edit.setText("no source")
