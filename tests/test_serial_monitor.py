@@ -65,7 +65,7 @@ def test_monitor_prints_frames_and_counts_problems_as_json(pty_pair):
 def test_monitor_text_output_and_clean_exit_on_ctrl_c(pty_pair):
     master, slave_name = pty_pair
     proc = start_monitor(slave_name)
-    # The README's example line; its checksum 57 is worked out by hand there.
+    # The example line of docs/serial.md; its checksum 57 is worked out by hand there.
     os.write(master, b"$QRF,42,1234,12.5,-3.0,250.0,1.25,-0.50,90.00,OK*57\r\n")
     assert proc.stdout is not None
     line = proc.stdout.readline().decode()
