@@ -273,7 +273,7 @@ def _near_square_on_views(count: int, seed: int, camera):
 def test_nearly_square_on_the_settled_rule_converges_and_meets_the_criteria():
     """Seen nearly square-on the lengths change only to second order with the tilt; the full
     Gauss-Newton step overshot and cycled until n_max with every length within 0.005 mm (NOCONV on
-    about one such view in ten: 3 of these 40, and 10 of the 60 frames of bench detect's sequence).
+    about one such view in ten: 3 of these 40, and 10 of the 60 frames of benchmark detect's sequence).
     The damped step converges, to a pose within the seed's criteria."""
     camera, *_ = cases(1, seed=1)
     views = _near_square_on_views(40, seed=0, camera=camera)

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from solver_cases import DISTORTED, SIDE_MM, cases
 
-from qrfield.bench._pose_views import corner_set
-from qrfield.bench.pose import draw_noise, random_corner_cov
+from qrfield.benchmarks._pose_views import corner_set
+from qrfield.benchmarks.pose import draw_noise, random_corner_cov
 from qrfield.camera import resolve_camera
 from qrfield.geometry import Pose, angle_difference, angles_from_rotation, project_points, rotation_matrix
 from qrfield.solvers import SolverError, solve, solve_batch

@@ -1,4 +1,4 @@
-"""``qrfield bench solvers``: microseconds per pose of each solver beside raw OpenCV, from one run.
+"""``qrfield benchmark solvers``: microseconds per pose of each solver beside raw OpenCV, from one run.
 
 Times are CPU time of this process (time.process_time), so that other work on a shared machine
 does not inflate them; the solvers are single-threaded. Baseline, measured in the same run on the
@@ -111,7 +111,7 @@ def run(args: argparse.Namespace) -> int:
         )
 
     print(
-        f"qrfield bench solvers: camera {camera.name}, QR {side:g} mm, {len(corners)} seeded poses "
+        f"qrfield benchmark solvers: camera {camera.name}, QR {side:g} mm, {len(corners)} seeded poses "
         "(z 150-800 mm, tilt <= 60 deg, any in-plane turn), exact corners unless marked; CPU time"
     )
     print(f"{'solve':<52}{'us/pose':>10}{'x baseline':>12}{'poses/s':>12}")

@@ -1,4 +1,5 @@
-"""Real optics for ``qrfield bench pose``: four chessboard corners as a "QR code", against the whole board.
+"""Real optics for ``qrfield benchmark pose``: four chessboard corners as a "QR code", against the
+whole board.
 
 Data: ../shared/data/calibration/Bumblebee2_Chess, 11 + 11 real 640x480 frames of a chessboard with
 4 x 6 inner corners (a PtGrey Bumblebee2 stereo camera, left and right), hand-labelled corners
@@ -206,9 +207,9 @@ def square_cases(folder: Path) -> list[SquareCase]:
 
 
 def real_optics(data: Path | None) -> None:
-    """Print section 4 of ``qrfield bench pose`` (skipped with a reason when the data is absent)."""
-    from qrfield.bench.detect import _shared_data
-    from qrfield.bench.pose import COMPONENTS, calibration_line
+    """Print section 4 of ``qrfield benchmark pose`` (skipped with a reason when the data is absent)."""
+    from qrfield.benchmarks.detect import _shared_data
+    from qrfield.benchmarks.pose import COMPONENTS, calibration_line
 
     root = _shared_data(data)
     folder = None if root is None else root / FOLDER
