@@ -17,11 +17,11 @@ from qrfield.benchmarks._pose_views import corner_set
 from qrfield.benchmarks.pose import draw_noise, random_corner_cov
 from qrfield.camera import resolve_camera
 from qrfield.geometry import Pose, angle_difference, angles_from_rotation, project_points, rotation_matrix
+from qrfield.methods import METHODS
 from qrfield.solvers import SolverError, solve, solve_batch
 from qrfield.solvers import uncertainty as unc
 
 CAMERAS = ("picam-v2@640x480", DISTORTED.name)
-METHODS = ("numerical", "ippe")
 
 
 def _pose_vector(result) -> np.ndarray:

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from qrfield.camera import CameraModel
+from qrfield.methods import METHODS
 
 FOLDER = "calibration/Bumblebee2_Chess"
 SQUARE_MM = 30.0
@@ -227,7 +228,7 @@ def real_optics(data: Path | None) -> None:
     print(f"{'   source, method (RMS z / % within 2)':<34}{'n':>7}{header}")
     for source in ("cornerSubPix", "hand labels"):
         sigmas = sorted({c.frame: c.corner_std_px for c in cases if c.source == source}.values())
-        for method in ("numerical", "ippe"):
+        for method in METHODS:
             sel = [c for c in cases if c.source == source and c.method == method and c.converged]
             if not sel:
                 continue
@@ -244,7 +245,7 @@ def real_optics(data: Path | None) -> None:
     print(f"   the reference's own std is at most {ratio:.2f} of the square's (median over cases)")
     _per_frame(sel)
     print("   median |error| per component, cornerSubPix corners, 90 mm squares:")
-    for method in ("numerical", "ippe"):
+    for method in METHODS:
         big = [c for c in sel if c.method == method and c.size == 3]
         if big:
             med = np.median(np.abs([c.errors for c in big]), axis=0)
@@ -264,7 +265,7 @@ def _per_frame(cases: list[SquareCase]) -> None:
     for frame in sorted({c.frame for c in cases}):
         middle = [c for c in cases if c.frame == frame and c.size == 3]
         cells = []
-        for method in ("numerical", "ippe"):
+        for method in METHODS:
             # Made row by row: the middle one of the three 3 x 3 squares is the second.
             mine = [c for c in middle if c.method == method]
             if len(mine) != 3:

@@ -42,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from qrfield.camera import resolve_camera
-    from qrfield.geometry import angle_difference, ippe_object_points
+    from qrfield.geometry import ippe_object_points
     from qrfield.sampling import random_visible_poses
     from qrfield.sessions.criteria import AcceptanceCriteria
     from qrfield.solvers import SEED_SETTINGS, IppeSettings, NumericalSettings, solve, solve_batch
@@ -134,17 +134,13 @@ def run(args: argparse.Namespace) -> int:
     for label, settings in configs:
         for data_label, data in (("exact", corners), ("0.5 px", noisy)):
             b = solve_batch(data, camera, side, settings)
-            err_pos = np.linalg.norm(b.position_mm - truth_pos, axis=1)
-            err_ang = np.max(np.abs(angle_difference(b.angles_deg, truth_ang)), axis=1)
-            ok = b.converged & criteria.meets(err_pos, err_ang)
+            ok = b.converged & criteria.judge(b.position_mm, b.angles_deg, truth_pos, truth_ang)[0]
             print(
                 f"{label:<48}{data_label:<10}{b.converged.mean():>10.4f}{b.iterations.mean():>7.2f}{ok.mean():>8.4f}"
             )
     for data_label, data in (("exact", corners), ("0.5 px", noisy)):
         b = solve_batch(data, camera, side, method="ippe")
-        err_pos = np.linalg.norm(b.position_mm - truth_pos, axis=1)
-        err_ang = np.max(np.abs(angle_difference(b.angles_deg, truth_ang)), axis=1)
-        ok = b.converged & criteria.meets(err_pos, err_ang)
+        ok = b.converged & criteria.judge(b.position_mm, b.angles_deg, truth_pos, truth_ang)[0]
         label = "ippe (LM refined)"
         print(f"{label:<48}{data_label:<10}{b.converged.mean():>10.4f}{0.0:>7.2f}{ok.mean():>8.4f}")
     print("targets: numerical single <= 10x baseline; batch >= 200000 poses/s")
