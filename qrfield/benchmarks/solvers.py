@@ -103,9 +103,9 @@ def run(args: argparse.Namespace) -> int:
     reps = -(-args.batch // len(corners))
     big = np.tile(corners, (reps, 1, 1))[: args.batch]
     for label, settings in (("defaults", default), ("thesis settings", SEED_SETTINGS)):
-        solve_batch(big[:1000], camera, side, settings)
+        solve_batch(big[:1000], camera, side, settings=settings)
         t0 = time.process_time()
-        solve_batch(big, camera, side, settings)
+        solve_batch(big, camera, side, settings=settings)
         rows.append(
             (f"numerical batch of {len(big)}, {label}, per pose", (time.process_time() - t0) * 1e6 / len(big))
         )
@@ -133,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
     ]
     for label, settings in configs:
         for data_label, data in (("exact", corners), ("0.5 px", noisy)):
-            b = solve_batch(data, camera, side, settings)
+            b = solve_batch(data, camera, side, settings=settings)
             ok = b.converged & criteria.judge(b.position_mm, b.angles_deg, truth_pos, truth_ang)[0]
             print(
                 f"{label:<48}{data_label:<10}{b.converged.mean():>10.4f}{b.iterations.mean():>7.2f}{ok.mean():>8.4f}"
