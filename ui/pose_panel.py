@@ -26,8 +26,6 @@ from qrfield.sessions.criteria import AcceptanceCriteria
 from ui.text import fixed
 
 ROWS = (("x", "mm"), ("y", "mm"), ("z", "mm"), ("α", "°"), ("β", "°"), ("γ", "°"))
-#: An ambiguity ratio at or above this counts as "the two mirror poses fit almost equally well".
-AMBIGUITY_WARNING = 0.8
 TRUTH = "true"
 #: Point sizes (values, headline, column headers, the "+- std" beside a value) and the value
 #: columns' width (px), by layout (compact: a small screen).
