@@ -66,7 +66,7 @@ def test_bench_pose_runs_on_a_view_set_given_by_name(monkeypatch, capsys, tmp_pa
     monkeypatch.setitem(VIEW_SETS, "tiny", tiny)
     args = ["--poses", "20", "--views", "1", "--cost-views", "5", "--view-set", "tiny"]
     args += ["--data", str(tmp_path)]
-    code = main(["bench", "pose", *args])
+    code = main(["benchmark", "pose", *args])
     out = capsys.readouterr().out
     assert code == 0
     assert "view set 'tiny', 1 seeded views" in out
