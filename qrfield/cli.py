@@ -1,7 +1,8 @@
 """The ``qrfield`` command line: one subcommand per module in :mod:`qrfield.commands`.
 
 Each command module defines ``HELP`` (one line), ``add_arguments(parser)`` and ``run(args) -> int``
-and imports its heavy dependencies inside ``run`` so that ``qrfield --help`` stays fast.
+(optionally ``ALIASES``, other names it answers to) and imports its heavy dependencies inside
+``run`` so that ``qrfield --help`` stays fast.
 No subcommand opens the bench app (``qrfield gui``).
 """
 
@@ -40,7 +41,12 @@ def build_parser() -> argparse.ArgumentParser:
     for name in command_names():
         module = importlib.import_module(f"qrfield.commands.{name.replace('-', '_')}")
         description = getattr(module, "DESCRIPTION", module.HELP)
-        sp = sub.add_parser(name, help=module.HELP, description=f"{description} ({NEGATIVE_VALUES_HELP}.)")
+        sp = sub.add_parser(
+            name,
+            aliases=list(getattr(module, "ALIASES", ())),
+            help=module.HELP,
+            description=f"{description} ({NEGATIVE_VALUES_HELP}.)",
+        )
         module.add_arguments(sp)
         sp.set_defaults(_run=module.run)
     return parser
@@ -67,7 +73,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ModuleNotFoundError as exc:
         if (exc.name or "").split(".")[0] not in ("PySide6", "shiboken6", "pyqtgraph"):
             raise
-        from qrfield.commands.gui import GUI_EXTRA_HINT  # e.g. `bench pipeline` measures the app too
+        from qrfield.commands.gui import GUI_EXTRA_HINT  # e.g. `benchmark pipeline` measures the app too
 
         print(f"qrfield {args.command}: error: this needs {exc.name}: {GUI_EXTRA_HINT}", file=sys.stderr)
         return 3

@@ -36,7 +36,9 @@ from qrfield.sources.base import Frame
 OK, NOQR, NOCONV, ERROR = "OK", "NOQR", "NOCONV", "ERROR"
 #: What OK becomes in a result reported from a source that is not a live camera (JSON lines).
 SIM = "SIM"
-STATUSES = (OK, NOQR, NOCONV, ERROR)
+#: The statuses of a FrameResult (not the serial wire's: qrfield.serial_frames.WIRE_STATUSES, which
+#: qrfield.serial_frames.RESULT_TO_WIRE_STATUS maps these to).
+RESULT_STATUSES = (OK, NOQR, NOCONV, ERROR)
 
 #: Keys of a pose result's JSON (those of ``qrfield solve --json``), null when there is no pose.
 POSE_JSON_KEYS = (
@@ -64,7 +66,7 @@ class FrameResult:
     Attributes:
         index: the frame's index in its stream.
         t_ms: capture time in ms since the stream started.
-        status: one of STATUSES; reason: why, when not OK ("" when OK).
+        status: one of RESULT_STATUSES; reason: why, when not OK ("" when OK).
         detection: the selected code (qrfield.detect.Detection: corners_px (4, 2) V1..V4, text, ...)
             or None.
         detections: every code found in the frame.
@@ -94,7 +96,7 @@ class FrameResult:
         """The first method's PoseResult, or None."""
         return next(iter(self.poses.values()), None)
 
-    def pose_of(self, method: str) -> Pose | None:
+    def converged_pose(self, method: str) -> Pose | None:
         """The converged pose of ``method`` as a Pose (mm, degrees), else None."""
         result = self.poses.get(method)
         if result is None or not result.converged or not np.all(np.isfinite(result.position_mm)):

@@ -34,6 +34,7 @@ import numpy as np
 
 from qrfield.serial_frames import (
     COMMAND_TALKER,
+    RESULT_TO_WIRE_STATUS,
     SEQ_MODULUS,
     T_MS_MODULUS,
     ControllerCommand,
@@ -160,7 +161,7 @@ class CommandHandler:
             meas.frames_seen += 1
             meas.last_t_ms = self._last_t_ms
             status = getattr(result, "status", "")
-            meas.last_status = "NOCONV" if status == "ERROR" else status
+            meas.last_status = RESULT_TO_WIRE_STATUS.get(status, "NOCONV")
             pose = getattr(result, "primary", None)
             if status == "OK" and pose is not None and bool(np.all(np.isfinite(pose.position_mm))):
                 meas.poses.append(pose)

@@ -44,12 +44,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-STATUSES = ("OK", "SIM", "NOQR", "NOCONV", "STALE", "NOSRC")
+#: The statuses a $QRF frame carries on the wire (docs/conventions.md); not the pipeline's
+#: result statuses (qrfield.pipeline.RESULT_STATUSES), which RESULT_TO_WIRE_STATUS maps to these.
+WIRE_STATUSES = ("OK", "SIM", "NOQR", "NOCONV", "STALE", "NOSRC")
 #: Statuses whose pose fields are filled (OK, SIM), empty (NOQR, NOCONV, NOSRC), or either (STALE).
 POSE_STATUSES = ("OK", "SIM")
 EMPTY_STATUSES = ("NOQR", "NOCONV", "NOSRC")
 #: Statuses of a $QRM answer: a mean pose (OK, SIM) or why there is none.
 MEAS_STATUSES = ("OK", "SIM", "NOQR", "NOCONV", "NOSRC", "TIMEOUT")
+#: Pipeline result status (qrfield.pipeline.RESULT_STATUSES) -> the wire status it is sent as: an
+#: ERROR frame has no pose, which the controller must treat like a pose that did not converge. OK
+#: goes out as OK only from a live camera, else as SIM (:func:`pose_status`).
+RESULT_TO_WIRE_STATUS = {"OK": "OK", "NOQR": "NOQR", "NOCONV": "NOCONV", "ERROR": "NOCONV"}
 #: The controller's talker, and the talkers of our answers.
 COMMAND_TALKER, ANSWER_TALKER, MEASUREMENT_TALKER = "QRC", "QRA", "QRM"
 #: Longest reason text in a $QRA ERR answer (docs/conventions.md), bytes.
@@ -133,8 +139,8 @@ def check_pose_fields(
     degrees); NOQR, NOCONV and NOSRC need both None; STALE takes both or neither. Raises FrameError
     otherwise.
     """
-    if status not in STATUSES:
-        raise FrameError(f"status must be one of {', '.join(STATUSES)}, got {status!r}")
+    if status not in WIRE_STATUSES:
+        raise FrameError(f"status must be one of {', '.join(WIRE_STATUSES)}, got {status!r}")
     given = (position_mm is not None, angles_deg is not None)
     if given[0] != given[1]:
         raise FrameError(f"status {status}: give both position_mm and angles_deg or neither")
@@ -480,8 +486,8 @@ def _parse_qrf(parts: list[str]) -> QrfFrame:
         raise ValueError(f"QRF frame has {len(parts)} fields, expected 10")
     _, seq_text, t_text, *pose_text, status = parts
     _parse_seq_t(seq_text, t_text)
-    if status not in STATUSES:
-        raise ValueError(f"status {status!r} is not one of {', '.join(STATUSES)}")
+    if status not in WIRE_STATUSES:
+        raise ValueError(f"status {status!r} is not one of {', '.join(WIRE_STATUSES)}")
     empty = all(p == "" for p in pose_text)
     if empty and status not in POSE_STATUSES:
         return QrfFrame(int(seq_text), int(t_text), None, None, status)

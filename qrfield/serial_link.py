@@ -37,9 +37,10 @@ import numpy as np
 from qrfield.mailbox import Mailbox
 from qrfield.serial_frames import (  # re-exported: one import gives the whole serial API
     MAX_LINE_BYTES,
+    RESULT_TO_WIRE_STATUS,
     SEQ_MODULUS,
-    STATUSES,
     T_MS_MODULUS,
+    WIRE_STATUSES,
     ControllerCommand,
     Decoded,
     DecoderCounters,
@@ -72,7 +73,8 @@ __all__ = [
     "DISCONNECTED",
     "LOOP_URL",
     "MAX_LINE_BYTES",
-    "STATUSES",
+    "RESULT_TO_WIRE_STATUS",
+    "WIRE_STATUSES",
     "ControllerCommand",
     "DecoderCounters",
     "FrameDecoder",
@@ -97,9 +99,6 @@ __all__ = [
 ]
 
 
-#: Pipeline status (qrfield.pipeline) -> serial frame status (docs/conventions.md):
-#: an ERROR frame has no pose, which the controller must treat like a pose that did not converge.
-PIPELINE_TO_SERIAL_STATUS = {"OK": "OK", "NOQR": "NOQR", "NOCONV": "NOCONV", "ERROR": "NOCONV"}
 #: While the source is down, a NOSRC frame goes out this often, s (docs/conventions.md: >= 1/s).
 NOSRC_INTERVAL_S = 0.5
 #: Answers waiting to be written at most; an older one is dropped when a controller floods us.
@@ -656,13 +655,13 @@ class SerialLink:
 def publish_result(link: SerialLink, result: object, simulated: bool = True) -> bool:
     """Hand one pipeline result (:class:`qrfield.pipeline.FrameResult`) to ``link``; never blocks.
 
-    Maps the pipeline's status with :data:`PIPELINE_TO_SERIAL_STATUS` (ERROR and unknown statuses go
+    Maps the pipeline's status with :data:`RESULT_TO_WIRE_STATUS` (ERROR and unknown statuses go
     out as NOCONV, pose fields empty); a pose carries its first method's position (mm) and angles
     (degrees), as OK only when ``simulated`` is False (the frame came from a live camera:
     :func:`qrfield.sources.is_live_camera`), else as SIM. Returns what :meth:`SerialLink.publish`
     returns (False once the link is closed).
     """
-    status = PIPELINE_TO_SERIAL_STATUS.get(getattr(result, "status", ""), "NOCONV")
+    status = RESULT_TO_WIRE_STATUS.get(getattr(result, "status", ""), "NOCONV")
     pose = getattr(result, "primary", None) if status == "OK" else None
     t_ms = getattr(result, "t_ms", None)
     if pose is None:

@@ -27,8 +27,9 @@ def _run(*args, env=None):
 def test_help_lists_subcommands():
     out = _run("--help")
     assert out.returncode == 0
-    for name in ("render", "bench", "gui"):
+    for name in ("render", "benchmark", "gui"):
         assert name in out.stdout
+    assert "benchmark (bench)" in out.stdout  # the old name is still listed as an alias
 
 
 def test_core_import_pulls_in_no_qt():
@@ -47,7 +48,7 @@ def test_core_import_pulls_in_no_qt():
 
 
 def test_core_has_no_qt_import_even_inside_functions():
-    # The app is reached only through ui/ (qrfield gui -> ui.app, bench pipeline -> ui.bench).
+    # The app is reached only through ui/ (qrfield gui -> ui.app, benchmark pipeline -> ui.gui_rates).
     pattern = re.compile(r"^\s*(from|import)\s+(PySide6|pyqtgraph|shiboken6)\b", re.M)
     core = Path(REPO) / "qrfield"
     offenders = [str(p.relative_to(REPO)) for p in core.rglob("*.py") if pattern.search(p.read_text())]
@@ -157,11 +158,22 @@ def test_no_display_says_how_to_run_headless():
     assert "Traceback" not in out.stderr
 
 
-@pytest.mark.parametrize("name", ["render"])
-def test_bench_commands_run(name):
-    out = _run("bench", name, "--views", "3")
+@pytest.mark.parametrize("command", ["benchmark", "bench"])
+def test_benchmark_runs_under_its_name_and_its_old_alias(command):
+    # `qrfield bench NAME` was the command's name before: users' scripts type it and it must work the same.
+    out = _run(command, "render", "--views", "3")
     assert out.returncode == 0, out.stderr
     assert "ratio" in out.stdout
+    assert out.stdout.startswith("qrfield benchmark render:")
+
+
+def test_benchmark_alias_lists_the_same_benchmarks(capsys):
+    for command in ("benchmark", "bench"):
+        assert main([command, "--help"]) == 0
+    first, second = capsys.readouterr().out.split("usage:")[1:]
+    names = re.compile(r"^\s{4}(\w[\w-]*)\s", re.M)
+    assert names.findall(first) == names.findall(second)
+    assert {"detect", "pose", "render", "solvers", "pipeline", "serial"} <= set(names.findall(first))
 
 
 @pytest.mark.parametrize(

@@ -9,7 +9,7 @@ import pytest
 
 segno = pytest.importorskip("segno", reason="segno (a dev dependency) encodes the hard set's symbols")
 
-from qrfield.bench.hardset import hard_view, symbol_matrix  # noqa: E402
+from qrfield.benchmarks.hardset import hard_view, symbol_matrix  # noqa: E402
 from qrfield.detect import Detector  # noqa: E402
 from qrfield.detect.backends import find_candidates  # noqa: E402
 from qrfield.detect.lens import Lens  # noqa: E402

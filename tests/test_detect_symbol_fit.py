@@ -1,5 +1,5 @@
 """The whole-symbol fit against truth that is not qrfield's own: segno's symbols, the hard set's
-rasteriser and cv2.projectPoints (qrfield.bench.hardset), pinhole and distorted."""
+rasteriser and cv2.projectPoints (qrfield.benchmarks.hardset), pinhole and distorted."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import pytest
 
 segno = pytest.importorskip("segno", reason="segno (a dev dependency) encodes the hard set's symbols")
 
-from qrfield.bench.hardset import hard_view, rasterise  # noqa: E402
+from qrfield.benchmarks.hardset import hard_view, rasterise  # noqa: E402
 from qrfield.detect import Detector  # noqa: E402
 from qrfield.detect.detection import GOOD_QUALITY, quality_of  # noqa: E402
 from qrfield.detect.symbol import QUIET_RINGS, decoded_cells, fixed_cells, verified_matrix  # noqa: E402
@@ -75,7 +75,7 @@ def test_covariance_is_symmetric_positive_and_roughly_calibrated(detections):
         for k in range(4):
             z.extend(np.linalg.solve(np.linalg.cholesky(cov[k]), d.corners_px[k] - view.corners_px[k]))
     rms = float(np.sqrt(np.mean(np.square(z))))
-    # Loose on 15 views (60 corners): the bench measures the calibration on hundreds.
+    # Loose on 15 views (60 corners): the benchmark measures the calibration on hundreds.
     assert 0.5 < rms < 2.0, f"whitened corner errors have RMS {rms:.2f}"
 
 

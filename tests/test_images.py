@@ -55,7 +55,7 @@ def big_png(path: Path, width: int, height: int) -> Path:
 
 def test_an_image_above_the_pixel_limit_is_refused_before_decoding(tmp_path, monkeypatch):
     # The 0.8 MB PNG of 32000 x 24000 took 4.5 GB to decode; its size is in its header.
-    # (Time and memory: `qrfield bench images`.) Smaller here: the rule is the same.
+    # (Time and memory: `qrfield benchmark images`.) Smaller here: the rule is the same.
     path = big_png(tmp_path / "big.png", 12000, 8000)
     assert probe_size(path) == (12000, 8000) and path.stat().st_size < 1_000_000
 

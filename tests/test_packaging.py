@@ -112,5 +112,5 @@ def test_missing_qt_libraries_name_the_apt_package(monkeypatch):
 
 
 def test_a_command_that_needs_the_app_names_the_extra(without_qt, tmp_path):
-    done = _qrfield(without_qt, tmp_path, "bench", "pipeline", "--seconds", "0.1")
+    done = _qrfield(without_qt, tmp_path, "benchmark", "pipeline", "--seconds", "0.1")
     assert done.returncode == 3 and "qrfield[gui]" in done.stderr and "Traceback" not in done.stderr

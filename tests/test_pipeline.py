@@ -149,7 +149,7 @@ def test_primary_not_converged_is_noconv_with_its_reason() -> None:
 
     result = make_pipeline([FakeDetection(CORNERS)], solve, methods=METHODS).process(frame())
     assert result.status == NOCONV and result.reason == "n_max reached"
-    assert result.pose_of("ippe") is not None and result.pose_of("numerical") is None
+    assert result.converged_pose("ippe") is not None and result.converged_pose("numerical") is None
 
 
 def test_a_raising_solver_or_detector_is_a_status_never_an_exception() -> None:
@@ -214,7 +214,10 @@ def test_virtual_bench_end_to_end_meets_the_seed_criteria(seed_pose: Pose, camer
         assert result.status == OK, result.reason
         assert np.allclose(result.detection.corners_px, seed_pose.corners_px(camera_vga, 50.0), atol=1.5)
         for method in METHODS:
-            assert within_seed_criteria(result.pose_of(method), seed_pose), (method, result.poses[method])
+            assert within_seed_criteria(result.converged_pose(method), seed_pose), (
+                method,
+                result.poses[method],
+            )
 
 
 class ExactCornersTracker:
@@ -238,7 +241,7 @@ def test_real_solvers_through_the_pipeline_recover_the_rendered_pose(camera_vga)
             result = pipeline.process(frame)
             assert result.status == OK, result.reason
             for method in METHODS:
-                pose = result.pose_of(method)
+                pose = result.converged_pose(method)
                 assert np.allclose(pose.position_mm, frame.truth.position_mm, atol=1e-3), method
                 assert np.allclose(angle_difference(pose.angles_deg, frame.truth.angles_deg), 0.0, atol=1e-3)
 
@@ -257,19 +260,19 @@ def test_corners_that_were_not_refined_give_no_pose_as_good(camera_vga) -> None:
     result = pipeline.process(Frame(view.image, 100.0, 0))
     assert result.detection is not None and not result.detection.refined
     assert result.status == NOCONV and "not refined" in result.reason
-    assert result.poses == {} and result.pose_of("numerical") is None
+    assert result.poses == {} and result.converged_pose("numerical") is None
     data = json.loads(json.dumps(result.to_json_dict(), allow_nan=False))
     assert data["status"] == "NOCONV" and data["position_mm"] is None and data["corners"] is not None
     # The same code refined is a good pose (the flag is about the corners, not the view).
     refined = Pipeline(camera_vga, 50.0, METHODS).process(Frame(view.image, 100.0, 0))
-    assert refined.status == OK and within_seed_criteria(refined.pose_of("numerical"), truth)
+    assert refined.status == OK and within_seed_criteria(refined.converged_pose("numerical"), truth)
 
 
 def test_the_hard_set_view_whose_v4_is_18_px_off_is_not_a_good_pose() -> None:
     """Hard set seed 7, view 58: zxing's V4 is 17.9 px off and cannot be refined; IPPE made a
     converged pose several degrees off from it, which the pipeline reported as OK before."""
     pytest.importorskip("segno", reason="segno (a dev dependency) encodes the hard set's symbols")
-    from qrfield.bench.hardset import hard_view
+    from qrfield.benchmarks.hardset import hard_view
     from qrfield.solvers import solve
 
     view = hard_view(58, seed=7)

@@ -416,3 +416,51 @@ def test_receive_callback_gets_controller_commands_over_loop():
         holder["port"].write(b"noise" + encode_command("QRC", "RATE", "10"))  # loop:// reads it back
         assert got.get(timeout=5) == ControllerCommand("QRC", ("RATE", "10"))
         wait_until(lambda: link.status().received.get("garbage_bytes") == 5, what="garbage count")
+
+
+# ---------------------------------------------------------------------- result status -> wire status
+#: By hand from docs/conventions.md: a frame without a pose of its own (no code, no convergence, an
+#: error) goes out with empty fields; a pose goes out as OK from a live camera only, else as SIM.
+WIRE_STATUS_OF_RESULT = {
+    ("OK", False): "OK",
+    ("OK", True): "SIM",
+    ("NOQR", False): "NOQR",
+    ("NOQR", True): "NOQR",
+    ("NOCONV", False): "NOCONV",
+    ("NOCONV", True): "NOCONV",
+    ("ERROR", False): "NOCONV",
+    ("ERROR", True): "NOCONV",
+}
+
+
+def test_every_result_status_maps_to_the_wire_status_it_is_sent_as() -> None:
+    from types import SimpleNamespace
+
+    from qrfield.pipeline import RESULT_STATUSES, FrameResult
+    from qrfield.serial_link import RESULT_TO_WIRE_STATUS, WIRE_STATUSES, encode_frame, publish_result
+
+    # The two vocabularies are distinct: ERROR is never on the wire, SIM/STALE/NOSRC never a result.
+    assert set(RESULT_STATUSES) == {"OK", "NOQR", "NOCONV", "ERROR"}
+    assert set(WIRE_STATUSES) == {"OK", "SIM", "NOQR", "NOCONV", "STALE", "NOSRC"}
+    assert set(RESULT_TO_WIRE_STATUS) == set(RESULT_STATUSES)
+    assert set(RESULT_TO_WIRE_STATUS.values()) <= set(WIRE_STATUSES)
+    assert {status for status, _ in WIRE_STATUS_OF_RESULT} == set(RESULT_STATUSES)
+
+    class Recorder:
+        def publish(self, t_ms, position_mm, angles_deg, status):
+            self.sent = (t_ms, position_mm, angles_deg, status)
+            return True
+
+    pose = SimpleNamespace(position_mm=np.array([1.0, -2.0, 300.0]), angles_deg=np.array([5.0, -6.0, 7.0]))
+    for (status, simulated), wire in WIRE_STATUS_OF_RESULT.items():
+        result = FrameResult(index=0, t_ms=40, status=status, poses={"numerical": pose})
+        link = Recorder()
+        assert publish_result(link, result, simulated=simulated)
+        t_ms, position, angles, sent = link.sent
+        assert (t_ms, sent) == (40, wire), (status, simulated)
+        # Only a pose status carries the pose; the others go out with empty fields.
+        assert (position is not None) == (wire in ("OK", "SIM")), (status, simulated)
+        assert (angles is not None) == (wire in ("OK", "SIM")), (status, simulated)
+        # The whole frame encodes, and an independent parser reads the same status back.
+        line = encode_frame(0, t_ms, position, angles, sent)
+        assert parse_frame_line(line)["status"] == wire

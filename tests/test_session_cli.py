@@ -121,8 +121,10 @@ def test_a_row_is_logged_only_once_it_is_on_disk(tmp_path: Path, capsys, monkeyp
 
 def test_undo_list_and_show(tmp_path: Path, capsys) -> None:
     folder = new_session(tmp_path, capsys)
-    for combo in ("alpha", "beta"):
-        assert main(log_args(folder, tmp_path, "--truth", "bench", "--combo", combo, "--frames", "2")) == 0
+    # `--truth virtual` names the virtual bench's pose; `bench`, its older spelling, still works.
+    for combo, truth in (("alpha", "virtual"), ("beta", "bench")):
+        assert main(log_args(folder, tmp_path, "--truth", truth, "--combo", combo, "--frames", "2")) == 0
+        assert capsys.readouterr().out.startswith(f"logged row {1 if combo == 'alpha' else 2}: pass")
     capsys.readouterr()
     assert main(["session", "undo", str(folder)]) == 0
     assert capsys.readouterr().out.startswith("withdrew row 2")

@@ -14,7 +14,7 @@ from qrfield.sessions import (
     GroundTruth,
     average_frames,
     circular_mean_deg,
-    judge,
+    judge_row,
     measure,
 )
 
@@ -92,12 +92,12 @@ def test_no_converged_frame_never_passes():
 )
 def test_criteria_boundaries(pos, ang, passed):
     truth = GroundTruth(0.0, 0.0, 300.0, 0.0, 0.0, 0.0, "alpha")
-    assert judge(pos, ang, truth).passed is passed
+    assert judge_row(pos, ang, truth).passed is passed
 
 
 def test_angle_errors_are_wrapped():
     truth = GroundTruth(0.0, 0.0, 300.0, 179.0, 0.0, -179.5, "gamma")
-    result = judge([0, 0, 300], [-179.0, 0.0, 179.5], truth)
+    result = judge_row([0, 0, 300], [-179.0, 0.0, 179.5], truth)
     np.testing.assert_allclose(result.err_angles_deg, [2.0, 0.0, -1.0])
     assert result.passed
 
@@ -105,9 +105,9 @@ def test_angle_errors_are_wrapped():
 def test_criteria_are_settings():
     truth = GroundTruth(0.0, 0.0, 300.0, 0.0, 0.0, 0.0, "alpha")
     strict = AcceptanceCriteria(max_angle_error_deg=0.5, max_position_error_mm=1.0)
-    assert judge([0, 0, 300.5], [0.4, 0, 0], truth, strict).passed
-    assert not judge([0, 0, 300.5], [0.6, 0, 0], truth, strict).passed
-    assert "alpha error +0.60 deg" in judge([0, 0, 300.5], [0.6, 0, 0], truth, strict).reason
+    assert judge_row([0, 0, 300.5], [0.4, 0, 0], truth, strict).passed
+    assert not judge_row([0, 0, 300.5], [0.6, 0, 0], truth, strict).passed
+    assert "alpha error +0.60 deg" in judge_row([0, 0, 300.5], [0.6, 0, 0], truth, strict).reason
 
 
 def test_frame_collector_progress():

@@ -105,7 +105,7 @@ def test_the_benchmark_prints_both_paths_and_the_ippe_agreement(capsys):
     from qrfield.cli import main
 
     tiny = ["--set", "x_range=0", "--set", "y_range=0", "--set", "z_range=300", "--set", "sweep_step_deg=30"]
-    assert main(["bench", "simulation", *tiny, "--poses", "40"]) == 0
+    assert main(["benchmark", "simulation", *tiny, "--poses", "40"]) == 0
     out = capsys.readouterr().out
     assert "load average" in out and "old (per-pose OpenCV IPPE, one process)" in out
     assert "samples whose verdict differs, new vs old, ippe: 0 of" in out

@@ -9,7 +9,7 @@ from solver_cases import DISTORTED, SIDE_MM, cases, errors
 
 from qrfield.geometry import Pose, angles_from_rotation, marker_vertices, project_points
 from qrfield.settings import SettingError
-from qrfield.solvers import SEED_SETTINGS, NumericalSettings, SolverError, solve, solve_batch
+from qrfield.solvers import SEED_SETTINGS, IppeSettings, NumericalSettings, SolverError, solve, solve_batch
 
 
 def test_default_guess_recovers_exact_poses():
@@ -164,7 +164,7 @@ def test_distortion_is_undone_before_solving():
 
 
 def _assert_batch_equals_single(corners, camera, settings):
-    b = solve_batch(corners, camera, SIDE_MM, settings)
+    b = solve_batch(corners, camera, SIDE_MM, "numerical", settings)
     assert len(b) == len(corners)
     single = (
         NumericalSettings(**{**settings.__dict__, "mirror": False})
@@ -238,7 +238,7 @@ def test_batch_in_chunks_equals_single(monkeypatch):
     sample[9, 0] = np.nan
     b = _assert_batch_equals_single(np.delete(sample, 9, axis=0), camera, SEED_SETTINGS)
     assert len(b) == 59
-    b = solve_batch(sample, camera, SIDE_MM, SEED_SETTINGS)
+    b = solve_batch(sample, camera, SIDE_MM, settings=SEED_SETTINGS)
     assert len(b) == 60 and not b.valid[9] and b.valid.sum() == 59
 
 
@@ -273,7 +273,7 @@ def _near_square_on_views(count: int, seed: int, camera):
 def test_nearly_square_on_the_settled_rule_converges_and_meets_the_criteria():
     """Seen nearly square-on the lengths change only to second order with the tilt; the full
     Gauss-Newton step overshot and cycled until n_max with every length within 0.005 mm (NOCONV on
-    about one such view in ten: 3 of these 40, and 10 of the 60 frames of bench detect's sequence).
+    about one such view in ten: 3 of these 40, and 10 of the 60 frames of benchmark detect's sequence).
     The damped step converges, to a pose within the seed's criteria."""
     camera, *_ = cases(1, seed=1)
     views = _near_square_on_views(40, seed=0, camera=camera)
@@ -285,3 +285,39 @@ def test_nearly_square_on_the_settled_rule_converges_and_meets_the_criteria():
         assert pos_err < 5.0 and ang_err <= 2.0
     # Damped or not, the batch path gives the same numbers.
     _assert_batch_equals_single(np.array([c for _, c in views]), camera, None)
+
+
+def test_solve_batch_takes_the_arguments_of_solve_in_its_order():
+    import inspect
+
+    names = lambda f: list(inspect.signature(f).parameters)  # noqa: E731
+    assert (
+        names(solve_batch)
+        == names(solve)
+        == [
+            "corners_px",
+            "camera",
+            "side_mm",
+            "method",
+            "settings",
+            "corners_cov",
+        ]
+    )
+    camera, _, corners, *_ = cases(4, seed=41)
+    loose = NumericalSettings(tolerance_mm=1.0, stop="seed")
+    plain = IppeSettings(refine="none")
+    for method, settings in (("numerical", loose), ("ippe", plain)):
+        batch = solve_batch(corners, camera, SIDE_MM, method, settings)
+        for i in range(len(corners)):
+            one = solve(corners[i], camera, SIDE_MM, method, settings)
+            np.testing.assert_allclose(batch.position_mm[i], one.position_mm, atol=1e-6)
+            np.testing.assert_allclose(batch.angles_deg[i], one.angles_deg, atol=1e-6)
+        if method == "numerical":
+            assert batch.iterations.tolist() == [
+                solve(c, camera, SIDE_MM, method, settings).iterations for c in corners
+            ]
+    # A caller of the old order (settings fourth) is told, not misread.
+    with pytest.raises(
+        SolverError, match=r"method must be a name, got NumericalSettings; pass settings=\.\.\. by keyword"
+    ):
+        solve_batch(corners, camera, SIDE_MM, loose)

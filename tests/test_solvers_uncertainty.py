@@ -13,15 +13,15 @@ import numpy as np
 import pytest
 from solver_cases import DISTORTED, SIDE_MM, cases
 
-from qrfield.bench._pose_views import corner_set
-from qrfield.bench.pose import draw_noise, random_corner_cov
+from qrfield.benchmarks._pose_views import corner_set
+from qrfield.benchmarks.pose import draw_noise, random_corner_cov
 from qrfield.camera import resolve_camera
 from qrfield.geometry import Pose, angle_difference, angles_from_rotation, project_points, rotation_matrix
+from qrfield.methods import METHODS
 from qrfield.solvers import SolverError, solve, solve_batch
 from qrfield.solvers import uncertainty as unc
 
 CAMERAS = ("picam-v2@640x480", DISTORTED.name)
-METHODS = ("numerical", "ippe")
 
 
 def _pose_vector(result) -> np.ndarray:
@@ -277,3 +277,75 @@ def test_solve_methods_gives_what_solve_gives_method_by_method(camera_name):
             for name in ("position_mm", "angles_deg", "position_std_mm", "angles_std_deg", "corners_std_px"):
                 np.testing.assert_allclose(getattr(both, name), getattr(alone, name), rtol=1e-9, atol=1e-12)
             assert both.chi2 == pytest.approx(alone.chi2, rel=1e-9, abs=1e-12)
+
+
+# ---------------------------------------------------------------------- ambiguity: one definition
+def test_ambiguity_ratio_by_hand():
+    # Better-fitting over worse-fitting RMS error, whichever is given first: in [0, 1].
+    assert unc.ambiguity_ratio(0.3, 0.6) == pytest.approx(0.5)
+    assert unc.ambiguity_ratio(0.6, 0.3) == pytest.approx(0.5)  # this pose fits worse: still 0.5
+    assert unc.ambiguity_ratio(0.0, 0.0) == 1.0  # both exact: indistinguishable
+    assert unc.ambiguity_ratio(0.2, math.inf) == 0.0
+    assert math.isnan(unc.ambiguity_ratio(math.nan, 1.0))
+
+
+def _rms_reprojection_by_opencv(result, corners, camera) -> float:
+    """RMS px between ``corners`` and the square V1..V4 of side SIDE_MM placed by ``result``
+    (docs/conventions.md marker frame: V1 (-L/2, -L/2), V2 (+L/2, -L/2), V3 (+L/2, +L/2), V4),
+    projected by cv2.projectPoints: an answer computed without the solvers' own code."""
+    h = SIDE_MM / 2.0
+    square = np.array([[-h, -h, 0.0], [h, -h, 0.0], [h, h, 0.0], [-h, h, 0.0]])
+    rvec, _ = cv2.Rodrigues(np.asarray(result.rotation, dtype=float))
+    pixels, _ = cv2.projectPoints(
+        square,
+        rvec,
+        np.asarray(result.position_mm, dtype=float),
+        camera.K,
+        np.asarray(camera.dist, dtype=float),
+    )
+    return float(np.sqrt(np.mean(np.sum((pixels.reshape(4, 2) - corners) ** 2, axis=1))))
+
+
+#: Hand-made views (true pose, solver settings, whether the answer fits better than its mirror).
+#: The second: the numerical model from the seed's equal-depth guess with a loose stop settles on
+#: the mirror side, so the mirror fits better (this/mirror would be 6.7; the ratio stays below 1).
+AMBIGUITY_VIEWS = [
+    ("numerical", [25.0, -15.0, 10.0], 400.0, None, True),
+    (
+        "numerical",
+        [40.0, 40.0, 0.0],
+        500.0,
+        {"initial_guess": "seed", "tolerance_mm": 1.0, "stop": "settled"},
+        False,
+    ),
+    ("ippe", [25.0, -15.0, 10.0], 400.0, None, True),
+    ("ippe", [40.0, 40.0, 0.0], 500.0, None, True),
+]
+
+
+@pytest.mark.parametrize(("method", "angles", "z_mm", "settings", "answer_fits_better"), AMBIGUITY_VIEWS)
+def test_ambiguity_is_the_same_ratio_for_both_methods_on_hand_made_views(
+    method, angles, z_mm, settings, answer_fits_better
+):
+    """A card at (20, -10, z) mm at the given angles, its corners projected by OpenCV and V3 pushed
+    0.6 px right and 0.4 px down by hand: both poses of the planar ambiguity fit it with some error.
+    For either method ``ambiguity`` is min/max of the two RMS reprojection errors, each measured
+    here with cv2.projectPoints, whichever of the two fits better."""
+    from qrfield.methods import settings_class
+
+    camera = resolve_camera("picam-v2@640x480")
+    h = SIDE_MM / 2.0
+    square = np.array([[-h, -h, 0.0], [h, -h, 0.0], [h, h, 0.0], [-h, h, 0.0]])
+    rvec, _ = cv2.Rodrigues(rotation_matrix(angles))
+    dist = np.asarray(camera.dist, dtype=float)
+    pixels, _ = cv2.projectPoints(square, rvec, np.array([20.0, -10.0, z_mm]), camera.K, dist)
+    corners = pixels.reshape(4, 2) + np.array([[0.0, 0.0], [0.0, 0.0], [0.6, 0.4], [0.0, 0.0]])
+    chosen = None if settings is None else settings_class(method)(**settings)
+    result = solve(corners, camera, SIDE_MM, method, chosen)
+    assert result.converged and result.alternative is not None
+    answer = _rms_reprojection_by_opencv(result, corners, camera)
+    mirror = _rms_reprojection_by_opencv(result.alternative, corners, camera)
+    assert min(answer, mirror) > 0.05
+    assert (answer < mirror) is answer_fits_better
+    assert result.ambiguity == pytest.approx(min(answer, mirror) / max(answer, mirror), rel=1e-6)
+    assert 0.0 < result.ambiguity < 1.0

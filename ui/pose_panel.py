@@ -20,15 +20,12 @@ from typing import Any
 import numpy as np
 from PySide6 import QtCore, QtGui, QtWidgets
 
-from qrfield.geometry import Pose, angle_difference
 from qrfield.pipeline import OK
 from qrfield.serial_frames import pose_status
 from qrfield.sessions.criteria import AcceptanceCriteria
 from ui.text import fixed
 
 ROWS = (("x", "mm"), ("y", "mm"), ("z", "mm"), ("α", "°"), ("β", "°"), ("γ", "°"))
-#: An ambiguity ratio at or above this counts as "the two mirror poses fit almost equally well".
-AMBIGUITY_WARNING = 0.8
 TRUTH = "true"
 #: Point sizes (values, headline, column headers, the "+- std" beside a value) and the value
 #: columns' width (px), by layout (compact: a small screen).
@@ -331,15 +328,16 @@ class PosePanel(QtWidgets.QWidget):
             f"{criteria.max_position_error_mm:g}{NBSP}mm):"
         ]
         for name in methods:
-            pose = result.pose_of(name)
+            pose = result.converged_pose(name)
             if pose is None:
                 lines.append(f"– {name}: no pose")
                 continue
-            position_error, angle_errors = pose_errors(pose, result.truth)
-            ok = bool(criteria.meets(position_error, max(angle_errors)))
+            ok, position_error, angle_error = criteria.judge(
+                pose.position_mm, pose.angles_deg, result.truth.position_mm, result.truth.angles_deg
+            )
             lines.append(
-                ("✔" if ok else "✘")
-                + f" {name}: Δpos {fixed(position_error, 2)} mm, Δangle ≤ {fixed(max(angle_errors), 2)}°"
+                ("✔" if ok else "✘") + f" {name}: Δpos {fixed(float(position_error), 2)} mm, "
+                f"Δangle ≤ {fixed(float(angle_error), 2)}°"
             )
         return "\n".join(lines)
 
@@ -363,10 +361,3 @@ def _number(text: object) -> float:
         return float(str(text))
     except ValueError:
         return math.nan
-
-
-def pose_errors(measured: Pose, truth: Pose) -> tuple[float, list[float]]:
-    """Position error (mm, Euclidean) and the absolute error of each angle (degrees)."""
-    position_error = float(np.linalg.norm(measured.position_mm - truth.position_mm))
-    angle_errors = [float(abs(d)) for d in angle_difference(measured.angles_deg, truth.angles_deg)]
-    return position_error, angle_errors

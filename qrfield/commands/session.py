@@ -125,8 +125,8 @@ def _add_log(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--truth",
         metavar="X,Y,Z,A,B,G",
-        help="the pose measured by hand: x, y, z (mm) and alpha, beta, gamma (degrees); 'bench' = the "
-        "virtual bench's own pose; without --truth every field is asked for (interactive)",
+        help="the pose measured by hand: x, y, z (mm) and alpha, beta, gamma (degrees); 'virtual' (or "
+        "'bench') = the virtual bench's own pose; without --truth every field is asked for (interactive)",
     )
     parser.add_argument("--combo", metavar="NAME", help="the rotation combination of the row")
     parser.add_argument("--note", default="", metavar="T", help="a one-line note for the row")
@@ -166,7 +166,7 @@ def _run_log(args: argparse.Namespace) -> int:
     if args.frames is not None and args.frames < 1:
         raise ValueError(f"--frames must be at least 1, got {args.frames}")
     combinations = known_combinations()
-    follow = (args.truth or "").strip().lower() == "bench"
+    follow = (args.truth or "").strip().lower() in ("virtual", "bench")  # "bench": the older spelling
     truth = None
     if args.truth and not follow:
         truth = _parse_truth(args.truth, args.combo, combinations)

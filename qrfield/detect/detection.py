@@ -93,7 +93,7 @@ class Detection:
         """(4, 2, 2) px^2: the covariance to solve the pose with. ``corners_cov`` when the fit gave
         one; else an assumed one, isotropic per corner, of :data:`EDGE_LINE_STD_MODULES` (refined
         corners of the edge-line fallback) or :data:`UNREFINED_STD_MODULES` (the backend's own
-        corners) modules per coordinate: what such corners are off by on the hard bench set, so
+        corners) modules per coordinate: what such corners are off by on the hard benchmark set, so
         that the pose's std is honest for them too (docs/uncertainty.md)."""
         if self.corners_cov is not None:
             return self.corners_cov
@@ -138,8 +138,8 @@ class Detection:
 
 
 #: Assumed standard uncertainty per coordinate of corners without a covariance, in modules, for
-#: V1..V4: the edge-line fallback's and a backend's own corners. Measured on the hard bench set
-#: (seeds 2024 and 7, 400 views each; qrfield bench detect with symbol_fit or refine off): the
+#: V1..V4: the edge-line fallback's and a backend's own corners. Measured on the hard benchmark set
+#: (seeds 2024 and 7, 400 views each; qrfield benchmark detect with symbol_fit or refine off): the
 #: 95th percentile of |error| per coordinate is 0.19-0.26 modules at V1, V2, V4 and 0.68-0.75 at
 #: V3 (extrapolated) for the edge lines, 0.39-0.45 and 0.71-0.75 for the backends' corners; these
 #: are about half of that (2 std), with heavy tails beyond.

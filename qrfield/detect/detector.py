@@ -8,11 +8,11 @@ import numpy as np
 
 from qrfield.camera import CameraModel
 from qrfield.detect.backends import Candidate, find_candidates, parse_backends
+from qrfield.detect.bilinear import sample_bilinear
 from qrfield.detect.detection import Detection, DetectorSettings, quality_of
 from qrfield.detect.lens import Lens, module_points_px
 from qrfield.detect.patterns import best_module_count, check_patterns
 from qrfield.detect.refine import refine_corners
-from qrfield.detect.sampling import sample_bilinear
 from qrfield.detect.symbol import decoded_cells, fixed_cells, verified_matrix
 from qrfield.detect.symbol_fit import FitState, fit_symbol
 from qrfield.settings import validated

@@ -16,8 +16,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from qrfield.detect.bilinear import sample_bilinear
 from qrfield.detect.lens import Lens, module_points_px
-from qrfield.detect.sampling import sample_bilinear
 
 #: Smallest contrast (grey levels between the dark and light pattern modules) a code may have.
 MIN_CONTRAST = 12.0

@@ -37,8 +37,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from qrfield.detect.bilinear import sample_bilinear
 from qrfield.detect.patterns import module_homography, to_pixels
-from qrfield.detect.sampling import sample_bilinear
 
 #: Index of the next and of the previous corner (or side), cyclically.
 _NEXT = np.array([1, 2, 3, 0])

@@ -139,7 +139,7 @@ def verified_matrix(values: np.ndarray, matrix: np.ndarray, dark: float, light: 
     that did not need the data modules), ``dark``/``light`` the levels of the fixed patterns.
 
     zxing-cpp's matrix is the grid it sampled to decode, misread modules included (2 to 7 of 441
-    on blurred views of the hard bench set): a misread module would pull the fit, so a module
+    on blurred views of the hard benchmark set): a misread module would pull the fit, so a module
     whose centre reads the other colour, or within 15 % of the contrast of the middle, is unknown.
     """
     m = np.asarray(matrix, dtype=np.float64)

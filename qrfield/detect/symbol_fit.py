@@ -59,7 +59,7 @@ COARSE_BUDGET = 600
 #: and 95 %, but the poses solved from them came out over-confident in their angles (88-91 %
 #: within 2 on seeds 2024, 7 and 11): the model's errors are partly shared by the four corners,
 #: which the independent floor cannot express. 0.006 px: corners RMS 0.83-0.91 (96-98 % within 2),
-#: poses 91-97 % within 2 for every component on those seeds (qrfield bench pose, section 3).
+#: poses 91-97 % within 2 for every component on those seeds (qrfield benchmark pose, section 3).
 MODEL_FLOOR_PX = 0.006
 #: Smallest fitted contrast, grey levels (a code is not seen below it).
 MIN_CONTRAST = 12.0

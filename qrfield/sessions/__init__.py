@@ -14,7 +14,7 @@ from qrfield.sessions.averaging import (
     Measurement,
     average_frames,
     circular_mean_deg,
-    judge,
+    judge_row,
     measure,
 )
 from qrfield.sessions.criteria import AcceptanceCriteria, SessionSettings
@@ -63,7 +63,7 @@ __all__ = [
     "average_frames",
     "check_ground_truth",
     "circular_mean_deg",
-    "judge",
+    "judge_row",
     "known_combinations",
     "measure",
     "parse_ground_truth",

@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from qrfield.methods import METHODS
-from qrfield.sessions.averaging import judge
+from qrfield.sessions.averaging import judge_row
 from qrfield.sessions.groundtruth import GroundTruth
 from qrfield.sessions.store import LoggedRow, SessionInfo, read_session
 
@@ -125,7 +125,7 @@ def simulated_verdict(truth: GroundTruth, info: SessionInfo) -> tuple[bool, bool
         return False, False, f"no pose: {result.reason}"
     n_max = getattr(settings, "n_max", None)
     stopped_in_time = result.converged or n_max is None or result.iterations < n_max
-    verdict = judge(result.position_mm, result.angles_deg, truth, info.criteria)
+    verdict = judge_row(result.position_mm, result.angles_deg, truth, info.criteria)
     within = verdict.passed and stopped_in_time
     converged = within and result.converged
     reasons = [verdict.reason] if verdict.reason else []

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from qrfield.geometry import angle_difference, wrap_degrees
-from qrfield.sessions.criteria import AcceptanceCriteria
+from qrfield.sessions.criteria import AcceptanceCriteria, pose_errors
 from qrfield.sessions.groundtruth import GroundTruth
 
 
@@ -69,7 +69,7 @@ class AveragedPose:
         return self.n_converged > 0 and bool(np.all(np.isfinite(self.position_mm)))
 
 
-def pose_of(frame: Any, method: str = "") -> Any:
+def method_result(frame: Any, method: str = "") -> Any:
     """The PoseResult-like part of a frame: a pipeline FrameResult (it has ``poses``, method name ->
     PoseResult) gives the result of ``method`` (or its first method when ``method`` is empty);
     anything else is taken as it is (None = no code in the frame)."""
@@ -84,7 +84,7 @@ def pose_of(frame: Any, method: str = "") -> Any:
 def average_frames(frames: Iterable[Any], method: str = "") -> AveragedPose:
     """Means and standard deviations of the converged frames (see the module doc).
 
-    ``method`` picks the solver's result out of pipeline frames (see :func:`pose_of`).
+    ``method`` picks the solver's result out of pipeline frames (see :func:`method_result`).
     """
     positions: list[np.ndarray] = []
     angles: list[np.ndarray] = []
@@ -94,7 +94,7 @@ def average_frames(frames: Iterable[Any], method: str = "") -> AveragedPose:
     n_frames = 0
     for index, item in enumerate(frames):
         n_frames += 1
-        frame = pose_of(item, method)
+        frame = method_result(item, method)
         if frame is None or not bool(_get(frame, "converged", False)):
             continue
         pos = np.asarray(_get(frame, "position_mm"), dtype=float).reshape(-1)
@@ -171,7 +171,7 @@ class Judgement:
     reason: str
 
 
-def judge(
+def judge_row(
     position_mm: Sequence[float] | np.ndarray,
     angles_deg: Sequence[float] | np.ndarray,
     truth: GroundTruth,
@@ -179,7 +179,8 @@ def judge(
     *,
     has_pose: bool = True,
 ) -> Judgement:
-    """Errors (mm; signed wrapped degrees, measured minus truth) and pass by the criteria."""
+    """One session row's verdict: errors (mm; signed wrapped degrees, measured minus truth), pass
+    by the criteria (qrfield.sessions.criteria, the rule's one home) and, for a fail, the reasons."""
     criteria = criteria or AcceptanceCriteria()
     pos = np.asarray(position_mm, dtype=float).reshape(-1)
     ang = np.asarray(angles_deg, dtype=float).reshape(-1)
@@ -187,8 +188,8 @@ def judge(
         raise ValueError(f"position (3, mm) and angles (3, deg) expected, got {pos.size} and {ang.size}")
     if not has_pose or not (np.all(np.isfinite(pos)) and np.all(np.isfinite(ang))):
         return Judgement(math.nan, np.full(3, np.nan), False, "no converged frame")
-    err_pos = float(np.linalg.norm(pos - np.asarray(truth.position_mm)))
-    err_ang = np.asarray(angle_difference(ang, np.asarray(truth.angles_deg)), dtype=float)
+    err_pos_, err_ang = pose_errors(pos, ang, truth.position_mm, truth.angles_deg)
+    err_pos = float(err_pos_)
     passed = criteria.passes(err_pos, err_ang)
     reasons = []
     if not err_pos < criteria.max_position_error_mm:
@@ -220,7 +221,7 @@ def measure(
 ) -> Measurement:
     """Average ``frames`` and judge the mean against ``truth`` (pass needs >= 1 converged frame)."""
     average = average_frames(frames, method)
-    judgement = judge(average.position_mm, average.angles_deg, truth, criteria, has_pose=average.has_pose)
+    judgement = judge_row(average.position_mm, average.angles_deg, truth, criteria, has_pose=average.has_pose)
     return Measurement(truth, average, judgement, method=method, note=note)
 
 

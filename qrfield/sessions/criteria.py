@@ -4,6 +4,11 @@ The criteria are the seed's (docs/conventions.md): each of alpha, beta, gamma wi
 truth (inclusive) and the position within 5 mm (Euclidean, strict), with at least one converged
 frame. They are settings so that a study can tighten or loosen them; the values used are saved in
 every session's ``session.json``.
+
+The one home of the rule: :func:`pose_errors` (how far a pose is from its truth) and
+:meth:`AcceptanceCriteria.judge` (whether that passes), used by a session row
+(:func:`qrfield.sessions.averaging.judge_row`), the simulation study, the benchmarks and the app's
+verdict against the virtual bench's true pose.
 """
 
 from __future__ import annotations
@@ -13,7 +18,32 @@ from typing import Any
 
 import numpy as np
 
+from qrfield.geometry import angle_difference
 from qrfield.settings import setting
+
+
+def pose_errors(
+    position_mm: Any, angles_deg: Any, truth_position_mm: Any, truth_angles_deg: Any
+) -> tuple[np.ndarray, np.ndarray]:
+    """Errors of poses against their truth: the Euclidean position error (mm, shape (...)) and the
+    signed angle errors (degrees, measured minus truth, wrapped to (-180, 180], shape (..., 3)).
+
+    Each argument is (3,) or (N, 3): x, y, z in mm (camera frame) or alpha, beta, gamma in degrees;
+    a single truth broadcasts over N poses. NaN in a pose gives NaN errors.
+    """
+    pos = np.asarray(position_mm, dtype=float)
+    ang = np.asarray(angles_deg, dtype=float)
+    truth_pos = np.asarray(truth_position_mm, dtype=float)
+    truth_ang = np.asarray(truth_angles_deg, dtype=float)
+    for name, arr in (("position_mm", pos), ("angles_deg", ang), ("truth position", truth_pos)):
+        if arr.ndim not in (1, 2) or arr.shape[-1] != 3:
+            raise ValueError(f"{name}: (3,) or (N, 3) expected, got shape {arr.shape}")
+    if truth_ang.ndim not in (1, 2) or truth_ang.shape[-1] != 3:
+        raise ValueError(f"truth angles: (3,) or (N, 3) expected, got shape {truth_ang.shape}")
+    with np.errstate(invalid="ignore"):
+        err_pos = np.linalg.norm(pos - truth_pos, axis=-1)
+        err_ang = np.asarray(angle_difference(ang, truth_ang), dtype=float)
+    return err_pos, err_ang
 
 
 @dataclass(frozen=True)
@@ -54,6 +84,18 @@ class AcceptanceCriteria:
         ang = np.abs(np.asarray(max_angle_error_deg, dtype=float))
         with np.errstate(invalid="ignore"):
             return (pos < self.max_position_error_mm) & (ang <= self.max_angle_error_deg)
+
+    def judge(
+        self, position_mm: Any, angles_deg: Any, truth_position_mm: Any, truth_angles_deg: Any
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Poses against their truth (shapes as :func:`pose_errors`): (passed, position error in mm,
+        largest absolute angle error in degrees), each of shape (...) (a (3,) pose gives 0-d
+        arrays). A pose with NaN never passes."""
+        err_pos, err_ang = pose_errors(position_mm, angles_deg, truth_position_mm, truth_angles_deg)
+        with np.errstate(invalid="ignore"):
+            worst = np.max(np.abs(err_ang), axis=-1)
+        passed = self.meets(err_pos, worst) & np.isfinite(err_pos) & np.isfinite(worst)
+        return passed, err_pos, worst
 
     def label(self) -> str:
         """The criteria in a few characters for screens and reports, e.g. "2°/5 mm"."""

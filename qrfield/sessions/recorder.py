@@ -8,7 +8,7 @@ exactly as the app does (:meth:`FrameCollector.measurement`). The row is then lo
 :meth:`Session.log` (appended and fsynced before it is reported as logged).
 
 :func:`bench_mean_truth` is the ground truth of a row on the virtual bench: its mean true pose over
-the frames the row's mean is made of (the app's "follow the bench", and ``--truth bench``).
+the frames the row's mean is made of (the app's "follow the bench", and ``--truth virtual``).
 """
 
 from __future__ import annotations
@@ -133,7 +133,7 @@ class RowRecorder:
             bench = bench_mean_truth(collector.frames, name, collector.method)
             if bench is None:
                 raise ValueError(
-                    "--truth bench needs the virtual bench as the source (its frames carry the truth)"
+                    "--truth virtual needs the virtual bench as the source (its frames carry the truth)"
                 )
             truth = bench
         assert truth is not None

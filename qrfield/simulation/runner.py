@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from qrfield.camera import CameraModel
-from qrfield.geometry import angle_difference, angles_from_rotation, rotation_matrix
+from qrfield.geometry import angles_from_rotation, rotation_matrix
 from qrfield.simulation.combinations import Combination
 from qrfield.simulation.study import SolverSpec, StudyConfig
 from qrfield.simulation.view import poses_in_view
@@ -256,19 +256,18 @@ def combination_noise(
     return rng.normal(0.0, config.noise_px, size=shape)
 
 
-def judge(
+def judge_samples(
     result: Any, truth_position: np.ndarray, truth_angles: np.ndarray, config: StudyConfig
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(passed, position error mm, largest angle error deg) of N solved samples against the truth."""
-    position = np.asarray(result.position_mm, dtype=float)
-    angles = np.asarray(result.angles_deg, dtype=float)
-    with np.errstate(invalid="ignore"):
-        pos_err = np.linalg.norm(position - truth_position, axis=1)
-        ang_err = np.max(np.abs(angle_difference(angles, truth_angles)), axis=1)
-        c = config.criteria
-        within = np.asarray(result.converged, bool) | (np.asarray(result.iterations) < c.n_max)
-        passed = c.acceptance.meets(pos_err, ang_err) & within
-    return passed & np.isfinite(pos_err) & np.isfinite(ang_err), pos_err, ang_err
+    """(passed, position error mm, largest angle error deg) of N solved samples against the truth:
+    the acceptance criteria (:meth:`AcceptanceCriteria.judge`, the rule's one home) and, the study's
+    own condition, a solver that stopped before n_max (see the module doc)."""
+    c = config.criteria
+    passed, pos_err, ang_err = c.acceptance.judge(
+        result.position_mm, result.angles_deg, truth_position, truth_angles
+    )
+    within = np.asarray(result.converged, bool) | (np.asarray(result.iterations) < c.n_max)
+    return passed & within, pos_err, ang_err
 
 
 def _should_stop(stop: threading.Event | Callable[[], bool] | None) -> bool:
@@ -397,7 +396,7 @@ def compute_task(
         }
         if flat_corners.shape[0]:
             res = solve(spec, flat_corners, d.camera, config.side_mm)
-            passed, pos_err, ang_err = judge(res, flat_pos, flat_ang, config)
+            passed, pos_err, ang_err = judge_samples(res, flat_pos, flat_ang, config)
             values["status"][:] = np.where(passed, PASSED, FAILED)
             values["position_mm"][:] = res.position_mm
             values["angles_deg"][:] = res.angles_deg

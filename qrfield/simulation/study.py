@@ -108,7 +108,7 @@ CRITERIA_FIELDS: dict[str, SettingSpec] = {
     ),
 }
 TABLES = ("criteria", "solver")
-#: The app's small study (its Simulation tab starts with it; ``qrfield bench simulation`` times it):
+#: The app's small study (its Simulation tab starts with it; ``qrfield benchmark simulation`` times it):
 #: the shipped study with a 5 x 3 x 2 grid (x -80..80 step 40, y -40..40 step 40, z 250 and 400 mm)
 #: and tilts 0..60 deg in 5 deg steps: 12 combinations x 13 angles x 30 points = 4680 poses.
 SMALL_STUDY: dict[str, Any] = {

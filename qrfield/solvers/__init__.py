@@ -110,11 +110,13 @@ def solve_batch(
     corners_px: np.ndarray,
     camera: CameraModel,
     side_mm: float,
-    settings: NumericalSettings | IppeSettings | None = None,
     method: str = "numerical",
+    settings: NumericalSettings | IppeSettings | None = None,
     corners_cov: np.ndarray | None = None,
 ) -> BatchResult:
     """Poses of N QR codes at once from corners (N, 4, 2) (pixels, V1..V4 each).
+
+    The arguments of :func:`solve`, in its order (``method`` before ``settings``), batched.
 
     "numerical" is vectorised in numpy and gives, row by row, the same numbers as :func:`solve`
     (depths and iteration counts bit for bit; the mirror search is not run). "ippe" is the
@@ -126,6 +128,12 @@ def solve_batch(
     ValueError, for a setting outside its limits); rows with unusable
     corners (NaN/inf, degenerate or wrongly ordered) come back not converged with ``valid`` False.
     """
+    if not isinstance(method, str):
+        # Before, settings came fourth: a settings object here is a caller of that order.
+        raise SolverError(
+            f"solve_batch(corners, camera, side_mm, method, settings): method must be a name, got "
+            f"{type(method).__name__}; pass settings=... by keyword"
+        )
     settings_class(method)
     cam = check_camera(camera)
     side = check_side(side_mm)

@@ -15,7 +15,7 @@ What is our reconstruction (the seed gives no equations):
     squared diffs) is taken back and halved. Why: seen nearly square-on, the lengths change only
     to second order with the tilt, the Gauss-Newton matrix is nearly singular along it and the
     full step overshoots; undamped, it then cycles for ever (measured: 10 of 60 frames of the
-    moving sequence of ``qrfield bench detect``, 5 of 312 hard-set views, NOCONV with every
+    moving sequence of ``qrfield benchmark detect``, 5 of 312 hard-set views, NOCONV with every
     length within 0.005 mm), damped it creeps along that flat valley;
   - stop rule "seed" (our reading of the seed): converged as soon as max |diff_i| < tolerance;
     not converged when n reaches n_max, when the step falls below STALL_MM (a least-squares optimum

@@ -65,10 +65,11 @@ class PoseResult:
         reason: "" when converged, else why not (always set when converged is False).
         alternative: the other (mirror) candidate of the planar ambiguity, when the method found one
             (its own uncertainty fields are not computed: NaN).
-        ambiguity: both methods alike: the RMS reprojection error of the better-fitting of this
-            result and its alternative over that of the worse, in [0, 1]; near 1 the corners cannot
-            tell the two poses apart. Which one fits better: compare ``reprojection_px`` of the two.
-            None without an alternative.
+        ambiguity: both methods alike (``uncertainty.ambiguity_ratio``): the RMS reprojection error
+            of the better-fitting of this result and its alternative over that of the worse, in
+            [0, 1]; near 1 the corners cannot tell the two poses apart. Which one fits better:
+            compare ``reprojection_px`` of the two. None without an alternative. A number to show,
+            not a verdict: whether the pose may be the mirror is ``ambiguous``.
         corners_px: (4, 2) the corners as given (pixels, V1..V4, before undistortion).
         corners_std_px: (4,) per corner V1..V4 the RMS radius of its uncertainty, sqrt(trace) of
             its 2x2 covariance, px (NaN when no corner covariance was given).
@@ -81,7 +82,8 @@ class PoseResult:
             their uncertainty, or better than this pose (a flip risk; then the std fields do not
             describe the error, which may be the mirror's). With a corner covariance: chi-square
             test (``mirror_chi2`` below the 0.999 quantile of chi-square with 2 degrees of
-            freedom, or below ``chi2``); without one: ``ambiguity`` >= 0.8 or the mirror fits better.
+            freedom, or below ``chi2``); without one: ``ambiguity`` >= 0.5
+            (``uncertainty.AMBIGUITY_FALLBACK``) or the mirror fits better.
         chi2: chi-square of this pose's branch against the corners under their covariance (at its
             chi-square optimum; about chi-square(2) distributed when the covariance is right), NaN
             without a covariance.

@@ -45,7 +45,7 @@ from qrfield.solvers.result import PoseResult, SolverError
 #: reprojection chi-square exceeds the answer's by less than this, i.e. when the mirror is at least
 #: exp(-4.5) = 1.1 % as likely as the answer. Chosen for recall: on seeded views with known noise
 #: it leaves no flip unflagged, where 4 and 6 leave a few, each a pose tens of degrees off with a
-#: std of a degree (measured recall and precision: docs/uncertainty.md, ``qrfield bench pose``).
+#: std of a degree (measured recall and precision: docs/uncertainty.md, ``qrfield benchmark pose``).
 FLIP_DELTA_CHI2 = 9.0
 #: Without a corner covariance the test falls back on the ratio of the two candidates' RMS
 #: reprojection errors (``PoseResult.ambiguity``): at or above this the mirror counts as fitting.

@@ -1,4 +1,4 @@
-"""``qrfield bench pose`` and its real-optics part: four real chessboard corners solved as a code,
+"""``qrfield benchmark pose`` and its real-optics part: four real chessboard corners solved as a code,
 against OpenCV's pose of the whole board (independent truth: 24 corners, another library's intrinsics)."""
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from qrfield.bench._pose_real import FOLDER, boofcv_cameras, square_cases
-from qrfield.bench._pose_views import VIEW_SETS, BenchView
+from qrfield.benchmarks._pose_real import FOLDER, boofcv_cameras, square_cases
+from qrfield.benchmarks._pose_views import VIEW_SETS, BenchView
 from qrfield.cli import main
 
 
@@ -53,8 +53,8 @@ def test_four_real_corners_agree_with_the_whole_board_within_their_std(real_case
 
 
 def test_bench_pose_runs_on_a_view_set_given_by_name(monkeypatch, capsys, tmp_path):
-    """The view set is a parameter: a stand-in set registered under a name is what the bench measures."""
-    from qrfield.bench._pose_views import cameras
+    """The view set is a parameter: a stand-in set registered under a name is what the benchmark measures."""
+    from qrfield.benchmarks._pose_views import cameras
     from qrfield.geometry import Pose
     from qrfield.render import render_view
 
@@ -66,7 +66,7 @@ def test_bench_pose_runs_on_a_view_set_given_by_name(monkeypatch, capsys, tmp_pa
     monkeypatch.setitem(VIEW_SETS, "tiny", tiny)
     args = ["--poses", "20", "--views", "1", "--cost-views", "5", "--view-set", "tiny"]
     args += ["--data", str(tmp_path)]
-    code = main(["bench", "pose", *args])
+    code = main(["benchmark", "pose", *args])
     out = capsys.readouterr().out
     assert code == 0
     assert "view set 'tiny', 1 seeded views" in out

@@ -1,4 +1,5 @@
-"""Real optics for ``qrfield bench pose``: four chessboard corners as a "QR code", against the whole board.
+"""Real optics for ``qrfield benchmark pose``: four chessboard corners as a "QR code", against the
+whole board.
 
 Data: ../shared/data/calibration/Bumblebee2_Chess, 11 + 11 real 640x480 frames of a chessboard with
 4 x 6 inner corners (a PtGrey Bumblebee2 stereo camera, left and right), hand-labelled corners
@@ -26,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from qrfield.camera import CameraModel
+from qrfield.methods import METHODS
 
 FOLDER = "calibration/Bumblebee2_Chess"
 SQUARE_MM = 30.0
@@ -206,9 +208,9 @@ def square_cases(folder: Path) -> list[SquareCase]:
 
 
 def real_optics(data: Path | None) -> None:
-    """Print section 4 of ``qrfield bench pose`` (skipped with a reason when the data is absent)."""
-    from qrfield.bench.detect import _shared_data
-    from qrfield.bench.pose import COMPONENTS, calibration_line
+    """Print section 4 of ``qrfield benchmark pose`` (skipped with a reason when the data is absent)."""
+    from qrfield.benchmarks.detect import _shared_data
+    from qrfield.benchmarks.pose import COMPONENTS, calibration_line
 
     root = _shared_data(data)
     folder = None if root is None else root / FOLDER
@@ -226,7 +228,7 @@ def real_optics(data: Path | None) -> None:
     print(f"{'   source, method (RMS z / % within 2)':<34}{'n':>7}{header}")
     for source in ("cornerSubPix", "hand labels"):
         sigmas = sorted({c.frame: c.corner_std_px for c in cases if c.source == source}.values())
-        for method in ("numerical", "ippe"):
+        for method in METHODS:
             sel = [c for c in cases if c.source == source and c.method == method and c.converged]
             if not sel:
                 continue
@@ -243,7 +245,7 @@ def real_optics(data: Path | None) -> None:
     print(f"   the reference's own std is at most {ratio:.2f} of the square's (median over cases)")
     _per_frame(sel)
     print("   median |error| per component, cornerSubPix corners, 90 mm squares:")
-    for method in ("numerical", "ippe"):
+    for method in METHODS:
         big = [c for c in sel if c.method == method and c.size == 3]
         if big:
             med = np.median(np.abs([c.errors for c in big]), axis=0)
@@ -263,7 +265,7 @@ def _per_frame(cases: list[SquareCase]) -> None:
     for frame in sorted({c.frame for c in cases}):
         middle = [c for c in cases if c.frame == frame and c.size == 3]
         cells = []
-        for method in ("numerical", "ippe"):
+        for method in METHODS:
             # Made row by row: the middle one of the three 3 x 3 squares is the second.
             mine = [c for c in middle if c.method == method]
             if len(mine) != 3:

@@ -1,4 +1,4 @@
-"""Section 3 of ``qrfield bench pose``: image to pose on pictures, beside the peers and the ceiling.
+"""Section 3 of ``qrfield benchmark pose``: image to pose on pictures, beside the peers and the ceiling.
 
 Each view goes through the default pipeline as the app runs it: a fresh
 :class:`qrfield.pipeline.Pipeline` (the tracker with the default DetectorSettings, the camera model
@@ -16,7 +16,7 @@ check of the argument that bounds its precision: among views where both branches
 of flips against the mirror's posterior probability exp(-d/2) / (1 + exp(-d/2)), d = mirror chi2
 - answer chi2.
 
-Not a benchmark of its own (the leading underscore keeps it out of ``qrfield bench``).
+Not a benchmark of its own (the leading underscore keeps it out of ``qrfield benchmark``).
 """
 
 from __future__ import annotations
@@ -64,7 +64,7 @@ class Solved:
 
     @property
     def flip(self) -> bool:
-        from qrfield.bench.pose import FLIP_DEG
+        from qrfield.benchmarks.pose import FLIP_DEG
 
         return bool(np.nanmax(np.abs(self.error[3:])) > FLIP_DEG) if self.converged else False
 
@@ -84,7 +84,7 @@ class Outcome:
 
 
 def _solved(result: Any, view: Any) -> Solved:
-    from qrfield.bench.pose import pose_errors
+    from qrfield.benchmarks.pose import pose_errors
 
     if result is None or not result.converged:
         return Solved()
@@ -289,7 +289,7 @@ def _print_causes(outcomes: list[Outcome]) -> None:
 
 
 def _print_calibration(outcomes: list[Outcome]) -> None:
-    from qrfield.bench.pose import COMPONENTS, calibration_line
+    from qrfield.benchmarks.pose import COMPONENTS, calibration_line
 
     names = [n for n in outcomes[0].poses]
     print(
@@ -309,7 +309,7 @@ def _print_calibration(outcomes: list[Outcome]) -> None:
 
 
 def _print_flips(outcomes: list[Outcome]) -> None:
-    from qrfield.bench.pose import FLIP_DEG, recall_precision
+    from qrfield.benchmarks.pose import FLIP_DEG, recall_precision
     from qrfield.solvers.uncertainty import FLIP_DELTA_CHI2
 
     print(

@@ -1,4 +1,4 @@
-"""``qrfield bench serial``: frames encoded and written per second, and publish-to-wire latency.
+"""``qrfield benchmark serial``: frames encoded and written per second, and publish-to-wire latency.
 
 1. Encoding: frames per second of :func:`encode_frame` (validation, formatting, checksum) beside a
    baseline measured in the same run: a bare f-string of the same numbers with no checks and no
@@ -83,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
     angles = rng.uniform([-180, -90, -180], [180, 90, 180], (args.frames, 3))
     pos_list, ang_list = positions.tolist(), angles.tolist()
 
-    print(f"qrfield bench serial: {args.frames} seeded poses; pty and loop:// on this machine")
+    print(f"qrfield benchmark serial: {args.frames} seeded poses; pty and loop:// on this machine")
     # 1. Encoding.
     t0 = time.perf_counter()
     for i in range(args.frames):

@@ -1,6 +1,6 @@
-"""``qrfield bench detect``: corner accuracy, uncertainty, speed and detection rates, in one run.
+"""``qrfield benchmark detect``: corner accuracy, uncertainty, speed and detection rates, in one run.
 
-0. The hard set (qrfield.bench.hardset: segno symbols of versions 1-10, 30/50/100 mm codes at
+0. The hard set (qrfield.benchmarks.hardset: segno symbols of versions 1-10, 30/50/100 mm codes at
    z 150-1000 mm, tilt up to 60 deg, noise 0-4, blur 0.3-1.2 px, lighting gradients, pinhole and
    a distorted lens; its truth does not come from qrfield.render): per corner V1..V4 the median,
    90th percentile and largest error by module size band, pinhole and distorted apart, for the
@@ -74,8 +74,8 @@ def _shared_data(path: Path | None) -> Path | None:
 
 def _hard_set(count: int, seed: int) -> None:
     """Section 0: the hard set through the default pipeline and through the edge lines alone."""
-    from qrfield.bench import _corners
-    from qrfield.bench.hardset import hard_views
+    from qrfield.benchmarks import _corners
+    from qrfield.benchmarks.hardset import hard_views
     from qrfield.detect import Detector, DetectorSettings
 
     try:
@@ -84,7 +84,7 @@ def _hard_set(count: int, seed: int) -> None:
         print("\n0. hard set: needs the segno package (pip install segno, or the dev extra); skipped")
         return
     print(
-        f"\n0. hard set: {count} views (seed {seed}; qrfield bench hardset describes it), per corner "
+        f"\n0. hard set: {count} views (seed {seed}; qrfield benchmark hardset describes it), per corner "
         "error against cv2.projectPoints' truth"
     )
     t0 = time.perf_counter()
@@ -233,7 +233,7 @@ def run(args: argparse.Namespace) -> int:
     side = args.side_mm
     default = DetectorSettings()
     print(
-        f"qrfield bench detect: default backends {default.backends!r}, refine {default.refine}, "
+        f"qrfield benchmark detect: default backends {default.backends!r}, refine {default.refine}, "
         f"whole-symbol fit {default.symbol_fit}"
     )
     print("(the machine is shared with other work: times are noisy; ratios come from the same run)")

@@ -1,4 +1,4 @@
-"""``qrfield bench serial`` runs end to end on a pty and loop:// (tiny sizes; prints, asserts no figures)."""
+"""``qrfield benchmark serial`` runs end to end on a pty and loop:// (tiny sizes; asserts no figures)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ pytestmark = pytest.mark.timeout(60)
 
 
 def test_bench_serial_runs_and_prints_its_figures(capsys):
-    assert main(["bench", "serial", "--frames", "200", "--seconds", "0.05", "--latency-frames", "5"]) == 0
+    assert main(["benchmark", "serial", "--frames", "200", "--seconds", "0.05", "--latency-frames", "5"]) == 0
     out = capsys.readouterr().out
     labels = ("encode", "via link to pty", "via link to loop://", "publish -> read", "bare write")
     for label in labels:

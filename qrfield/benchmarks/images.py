@@ -1,4 +1,4 @@
-"""``qrfield bench images``: time and peak memory of refusing an image above the pixel limit.
+"""``qrfield benchmark images``: time and peak memory of refusing an image above the pixel limit.
 
 A 0.75 MB PNG of 32000 x 24000 black pixels (768 MP; OpenCV would decode it into 768 MB grey or
 2.3 GB colour) is given to ``qrfield solve`` in a fresh process; its wall time and peak resident
@@ -75,7 +75,8 @@ def run(args: argparse.Namespace) -> int:
         write_image(small, view.image)
         base = [sys.executable, "-m", "qrfield", "solve", "--focal-px", "500", "--side-mm", "50", "--json"]
         print(
-            f"qrfield bench images: {args.width}x{args.height} PNG of {os.path.getsize(big) / 1e6:.2f} MB "
+            f"qrfield benchmark images: {args.width}x{args.height} PNG of "
+            f"{os.path.getsize(big) / 1e6:.2f} MB "
             f"({args.width * args.height / 1e6:.0f} MP) against a 640x480 view; best of {args.repeat} "
             "(machine shared with other work: figures vary)"
         )

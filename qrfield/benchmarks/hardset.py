@@ -1,4 +1,4 @@
-"""The hard bench set: seeded views of QR codes whose truth does not come from qrfield's renderer.
+"""The hard benchmark set: seeded views of QR codes whose truth does not come from qrfield's renderer.
 
 Why: a bench made with our own renderer and one payload was too kind (docs/detection.md). Here
 every piece of the picture is made another way than :mod:`qrfield.render`:
@@ -341,8 +341,10 @@ def hard_views(count: int, seed: int = 2024, start: int = 0) -> Iterator[HardVie
         yield hard_view(index, seed)
 
 
-# ---------------------------------------------------------------------- ``qrfield bench hardset``
-HELP = "the hard bench set of `qrfield bench detect`: its make-up, render time and a check of its truth"
+# ---------------------------------------------------------------------- ``qrfield benchmark hardset``
+HELP = (
+    "the hard benchmark set of `qrfield benchmark detect`: its make-up, render time and a check of its truth"
+)
 
 
 def add_arguments(parser) -> None:

@@ -1,4 +1,7 @@
-"""The bench app's own speed, for ``qrfield bench pipeline`` (which lives in the Qt-free core)."""
+"""The app's own frame rates (worker, window) offscreen, for ``qrfield benchmark pipeline``.
+
+The benchmark lives in the Qt-free core; this is the part of it that needs Qt.
+"""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""View sets for ``qrfield bench pose``: seeded views with their truth, and the cameras they use.
+"""View sets for ``qrfield benchmark pose``: seeded views with their truth, and the cameras they use.
 
 A view set is a function ``(count, seed) -> list[BenchView]`` registered in :data:`VIEW_SETS`; the
 bench takes its name (``--view-set``), so that another set (a harder one built elsewhere, another
@@ -16,11 +16,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from qrfield.bench.hardset import DISTORTED_CAMERA
+from qrfield.benchmarks.hardset import DISTORTED_CAMERA
 from qrfield.camera import CameraModel, resolve_camera
 from qrfield.geometry import Pose
 
-#: The lens with visible barrel distortion of the hard bench set (also the tests' DISTORTED case).
+#: The lens with visible barrel distortion of the hard benchmark set (also the tests' DISTORTED case).
 DISTORTED = DISTORTED_CAMERA
 #: QR sides (mm), distances (mm) and the largest tilt (deg) the sets draw from.
 SIDES_MM = (30.0, 50.0, 100.0)
@@ -125,10 +125,11 @@ def render_set(count: int, seed: int) -> list[BenchView]:
 
 
 def hard_set(count: int, seed: int) -> list[BenchView]:
-    """The hard bench set of ``qrfield bench detect`` (qrfield.bench.hardset: segno symbols of versions
-    1-10, 30/50/100 mm codes, z 150-1000 mm, tilt up to 60 deg, noise 0-4, blur 0.3-1.2 px, lighting
-    gradients, pinhole and DISTORTED; module size its views' shortest side over the modules)."""
-    from qrfield.bench.hardset import hard_views
+    """The hard benchmark set of ``qrfield benchmark detect`` (qrfield.benchmarks.hardset: segno
+    symbols of versions 1-10, 30/50/100 mm codes, z 150-1000 mm, tilt up to 60 deg, noise 0-4, blur
+    0.3-1.2 px, lighting gradients, pinhole and DISTORTED; module size its views' shortest side over
+    the modules)."""
+    from qrfield.benchmarks.hardset import hard_views
 
     return [
         BenchView(v.camera, v.side_mm, v.pose, v.corners_px, v.image, v.modules, v.text, v.module_px)
@@ -136,5 +137,5 @@ def hard_set(count: int, seed: int) -> list[BenchView]:
     ]
 
 
-#: View sets with pictures, by name (``qrfield bench pose --view-set NAME``).
+#: View sets with pictures, by name (``qrfield benchmark pose --view-set NAME``).
 VIEW_SETS: dict[str, Callable[[int, int], list[BenchView]]] = {"hard": hard_set, "render": render_set}

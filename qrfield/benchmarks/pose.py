@@ -1,4 +1,4 @@
-"""``qrfield bench pose``: is the pose's uncertainty honest, and how often is the pose right?
+"""``qrfield benchmark pose``: is the pose's uncertainty honest, and how often is the pose right?
 
 1. Uncertainty calibration with injected corner noise (independent truth): seeded poses (sides
    30/50/100 mm, z 150-1000 mm, tilt <= 60 deg, pinhole and a distorted lens), the exact vertex
@@ -8,15 +8,15 @@
    the planar ambiguity the linearisation fails: that is what the flag is for) and over all.
 2. The flip flag on the same views: recall and precision of ``ambiguous`` on flips (an angle more
    than 10 deg off), for the chi-square test and, for comparison, the fallback without covariance.
-3. End to end on pictures (``--view-set``, default "hard": bench detect's hard set,
-   qrfield/bench/hardset.py; "render": qrfield.render views), through the default pipeline:
+3. End to end on pictures (``--view-set``, default "hard": benchmark detect's hard set,
+   qrfield/benchmarks/hardset.py; "render": qrfield.render views), through the default pipeline:
    share of views that meet the thesis' criteria (2 deg, 5 mm) by module size and lens, for each
    qrfield method beside OpenCV's QRCodeDetectorAruco + IPPE_SQUARE + RefineLM and zxing-cpp
    corners + SQPNP, and the ceiling (true corners + 0.05 px noise); why qrfield's views miss; the
-   calibration of the std and the flip flag on the pictures (qrfield/bench/_pose_pictures.py).
+   calibration of the std and the flip flag on the pictures (qrfield/benchmarks/_pose_pictures.py).
 4. Real optics: squares of 4 inner corners of the real Bumblebee2 chessboard frames
    (../shared/data/calibration), solved through BoofCV's calibration, against cv2.solvePnP on the
-   whole board (qrfield/bench/_pose_real.py).
+   whole board (qrfield/benchmarks/_pose_real.py).
 5. Cost: CPU microseconds per solve with and without a covariance (baseline: without).
 """
 
@@ -43,7 +43,7 @@ COMPONENTS = ("x", "y", "z", "alpha", "beta", "gamma")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from qrfield.bench._pose_views import VIEW_SETS
+    from qrfield.benchmarks._pose_views import VIEW_SETS
 
     parser.add_argument("--poses", type=int, default=3000, help="corner-level views for 1-2 (default 3000)")
     parser.add_argument("--views", type=int, default=400, help="pictures for 3 (default 400)")
@@ -51,10 +51,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--view-set",
         choices=sorted(VIEW_SETS),
         default="hard",
-        help="picture set for 3 (default hard: bench detect's hard set)",
+        help="picture set for 3 (default hard: benchmark detect's hard set)",
     )
     parser.add_argument(
-        "--view-seed", type=int, default=2024, help="seed of the picture set (default 2024, as bench detect)"
+        "--view-seed",
+        type=int,
+        default=2024,
+        help="seed of the picture set (default 2024, as benchmark detect)",
     )
     parser.add_argument("--cost-views", type=int, default=400, help="views timed for 5 (default 400)")
     parser.add_argument("--seed", type=int, default=1)
@@ -131,7 +134,7 @@ def _methods() -> list[tuple[str, str, Any]]:
 
 
 def injected_noise(count: int, seed: int) -> bool:
-    from qrfield.bench._pose_views import corner_set
+    from qrfield.benchmarks._pose_views import corner_set
     from qrfield.solvers import solve
 
     views = corner_set(count, seed)
@@ -223,9 +226,9 @@ def _flip_table(flips: dict[str, tuple[np.ndarray, ...]]) -> None:
 
 
 def end_to_end(count: int, seed: int, view_set: str) -> bool:
-    """Section 3 (qrfield/bench/_pose_pictures.py); True when qrfield meets the issue's targets."""
-    from qrfield.bench import _pose_pictures
-    from qrfield.bench._pose_views import VIEW_SETS
+    """Section 3 (qrfield/benchmarks/_pose_pictures.py); True when qrfield meets the issue's targets."""
+    from qrfield.benchmarks import _pose_pictures
+    from qrfield.benchmarks._pose_views import VIEW_SETS
 
     print(
         f"\n3. end to end on pictures: view set {view_set!r}, {count} seeded views (seed {seed}), each "
@@ -245,7 +248,7 @@ def end_to_end(count: int, seed: int, view_set: str) -> bool:
 
 
 def cost(count: int, seed: int) -> None:
-    from qrfield.bench._pose_views import corner_set
+    from qrfield.benchmarks._pose_views import corner_set
     from qrfield.solvers import METHODS, solve, solve_methods
 
     views = corner_set(count, seed)
@@ -277,7 +280,7 @@ def cost(count: int, seed: int) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from qrfield.bench._pose_real import real_optics
+    from qrfield.benchmarks._pose_real import real_optics
 
     ok = injected_noise(args.poses, args.seed)
     pictures = end_to_end(args.views, args.view_seed, args.view_set) if args.views > 0 else None

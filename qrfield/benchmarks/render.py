@@ -1,4 +1,4 @@
-"""``qrfield bench render``: milliseconds per rendered virtual-bench view.
+"""``qrfield benchmark render``: milliseconds per rendered virtual-bench view.
 
 Baseline, measured in the same run: one plain cv2.warpPerspective of a full camera-sized image
 (the least any homography renderer must do), so the ratio is comparable across machines.
@@ -25,7 +25,9 @@ def run(args: argparse.Namespace) -> int:
     from qrfield.render import render_view
     from qrfield.sampling import random_visible_poses
 
-    print(f"qrfield bench render: {args.views} seeded views per resolution, 50 mm code, noise 2, blur 0.6")
+    print(
+        f"qrfield benchmark render: {args.views} seeded views per resolution, 50 mm code, noise 2, blur 0.6"
+    )
     print(f"{'camera':<22}{'render ms':>11}{'baseline ms':>13}{'ratio':>8}")
     for spec in ("picam-v2@640x480", "picam-v2@1280x960", "webcam-60@1280x720"):
         camera = resolve_camera(spec)

@@ -1,4 +1,4 @@
-"""``qrfield bench sessions``: milliseconds to log one confirmed row (average, judge, append, fsync).
+"""``qrfield benchmark sessions``: milliseconds to log one confirmed row (average, judge, append, fsync).
 
 Baseline, measured in the same run in the same folder: one raw ``os.write`` of a line of the
 same length on an O_APPEND descriptor followed by ``os.fsync`` (the least any crash-safe logger
@@ -67,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
             os.close(fd)
             session.close()
         log_ms, base_ms = log_s * 1e3 / args.rows, base_s * 1e3 / args.rows
-    print(f"qrfield bench sessions: {args.rows} rows of {args.frames} frames, {len(line)} bytes per line")
+    print(f"qrfield benchmark sessions: {args.rows} rows of {args.frames} frames, {len(line)} bytes per line")
     print(f"{'log row ms':>11}{'write+fsync ms':>16}{'ratio':>8}")
     print(f"{log_ms:>11.3f}{base_ms:>16.3f}{log_ms / base_ms:>8.2f}")
     return 0

@@ -1,4 +1,4 @@
-"""``qrfield bench simulation``: the study's time and poses/s, the new path beside the old, in one run.
+"""``qrfield benchmark simulation``: the study's time and poses/s, the new path beside the old, in one run.
 
 Measured in this run, on this machine (wall time: the new path uses several processes):
   - the default study (qrfield/data/study-default.toml, with --set overrides) and the app's small
@@ -161,7 +161,7 @@ def run(args: argparse.Namespace) -> int:
     from qrfield.simulation import config_from_dict, load_study, parallel
     from qrfield.simulation.study import SMALL_STUDY
 
-    print(f"qrfield bench simulation: {parallel.cpu_count()} cores; {_load()} before the runs")
+    print(f"qrfield benchmark simulation: {parallel.cpu_count()} cores; {_load()} before the runs")
     default = load_study(overrides=args.overrides)
     small = config_from_dict(SMALL_STUDY, base=default)
     _compare_study("default study", default, args.no_old)

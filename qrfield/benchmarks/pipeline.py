@@ -1,4 +1,4 @@
-"""``qrfield bench pipeline``: frames per second of the whole measurement on the virtual bench.
+"""``qrfield benchmark pipeline``: frames per second of the whole measurement on the virtual bench.
 
 For 640x480 and 1280x720, from one run:
   - render only (baseline): the virtual bench producing frames, nothing else;
@@ -37,7 +37,7 @@ def run(args: argparse.Namespace) -> int:
     methods = methods_from_choice(args.method)
     bench = VirtualBenchSettings(fps=0.0)  # as fast as it renders
     print(
-        f"qrfield bench pipeline: virtual bench, 50 mm code at {bench.pose.position_mm.tolist()} mm, "
+        f"qrfield benchmark pipeline: virtual bench, 50 mm code at {bench.pose.position_mm.tolist()} mm, "
         f"{bench.pose.angles_deg.tolist()} deg, noise {bench.noise_sigma}, blur {bench.blur_px}; "
         f"method {args.method}; {args.seconds:g} s per figure; {os.cpu_count()} CPUs"
     )
@@ -99,8 +99,8 @@ def _interleaved_rates(baseline, step, seconds: float, slice_s: float = 0.25) ->
 
 
 def _gui_rates(camera: str, method: str, seconds: float) -> tuple[float, float]:
-    """The app's rates, measured by ui.bench (the core never imports Qt itself, as for ``qrfield gui``)."""
+    """The app's rates, measured by ui.gui_rates (the core never imports Qt itself, like ``qrfield gui``)."""
     os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
-    from ui.bench import gui_rates
+    from ui.gui_rates import gui_rates
 
     return gui_rates(camera, method, seconds)

@@ -1,6 +1,6 @@
-"""Corner figures of ``qrfield bench detect`` on the hard set: errors per corner and band, flags,
+"""Corner figures of ``qrfield benchmark detect`` on the hard set: errors per corner and band, flags,
 and the calibration of the corners' covariance (not a benchmark of its own: the leading
-underscore keeps it out of ``qrfield bench``)."""
+underscore keeps it out of ``qrfield benchmark``)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from qrfield.bench.hardset import BANDS, HardView
+from qrfield.benchmarks.hardset import BANDS, HardView
 from qrfield.detect.detection import GOOD_QUALITY
 
 #: A corner further off than this, px, must not be reported with a good quality.

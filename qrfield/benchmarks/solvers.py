@@ -1,4 +1,4 @@
-"""``qrfield bench solvers``: microseconds per pose of each solver beside raw OpenCV, from one run.
+"""``qrfield benchmark solvers``: microseconds per pose of each solver beside raw OpenCV, from one run.
 
 Times are CPU time of this process (time.process_time), so that other work on a shared machine
 does not inflate them; the solvers are single-threaded. Baseline, measured in the same run on the
@@ -42,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from qrfield.camera import resolve_camera
-    from qrfield.geometry import angle_difference, ippe_object_points
+    from qrfield.geometry import ippe_object_points
     from qrfield.sampling import random_visible_poses
     from qrfield.sessions.criteria import AcceptanceCriteria
     from qrfield.solvers import SEED_SETTINGS, IppeSettings, NumericalSettings, solve, solve_batch
@@ -103,15 +103,15 @@ def run(args: argparse.Namespace) -> int:
     reps = -(-args.batch // len(corners))
     big = np.tile(corners, (reps, 1, 1))[: args.batch]
     for label, settings in (("defaults", default), ("thesis settings", SEED_SETTINGS)):
-        solve_batch(big[:1000], camera, side, settings)
+        solve_batch(big[:1000], camera, side, settings=settings)
         t0 = time.process_time()
-        solve_batch(big, camera, side, settings)
+        solve_batch(big, camera, side, settings=settings)
         rows.append(
             (f"numerical batch of {len(big)}, {label}, per pose", (time.process_time() - t0) * 1e6 / len(big))
         )
 
     print(
-        f"qrfield bench solvers: camera {camera.name}, QR {side:g} mm, {len(corners)} seeded poses "
+        f"qrfield benchmark solvers: camera {camera.name}, QR {side:g} mm, {len(corners)} seeded poses "
         "(z 150-800 mm, tilt <= 60 deg, any in-plane turn), exact corners unless marked; CPU time"
     )
     print(f"{'solve':<52}{'us/pose':>10}{'x baseline':>12}{'poses/s':>12}")
@@ -133,18 +133,14 @@ def run(args: argparse.Namespace) -> int:
     ]
     for label, settings in configs:
         for data_label, data in (("exact", corners), ("0.5 px", noisy)):
-            b = solve_batch(data, camera, side, settings)
-            err_pos = np.linalg.norm(b.position_mm - truth_pos, axis=1)
-            err_ang = np.max(np.abs(angle_difference(b.angles_deg, truth_ang)), axis=1)
-            ok = b.converged & criteria.meets(err_pos, err_ang)
+            b = solve_batch(data, camera, side, settings=settings)
+            ok = b.converged & criteria.judge(b.position_mm, b.angles_deg, truth_pos, truth_ang)[0]
             print(
                 f"{label:<48}{data_label:<10}{b.converged.mean():>10.4f}{b.iterations.mean():>7.2f}{ok.mean():>8.4f}"
             )
     for data_label, data in (("exact", corners), ("0.5 px", noisy)):
         b = solve_batch(data, camera, side, method="ippe")
-        err_pos = np.linalg.norm(b.position_mm - truth_pos, axis=1)
-        err_ang = np.max(np.abs(angle_difference(b.angles_deg, truth_ang)), axis=1)
-        ok = b.converged & criteria.meets(err_pos, err_ang)
+        ok = b.converged & criteria.judge(b.position_mm, b.angles_deg, truth_pos, truth_ang)[0]
         label = "ippe (LM refined)"
         print(f"{label:<48}{data_label:<10}{b.converged.mean():>10.4f}{0.0:>7.2f}{ok.mean():>8.4f}")
     print("targets: numerical single <= 10x baseline; batch >= 200000 poses/s")
