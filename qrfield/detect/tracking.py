@@ -60,6 +60,10 @@ MOTION_MARGIN_PX = 16.0
 MIN_MOTION_RESPONSE = 0.3
 
 
+#: A grey crop of a frame and its offset (x, y) in the camera image.
+_View = tuple[np.ndarray, tuple[int, int]]
+
+
 @dataclass(frozen=True)
 class _Motion:
     """A new track's patch for measuring its first move: the region (x0, y0, x1, y1) of the image
@@ -78,16 +82,23 @@ def _motion_patch(image: np.ndarray, region: tuple[int, int, int, int]) -> np.nd
     return cv2.resize(grey, size, interpolation=cv2.INTER_AREA).astype(np.float32)
 
 
-def motion_reference(image: np.ndarray, corners: np.ndarray) -> _Motion | None:
-    """The patch around ``corners`` (4, 2) px in ``image`` (grey or BGR) to measure a move from."""
+def motion_reference(
+    image: np.ndarray, corners: np.ndarray, offset: tuple[int, int] = (0, 0)
+) -> _Motion | None:
+    """The patch around ``corners`` (4, 2) px of the camera image to measure a move from, cut from
+    ``image`` (grey or BGR): the camera image, or a crop of it at ``offset`` (x, y)."""
     h, w = image.shape[:2]
+    ox, oy = offset
     margin = MOTION_MARGIN_PX + 0.25 * float(np.ptp(corners, axis=0).max())
-    x0, y0 = (max(int(v), 0) for v in np.floor(corners.min(axis=0) - margin))
-    x1, y1 = (min(int(v), m) for v, m in zip(np.ceil(corners.max(axis=0) + margin) + 1, (w, h), strict=True))
+    x0, y0 = (max(int(v), o) for v, o in zip(np.floor(corners.min(axis=0) - margin), offset, strict=True))
+    x1, y1 = (
+        min(int(v), m)
+        for v, m in zip(np.ceil(corners.max(axis=0) + margin) + 1, (ox + w, oy + h), strict=True)
+    )
     if x1 - x0 < 21 or y1 - y0 < 21:
         return None
     region = (x0, y0, x1, y1)
-    return _Motion(region, _motion_patch(image, region))
+    return _Motion(region, _motion_patch(image, (x0 - ox, y0 - oy, x1 - ox, y1 - oy)))
 
 
 def measured_move(reference: _Motion, image: np.ndarray) -> np.ndarray | None:
@@ -125,9 +136,20 @@ class _Track:
     #: the pattern score of the last check (the warm fit does not check the patterns each frame)
     score: float | None = None
     #: the patch around the code in the last frame, to measure the move when the prediction fails
+    #: (made from ``last_view`` only then: most frames do not need it)
     motion: _Motion | None = None
+    #: the grey crop of the last frame around the code and its offset (x, y) in the image
+    last_view: _View | None = None
     #: the residual of the fit when a backend last found the code (the bar of every tracked fit)
     reference_residual: float = np.nan
+
+    def reference(self) -> _Motion | None:
+        """The last frame's patch to measure this frame's move from (None when there is none)."""
+        if self.motion is None and self.last_view is not None:
+            grey, offset = self.last_view
+            self.motion = motion_reference(grey, self.detection.corners_px, offset)
+            self.last_view = None
+        return self.motion
 
     def predicted(self) -> np.ndarray:
         corners = self.detection.corners_px
@@ -191,15 +213,16 @@ class Tracker:
         found: list[Detection] | None = None
         grey = None
         if self.settings.track and self._tracks:
-            found = self._refine_all(image)
-            if found is not None:
-                self._advance(found, image)
+            refined = self._refine_all(image)
+            if refined is not None:
+                found, view = refined
+                self._advance(found, view)
                 self.last_mode = "refined"
             else:
                 grey = as_grey(image)
                 found = self._search_all(grey)
                 if found is not None:
-                    self._advance(found, grey, refound=True)
+                    self._advance(found, (grey, (0, 0)), refound=True)
                     self.last_mode = "roi"
         if found is not None and not due:
             return found
@@ -248,20 +271,26 @@ class Tracker:
             found.append(detection)
         return found
 
-    def _advance(self, found: list[Detection], image: np.ndarray, refound: bool = False) -> None:
-        """Move the tracks on to ``found`` in ``image`` (grey when ``refound``: by a backend)."""
+    def _advance(self, found: list[Detection], view: _View, refound: bool = False) -> None:
+        """Move the tracks on to ``found`` in ``view``: the grey image, or a crop of it around the
+        codes, and its offset (x, y); when ``refound`` (by a backend) the whole grey image."""
+        grey, offset = view
         for track, detection in zip(self._tracks, found, strict=True):
             track.previous_corners = track.detection.corners_px
             if refound:  # re-read its polarity and layout, and its reference residual
-                fresh = self._new_track(image, detection)
+                fresh = self._new_track(grey, detection)
                 track.inverted, track.cells, track.fit_state = fresh.inverted, fresh.cells, fresh.fit_state
                 track.motion, track.reference_residual = fresh.motion, fresh.reference_residual
+                track.last_view = None
             else:
-                track.motion = motion_reference(image, detection.corners_px)
+                # Kept, not cut into a patch yet (that costs about half a warm fit): most frames
+                # hold without measuring their move.
+                track.motion, track.last_view = None, (grey, offset)
             track.detection = detection
 
-    def _refine_all(self, image: np.ndarray) -> list[Detection] | None:
-        """Step 1 for every track, on the grey of just the region around them (a cheap crop)."""
+    def _refine_all(self, image: np.ndarray) -> tuple[list[Detection], _View] | None:
+        """Step 1 for every track, on the grey of just the region around them (a cheap crop): the
+        detections and that crop with its offset (x, y), or None when a track is not followed."""
         settings = self.settings
         if not settings.refine or not all(t.detection.refined for t in self._tracks):
             return None
@@ -281,6 +310,8 @@ class Tracker:
         if x1 - x0 < 21 or y1 - y0 < 21:
             return None
         grey = as_grey(image[y0:y1, x0:x1])
+        if np.shares_memory(grey, image):  # kept as the track's last view: not the caller's buffer
+            grey = grey.copy()
         offset = (int(x0), int(y0))
         shape = (h, w)
         found = []
@@ -291,7 +322,7 @@ class Tracker:
             if detection is None:
                 return None
             found.append(detection)
-        return found
+        return found, (grey, offset)
 
     def _follow(
         self,
@@ -328,8 +359,9 @@ class Tracker:
         # The prediction failed (or there is no warm fit to try it): the fits below are local, so
         # they start from the measured move rather than from the prediction.
         start = predicted
-        if result is None and track.motion is not None and image is not None:
-            move = measured_move(track.motion, image)
+        reference = track.reference() if result is None and image is not None else None
+        if reference is not None:
+            move = measured_move(reference, image)
             if move is not None:
                 start = last.corners_px + move - np.array(offset, dtype=np.float64)
                 if warm:
