@@ -5,15 +5,24 @@ Per frame and per code tracked, cheapest first:
    velocity, with the last frame's edge width and lighting, two Gauss-Newton steps, on the
    module layout of the first decode (no decoding: the text is carried over); the fit must still
    see the code (its contrast and residual) and the symbol's fixed patterns must check out there.
-   A new track has no velocity yet: on its first frame, when the code moved beyond the warm
-   fit's reach (about a pixel), the move is measured by phase correlation of a small patch
-   around the code in both frames, and the warm fit starts from there (more steps, the patterns
-   checked). If it does not hold, the edge-line refinement and a full symbol fit from the
-   prediction;
+   When the warm fit from the prediction does not hold (a new track has no velocity yet; a code
+   that swings back and forth is far from where constant velocity puts it), the move since the
+   last frame is measured by phase correlation of a small patch around the code in both frames,
+   and the warm fit starts from there (more steps, the patterns checked). If it does not hold,
+   the full symbol fit, else the edge-line refinement and a full symbol fit, from the measured
+   start (or the prediction when the move cannot be measured);
 2. else run the first backend on a region around the prediction (``track_margin_px`` plus a quarter
    of the code's size), refine and check; the text must be the one tracked;
 3. else (any code lost) a full-frame detection with every backend. Every ``redetect_frames``
    frames a full-frame detection also runs beside the tracking, to pick up codes that came into view.
+
+Every fit of step 1 starts only a module or two from the code: all of them are local, and from
+a start two modules off they can settle a fraction of a module to a module off (1.5-7 px at 5 px
+modules, measured on the virtual bench wobbling 20-30 deg at 0.5 s), where the fixed patterns,
+sampled at module centres, still check out. What tells such a fit from a right one is its residual:
+right fits stay within MAX_RESIDUAL_GROWTH of the residual the track had when a backend last found
+it (its *reference*, not the last frame's: a wrong fit let through would loosen the next frame's
+bar); every fit of step 1 must pass that bar (docs/detection.md, "Tracking under fast motion").
 """
 
 from __future__ import annotations
@@ -34,9 +43,12 @@ from qrfield.detect.symbol_track import WarmFit
 #: Gauss-Newton steps of a warm fit (one step from a prediction 0.1-0.2 px off leaves 0.013-0.021
 #: px, twice the noise's share, and tracked corners lose 10-20 % in accuracy: measured).
 TRACK_ITERATIONS = 2
-#: A warm fit still sees the code while its residual stays below this share of its contrast ...
+#: A fit of step 1 still sees the code while its residual stays below this share of its contrast ...
 MAX_RESIDUAL_SHARE = 0.2
-#: ... and below this multiple of the last frame's residual (plus 2 grey levels).
+#: ... and below this multiple of the track's reference residual (the fit's when a backend last
+#: found the code) plus 2 grey levels. On the virtual bench (noise 2, blur 0.6 px) right fits are
+#: 0.75-1.2 times the reference, fits 1.5 px or more off 1.8-10 times (residual 8-46 grey levels
+#: against 4-5): measured.
 MAX_RESIDUAL_GROWTH = 2.0
 #: Gauss-Newton steps of the warm fit from a measured move (a new track's first frame).
 JUMP_ITERATIONS = 5
@@ -46,6 +58,10 @@ MOTION_PATCH_PX = 128
 MOTION_MARGIN_PX = 16.0
 #: Least phase-correlation response for a measured move to be used.
 MIN_MOTION_RESPONSE = 0.3
+
+
+#: A grey crop of a frame and its offset (x, y) in the camera image.
+_View = tuple[np.ndarray, tuple[int, int]]
 
 
 @dataclass(frozen=True)
@@ -66,16 +82,23 @@ def _motion_patch(image: np.ndarray, region: tuple[int, int, int, int]) -> np.nd
     return cv2.resize(grey, size, interpolation=cv2.INTER_AREA).astype(np.float32)
 
 
-def motion_reference(image: np.ndarray, corners: np.ndarray) -> _Motion | None:
-    """The patch around ``corners`` (4, 2) px in ``image`` (grey or BGR) to measure a move from."""
+def motion_reference(
+    image: np.ndarray, corners: np.ndarray, offset: tuple[int, int] = (0, 0)
+) -> _Motion | None:
+    """The patch around ``corners`` (4, 2) px of the camera image to measure a move from, cut from
+    ``image`` (grey or BGR): the camera image, or a crop of it at ``offset`` (x, y)."""
     h, w = image.shape[:2]
+    ox, oy = offset
     margin = MOTION_MARGIN_PX + 0.25 * float(np.ptp(corners, axis=0).max())
-    x0, y0 = (max(int(v), 0) for v in np.floor(corners.min(axis=0) - margin))
-    x1, y1 = (min(int(v), m) for v, m in zip(np.ceil(corners.max(axis=0) + margin) + 1, (w, h), strict=True))
+    x0, y0 = (max(int(v), o) for v, o in zip(np.floor(corners.min(axis=0) - margin), offset, strict=True))
+    x1, y1 = (
+        min(int(v), m)
+        for v, m in zip(np.ceil(corners.max(axis=0) + margin) + 1, (ox + w, oy + h), strict=True)
+    )
     if x1 - x0 < 21 or y1 - y0 < 21:
         return None
     region = (x0, y0, x1, y1)
-    return _Motion(region, _motion_patch(image, region))
+    return _Motion(region, _motion_patch(image, (x0 - ox, y0 - oy, x1 - ox, y1 - oy)))
 
 
 def measured_move(reference: _Motion, image: np.ndarray) -> np.ndarray | None:
@@ -112,8 +135,21 @@ class _Track:
     warm: WarmFit | None = None
     #: the pattern score of the last check (the warm fit does not check the patterns each frame)
     score: float | None = None
-    #: for measuring the first move of a new track (None once it has a velocity)
+    #: the patch around the code in the last frame, to measure the move when the prediction fails
+    #: (made from ``last_view`` only then: most frames do not need it)
     motion: _Motion | None = None
+    #: the grey crop of the last frame around the code and its offset (x, y) in the image
+    last_view: _View | None = None
+    #: the residual of the fit when a backend last found the code (the bar of every tracked fit)
+    reference_residual: float = np.nan
+
+    def reference(self) -> _Motion | None:
+        """The last frame's patch to measure this frame's move from (None when there is none)."""
+        if self.motion is None and self.last_view is not None:
+            grey, offset = self.last_view
+            self.motion = motion_reference(grey, self.detection.corners_px, offset)
+            self.last_view = None
+        return self.motion
 
     def predicted(self) -> np.ndarray:
         corners = self.detection.corners_px
@@ -122,14 +158,20 @@ class _Track:
         return corners + (corners - self.previous_corners)
 
 
+def _fits_reference(residual: float, track: _Track) -> bool:
+    """A tracked fit's ``residual`` (grey levels) is within MAX_RESIDUAL_GROWTH of the track's
+    reference (True while the track has none: a backend's corners without a symbol fit)."""
+    return not residual > MAX_RESIDUAL_GROWTH * track.reference_residual + 2.0
+
+
 def _warm_holds(fit: SymbolFit, track: _Track) -> bool:
-    """A warm fit still sees the tracked code: its polarity, its residual against its contrast and
-    against the last frame's."""
+    """A fit of step 1 still sees the tracked code: its polarity, its residual against its contrast
+    and against the track's reference."""
     return bool(
         fit.ok
         and (fit.contrast < 0) == track.inverted
         and fit.residual < MAX_RESIDUAL_SHARE * abs(fit.contrast)
-        and not fit.residual > MAX_RESIDUAL_GROWTH * track.residual + 2.0
+        and _fits_reference(fit.residual, track)
     )
 
 
@@ -171,15 +213,16 @@ class Tracker:
         found: list[Detection] | None = None
         grey = None
         if self.settings.track and self._tracks:
-            found = self._refine_all(image)
-            if found is not None:
-                self._advance(found)
+            refined = self._refine_all(image)
+            if refined is not None:
+                found, view = refined
+                self._advance(found, view)
                 self.last_mode = "refined"
             else:
                 grey = as_grey(image)
                 found = self._search_all(grey)
                 if found is not None:
-                    self._advance(found, grey)
+                    self._advance(found, (grey, (0, 0)), refound=True)
                     self.last_mode = "roi"
         if found is not None and not due:
             return found
@@ -207,8 +250,16 @@ class Tracker:
         if state is None and detection.corners_cov is not None and np.isfinite(check.light - check.dark):
             # Warm from the start: the light level and contrast the pattern check saw.
             state = FitState(START_EDGE_PX, np.array([check.light, 0, 0, check.light - check.dark, 0, 0]))
-        motion = motion_reference(grey, detection.corners_px) if state is not None else None
-        return _Track(detection, inverted=check.inverted, cells=cells, fit_state=state, motion=motion)
+        motion = motion_reference(grey, detection.corners_px)
+        reference = state.scale if state is not None and detection.fit_state is not None else np.nan
+        return _Track(
+            detection,
+            inverted=check.inverted,
+            cells=cells,
+            fit_state=state,
+            motion=motion,
+            reference_residual=reference,
+        )
 
     def _search_all(self, grey: np.ndarray) -> list[Detection] | None:
         """Step 2 for every track; None as soon as one is not found."""
@@ -220,19 +271,26 @@ class Tracker:
             found.append(detection)
         return found
 
-    def _advance(self, found: list[Detection], grey: np.ndarray | None = None) -> None:
+    def _advance(self, found: list[Detection], view: _View, refound: bool = False) -> None:
+        """Move the tracks on to ``found`` in ``view``: the grey image, or a crop of it around the
+        codes, and its offset (x, y); when ``refound`` (by a backend) the whole grey image."""
+        grey, offset = view
         for track, detection in zip(self._tracks, found, strict=True):
             track.previous_corners = track.detection.corners_px
-            if grey is not None:  # re-found by a backend: re-read its polarity and layout
+            if refound:  # re-read its polarity and layout, and its reference residual
                 fresh = self._new_track(grey, detection)
                 track.inverted, track.cells, track.fit_state = fresh.inverted, fresh.cells, fresh.fit_state
-                track.motion = fresh.motion
+                track.motion, track.reference_residual = fresh.motion, fresh.reference_residual
+                track.last_view = None
             else:
-                track.motion = None  # it has a velocity now
+                # Kept, not cut into a patch yet (that costs about half a warm fit): most frames
+                # hold without measuring their move.
+                track.motion, track.last_view = None, (grey, offset)
             track.detection = detection
 
-    def _refine_all(self, image: np.ndarray) -> list[Detection] | None:
-        """Step 1 for every track, on the grey of just the region around them (a cheap crop)."""
+    def _refine_all(self, image: np.ndarray) -> tuple[list[Detection], _View] | None:
+        """Step 1 for every track, on the grey of just the region around them (a cheap crop): the
+        detections and that crop with its offset (x, y), or None when a track is not followed."""
         settings = self.settings
         if not settings.refine or not all(t.detection.refined for t in self._tracks):
             return None
@@ -243,10 +301,8 @@ class Tracker:
             for p, t in zip(predictions, self._tracks, strict=True)
         )
         # Room for the edge profiles and the quiet-zone check (one module out) around the code,
-        # and for a new track's first move (unknown yet).
-        margin = 2.0 * module + settings.search_px + 6.0
-        if any(t.previous_corners is None for t in self._tracks):
-            margin += MOTION_MARGIN_PX
+        # and for a move that the prediction misses (measured then, see _follow).
+        margin = 2.0 * module + settings.search_px + 6.0 + MOTION_MARGIN_PX
         h, w = image.shape[:2]
         x0, y0 = np.floor(everything.min(axis=0) - margin).astype(int)
         x1, y1 = np.ceil(everything.max(axis=0) + margin).astype(int) + 1
@@ -254,6 +310,8 @@ class Tracker:
         if x1 - x0 < 21 or y1 - y0 < 21:
             return None
         grey = as_grey(image[y0:y1, x0:x1])
+        if np.shares_memory(grey, image):  # kept as the track's last view: not the caller's buffer
+            grey = grey.copy()
         offset = (int(x0), int(y0))
         shape = (h, w)
         found = []
@@ -264,7 +322,7 @@ class Tracker:
             if detection is None:
                 return None
             found.append(detection)
-        return found
+        return found, (grey, offset)
 
     def _follow(
         self,
@@ -276,35 +334,49 @@ class Tracker:
         image: np.ndarray | None = None,
     ) -> Detection | None:
         """Step 1 for one track on a crop ``grey`` at ``offset`` of an image of ``shape`` (H, W):
-        the warm whole-symbol fit (for a new track from its measured move in ``image``, the whole
-        frame, when needed), else the detector's refinement from the prediction."""
+        the warm whole-symbol fit from the prediction, else from the move measured in ``image``
+        (the whole frame), else the full fit or the detector's refinement from the measured start
+        (the prediction when the move cannot be measured); each must pass the track's residual bar."""
         settings = self.settings
+        if settings.symbol_fit and not np.isfinite(track.reference_residual):
+            # A backend found this code but the symbol fit did not hold there: nothing to tell a
+            # right fit from a wrong one here, so step 2 looks for it again.
+            return None
         last = track.detection
         lens = self.detector.lens
         cells = track.cells
         if cells is None:
             cells = symbol_cells(grey, predicted, last.modules, last.symbol, track.inverted, lens, offset)
         result = None
-        if track.fit_state is not None and settings.symbol_fit:
+        warm = track.fit_state is not None and settings.symbol_fit
+        if warm:
             if track.warm is None or track.warm.cells is not cells or track.warm.lens is not lens:
                 track.warm = WarmFit(cells, lens)
             fit = track.warm.fit(grey, predicted, track.fit_state, offset, TRACK_ITERATIONS)
             if _warm_holds(fit, track):
                 score = track.detection.quality if track.score is None else track.score
                 result = _refined(fit, score, cells)
-            elif track.motion is not None and image is not None:
-                result = self._jump(grey, track, cells, offset, image)
-        if result is None and track.fit_state is not None and settings.symbol_fit:
-            # A prediction too far for the warm fit (a new track, a jerk): the full fit from it.
-            fit = fit_symbol(grey, predicted, cells, lens=lens, offset=offset, image_shape=shape)
-            if fit.ok and fit.residual < MAX_RESIDUAL_SHARE * abs(fit.contrast):
+        # The prediction failed (or there is no warm fit to try it): the fits below are local, so
+        # they start from the measured move rather than from the prediction.
+        start = predicted
+        reference = track.reference() if result is None and image is not None else None
+        if reference is not None:
+            move = measured_move(reference, image)
+            if move is not None:
+                start = last.corners_px + move - np.array(offset, dtype=np.float64)
+                if warm:
+                    result = self._jump(grey, track, cells, offset, start)
+        if result is None and warm:
+            # A start too far for the warm fit (a jerk, a fast swing): the full fit from it.
+            fit = fit_symbol(grey, start, cells, lens=lens, offset=offset, image_shape=shape)
+            if _warm_holds(fit, track):
                 result = self._checked(grey, fit, track, cells, offset)
         if result is None:
-            # Cold: the edge lines and the whole symbol fit from the prediction (V3 is not
-            # re-sought: it comes with the prediction).
+            # Cold: the edge lines and the whole symbol fit from the start (V3 is not
+            # re-sought: it comes with the start).
             result = self.detector.refine(
                 grey,
-                predicted,
+                start,
                 last.modules,
                 0.0,
                 track.inverted,
@@ -313,6 +385,8 @@ class Tracker:
                 image_shape=shape,
             )
             if result is None or result.score < settings.min_quality:
+                return None
+            if not _fits_reference(result.residual, track):
                 return None
             if check_patterns(grey, result.corners_px, last.modules, lens, offset).inverted != track.inverted:
                 return None
@@ -335,15 +409,11 @@ class Tracker:
         )
 
     def _jump(
-        self, grey: np.ndarray, track: _Track, cells: np.ndarray, offset: tuple[int, int], image: np.ndarray
+        self, grey: np.ndarray, track: _Track, cells: np.ndarray, offset: tuple[int, int], start: np.ndarray
     ) -> Refined | None:
-        """The warm fit of a new track from its move measured in ``image`` (the whole frame), with
-        the patterns checked there; None when the move cannot be measured or the fit does not hold."""
-        assert track.motion is not None and track.warm is not None and track.fit_state is not None
-        move = measured_move(track.motion, image)
-        if move is None:
-            return None
-        start = track.detection.corners_px + move - np.array(offset, dtype=np.float64)
+        """The warm fit from ``start`` (corners in ``grey``: the last ones moved by the measured
+        move), with the patterns checked; None when the fit does not hold."""
+        assert track.warm is not None and track.fit_state is not None
         fit = track.warm.fit(grey, start, track.fit_state, offset, JUMP_ITERATIONS)
         return self._checked(grey, fit, track, cells, offset) if _warm_holds(fit, track) else None
 
