@@ -19,7 +19,7 @@ matrix, as there.
 
 Sampling the image between pixel centres (bilinear) smooths it a little depending on where the
 points fall; over hundreds of points at all phases this averages out (measured on the moving
-sequence of ``qrfield bench detect``: docs/detection.md).
+sequence of ``qrfield benchmark detect``: docs/detection.md).
 """
 
 from __future__ import annotations
