@@ -62,6 +62,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # --help, --version, or a usage error already printed in one line
         return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
+    if getattr(args, "config_dir", None):
+        from qrfield import paths
+
+        # One config folder for the whole command: the settings file and the camera profiles in it.
+        paths.use_config_dir(args.config_dir)
     try:
         code = int(args._run(args) or 0)
         sys.stdout.flush()  # here, not at exit: a closed pipe must be caught below, not printed

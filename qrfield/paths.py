@@ -31,6 +31,15 @@ def config_dir(override: str | os.PathLike[str] | None = None) -> Path:
     return (xdg if xdg is not None else Path.home() / ".config") / "qrfield"
 
 
+def use_config_dir(directory: str | os.PathLike[str]) -> Path:
+    """Make ``directory`` (``--config-dir``, relative to the current folder) this process's config
+    folder for everything kept there (app.json, the user's camera profiles in ``calib/``), and for
+    the processes it starts: it becomes ``$QRFIELD_CONFIG_DIR``. Returns the absolute folder."""
+    folder = Path(directory).expanduser().absolute()
+    os.environ["QRFIELD_CONFIG_DIR"] = str(folder)
+    return folder
+
+
 def data_dir() -> Path:
     """The data folder for results written without a named destination."""
     env = _from_env("QRFIELD_DATA_DIR")

@@ -210,3 +210,21 @@ def test_the_run_configuration_has_the_one_side_option_and_its_limits(tmp_path: 
     assert main(["config", "--config-dir", str(tmp_path), "--json", "--side-mm", "0.5"]) == 0
     side = json.loads(capsys.readouterr().out)["run"]["side_mm"]
     assert side == {"value": 0.5, "origin": "command line", "option": "--side-mm"}
+
+
+def test_config_dir_also_holds_the_users_camera_profiles(tmp_path, capsys, monkeypatch) -> None:
+    """`--config-dir D` is the config folder for everything in it, the user's calibrations in
+    D/calib included: `--camera mycam` finds D/calib/mycam.json (it used to look in the default)."""
+    from qrfield.cli import main
+
+    folder = tmp_path / "bench-pi"
+    (folder / "calib").mkdir(parents=True)
+    profile = {"width": 640, "height": 480, "fx": 612.5, "fy": 611.0, "cx": 319.5, "cy": 239.5}
+    (folder / "calib" / "mycam.json").write_text(json.dumps(profile), encoding="utf-8")
+    monkeypatch.chdir(tmp_path)
+    assert main(["config", "--config-dir", "bench-pi", "--camera", "mycam", "--json"]) == 0, capsys.readouterr().err
+    shown = capsys.readouterr().out
+    assert "612.5" in shown and "mycam" in shown
+    monkeypatch.setenv("QRFIELD_CONFIG_DIR", str(tmp_path / "elsewhere"))  # a new process without it
+    assert main(["config", "--camera", "mycam", "--json"]) == 2  # not found
+    assert "mycam" in capsys.readouterr().err
