@@ -96,6 +96,8 @@ def check_corners_cov(cov: object, batch: int | None = None) -> np.ndarray:
         c = np.array(cov, dtype=float)
     except (TypeError, ValueError):
         raise SolverError("corners_cov must be a numeric (4, 2, 2) array of px^2 (V1..V4)") from None
+    if batch is None and c.shape == (4, 2, 2) and _usable_single(c.reshape(16).tolist()):
+        return c  # the usual case, checked in Python floats; else the checks below say what is wrong
     if batch is not None and c.shape == (4, 2, 2):
         c = np.broadcast_to(c, (batch, 4, 2, 2)).copy()
     want = (4, 2, 2) if batch is None else (batch, 4, 2, 2)
@@ -114,6 +116,21 @@ def check_corners_cov(cov: object, batch: int | None = None) -> np.ndarray:
             "positive semi-definite"
         )
     return c
+
+
+def _usable_single(v: list[float]) -> bool:
+    """The checks of :func:`check_corners_cov` on one (4, 2, 2) covariance as 16 floats: True when all pass."""
+    for i in range(0, 16, 4):
+        a, b, c, d = v[i : i + 4]
+        if not (
+            math.isfinite(a + b + c + d)
+            and abs(b - c) <= SYMMETRY_RTOL * (a + d + 1e-300)
+            and a >= 0.0
+            and d >= 0.0
+            and a * d - b * b >= -1e-9 * (a + d) ** 2
+        ):
+            return False
+    return True
 
 
 def isotropic_cov(std_px: float, batch: int | None = None) -> np.ndarray:
