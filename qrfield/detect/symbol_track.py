@@ -41,6 +41,7 @@ from qrfield.detect.symbol_fit import (
     corner_covariance,
     darkness_at,
 )
+from qrfield.linalg import small_inverse, small_solve
 
 #: Template points (module coordinates near the known edges).
 TEMPLATE_POINTS = 600
@@ -106,6 +107,13 @@ class _Template:
     def fits(self, h: np.ndarray, edge_px: float) -> bool:
         change = np.abs(_scales(h, self.n) / self.scales - 1.0).max()
         return bool(change < TEMPLATE_TOLERANCE and abs(edge_px / self.edge_px - 1.0) < TEMPLATE_TOLERANCE)
+
+
+def _usable_homography(h: np.ndarray) -> bool:
+    """A finite homography (3, 3) with |det| >= 1e-12 (in Python floats: no numpy call overhead)."""
+    a, b, c, d, e, f, g, hh, i = h.ravel().tolist()
+    det = a * (e * i - f * hh) - b * (d * i - f * g) + c * (d * hh - e * g)
+    return math.isfinite(a + b + c + d + e + f + g + hh + i) and abs(det) >= 1e-12
 
 
 def _compose_inverse(h: np.ndarray, delta: np.ndarray) -> np.ndarray | None:
@@ -180,7 +188,7 @@ class WarmFit:
             h = cv2.getPerspectiveTransform(self._square32, ideal.astype(np.float32))
         except cv2.error:
             return fail("degenerate corners")
-        if not np.all(np.isfinite(h)) or abs(np.linalg.det(h)) < 1e-12:
+        if not _usable_homography(h):
             return fail("degenerate corners")
         edge = state.edge_px
         template = self._template
@@ -196,15 +204,16 @@ class WarmFit:
         k = len(template.t)
         jac = template.jac
         m4 = self._corner_modules
+        limits = np.array([ww - 1, hh - 1], dtype=np.float64)
         with np.errstate(all="ignore"):
             for _ in range(iterations):
                 px = cv2.perspectiveTransform(template.uv_cv, h).reshape(-1, 2)
                 if lens.distorted:
                     px = lens.distort(px)
                 px -= shift
-                lo, hi = px.min(axis=0), px.max(axis=0)
                 inside = None  # all inside, the usual case
-                if lo[0] < 0 or lo[1] < 0 or hi[0] > ww - 1 or hi[1] > hh - 1:
+                # (two whole-array tests: numpy's per-column min/max on (k, 2) costs ten times more)
+                if px.min() < 0 or (px > limits).any():
                     inside = (px[:, 0] >= 0) & (px[:, 1] >= 0) & (px[:, 0] <= ww - 1) & (px[:, 1] <= hh - 1)
                     if inside.mean() < 0.9:
                         return fail("the code leaves the region")
@@ -227,7 +236,7 @@ class WarmFit:
                 normal = jw.T @ jac
                 normal.flat[::15] += 1e-9
                 try:
-                    delta = np.linalg.solve(normal, jw.T @ resid)
+                    delta = small_solve(normal, jw.T @ resid, symmetric=True)
                 except np.linalg.LinAlgError:
                     return fail("the fit is singular")
                 h = _compose_inverse(h, delta)
@@ -244,7 +253,7 @@ class WarmFit:
             if abs(contrast) < MIN_CONTRAST:
                 return fail(f"too little contrast ({abs(contrast):.0f} grey levels)")
             try:
-                cov = robust**2 * np.linalg.inv(normal)[:8, :8]
+                cov = robust**2 * small_inverse(normal, symmetric=True)[:8, :8]
             except np.linalg.LinAlgError:
                 return fail("the fit is singular")
             # Corner k is H (m_k - dW(m_k) dH) to first order: d corner / d dH = -dpx/dm dW/ddH.

@@ -119,7 +119,7 @@ def check_corners_cov(cov: object, batch: int | None = None) -> np.ndarray:
 
 
 def _usable_single(v: list[float]) -> bool:
-    """The checks of :func:`check_corners_cov` on one (4, 2, 2) covariance as 16 floats: True when all pass."""
+    """The checks of :func:`check_corners_cov` on one (4, 2, 2) covariance as 16 floats: all pass."""
     for i in range(0, 16, 4):
         a, b, c, d = v[i : i + 4]
         if not (

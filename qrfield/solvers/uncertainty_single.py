@@ -5,7 +5,7 @@ The same first-order propagation and mirror test as the array functions of
 method), written for the single solve that every video frame makes: there the array functions
 spend most of their time in the overhead of about 80 numpy calls on 8 x 6 matrices. Here the
 per-vertex terms are Python floats, the matrices are built once from them, and the small linear
-systems go to cv2.solve (LU; about a quarter of np.linalg.solve's overhead on these sizes).
+systems go to qrfield.linalg.small_solve (cv2's LU: a quarter of np.linalg.solve's overhead here).
 The numbers agree with the array functions to float rounding (tests/test_solvers_uncertainty_single.py
 compares both on seeded poses, pinhole and distorted, both methods).
 
@@ -21,19 +21,9 @@ import math
 import numpy as np
 
 from qrfield.camera import CameraModel
+from qrfield.linalg import small_solve
 from qrfield.solvers.kernel import PAIRS
 from qrfield.solvers.uncertainty import _BLOCK_DIAGONAL, _UNIT_STEPS, distortion_terms
-
-
-def small_solve(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a^-1 b for a small square float64 matrix ``a`` and a 2-D ``b``; np.linalg.solve (which
-    raises LinAlgError for a singular ``a``, as the array path does) when cv2's LU finds ``a`` singular."""
-    import cv2
-
-    a = np.ascontiguousarray(a)
-    b = np.ascontiguousarray(b)
-    ok, out = cv2.solve(a, b, flags=cv2.DECOMP_LU)
-    return out if ok else np.linalg.solve(a, b)
 
 
 def block_diagonal(blocks: list[float]) -> np.ndarray:
@@ -156,6 +146,6 @@ def branch_chi2_single(
     jac = np.array(jac_rows)
     jtw = jac.T @ info
     g = jtw @ r
-    step = small_solve(jtw @ jac, g[:, None])[:, 0]
+    step = small_solve(jtw @ jac, g)
     chi2 = float(r @ info @ r) - float(g @ step)
     return max(chi2, 0.0)
