@@ -50,13 +50,24 @@ TEMPLATE_POINTS = 600
 TEMPLATE_TOLERANCE = 0.15
 #: Module coordinates of V1..V4 per module of the symbol.
 _SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+_FLT_EPSILON = float(np.finfo(np.float32).eps)
 
 
-def _scales(h: np.ndarray, n: int) -> np.ndarray:
-    """px per module along u and along v at the symbol's centre for homography ``h`` (module -> px)."""
-    c = np.array([[n / 2, n / 2], [n / 2 + 1, n / 2], [n / 2, n / 2 + 1]], dtype=np.float64)
-    p = cv2.perspectiveTransform(c.reshape(1, 3, 2), h).reshape(3, 2)
-    return np.hypot(*(p[1:] - p[0]).T)
+def _scales(h: np.ndarray, n: int) -> tuple[float, float]:
+    """px per module along u and along v at the symbol's centre for homography ``h`` (module -> px)
+    (Python floats: this runs on every tracked frame)."""
+    h00, h01, h02, h10, h11, h12, h20, h21, h22 = h.ravel().tolist()
+
+    def mapped(u: float, v: float) -> tuple[float, float]:
+        w = h20 * u + h21 * v + h22
+        w = 1.0 / w if abs(w) > _FLT_EPSILON else 0.0  # as cv2.perspectiveTransform
+        return (h00 * u + h01 * v + h02) * w, (h10 * u + h11 * v + h12) * w
+
+    c = n / 2
+    x0, y0 = mapped(c, c)
+    xu, yu = mapped(c + 1, c)
+    xv, yv = mapped(c, c + 1)
+    return math.hypot(xu - x0, yu - y0), math.hypot(xv - x0, yv - y0)
 
 
 class _Template:
@@ -67,7 +78,7 @@ class _Template:
         n = size - 2 * QUIET_RINGS
         self.scales = _scales(h, n)
         self.edge_px = edge_px
-        module_px = float(self.scales.mean())
+        module_px = 0.5 * (self.scales[0] + self.scales[1])
         r = 1 if edge_px / max(module_px, 1e-6) < 0.4 else 2
         layout = _layout(cells, r)
         band = 1.5 * edge_px + 1.0
@@ -105,7 +116,8 @@ class _Template:
         self.uv_cv = np.ascontiguousarray(uv.reshape(1, -1, 2))
 
     def fits(self, h: np.ndarray, edge_px: float) -> bool:
-        change = np.abs(_scales(h, self.n) / self.scales - 1.0).max()
+        su, sv = _scales(h, self.n)
+        change = max(abs(su / self.scales[0] - 1.0), abs(sv / self.scales[1] - 1.0))
         return bool(change < TEMPLATE_TOLERANCE and abs(edge_px / self.edge_px - 1.0) < TEMPLATE_TOLERANCE)
 
 
