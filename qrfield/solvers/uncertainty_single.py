@@ -23,7 +23,7 @@ import numpy as np
 from qrfield.camera import CameraModel
 from qrfield.linalg import small_solve
 from qrfield.solvers.kernel import PAIRS
-from qrfield.solvers.uncertainty import _BLOCK_DIAGONAL, _UNIT_STEPS, distortion_terms
+from qrfield.solvers.uncertainty import _BLOCK_DIAGONAL, distortion_terms
 
 
 def block_diagonal(blocks: list[float]) -> np.ndarray:
@@ -85,27 +85,49 @@ def rigid_projection_single(
 def numerical_jacobian_single(z: list[float], x: list[float], y: list[float]) -> np.ndarray:
     """(6, 8) derivative of the numerical model's pose p = (omega, t) over the normalised corners
     at its depths z (4 floats, mm): :func:`qrfield.solvers.uncertainty.numerical_jacobian` of one
-    corner set (the same implicit-function and Kabsch terms)."""
+    corner set (the same implicit-function and Kabsch terms, with the sparse sums written out).
+
+    With e_k the unit vector of pair k = (i, j) and m_i = (x_i, y_i, 1): d diff_k / d z_i = e_k . m_i,
+    d diff_k / d z_j = -e_k . m_j, d diff_k / d (x_i, y_i) = z_i (e_kx, e_ky) (minus at j). Then
+    w = (Jz^T Jz)^-1 Jz^T Jn (minus dz/dn, 4 x 8), dV_i/dn = z_i (unit steps at i) - m_i w_i, and
+    with the centred vertices p_i: d omega = H^-1 sum_i p_i x dV_i, dt = sum_i dV_i / 4, where
+    p_i x dV_i = z_i p_i x (unit step) - w_i (p_i x m_i).
+    """
     vx = [z[i] * x[i] for i in range(4)]
     vy = [z[i] * y[i] for i in range(4)]
-    jz = [[0.0] * 4 for _ in range(6)]
-    jn = [[0.0] * 8 for _ in range(6)]
-    for k, (i, j) in enumerate(PAIRS):
+    a = [[0.0] * 4 for _ in range(4)]  # Jz^T Jz
+    b = [[0.0] * 8 for _ in range(4)]  # Jz^T Jn
+    for i, j in PAIRS:
         dx, dy, dz = vx[i] - vx[j], vy[i] - vy[j], z[i] - z[j]
         norm = math.sqrt(dx * dx + dy * dy + dz * dz)
         ex, ey, ez = dx / norm, dy / norm, dz / norm
-        jz[k][i] = ex * x[i] + ey * y[i] + ez
-        jz[k][j] = -(ex * x[j] + ey * y[j] + ez)
-        jn[k][2 * i], jn[k][2 * i + 1] = ex * z[i], ey * z[i]
-        jn[k][2 * j], jn[k][2 * j + 1] = -ex * z[j], -ey * z[j]
-    jz_a = np.array(jz)
-    jzt = jz_a.T
-    dz_dn = small_solve(jzt @ jz_a, jzt @ np.array(jn))  # minus dz/dn, (4, 8)
-    rays = np.array([[x[i], y[i], 1.0] for i in range(4)])
-    dv = _UNIT_STEPS * np.array(z)[:, None, None] - rays[:, :, None] * dz_dn[:, None, :]  # (4, 3, 8)
-    # Kabsch: d omega = H^-1 sum_i p_i x dV_i, p_i the centred vertices, H = sum |p_i|^2 I - p_i p_i^T.
+        ji = ex * x[i] + ey * y[i] + ez
+        jj = -(ex * x[j] + ey * y[j] + ez)
+        a[i][i] += ji * ji
+        a[j][j] += jj * jj
+        a[i][j] += ji * jj
+        a[j][i] += ji * jj
+        # Jn's row k: (ex z_i, ey z_i) at corner i, (-ex z_j, -ey z_j) at corner j.
+        nix, niy, njx, njy = ex * z[i], ey * z[i], -ex * z[j], -ey * z[j]
+        for row, jv in ((b[i], ji), (b[j], jj)):
+            row[2 * i] += jv * nix
+            row[2 * i + 1] += jv * niy
+            row[2 * j] += jv * njx
+            row[2 * j + 1] += jv * njy
+    w = small_solve(np.array(a), np.array(b))  # (4, 8)
     mx, my, mz = sum(vx) * 0.25, sum(vy) * 0.25, sum(z) * 0.25
     arms = [(vx[i] - mx, vy[i] - my, z[i] - mz) for i in range(4)]
+    # K: rows (p_i x m_i, m_i); S: the unit-step terms of sum_i p_i x dV_i (rows 0-2) and sum_i dV_i (3-5).
+    k_rows = []
+    s_rows = [[0.0] * 8 for _ in range(6)]
+    for i, (px, py, pz) in enumerate(arms):
+        xi, yi, zi = x[i], y[i], z[i]
+        k_rows.append([py - pz * yi, pz * xi - px, px * yi - py * xi, xi, yi, 1.0])
+        u, v = 2 * i, 2 * i + 1
+        s_rows[1][u], s_rows[2][u] = zi * pz, -zi * py  # z_i p_i x e_x
+        s_rows[0][v], s_rows[2][v] = -zi * pz, zi * px  # z_i p_i x e_y
+        s_rows[3][u], s_rows[4][v] = zi, zi
+    q = np.array(s_rows) - np.array(k_rows).T @ w  # (6, 8): sum_i p_i x dV_i, then sum_i dV_i
     sxx = sum(p[0] * p[0] for p in arms)
     syy = sum(p[1] * p[1] for p in arms)
     szz = sum(p[2] * p[2] for p in arms)
@@ -113,10 +135,9 @@ def numerical_jacobian_single(z: list[float], x: list[float], y: list[float]) ->
     sxz = sum(p[0] * p[2] for p in arms)
     syz = sum(p[1] * p[2] for p in arms)
     h = np.array([[syy + szz, -sxy, -sxz], [-sxy, sxx + szz, -syz], [-sxz, -syz, sxx + syy]])
-    skew = np.array([[[0.0, -pz, py], [pz, 0.0, -px], [-py, px, 0.0]] for px, py, pz in arms])
     out = np.empty((6, 8))
-    out[:3] = small_solve(h, np.einsum("iab,ibc->ac", skew, dv))
-    out[3:] = 0.25 * dv.sum(axis=0)
+    out[:3] = small_solve(h, q[:3])
+    out[3:] = 0.25 * q[3:]
     return out
 
 
