@@ -138,10 +138,14 @@ class Detector:
         self.settings = validated(settings or DetectorSettings())
         self.backends = parse_backends(self.settings.backends)
         self.lens = Lens(camera)
+        self._camera_set: CameraModel | None = None
 
     def set_camera(self, camera: CameraModel | None) -> None:
         """The camera model of the images to come (its lens is modelled by the whole-symbol fit);
         None for a pinhole. Its size must be the images' size."""
+        if camera is not None and camera is self._camera_set:
+            return  # the same model as the last frame's (the pipeline sets it on every frame)
+        self._camera_set = camera
         lens_camera = camera if camera is not None and camera.has_distortion else None
         current = self.lens.camera
         if lens_camera is not current and not (lens_camera is not None and lens_camera == current):

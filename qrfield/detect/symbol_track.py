@@ -139,15 +139,15 @@ def _compose_inverse(h: np.ndarray, delta: np.ndarray) -> np.ndarray | None:
     det = a * co[0] + b * co[1] + c * co[2]
     if not (abs(det) > 1e-12 and math.isfinite(det)):
         return None
-    inv = np.array(
-        [
-            [co[0], c * hh - b * i, b * f - c * e],
-            [co[1], a * i - c * g, c * d - a * f],
-            [co[2], b * g - a * hh, a * e - b * d],
-        ]
+    inv = (
+        (co[0] / det, (c * hh - b * i) / det, (b * f - c * e) / det),
+        (co[1] / det, (a * i - c * g) / det, (c * d - a * f) / det),
+        (co[2] / det, (b * g - a * hh) / det, (a * e - b * d) / det),
     )
-    out = h @ (inv / det)
-    return out if np.isfinite(out).all() else None
+    rows = [[r0 * inv[0][k] + r1 * inv[1][k] + r2 * inv[2][k] for k in range(3)] for r0, r1, r2 in h.tolist()]
+    if not math.isfinite(sum(rows[0]) + sum(rows[1]) + sum(rows[2])):
+        return None
+    return np.array(rows)
 
 
 class WarmFit:
