@@ -139,15 +139,25 @@ def _compose_inverse(h: np.ndarray, delta: np.ndarray) -> np.ndarray | None:
     det = a * co[0] + b * co[1] + c * co[2]
     if not (abs(det) > 1e-12 and math.isfinite(det)):
         return None
-    inv = (
-        (co[0] / det, (c * hh - b * i) / det, (b * f - c * e) / det),
-        (co[1] / det, (a * i - c * g) / det, (c * d - a * f) / det),
-        (co[2] / det, (b * g - a * hh) / det, (a * e - b * d) / det),
+    q = 1.0 / det
+    i00, i01, i02 = co[0] * q, (c * hh - b * i) * q, (b * f - c * e) * q
+    i10, i11, i12 = co[1] * q, (a * i - c * g) * q, (c * d - a * f) * q
+    i20, i21, i22 = co[2] * q, (b * g - a * hh) * q, (a * e - b * d) * q
+    (h00, h01, h02), (h10, h11, h12), (h20, h21, h22) = h.tolist()
+    out = (
+        h00 * i00 + h01 * i10 + h02 * i20,
+        h00 * i01 + h01 * i11 + h02 * i21,
+        h00 * i02 + h01 * i12 + h02 * i22,
+        h10 * i00 + h11 * i10 + h12 * i20,
+        h10 * i01 + h11 * i11 + h12 * i21,
+        h10 * i02 + h11 * i12 + h12 * i22,
+        h20 * i00 + h21 * i10 + h22 * i20,
+        h20 * i01 + h21 * i11 + h22 * i21,
+        h20 * i02 + h21 * i12 + h22 * i22,
     )
-    rows = [[r0 * inv[0][k] + r1 * inv[1][k] + r2 * inv[2][k] for k in range(3)] for r0, r1, r2 in h.tolist()]
-    if not math.isfinite(sum(rows[0]) + sum(rows[1]) + sum(rows[2])):
+    if not math.isfinite(sum(out)):
         return None
-    return np.array(rows)
+    return np.array(out).reshape(3, 3)
 
 
 class WarmFit:
