@@ -111,8 +111,11 @@ class _Template:
         self.light_cols = np.concatenate([self.basis, -self.basis * t[:, None]], axis=1)
         self.n = n
         # The Jacobian's buffer: its lighting columns do not change, the geometry's are -B dT/d dH.
-        self.jac = np.empty((len(t), 14))
-        self.jac[:, 8:] = self.light_cols
+        # Kept transposed, (14, k): each parameter's column is one contiguous row, so filling
+        # the geometry's rows and forming J^T W J cost half as much as on (k, 14) (measured).
+        self.neg_geo_t = np.ascontiguousarray(-self.geo.T)
+        self.jac_t = np.empty((14, len(t)))
+        self.jac_t[8:] = self.light_cols.T
         self.uv_cv = np.ascontiguousarray(uv.reshape(1, -1, 2))
 
     def fits(self, h: np.ndarray, edge_px: float) -> bool:
@@ -224,7 +227,7 @@ class WarmFit:
         scale = state.scale if math.isfinite(state.scale) else 2.0
         huber = HUBER_K * scale
         k = len(template.t)
-        jac = template.jac
+        jac_t = template.jac_t
         m4 = self._corner_modules
         limits = np.array([ww - 1, hh - 1], dtype=np.float64)
         with np.errstate(all="ignore"):
@@ -253,12 +256,12 @@ class WarmFit:
                 if inside is not None:
                     w *= inside
                 # d model / d dH = -B dT/d dH; d model / d light = (basis, -T basis)
-                np.multiply(template.geo, -b[:, None], out=jac[:, :8])
-                jw = jac * w[:, None]
-                normal = jw.T @ jac
+                np.multiply(template.neg_geo_t, b, out=jac_t[:8])
+                jw_t = jac_t * w
+                normal = jw_t @ jac_t.T
                 normal.flat[::15] += 1e-9
                 try:
-                    delta = small_solve(normal, jw.T @ resid, symmetric=True)
+                    delta = small_solve(normal, jw_t @ resid, symmetric=True)
                 except np.linalg.LinAlgError:
                     return fail("the fit is singular")
                 h = _compose_inverse(h, delta)
