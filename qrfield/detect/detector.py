@@ -36,7 +36,9 @@ def as_grey(image: np.ndarray) -> np.ndarray:
         return np.ascontiguousarray(image)
     if image.ndim == 3 and image.shape[2] in (3, 4):
         code = cv2.COLOR_BGR2GRAY if image.shape[2] == 3 else cv2.COLOR_BGRA2GRAY
-        return cv2.cvtColor(np.ascontiguousarray(image), code)
+        if image.strides[1:] != (image.shape[2], 1):  # not a crop of a packed image: pack it first
+            image = np.ascontiguousarray(image)
+        return cv2.cvtColor(image, code)  # a crop (rows with a stride) is read in place
     raise DetectorInputError(f"image must be (H, W) grey or (H, W, 3) BGR, got shape {image.shape}")
 
 
