@@ -161,7 +161,11 @@ def quality_of(score: float, corners_cov: np.ndarray | None) -> float:
     corner uncertainty), or times FALLBACK_QUALITY_FACTOR when the uncertainty is unknown."""
     if corners_cov is None:
         return FALLBACK_QUALITY_FACTOR * score
-    std = float(np.sqrt(np.trace(np.asarray(corners_cov), axis1=1, axis2=2)).max())
+    c = np.asarray(corners_cov).reshape(-1).tolist()  # (4, 2, 2); floats: every tracked frame runs this
+    traces = [c[4 * i] + c[4 * i + 3] for i in range(4)]
+    if not all(math.isfinite(t) and t >= 0.0 for t in traces):
+        return FALLBACK_QUALITY_FACTOR * score
+    std = math.sqrt(max(traces))
     if not math.isfinite(std):
         return FALLBACK_QUALITY_FACTOR * score
     return score * min(1.0, GOOD_CORNER_STD_PX / max(std, 1e-12))

@@ -36,7 +36,9 @@ def as_grey(image: np.ndarray) -> np.ndarray:
         return np.ascontiguousarray(image)
     if image.ndim == 3 and image.shape[2] in (3, 4):
         code = cv2.COLOR_BGR2GRAY if image.shape[2] == 3 else cv2.COLOR_BGRA2GRAY
-        return cv2.cvtColor(np.ascontiguousarray(image), code)
+        if image.strides[1:] != (image.shape[2], 1):  # not a crop of a packed image: pack it first
+            image = np.ascontiguousarray(image)
+        return cv2.cvtColor(image, code)  # a crop (rows with a stride) is read in place
     raise DetectorInputError(f"image must be (H, W) grey or (H, W, 3) BGR, got shape {image.shape}")
 
 
@@ -138,10 +140,14 @@ class Detector:
         self.settings = validated(settings or DetectorSettings())
         self.backends = parse_backends(self.settings.backends)
         self.lens = Lens(camera)
+        self._camera_set: CameraModel | None = None
 
     def set_camera(self, camera: CameraModel | None) -> None:
         """The camera model of the images to come (its lens is modelled by the whole-symbol fit);
         None for a pinhole. Its size must be the images' size."""
+        if camera is not None and camera is self._camera_set:
+            return  # the same model as the last frame's (the pipeline sets it on every frame)
+        self._camera_set = camera
         lens_camera = camera if camera is not None and camera.has_distortion else None
         current = self.lens.camera
         if lens_camera is not current and not (lens_camera is not None and lens_camera == current):

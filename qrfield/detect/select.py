@@ -16,4 +16,6 @@ def select_code(detections: Sequence[Detection], select_text: str = "") -> Detec
         detections = [d for d in detections if d.text == select_text]
     if not detections:
         return None
+    if len(detections) == 1:  # the usual frame: no area to compare (it costs a numpy pass)
+        return detections[0]
     return max(detections, key=lambda d: d.area_px)

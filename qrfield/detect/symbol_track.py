@@ -41,6 +41,7 @@ from qrfield.detect.symbol_fit import (
     corner_covariance,
     darkness_at,
 )
+from qrfield.linalg import small_inverse, small_solve
 
 #: Template points (module coordinates near the known edges).
 TEMPLATE_POINTS = 600
@@ -49,13 +50,24 @@ TEMPLATE_POINTS = 600
 TEMPLATE_TOLERANCE = 0.15
 #: Module coordinates of V1..V4 per module of the symbol.
 _SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+_FLT_EPSILON = float(np.finfo(np.float32).eps)
 
 
-def _scales(h: np.ndarray, n: int) -> np.ndarray:
-    """px per module along u and along v at the symbol's centre for homography ``h`` (module -> px)."""
-    c = np.array([[n / 2, n / 2], [n / 2 + 1, n / 2], [n / 2, n / 2 + 1]], dtype=np.float64)
-    p = cv2.perspectiveTransform(c.reshape(1, 3, 2), h).reshape(3, 2)
-    return np.hypot(*(p[1:] - p[0]).T)
+def _scales(h: np.ndarray, n: int) -> tuple[float, float]:
+    """px per module along u and along v at the symbol's centre for homography ``h`` (module -> px)
+    (Python floats: this runs on every tracked frame)."""
+    h00, h01, h02, h10, h11, h12, h20, h21, h22 = h.ravel().tolist()
+
+    def mapped(u: float, v: float) -> tuple[float, float]:
+        w = h20 * u + h21 * v + h22
+        w = 1.0 / w if abs(w) > _FLT_EPSILON else 0.0  # as cv2.perspectiveTransform
+        return (h00 * u + h01 * v + h02) * w, (h10 * u + h11 * v + h12) * w
+
+    c = n / 2
+    x0, y0 = mapped(c, c)
+    xu, yu = mapped(c + 1, c)
+    xv, yv = mapped(c, c + 1)
+    return math.hypot(xu - x0, yu - y0), math.hypot(xv - x0, yv - y0)
 
 
 class _Template:
@@ -66,7 +78,7 @@ class _Template:
         n = size - 2 * QUIET_RINGS
         self.scales = _scales(h, n)
         self.edge_px = edge_px
-        module_px = float(self.scales.mean())
+        module_px = 0.5 * (self.scales[0] + self.scales[1])
         r = 1 if edge_px / max(module_px, 1e-6) < 0.4 else 2
         layout = _layout(cells, r)
         band = 1.5 * edge_px + 1.0
@@ -99,13 +111,24 @@ class _Template:
         self.light_cols = np.concatenate([self.basis, -self.basis * t[:, None]], axis=1)
         self.n = n
         # The Jacobian's buffer: its lighting columns do not change, the geometry's are -B dT/d dH.
-        self.jac = np.empty((len(t), 14))
-        self.jac[:, 8:] = self.light_cols
+        # Kept transposed, (14, k): each parameter's column is one contiguous row, so filling
+        # the geometry's rows and forming J^T W J cost half as much as on (k, 14) (measured).
+        self.neg_geo_t = np.ascontiguousarray(-self.geo.T)
+        self.jac_t = np.empty((14, len(t)))
+        self.jac_t[8:] = self.light_cols.T
         self.uv_cv = np.ascontiguousarray(uv.reshape(1, -1, 2))
 
     def fits(self, h: np.ndarray, edge_px: float) -> bool:
-        change = np.abs(_scales(h, self.n) / self.scales - 1.0).max()
+        su, sv = _scales(h, self.n)
+        change = max(abs(su / self.scales[0] - 1.0), abs(sv / self.scales[1] - 1.0))
         return bool(change < TEMPLATE_TOLERANCE and abs(edge_px / self.edge_px - 1.0) < TEMPLATE_TOLERANCE)
+
+
+def _usable_homography(h: np.ndarray) -> bool:
+    """A finite homography (3, 3) with |det| >= 1e-12 (in Python floats: no numpy call overhead)."""
+    a, b, c, d, e, f, g, hh, i = h.ravel().tolist()
+    det = a * (e * i - f * hh) - b * (d * i - f * g) + c * (d * hh - e * g)
+    return math.isfinite(a + b + c + d + e + f + g + hh + i) and abs(det) >= 1e-12
 
 
 def _compose_inverse(h: np.ndarray, delta: np.ndarray) -> np.ndarray | None:
@@ -119,15 +142,25 @@ def _compose_inverse(h: np.ndarray, delta: np.ndarray) -> np.ndarray | None:
     det = a * co[0] + b * co[1] + c * co[2]
     if not (abs(det) > 1e-12 and math.isfinite(det)):
         return None
-    inv = np.array(
-        [
-            [co[0], c * hh - b * i, b * f - c * e],
-            [co[1], a * i - c * g, c * d - a * f],
-            [co[2], b * g - a * hh, a * e - b * d],
-        ]
+    q = 1.0 / det
+    i00, i01, i02 = co[0] * q, (c * hh - b * i) * q, (b * f - c * e) * q
+    i10, i11, i12 = co[1] * q, (a * i - c * g) * q, (c * d - a * f) * q
+    i20, i21, i22 = co[2] * q, (b * g - a * hh) * q, (a * e - b * d) * q
+    (h00, h01, h02), (h10, h11, h12), (h20, h21, h22) = h.tolist()
+    out = (
+        h00 * i00 + h01 * i10 + h02 * i20,
+        h00 * i01 + h01 * i11 + h02 * i21,
+        h00 * i02 + h01 * i12 + h02 * i22,
+        h10 * i00 + h11 * i10 + h12 * i20,
+        h10 * i01 + h11 * i11 + h12 * i21,
+        h10 * i02 + h11 * i12 + h12 * i22,
+        h20 * i00 + h21 * i10 + h22 * i20,
+        h20 * i01 + h21 * i11 + h22 * i21,
+        h20 * i02 + h21 * i12 + h22 * i22,
     )
-    out = h @ (inv / det)
-    return out if np.isfinite(out).all() else None
+    if not math.isfinite(sum(out)):
+        return None
+    return np.array(out).reshape(3, 3)
 
 
 class WarmFit:
@@ -180,7 +213,7 @@ class WarmFit:
             h = cv2.getPerspectiveTransform(self._square32, ideal.astype(np.float32))
         except cv2.error:
             return fail("degenerate corners")
-        if not np.all(np.isfinite(h)) or abs(np.linalg.det(h)) < 1e-12:
+        if not _usable_homography(h):
             return fail("degenerate corners")
         edge = state.edge_px
         template = self._template
@@ -194,17 +227,18 @@ class WarmFit:
         scale = state.scale if math.isfinite(state.scale) else 2.0
         huber = HUBER_K * scale
         k = len(template.t)
-        jac = template.jac
+        jac_t = template.jac_t
         m4 = self._corner_modules
+        limits = np.array([ww - 1, hh - 1], dtype=np.float64)
         with np.errstate(all="ignore"):
             for _ in range(iterations):
                 px = cv2.perspectiveTransform(template.uv_cv, h).reshape(-1, 2)
                 if lens.distorted:
                     px = lens.distort(px)
                 px -= shift
-                lo, hi = px.min(axis=0), px.max(axis=0)
                 inside = None  # all inside, the usual case
-                if lo[0] < 0 or lo[1] < 0 or hi[0] > ww - 1 or hi[1] > hh - 1:
+                # (two whole-array tests: numpy's per-column min/max on (k, 2) costs ten times more)
+                if px.min() < 0 or (px > limits).any():
                     inside = (px[:, 0] >= 0) & (px[:, 1] >= 0) & (px[:, 0] <= ww - 1) & (px[:, 1] <= hh - 1)
                     if inside.mean() < 0.9:
                         return fail("the code leaves the region")
@@ -222,12 +256,12 @@ class WarmFit:
                 if inside is not None:
                     w *= inside
                 # d model / d dH = -B dT/d dH; d model / d light = (basis, -T basis)
-                np.multiply(template.geo, -b[:, None], out=jac[:, :8])
-                jw = jac * w[:, None]
-                normal = jw.T @ jac
+                np.multiply(template.neg_geo_t, b, out=jac_t[:8])
+                jw_t = jac_t * w
+                normal = jw_t @ jac_t.T
                 normal.flat[::15] += 1e-9
                 try:
-                    delta = np.linalg.solve(normal, jw.T @ resid)
+                    delta = small_solve(normal, jw_t @ resid, symmetric=True)
                 except np.linalg.LinAlgError:
                     return fail("the fit is singular")
                 h = _compose_inverse(h, delta)
@@ -244,7 +278,7 @@ class WarmFit:
             if abs(contrast) < MIN_CONTRAST:
                 return fail(f"too little contrast ({abs(contrast):.0f} grey levels)")
             try:
-                cov = robust**2 * np.linalg.inv(normal)[:8, :8]
+                cov = robust**2 * small_inverse(normal, symmetric=True)[:8, :8]
             except np.linalg.LinAlgError:
                 return fail("the fit is singular")
             # Corner k is H (m_k - dW(m_k) dH) to first order: d corner / d dH = -dpx/dm dW/ddH.

@@ -28,6 +28,7 @@ bar); every fit of step 1 must pass that bar (docs/detection.md, "Tracking under
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -295,18 +296,23 @@ class Tracker:
         if not settings.refine or not all(t.detection.refined for t in self._tracks):
             return None
         predictions = [t.predicted() for t in self._tracks]
-        everything = np.concatenate(predictions)
+        # The bounds in Python floats (numpy's per-axis min/max on (4, 2) cost more than the sums).
+        us = [p[:, 0].tolist() for p in predictions]
+        vs = [p[:, 1].tolist() for p in predictions]
         module = max(
-            float(np.ptp(p, axis=0).max()) / t.detection.modules
-            for p, t in zip(predictions, self._tracks, strict=True)
+            max(max(u) - min(u), max(v) - min(v)) / t.detection.modules
+            for u, v, t in zip(us, vs, self._tracks, strict=True)
         )
         # Room for the edge profiles and the quiet-zone check (one module out) around the code,
         # and for a move that the prediction misses (measured then, see _follow).
         margin = 2.0 * module + settings.search_px + 6.0 + MOTION_MARGIN_PX
         h, w = image.shape[:2]
-        x0, y0 = np.floor(everything.min(axis=0) - margin).astype(int)
-        x1, y1 = np.ceil(everything.max(axis=0) + margin).astype(int) + 1
-        x0, y0, x1, y1 = max(int(x0), 0), max(int(y0), 0), min(int(x1), w), min(int(y1), h)
+        lo_u, lo_v = min(min(u) for u in us) - margin, min(min(v) for v in vs) - margin
+        hi_u, hi_v = max(max(u) for u in us) + margin, max(max(v) for v in vs) + margin
+        if not math.isfinite(lo_u + lo_v + hi_u + hi_v):
+            return None
+        x0, y0 = max(math.floor(lo_u), 0), max(math.floor(lo_v), 0)
+        x1, y1 = min(math.ceil(hi_u) + 1, w), min(math.ceil(hi_v) + 1, h)
         if x1 - x0 < 21 or y1 - y0 < 21:
             return None
         grey = as_grey(image[y0:y1, x0:x1])

@@ -207,6 +207,11 @@ def _initial_single(
     return [z0, z0, z0, z0]
 
 
+def _larger(a: float, b: float) -> float:
+    """max(a, b) for two floats (what the builtin returns, NaN included), without its generic call."""
+    return b if b > a else a
+
+
 def iterate_single(
     z: list[float],
     x: list[float],
@@ -245,16 +250,23 @@ def iterate_single(
         if n == n_max:
             return z, n, CONVERGED if not early and worst < tol else N_MAX, worst
         if not rejected:
-            dz, singular = kernel.solve4(diag, off, grad, max)
+            dz, singular = kernel.solve4(diag, off, grad, _larger)
             if singular:
                 return z, n, SINGULAR, worst
             if not early:
                 kept = (z, system, misfit, worst, dz)
                 scale = min(tf, 2.0 * scale)
-        step = [scale * dz[0], scale * dz[1], scale * dz[2], scale * dz[3]]
-        if max(abs(step[0]), abs(step[1]), abs(step[2]), abs(step[3])) < stall_mm:
+        s0, s1, s2, s3 = scale * dz[0], scale * dz[1], scale * dz[2], scale * dz[3]
+        if max(abs(s0), abs(s1), abs(s2), abs(s3)) < stall_mm:
             return z, n, CONVERGED if worst < tol else STALLED, worst
-        z = [max(z[k] - step[k], Z_FLOOR_MM) for k in range(4)]
+        # max(z - step, Z_FLOOR_MM) unrolled (what max returns: the floor only when it is larger).
+        z0, z1, z2, z3 = z[0] - s0, z[1] - s1, z[2] - s2, z[3] - s3
+        z = [
+            Z_FLOOR_MM if z0 < Z_FLOOR_MM else z0,
+            Z_FLOOR_MM if z1 < Z_FLOOR_MM else z1,
+            Z_FLOOR_MM if z2 < Z_FLOOR_MM else z2,
+            Z_FLOOR_MM if z3 < Z_FLOOR_MM else z3,
+        ]
         system = kernel.gn_system(z, x, y, lengths, sqrt)
     raise AssertionError("unreachable")  # pragma: no cover
 

@@ -34,6 +34,7 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 
@@ -95,6 +96,8 @@ def check_corners_cov(cov: object, batch: int | None = None) -> np.ndarray:
         c = np.array(cov, dtype=float)
     except (TypeError, ValueError):
         raise SolverError("corners_cov must be a numeric (4, 2, 2) array of px^2 (V1..V4)") from None
+    if batch is None and c.shape == (4, 2, 2) and _usable_single(c.reshape(16).tolist()):
+        return c  # the usual case, checked in Python floats; else the checks below say what is wrong
     if batch is not None and c.shape == (4, 2, 2):
         c = np.broadcast_to(c, (batch, 4, 2, 2)).copy()
     want = (4, 2, 2) if batch is None else (batch, 4, 2, 2)
@@ -113,6 +116,21 @@ def check_corners_cov(cov: object, batch: int | None = None) -> np.ndarray:
             "positive semi-definite"
         )
     return c
+
+
+def _usable_single(v: list[float]) -> bool:
+    """The checks of :func:`check_corners_cov` on one (4, 2, 2) covariance as 16 floats: all pass."""
+    for i in range(0, 16, 4):
+        a, b, c, d = v[i : i + 4]
+        if not (
+            math.isfinite(a + b + c + d)
+            and abs(b - c) <= SYMMETRY_RTOL * (a + d + 1e-300)
+            and a >= 0.0
+            and d >= 0.0
+            and a * d - b * b >= -1e-9 * (a + d) ** 2
+        ):
+            return False
+    return True
 
 
 def isotropic_cov(std_px: float, batch: int | None = None) -> np.ndarray:
@@ -140,17 +158,28 @@ def corners_std_px(cov: np.ndarray) -> np.ndarray:
 def distortion_jacobian(x: np.ndarray, y: np.ndarray, camera: CameraModel) -> np.ndarray:
     """(..., 2, 2) derivative of OpenCV's 5-term distortion (distorted over ideal normalised
     coordinates) at ideal normalised points (x, y) (...)."""
-    k1, k2, p1, p2, k3 = (float(v) for v in camera.dist)
+    j00, j01, j11 = distortion_terms(x, y, camera)
+    out = np.empty((*np.shape(x), 2, 2))
+    out[..., 0, 0] = j00
+    out[..., 0, 1] = j01
+    out[..., 1, 0] = j01
+    out[..., 1, 1] = j11
+    return out
+
+
+def distortion_terms(x: Any, y: Any, camera: CameraModel) -> tuple[Any, Any, Any]:
+    """The entries (d00, d01 = d10, d11) of :func:`distortion_jacobian` at (x, y): Python floats or
+    arrays (...) alike (the single path passes floats)."""
+    k1, k2, p1, p2, k3 = camera.dist.tolist()
     r2 = x * x + y * y
     radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
     g = 2.0 * (k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2))  # 2 d radial / d r2
     cross = x * y * g + 2.0 * p1 * x + 2.0 * p2 * y
-    out = np.empty((*np.shape(x), 2, 2))
-    out[..., 0, 0] = radial + x * x * g + 2.0 * p1 * y + 6.0 * p2 * x
-    out[..., 0, 1] = cross
-    out[..., 1, 0] = cross
-    out[..., 1, 1] = radial + y * y * g + 6.0 * p1 * y + 2.0 * p2 * x
-    return out
+    return (
+        radial + x * x * g + 2.0 * p1 * y + 6.0 * p2 * x,
+        cross,
+        radial + y * y * g + 6.0 * p1 * y + 2.0 * p2 * x,
+    )
 
 
 def normalised_cov(cov_px: np.ndarray, x: np.ndarray, y: np.ndarray, camera: CameraModel) -> np.ndarray:
@@ -168,15 +197,24 @@ def information_matrix(cov_n: np.ndarray) -> np.ndarray:
     """(8, 8) block-diagonal inverse of one corner set's normalised covariance (4, 2, 2); a floor of
     1e-12 of the largest variance (and 1e-30, about 1e-12 px^2, when all are 0) keeps exact
     corners usable."""
-    c = cov_n.reshape(16).tolist()
-    floor = 1e-12 * max(c[4 * i] + c[4 * i + 3] for i in range(4)) + 1e-30
     w = [0.0] * 64
+    w_blocks = information_blocks(cov_n.reshape(16).tolist())
+    for i in range(4):
+        k = 18 * i  # row 2i, column 2i of the flat 8 x 8
+        w[k], w[k + 1], w[k + 8], w[k + 9] = w_blocks[4 * i : 4 * i + 4]
+    return np.array(w).reshape(8, 8)
+
+
+def information_blocks(c: list[float]) -> list[float]:
+    """The inverses of the four 2x2 blocks of a normalised covariance given as 16 floats (corner,
+    row, column), in the same layout, with the floor of :func:`information_matrix`."""
+    floor = 1e-12 * max(c[4 * i] + c[4 * i + 3] for i in range(4)) + 1e-30
+    out = []
     for i in range(4):
         a, b, cc, d = c[4 * i] + floor, c[4 * i + 1], c[4 * i + 2], c[4 * i + 3] + floor
         det = a * d - b * cc
-        k = 18 * i  # row 2i, column 2i of the flat 8 x 8
-        w[k], w[k + 1], w[k + 8], w[k + 9] = d / det, -b / det, -cc / det, a / det
-    return np.array(w).reshape(8, 8)
+        out += [d / det, -b / det, -cc / det, a / det]
+    return out
 
 
 # ---------------------------------------------------------------------- Jacobians of the solvers
@@ -271,11 +309,7 @@ def euler_jacobian(angles_deg: np.ndarray) -> np.ndarray:
     """(..., 3, 3) derivative of (alpha, beta, gamma) in degrees with respect to omega (radians):
     the inverse of E = [e_x, Rx(alpha) e_y, Rx(alpha) Ry(beta) e_z]; NaN at gimbal lock."""
     if np.ndim(angles_deg) == 1:  # one pose: Python floats, no numpy call overhead
-        alpha, beta = math.radians(float(angles_deg[0])), math.radians(float(angles_deg[1]))
-        ca, sa, cb, sb = math.cos(alpha), math.sin(alpha), math.cos(beta), math.sin(beta)
-        inv_cb = 1.0 / cb if abs(cb) > 1e-9 else math.nan
-        rows = [[1.0, sa * sb * inv_cb, -ca * sb * inv_cb], [0.0, ca, sa], [0.0, -sa * inv_cb, ca * inv_cb]]
-        return math.degrees(1.0) * np.array(rows)
+        return np.array(euler_rows(float(angles_deg[0]), float(angles_deg[1])))
     a = np.radians(angles_deg)
     ca, sa = np.cos(a[..., 0]), np.sin(a[..., 0])
     cb, sb = np.cos(a[..., 1]), np.sin(a[..., 1])
@@ -284,6 +318,16 @@ def euler_jacobian(angles_deg: np.ndarray) -> np.ndarray:
     zero, one = np.zeros_like(ca), np.ones_like(ca)
     rows = [one, sa * sb * inv_cb, -ca * sb * inv_cb, zero, ca, sa, zero, -sa * inv_cb, ca * inv_cb]
     return math.degrees(1.0) * np.stack(rows, axis=-1).reshape(*ca.shape, 3, 3)
+
+
+def euler_rows(alpha_deg: float, beta_deg: float) -> list[list[float]]:
+    """:func:`euler_jacobian` of one pose as rows of Python floats (deg per rad; NaN at gimbal lock)."""
+    alpha, beta = math.radians(alpha_deg), math.radians(beta_deg)
+    ca, sa, cb, sb = math.cos(alpha), math.sin(alpha), math.cos(beta), math.sin(beta)
+    inv_cb = 1.0 / cb if abs(cb) > 1e-9 else math.nan
+    deg = math.degrees(1.0)
+    rows = [[1.0, sa * sb * inv_cb, -ca * sb * inv_cb], [0.0, ca, sa], [0.0, -sa * inv_cb, ca * inv_cb]]
+    return [[deg * v for v in row] for row in rows]
 
 
 def pose_covariance(jac: np.ndarray, cov_n: np.ndarray, angles_deg: np.ndarray) -> np.ndarray:
@@ -366,9 +410,9 @@ def with_uncertainties(
     xy: tuple[list[float], list[float]] | None = None,
 ) -> list[PoseResult]:
     """``results`` (one per method, all of the same corners) with their uncertainty fields and the
-    mirror test filled (see :class:`PoseResult`), in one vectorised pass: the corners' normalised
-    covariance, the rigid projections of every answer and mirror, the pose covariances and the
-    chi-squares are each computed once for all of them.
+    mirror test filled (see :class:`PoseResult`): the corners' normalised covariance and its
+    inverse once, then per answer its Jacobian, pose covariance and the chi-squares of its branch
+    and its mirror's (:mod:`qrfield.solvers.uncertainty_single`).
 
     ``cov`` is the checked (4, 2, 2) corner covariance in px^2, or None when unknown (then the std
     fields stay NaN and the mirror test falls back on the ratio ``ambiguity``). A result that did
@@ -389,36 +433,35 @@ def with_uncertainties(
                 better = r.alternative.reprojection_px < r.reprojection_px
                 fields[i]["ambiguous"] = bool(better or r.ambiguity >= AMBIGUITY_FALLBACK)
     elif solved:
+        # One corner set: Python floats and a few fused numpy calls (uncertainty_single), the same
+        # numbers as the array functions above to float rounding.
+        from qrfield.solvers import uncertainty_single as one
+        from qrfield.solvers.rays import has_distortion
+
         x_list, y_list = xy if xy is not None else normalised_single(corners, flat, camera)
-        x, y = np.array(x_list), np.array(y_list)
-        cov_n = normalised_cov(cov, x, y, camera)
-        # Every answer, then the mirrors of those that have one.
-        mirrors = [(i, _mirror_start(results[i], x_list, y_list)) for i in solved]
-        mirrors = [(i, m) for i, m in mirrors if m is not None]
-        rotations = [results[i].rotation for i in solved] + [m[0] for _, m in mirrors]
-        positions = [results[i].position_mm for i in solved] + [m[1] for _, m in mirrors]
-        projection = rigid_projection(np.array(rotations), np.array(positions), side)
-        jac = np.empty((len(solved), 6, 8))
-        for k, i in enumerate(solved):
-            if results[i].method == "numerical":
-                jac[k] = numerical_jacobian(results[i].vertices_mm[:, 2], x, y)
-            else:
-                jac[k] = least_squares_jacobian(projection[1][k], camera)
-        angles = np.array([results[i].angles_deg for i in solved])
-        pose_cov = pose_covariance(jac, cov_n, angles)
-        pos_std, ang_std = pose_std(pose_cov)
+        cov16 = one.normalised_cov_single(cov, x_list, y_list, camera, has_distortion(camera))
+        sigma_n = one.block_diagonal(cov16)
+        info = one.block_diagonal(information_blocks(cov16))
         n_obs = np.array([v for pair in zip(x_list, y_list, strict=True) for v in pair])
-        chi2 = branch_chi2(projection, n_obs, information_matrix(cov_n))
-        for k, i in enumerate(solved):
-            fields[i].update(
-                pose_cov=pose_cov[k],
-                position_std_mm=pos_std[k],
-                angles_std_deg=ang_std[k],
-                chi2=float(chi2[k]),
+        for i in solved:
+            result = results[i]
+            projection = one.rigid_projection_single(
+                result.rotation.tolist(), result.position_mm.tolist(), side
             )
-        for k, (i, _) in enumerate(mirrors):
-            mirror_chi2 = float(chi2[len(solved) + k])
-            fields[i].update(mirror_chi2=mirror_chi2, ambiguous=is_ambiguous(fields[i]["chi2"], mirror_chi2))
+            if result.method == "numerical":
+                jac = one.numerical_jacobian_single(result.vertices_mm[:, 2].tolist(), x_list, y_list)
+            else:
+                jac = one.ippe_jacobian_single(np.array(projection[1]), camera)
+            alpha, beta, _ = result.angles_deg.tolist()
+            pose_cov = one.pose_covariance_single(jac, sigma_n, euler_rows(alpha, beta))
+            std = np.sqrt(np.maximum(np.diagonal(pose_cov), 0.0))
+            chi2 = one.branch_chi2_single(projection, n_obs, info)
+            fields[i].update(pose_cov=pose_cov, position_std_mm=std[:3], angles_std_deg=std[3:], chi2=chi2)
+            mirror = _mirror_start(result, x_list, y_list)
+            if mirror is not None:
+                mirror_projection = one.rigid_projection_single(mirror[0].tolist(), mirror[1].tolist(), side)
+                mirror_chi2 = one.branch_chi2_single(mirror_projection, n_obs, info)
+                fields[i].update(mirror_chi2=mirror_chi2, ambiguous=is_ambiguous(chi2, mirror_chi2))
     return [replace(r, **f) if f else r for r, f in zip(results, fields, strict=True)]
 
 
