@@ -222,8 +222,10 @@ def test_config_dir_also_holds_the_users_camera_profiles(tmp_path, capsys, monke
     profile = {"width": 640, "height": 480, "fx": 612.5, "fy": 611.0, "cx": 319.5, "cy": 239.5}
     (folder / "calib" / "mycam.json").write_text(json.dumps(profile), encoding="utf-8")
     monkeypatch.chdir(tmp_path)
-    assert main(["config", "--config-dir", "bench-pi", "--camera", "mycam", "--json"]) == 0, capsys.readouterr().err
-    shown = capsys.readouterr().out
+    code = main(["config", "--config-dir", "bench-pi", "--camera", "mycam", "--json"])
+    shown = capsys.readouterr()
+    assert code == 0, shown.err
+    shown = shown.out
     assert "612.5" in shown and "mycam" in shown
     monkeypatch.setenv("QRFIELD_CONFIG_DIR", str(tmp_path / "elsewhere"))  # a new process without it
     assert main(["config", "--camera", "mycam", "--json"]) == 2  # not found
