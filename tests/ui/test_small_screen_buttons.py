@@ -11,7 +11,7 @@ from PySide6 import QtCore, QtWidgets
 from test_app_layout import WAIT_MS, clipped_by_parents, cut_labels, in_scroll_area, name, settle
 
 from qrfield.camera import resolve_camera
-from ui.calibration_dialog import CalibrationDialog
+from ui.calibration_dialog import RESULT_PAGE, VIEWS_PAGE, CalibrationDialog
 
 pytestmark = pytest.mark.gui
 SIZES = [(800, 480), (1024, 600)]
@@ -78,13 +78,15 @@ def test_every_calibration_button_is_in_view_without_scrolling(
     dialog.show()
     dialog.resize(width, height)
     dialog.virtual_check.setChecked(True)
+    pages = getattr(dialog, "pages", None)
     for _ in range(3):  # a result on the Result page: its text, Save and Use enabled
         qtbot.waitUntil(dialog.capture_button.isEnabled, timeout=WAIT_MS)
         dialog.capture_button.click()
+        assert pages is None or pages.currentIndex() == VIEWS_PAGE  # the view, and where it counts
     dialog.compute_button.click()
     qtbot.waitUntil(lambda: dialog.result is not None, timeout=WAIT_MS)
+    assert pages is None or pages.currentIndex() == RESULT_PAGE
     assert (dialog.width(), dialog.height()) == (width, height)
-    pages = getattr(dialog, "pages", None)
     problems: dict[str, list[str]] = {}
     seen: set[str] = set()
     for k in range(pages.count() if pages is not None else 1):
@@ -99,6 +101,8 @@ def test_every_calibration_button_is_in_view_without_scrolling(
     assert seen >= CALIBRATION_BUTTONS, CALIBRATION_BUTTONS - seen
     # The preview stays the larger part of the dialog.
     assert dialog.picture.width() >= 0.55 * width and dialog.picture.height() >= 0.8 * height
+    qtbot.mouseClick(dialog.close_button, QtCore.Qt.MouseButton.LeftButton)
+    assert not dialog.isVisible()
 
 
 @pytest.mark.parametrize(("width", "height"), SIZES, ids=IDS)
