@@ -110,11 +110,14 @@ def take(width: int, height: int, out: Path, scratch: Path, everything: bool) ->
         wait(1.0)
         save(window, out / f"{width}x{height}-new-session.png")
         dialog.reject()
-        calibration = window.open_calibration()
-        calibration.virtual_check.setChecked(True)
-        wait(3.0)
-        save(window, out / f"{width}x{height}-calibration.png")
-        calibration.close()
+        shoot_calibration(window, wait, out / f"{width}x{height}-calibration")
+        tab = window.simulation_tab
+        show(window, "Simulation", "")
+        for k, stem in ((0, "study"), (2, "heatmap")):
+            tab.pages.setCurrentIndex(k)
+            wait(1.0)
+            save(window, out / f"{width}x{height}-simulation-{stem}.png")
+        tab.pages.setCurrentIndex(1)
         resume = window.session_panel.show_resume_dialog()
         wait(1.0)
         save(window, out / f"{width}x{height}-resume.png")
@@ -130,6 +133,25 @@ def take(width: int, height: int, out: Path, scratch: Path, everything: bool) ->
         print(f"screenshots: FAIL: the window ({size.width()}x{size.height()}) does not fit {width}x{height}")
         return 1
     return 0
+
+
+def shoot_calibration(window, wait, stem: Path) -> None:
+    """The calibration dialog's three pages: Board (virtual chessboard on), Views after eight
+    captured views, Result after Compute."""
+    calibration = window.open_calibration()
+    calibration.virtual_check.setChecked(True)
+    wait(3.0)
+    save(window, stem.with_name(stem.name + ".png"))
+    for _ in range(8):
+        wait(10.0, calibration.capture_button.isEnabled)
+        calibration.capture_button.click()
+    wait(1.0)
+    save(window, stem.with_name(stem.name + "-views.png"))
+    calibration.compute_button.click()
+    wait(30.0, lambda: calibration.result is not None)
+    wait(1.0)
+    save(window, stem.with_name(stem.name + "-result.png"))
+    calibration.close()
 
 
 def log_demo_session(window, wait) -> None:

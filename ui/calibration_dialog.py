@@ -11,7 +11,9 @@ Saving writes the CameraModel JSON as ``NAME.json`` in the user's calib folder
 (:func:`qrfield.paths.user_calib_dir`, never the checkout's shipped presets; no silent
 overwrite), NAME being the camera name the operator gives; "Use" makes it the app's camera model.
 :func:`qrfield.calibration.calibrate` runs as a :class:`ui.background.BackgroundJob`. The dialog
-fits an 800x480 screen: its controls scroll beside the picture.
+fits an 800x480 screen without scrolling: beside the picture, Capture view and Next pose over
+three pages (Board: the settings; Views: the captured views and their coverage; Result: the
+result, Save and Use), Compute and Close under them.
 """
 
 from __future__ import annotations
@@ -47,6 +49,8 @@ from ui.background import BackgroundJob
 from ui.settings_form import SettingsForm
 from ui.text import short_path
 
+#: The pages beside the picture (in this order).
+BOARD_PAGE, VIEWS_PAGE, RESULT_PAGE = range(3)
 COVERED_COLOUR = "#2a8c2a"
 UNCOVERED_COLOUR = "#c44"
 
@@ -147,7 +151,7 @@ class CalibrationDialog(QtWidgets.QDialog):
         self.job = BackgroundJob("calibrate", self)
         layout = QtWidgets.QHBoxLayout(self)
         layout.addLayout(self._build_picture(), 3)
-        layout.addWidget(self._build_scrolled_controls(), 2)
+        layout.addWidget(self._build_controls(), 2)
         self._fit_screen()
         self._wire()
         self._board = self._parse_board()
@@ -171,37 +175,26 @@ class CalibrationDialog(QtWidgets.QDialog):
         left.addWidget(self.found_label)
         return left
 
-    def _build_scrolled_controls(self) -> QtWidgets.QScrollArea:
-        """The controls, scrolling on a small screen (the picture beside them stays)."""
-        page = self._build_controls()
-        area = QtWidgets.QScrollArea()
-        area.setWidget(page)
-        area.setWidgetResizable(True)
-        area.setHorizontalScrollBarPolicy(QtCore.Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
-        scrollbar = area.style().pixelMetric(QtWidgets.QStyle.PixelMetric.PM_ScrollBarExtent)
-        area.setMinimumWidth(page.minimumSizeHint().width() + scrollbar + 2 * area.frameWidth())
-        return area
-
     def _build_controls(self) -> QtWidgets.QWidget:
-        """Top to bottom: the settings, capturing, the views, the coverage, computing, saving."""
+        """Capture view and Next pose over three pages (Board | Views | Result), Compute and Close
+        under them: on an 800x480 screen every button is in view and nothing scrolls but the views
+        list and the result text. Capturing shows the Views page, a computed result the Result page."""
         self.form = SettingsForm(CalibrationDialogSettings, self._initial_settings)
-        page = QtWidgets.QWidget()
-        layout = QtWidgets.QVBoxLayout(page)
-        layout.addWidget(self.form)
-        self._build_capture(layout)
-        self._build_views(layout)
-        layout.addWidget(self._build_coverage())
-        self._build_compute(layout)
-        self._build_save(layout)
-        return page
+        column = QtWidgets.QWidget()
+        layout = QtWidgets.QVBoxLayout(column)
+        layout.setContentsMargins(0, 0, 0, 0)
+        layout.addLayout(self._build_capture())
+        self.pages = QtWidgets.QTabWidget()
+        self.pages.setObjectName("calibration_pages")
+        self.pages.addTab(self._build_board_page(), "Board")
+        self.pages.addTab(self._build_views_page(), "Views")
+        self.pages.addTab(self._build_result_page(), "Result")
+        layout.addWidget(self.pages, 1)
+        layout.addLayout(self._build_compute())
+        return column
 
-    def _build_capture(self, layout: QtWidgets.QVBoxLayout) -> None:
-        """The virtual chessboard switch, Capture view and Next pose."""
-        self.virtual_check = QtWidgets.QCheckBox("virtual chessboard")
-        self.virtual_check.setToolTip("seeded board poses rendered through the app's camera model")
-        self.virtual_check.setObjectName("virtual")
-        policy = QtWidgets.QSizePolicy.Policy
-        self.virtual_check.setSizePolicy(policy.Maximum, policy.Fixed)  # a click beside the text does nothing
+    def _build_capture(self) -> QtWidgets.QHBoxLayout:
+        """Capture view and Next pose (the virtual chessboard's)."""
         self.next_button = QtWidgets.QPushButton("Next pose")
         self.next_button.setObjectName("next_pose")
         self.next_button.setEnabled(False)
@@ -211,36 +204,59 @@ class CalibrationDialog(QtWidgets.QDialog):
         row = QtWidgets.QHBoxLayout()
         row.addWidget(self.capture_button, 2)
         row.addWidget(self.next_button, 1)
-        layout.addWidget(self.virtual_check)
-        layout.addLayout(row)
+        return row
 
-    def _build_views(self, layout: QtWidgets.QVBoxLayout) -> None:
-        """The captured views' list with Remove view and Clear views."""
+    def _build_board_page(self) -> QtWidgets.QWidget:
+        """The settings and the virtual chessboard switch."""
+        self.virtual_check = QtWidgets.QCheckBox("virtual chessboard")
+        self.virtual_check.setToolTip("seeded board poses rendered through the app's camera model")
+        self.virtual_check.setObjectName("virtual")
+        policy = QtWidgets.QSizePolicy.Policy
+        self.virtual_check.setSizePolicy(policy.Maximum, policy.Fixed)  # a click beside the text does nothing
+        page = QtWidgets.QWidget()
+        layout = QtWidgets.QVBoxLayout(page)
+        layout.addWidget(self.form)
+        layout.addWidget(self.virtual_check)
+        layout.addStretch(1)
+        return page
+
+    def _build_views_page(self) -> QtWidgets.QWidget:
+        """The captured views' list (it scrolls) with Remove view and Clear views, and the coverage."""
         self.views = QtWidgets.QListWidget()
         self.views.setObjectName("views")
-        self.views.setMaximumHeight(110)
+        self.views.setMinimumHeight(60)
         self.remove_button = QtWidgets.QPushButton("Remove view")
+        self.remove_button.setObjectName("remove_view")
         self.clear_button = QtWidgets.QPushButton("Clear views")
+        self.clear_button.setObjectName("clear_views")
         row = QtWidgets.QHBoxLayout()
         row.addWidget(self.remove_button)
         row.addWidget(self.clear_button)
-        layout.addWidget(self.views)
+        page = QtWidgets.QWidget()
+        layout = QtWidgets.QVBoxLayout(page)
+        layout.addWidget(self.views, 1)
         layout.addLayout(row)
+        layout.addWidget(self._build_coverage())
+        return page
 
-    def _build_compute(self, layout: QtWidgets.QVBoxLayout) -> None:
-        """Compute and the text of its result."""
+    def _build_compute(self) -> QtWidgets.QHBoxLayout:
+        """Compute and Close."""
         self.compute_button = QtWidgets.QPushButton(f"Compute (needs {MIN_VIEWS} views)")
         self.compute_button.setObjectName("compute")
         self.compute_button.setEnabled(False)
+        self.close_button = QtWidgets.QPushButton("Close")
+        self.close_button.setObjectName("close")
+        row = QtWidgets.QHBoxLayout()
+        row.addWidget(self.compute_button, 2)
+        row.addWidget(self.close_button, 1)
+        return row
+
+    def _build_result_page(self) -> QtWidgets.QWidget:
+        """The result's text (it scrolls), where Save writes, Save and Use, and the note line."""
         self.results = QtWidgets.QPlainTextEdit()
         self.results.setObjectName("results")
         self.results.setReadOnly(True)
-        self.results.setMinimumHeight(100)
-        layout.addWidget(self.compute_button)
-        layout.addWidget(self.results, 1)
-
-    def _build_save(self, layout: QtWidgets.QVBoxLayout) -> None:
-        """Where Save writes, Save and Use, and the note line."""
+        self.results.setPlaceholderText("Compute shows the calibration here")
         self.path_label = QtWidgets.QLabel("")
         self.path_label.setWordWrap(True)
         self.save_button = QtWidgets.QPushButton("Save")
@@ -256,9 +272,13 @@ class CalibrationDialog(QtWidgets.QDialog):
         self.note = QtWidgets.QLabel("")
         self.note.setObjectName("note")
         self.note.setWordWrap(True)
+        page = QtWidgets.QWidget()
+        layout = QtWidgets.QVBoxLayout(page)
+        layout.addWidget(self.results, 1)
         layout.addWidget(self.path_label)
         layout.addLayout(row)
         layout.addWidget(self.note)
+        return page
 
     def _build_coverage(self) -> QtWidgets.QGroupBox:
         box = QtWidgets.QGroupBox("views per image cell")
@@ -303,6 +323,7 @@ class CalibrationDialog(QtWidgets.QDialog):
         self.compute_button.clicked.connect(self.compute)
         self.save_button.clicked.connect(self.save)
         self.use_button.clicked.connect(self.use)
+        self.close_button.clicked.connect(self.close)
 
     # ---------------------------------------------------------------- settings
     def settings(self) -> CalibrationDialogSettings:
@@ -443,6 +464,7 @@ class CalibrationDialog(QtWidgets.QDialog):
         self.views.addItem(f"{label}: {d.image_size[0]}x{d.image_size[1]} px ({preview.source})")
         self.current = None  # the same frame is not captured twice
         self._views_changed()
+        self.pages.setCurrentIndex(VIEWS_PAGE)  # the new view in the list, and where it counts
         if self.virtual_check.isChecked():
             self.request_virtual_view()
 
@@ -503,6 +525,7 @@ class CalibrationDialog(QtWidgets.QDialog):
         self.computing = True
         self._update_capture()
         self.results.setPlainText(f"computing from {len(self.captured)} views…")
+        self.pages.setCurrentIndex(RESULT_PAGE)
         detections = list(self.captured)
         s = self.settings()
         name = s.name.strip() or "calibrated"

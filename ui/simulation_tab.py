@@ -18,7 +18,9 @@ where it is). With "re-run on change" ticked, once a study has been run, every c
 runs it again after a short pause (a run in progress is stopped and superseded): such a preview
 is shown but not written. The tab shows the coverage table (per combination and solver, in both
 readings: within criteria, and converged and within criteria; the mean, the seed's 77.28 %
-beside it) and the heatmap of the largest solvable angle for a chosen combination and z.
+beside it) and the heatmap of the largest solvable angle for a chosen combination and z, each on a
+page of its own, with the run folder and Open folder under the pages: on an 800x480 screen every
+button is in view and only the study's form and the table scroll, inside themselves.
 """
 
 from __future__ import annotations
@@ -140,31 +142,22 @@ def run_and_write(control: JobControl, run: StudyRun) -> RunOutcome:
 
 
 class ImageView(QtWidgets.QWidget):
-    """Shows a pixmap scaled to the widget's width, keeping its aspect ratio."""
+    """Shows a pixmap scaled to fit the widget, keeping its aspect ratio, centred (it takes the
+    room its layout gives it; Full size… shows the picture at its own size)."""
 
     def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__(parent)
         self.pixmap = QtGui.QPixmap()
         size = QtWidgets.QSizePolicy.Policy
-        policy = QtWidgets.QSizePolicy(size.Ignored, size.Preferred)
-        policy.setHeightForWidth(True)
-        self.setSizePolicy(policy)
+        self.setSizePolicy(size.Ignored, size.Ignored)
+        self.setMinimumSize(120, 80)
 
     def set_pixmap(self, pixmap: QtGui.QPixmap) -> None:
         self.pixmap = pixmap
-        self.updateGeometry()
         self.update()
 
-    def hasHeightForWidth(self) -> bool:
-        return True
-
-    def heightForWidth(self, width: int) -> int:
-        if self.pixmap.isNull():
-            return 40
-        return round(width * self.pixmap.height() / self.pixmap.width())
-
     def sizeHint(self) -> QtCore.QSize:
-        return QtCore.QSize(400, self.heightForWidth(400))
+        return QtCore.QSize(400, 300)
 
     def paintEvent(self, _event: QtGui.QPaintEvent) -> None:
         if self.pixmap.isNull():
@@ -172,7 +165,8 @@ class ImageView(QtWidgets.QWidget):
         painter = QtGui.QPainter(self)
         painter.setRenderHint(QtGui.QPainter.RenderHint.SmoothPixmapTransform)
         scaled = self.pixmap.size().scaled(self.size(), QtCore.Qt.AspectRatioMode.KeepAspectRatio)
-        painter.drawPixmap(QtCore.QRect(QtCore.QPoint(0, 0), scaled), self.pixmap)
+        corner = QtCore.QPoint((self.width() - scaled.width()) // 2, (self.height() - scaled.height()) // 2)
+        painter.drawPixmap(QtCore.QRect(corner, scaled), self.pixmap)
         painter.end()
 
 
@@ -208,8 +202,10 @@ class SimulationTab(QtWidgets.QWidget):
         self._ready = False
         self._build_run_controls()
         self.pages = QtWidgets.QTabWidget()
-        self.pages.addTab(_scrolled(self._build_study_page()), "Study")
-        self.pages.addTab(_scrolled(self._build_results_page()), "Results")
+        self.pages.addTab(self._build_study_page(), "Study")
+        self.pages.addTab(self._build_coverage_page(), "Coverage")
+        self.pages.addTab(self._build_heatmap_page(), "Heatmap")
+        self._build_run_folder_row()
         self._build_layout()
         self._connect_signals()
         self.apply_preset(SMALL_STUDY)
@@ -220,7 +216,8 @@ class SimulationTab(QtWidgets.QWidget):
 
     # ---------------------------------------------------------------- builders
     def _build_study_page(self) -> QtWidgets.QWidget:
-        """The presets over the study form (one row per field, its error under it) and the output folder."""
+        """The presets and the output folder over the study form (one row per field, its error
+        under it; the form scrolls inside itself on a small screen)."""
         self.small_button = QtWidgets.QPushButton("Small study")
         self.small_button.setToolTip("5 x 3 x 2 grid, 12 combinations, sweep 0..60 deg step 5: a few seconds")
         self.default_button = QtWidgets.QPushButton("Default study")
@@ -241,12 +238,18 @@ class SimulationTab(QtWidgets.QWidget):
             self._add_field_row(form, name)
         self.general_error = _error_label("")
         form.addRow(self.general_error)
-        form.addRow("output folder", self._build_output_row())
+        fields = QtWidgets.QWidget()
+        fields_layout = QtWidgets.QVBoxLayout(fields)
+        fields_layout.addLayout(form)
+        fields_layout.addStretch(1)
+        output = QtWidgets.QHBoxLayout()
+        output.addWidget(QtWidgets.QLabel("output folder"))
+        output.addLayout(self._build_output_row(), 1)
         page = QtWidgets.QWidget()
         layout = QtWidgets.QVBoxLayout(page)
         layout.addLayout(presets)
-        layout.addLayout(form)
-        layout.addStretch(1)
+        layout.addLayout(output)
+        layout.addWidget(_scrolled(fields), 1)  # the long form scrolls inside itself, no button in it
         return page
 
     def _add_field_row(self, form: QtWidgets.QFormLayout, name: str) -> None:
@@ -286,6 +289,8 @@ class SimulationTab(QtWidgets.QWidget):
             "each run started by Run writes its outputs into a new <YYYYmmdd-HHMMSS> folder inside this one"
         )
         browse = QtWidgets.QPushButton("…")
+        browse.setObjectName("browse_output")
+        browse.setToolTip("choose the output folder")
         browse.setFixedWidth(32)
         browse.clicked.connect(self._browse_output)
         row = QtWidgets.QHBoxLayout()
@@ -293,28 +298,11 @@ class SimulationTab(QtWidgets.QWidget):
         row.addWidget(browse)
         return row
 
-    def _build_results_page(self) -> QtWidgets.QWidget:
-        """The coverage table, the heatmap with its choice of combination and z, the run folder."""
+    def _build_coverage_page(self) -> QtWidgets.QWidget:
+        """The coverage table (it scrolls inside itself) under what its two readings mean."""
         self.table = QtWidgets.QTableWidget(0, 0)
         self.table.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
         self.table.verticalHeader().setDefaultSectionSize(20)
-        self.table.setMinimumHeight(200)
-        self.combo_choice = QtWidgets.QComboBox()
-        self.z_choice = QtWidgets.QComboBox()
-        choose = QtWidgets.QHBoxLayout()
-        choose.addWidget(QtWidgets.QLabel("combination"))
-        choose.addWidget(self.combo_choice, 1)
-        choose.addWidget(QtWidgets.QLabel("z"))
-        choose.addWidget(self.z_choice)
-        self.heatmap = ImageView()
-        self.heatmap_path = _selectable_label("")
-        self.output_label = _selectable_label("no run yet")
-        self.full_size_button = QtWidgets.QPushButton("Full size…")
-        self.full_size_button.setToolTip("the heatmap at its own size, in a window of its own")
-        self.full_size_button.setEnabled(False)
-        self.open_button = QtWidgets.QPushButton("Open folder")
-        self.open_button.setToolTip("open the last saved run's folder in the file manager")
-        self.open_button.setEnabled(False)
         coverage_label = QtWidgets.QLabel(
             "Coverage: share of in-view samples meeting the criteria. <i>within</i>: the pose meets "
             "them and the solver stopped before n_max; <i>converged</i>: its own converged flag holds too"
@@ -323,16 +311,47 @@ class SimulationTab(QtWidgets.QWidget):
         page = QtWidgets.QWidget()
         layout = QtWidgets.QVBoxLayout(page)
         layout.addWidget(coverage_label)
-        layout.addWidget(self.table)
+        layout.addWidget(self.table, 1)
+        return page
+
+    def _build_heatmap_page(self) -> QtWidgets.QWidget:
+        """The heatmap (scaled to the room there is) with its choice of combination and z, Full size."""
+        self.combo_choice = QtWidgets.QComboBox()
+        self.combo_choice.setObjectName("heatmap_combination")
+        self.combo_choice.setSizeAdjustPolicy(
+            QtWidgets.QComboBox.SizeAdjustPolicy.AdjustToMinimumContentsLengthWithIcon
+        )
+        self.combo_choice.setMinimumContentsLength(12)
+        self.z_choice = QtWidgets.QComboBox()
+        self.z_choice.setObjectName("heatmap_z")
+        self.heatmap = ImageView()
+        self.heatmap_path = _selectable_label("")
+        self.full_size_button = QtWidgets.QPushButton("Full size…")
+        self.full_size_button.setToolTip("the heatmap at its own size, in a window of its own")
+        self.full_size_button.setEnabled(False)
+        choose = QtWidgets.QHBoxLayout()
+        choose.addWidget(QtWidgets.QLabel("combination"))
+        choose.addWidget(self.combo_choice, 1)
+        choose.addWidget(QtWidgets.QLabel("z"))
+        choose.addWidget(self.z_choice)
+        choose.addWidget(self.full_size_button)
+        page = QtWidgets.QWidget()
+        layout = QtWidgets.QVBoxLayout(page)
         layout.addWidget(QtWidgets.QLabel("Largest solvable angle (deg) over the x-y grid"))
         layout.addLayout(choose)
-        layout.addWidget(self.heatmap)
+        layout.addWidget(self.heatmap, 1)
         layout.addWidget(self.heatmap_path)
-        layout.addWidget(self.full_size_button)
-        layout.addWidget(self.output_label)
-        layout.addWidget(self.open_button)
-        layout.addStretch(1)
         return page
+
+    def _build_run_folder_row(self) -> None:
+        """The last run's folder and Open folder, under the pages (in view on every page)."""
+        self.output_label = _selectable_label("no run yet")
+        self.open_button = QtWidgets.QPushButton("Open folder")
+        self.open_button.setToolTip("open the last saved run's folder in the file manager")
+        self.open_button.setEnabled(False)
+        self.run_folder_row = QtWidgets.QHBoxLayout()
+        self.run_folder_row.addWidget(self.output_label, 1)
+        self.run_folder_row.addWidget(self.open_button)
 
     def _build_run_controls(self) -> None:
         """Run, Stop, "re-run on change" (with its debounce timer), the progress bar and status lines."""
@@ -369,6 +388,7 @@ class SimulationTab(QtWidgets.QWidget):
         layout.addWidget(self.status)
         layout.addWidget(self.size_label)
         layout.addWidget(self.pages, 1)
+        layout.addLayout(self.run_folder_row)
 
     def _connect_signals(self) -> None:
         self.job.progressed.connect(self._on_progress)
