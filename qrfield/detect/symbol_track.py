@@ -53,10 +53,10 @@ _SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
 _FLT_EPSILON = float(np.finfo(np.float32).eps)
 
 
-def _scales(h: np.ndarray, n: int) -> tuple[float, float]:
-    """px per module along u and along v at the symbol's centre for homography ``h`` (module -> px)
-    (Python floats: this runs on every tracked frame)."""
-    h00, h01, h02, h10, h11, h12, h20, h21, h22 = h.ravel().tolist()
+def _scales(h: list[float], n: int) -> tuple[float, float]:
+    """px per module along u and along v at the symbol's centre for homography ``h`` (module -> px,
+    9 floats row by row; Python floats: this runs on every tracked frame)."""
+    h00, h01, h02, h10, h11, h12, h20, h21, h22 = h
 
     def mapped(u: float, v: float) -> tuple[float, float]:
         w = h20 * u + h21 * v + h22
@@ -76,7 +76,7 @@ class _Template:
     def __init__(self, cells: np.ndarray, h: np.ndarray, edge_px: float, points: int) -> None:
         size = cells.shape[0]
         n = size - 2 * QUIET_RINGS
-        self.scales = _scales(h, n)
+        self.scales = _scales(h.ravel().tolist(), n)
         self.edge_px = edge_px
         module_px = 0.5 * (self.scales[0] + self.scales[1])
         r = 1 if edge_px / max(module_px, 1e-6) < 0.4 else 2
@@ -117,23 +117,79 @@ class _Template:
         self.jac_t = np.empty((14, len(t)))
         self.jac_t[8:] = self.light_cols.T
         self.uv_cv = np.ascontiguousarray(uv.reshape(1, -1, 2))
+        # float32 points: cv2.perspectiveTransform then gives the float32 map cv2.remap takes.
+        self.uv_cv32 = self.uv_cv.astype(np.float32)
+        # The lighting basis as rows: (A, B) = light.reshape(2, 3) @ basis_t in one product (a
+        # (k, 3) @ (3,) matvec costs twice as much as this (2, 3) @ (3, k), measured).
+        self.basis_t = np.ascontiguousarray(self.basis.T)
+        # The points' box in module coordinates: where a homography keeps w > 0 over it, the box's
+        # image is the convex quad of its mapped corners, so those four inside the crop put every
+        # point inside (a test in floats instead of two passes over the (k, 2) pixels).
+        self.box = (float(u.min()), float(v.min()), float(u.max()), float(v.max()))
 
-    def fits(self, h: np.ndarray, edge_px: float) -> bool:
+    def fits(self, h: list[float], edge_px: float) -> bool:
+        """Whether this template serves homography ``h`` (9 floats) and edge width ``edge_px``."""
         su, sv = _scales(h, self.n)
         change = max(abs(su / self.scales[0] - 1.0), abs(sv / self.scales[1] - 1.0))
         return bool(change < TEMPLATE_TOLERANCE and abs(edge_px / self.edge_px - 1.0) < TEMPLATE_TOLERANCE)
 
 
-def _usable_homography(h: np.ndarray) -> bool:
-    """A finite homography (3, 3) with |det| >= 1e-12 (in Python floats: no numpy call overhead)."""
-    a, b, c, d, e, f, g, hh, i = h.ravel().tolist()
+def _square_homography(n: float, quad: list[list[float]]) -> list[float] | None:
+    """The 9 entries (row by row, h22 = 1) of the homography taking the corners (0, 0), (n, 0),
+    (n, n), (0, n) of the symbol's module square to the points ``quad`` (V1..V4, 4 x [x, y]), or
+    None when they are collinear: Heckbert's closed form for the unit square (Fundamentals of
+    Texture Mapping and Image Warping, 1989, sec. 2.2.3), its columns divided by n; in Python
+    floats (cv2.getPerspectiveTransform solves an 8 x 8 system for the same matrix)."""
+    (x0, y0), (x1, y1), (x2, y2), (x3, y3) = quad
+    sx, sy = x0 - x1 + x2 - x3, y0 - y1 + y2 - y3
+    if sx == 0.0 and sy == 0.0:
+        g = hh = 0.0
+    else:
+        dx1, dx2, dy1, dy2 = x1 - x2, x3 - x2, y1 - y2, y3 - y2
+        den = dx1 * dy2 - dx2 * dy1
+        if den == 0.0:
+            return None
+        g, hh = (sx * dy2 - dx2 * sy) / den, (dx1 * sy - sx * dy1) / den
+    q = 1.0 / n
+    return [
+        (x1 - x0 + g * x1) * q,
+        (x3 - x0 + hh * x3) * q,
+        x0,
+        (y1 - y0 + g * y1) * q,
+        (y3 - y0 + hh * y3) * q,
+        y0,
+        g * q,
+        hh * q,
+        1.0,
+    ]
+
+
+def _maps_inside(h: list[float], box: tuple[float, float, float, float], width: float, height: float) -> bool:
+    """The homography ``h`` (9 floats) maps the module box (u0, v0, u1, v1) into [0, width] x
+    [0, height] with w > 0 at its four corners (so over all of it: w is linear in u, v)."""
+    h00, h01, h02, h10, h11, h12, h20, h21, h22 = h
+    u0, v0, u1, v1 = box
+    for u, v in ((u0, v0), (u1, v0), (u1, v1), (u0, v1)):
+        w = h20 * u + h21 * v + h22
+        if not w > 0.0:
+            return False
+        x, y = (h00 * u + h01 * v + h02) / w, (h10 * u + h11 * v + h12) / w
+        if not (0.0 <= x <= width and 0.0 <= y <= height):
+            return False
+    return True
+
+
+def _usable_homography(h: list[float]) -> bool:
+    """A finite homography (9 floats, row by row) with |det| >= 1e-12."""
+    a, b, c, d, e, f, g, hh, i = h
     det = a * (e * i - f * hh) - b * (d * i - f * g) + c * (d * hh - e * g)
     return math.isfinite(a + b + c + d + e + f + g + hh + i) and abs(det) >= 1e-12
 
 
-def _compose_inverse(h: np.ndarray, delta: np.ndarray) -> np.ndarray | None:
-    """H o dH^-1 for the step dH = I + [[d0 d1 d2], [d3 d4 d5], [d6 d7 0]] (delta[:8]), None when
-    dH is singular or the result not finite (in Python floats: a 3x3 inverse by its adjugate)."""
+def _compose_inverse(h: list[float], delta: np.ndarray) -> list[float] | None:
+    """H o dH^-1 (9 floats, row by row) for the step dH = I + [[d0 d1 d2], [d3 d4 d5], [d6 d7 0]]
+    (delta[:8]), None when dH is singular or the result not finite (in Python floats: a 3x3
+    inverse by its adjugate)."""
     d0, d1, d2, d3, d4, d5, d6, d7 = delta[:8].tolist()
     a, b, c = 1.0 + d0, d1, d2
     d, e, f = d3, 1.0 + d4, d5
@@ -146,8 +202,8 @@ def _compose_inverse(h: np.ndarray, delta: np.ndarray) -> np.ndarray | None:
     i00, i01, i02 = co[0] * q, (c * hh - b * i) * q, (b * f - c * e) * q
     i10, i11, i12 = co[1] * q, (a * i - c * g) * q, (c * d - a * f) * q
     i20, i21, i22 = co[2] * q, (b * g - a * hh) * q, (a * e - b * d) * q
-    (h00, h01, h02), (h10, h11, h12), (h20, h21, h22) = h.tolist()
-    out = (
+    h00, h01, h02, h10, h11, h12, h20, h21, h22 = h
+    out = [
         h00 * i00 + h01 * i10 + h02 * i20,
         h00 * i01 + h01 * i11 + h02 * i21,
         h00 * i02 + h01 * i12 + h02 * i22,
@@ -157,10 +213,20 @@ def _compose_inverse(h: np.ndarray, delta: np.ndarray) -> np.ndarray | None:
         h20 * i00 + h21 * i10 + h22 * i20,
         h20 * i01 + h21 * i11 + h22 * i21,
         h20 * i02 + h21 * i12 + h22 * i22,
-    )
+    ]
     if not math.isfinite(sum(out)):
         return None
-    return np.array(out).reshape(3, 3)
+    return out
+
+
+def _shifted(h: list[float], sx: float, sy: float) -> list[float]:
+    """T o H for the translation T by (-sx, -sy): H's pixels in a crop whose origin is at (sx, sy)."""
+    h00, h01, h02, h10, h11, h12, h20, h21, h22 = h
+    return [
+        h00 - sx * h20, h01 - sx * h21, h02 - sx * h22,
+        h10 - sy * h20, h11 - sy * h21, h12 - sy * h22,
+        h20, h21, h22,
+    ]  # fmt: skip
 
 
 class WarmFit:
@@ -195,30 +261,35 @@ class WarmFit:
         iterations: int = 2,
     ) -> SymbolFit:
         """Corners V1..V4 (pixels of ``grey``, a crop at ``offset`` of the camera's image) from the
-        predicted corners and the last frame's edge width and lighting; never raises for content."""
+        predicted corners and the last frame's edge width and lighting; never raises for content.
+
+        The homography, its updates and the corners are kept in Python floats, and through a
+        pinhole the crop's offset is folded into the homography (every tracked frame runs this:
+        each numpy call on small arrays costs 2-5 us here)."""
         start = np.asarray(predicted_px, dtype=np.float64)
         lens = self.lens
-        shift = np.asarray(offset, dtype=np.float64)
+        distorted = lens.distorted
+        sx, sy = float(offset[0]), float(offset[1])
 
         def fail(reason: str) -> SymbolFit:
             return SymbolFit(False, start.copy(), None, reason)
 
-        if lens.distorted:
+        if start.shape != (4, 2):
+            raise ValueError(f"predicted corners must be (4, 2) pixels V1..V4, got shape {start.shape}")
+        if distorted:
             from qrfield.detect.lens import undistort_pixels
 
-            ideal = undistort_pixels(lens.camera, start + shift)
+            quad = undistort_pixels(lens.camera, start + np.array([sx, sy])).tolist()
         else:
-            ideal = start + shift
-        try:
-            h = cv2.getPerspectiveTransform(self._square32, ideal.astype(np.float32))
-        except cv2.error:
-            return fail("degenerate corners")
-        if not _usable_homography(h):
+            quad = [[x + sx, y + sy] for x, y in start.tolist()]
+        n = self.n
+        h = _square_homography(float(n), quad)  # module -> ideal camera pixels
+        if h is None or not _usable_homography(h):
             return fail("degenerate corners")
         edge = state.edge_px
         template = self._template
         if template is None or not template.fits(h, edge):
-            template = self._template = _Template(self.cells, h, edge, self.points)
+            template = self._template = _Template(self.cells, np.array(h).reshape(3, 3), edge, self.points)
         if len(template.t) < 60:
             return fail("too few template points")
         image = grey.astype(np.float32)
@@ -228,31 +299,39 @@ class WarmFit:
         huber = HUBER_K * scale
         k = len(template.t)
         jac_t = template.jac_t
-        m4 = self._corner_modules
-        limits = np.array([ww - 1, hh - 1], dtype=np.float64)
+        t = template.t
+        # Through a pinhole the iteration runs on the crop's pixels directly (T o H); through a
+        # lens on the ideal pixels, distorted and shifted at each step.
+        if not distorted:
+            h = _shifted(h, sx, sy)
         with np.errstate(all="ignore"):
             for _ in range(iterations):
-                px = cv2.perspectiveTransform(template.uv_cv, h).reshape(-1, 2)
-                if lens.distorted:
-                    px = lens.distort(px)
-                px -= shift
+                hm = np.array(h).reshape(3, 3)
                 inside = None  # all inside, the usual case
-                # (two whole-array tests: numpy's per-column min/max on (k, 2) costs ten times more)
-                if px.min() < 0 or (px > limits).any():
-                    inside = (px[:, 0] >= 0) & (px[:, 1] >= 0) & (px[:, 0] <= ww - 1) & (px[:, 1] <= hh - 1)
-                    if inside.mean() < 0.9:
-                        return fail("the code leaves the region")
+                if distorted:
+                    px = lens.distort(cv2.perspectiveTransform(template.uv_cv, hm).reshape(-1, 2))
+                    px -= (sx, sy)
+                    grid = px.astype(np.float32)
+                    if px.min() < 0 or (px > (ww - 1, hh - 1)).any():
+                        inside = (
+                            (px[:, 0] >= 0) & (px[:, 1] >= 0) & (px[:, 0] <= ww - 1) & (px[:, 1] <= hh - 1)
+                        )
+                else:
+                    grid = cv2.perspectiveTransform(template.uv_cv32, hm)
+                    if not _maps_inside(h, template.box, ww - 1, hh - 1):
+                        px = grid.reshape(-1, 2)
+                        inside = (
+                            (px[:, 0] >= 0) & (px[:, 1] >= 0) & (px[:, 0] <= ww - 1) & (px[:, 1] <= hh - 1)
+                        )
+                if inside is not None and inside.mean() < 0.9:
+                    return fail("the code leaves the region")
                 values = cv2.remap(
-                    image,
-                    px.astype(np.float32).reshape(1, -1, 2),
-                    None,
-                    cv2.INTER_LANCZOS4,
-                    borderMode=cv2.BORDER_REPLICATE,
+                    image, grid.reshape(1, -1, 2), None, cv2.INTER_LANCZOS4, borderMode=cv2.BORDER_REPLICATE
                 ).reshape(-1)
-                b = template.basis @ light[3:]
-                resid = values - template.basis @ light[:3] + b * template.t
+                level, b = light.reshape(2, 3) @ template.basis_t  # lighting A and contrast B, (k,) each
+                resid = values - level + b * t
                 # Huber weights (1 within HUBER_K robust scales), none outside the region.
-                w = np.minimum(1.0, huber / np.maximum(np.abs(resid), 1e-12))
+                w = huber / np.maximum(np.abs(resid), huber)
                 if inside is not None:
                     w *= inside
                 # d model / d dH = -B dT/d dH; d model / d light = (basis, -T basis)
@@ -270,23 +349,30 @@ class WarmFit:
                 light = light + delta[8:]
             half = k // 2
             robust = max(1.4826 * float(np.partition(np.abs(resid), half)[half]), 0.5)
-            corners_ideal = cv2.perspectiveTransform(m4, h).reshape(4, 2)
-            if not np.all(np.isfinite(corners_ideal)):
-                return fail("the fit diverged")
-            corners = (lens.distort(corners_ideal) if lens.distorted else corners_ideal) - shift
             contrast = float(light[3])
             if abs(contrast) < MIN_CONTRAST:
                 return fail(f"too little contrast ({abs(contrast):.0f} grey levels)")
+            # The corners (ideal pixels through a lens, else the crop's) and d corner / d module.
+            h00, h01, h02, h10, h11, h12, h20, h21, h22 = h
+            points, dpx = [], []
+            for u, v in ((0.0, 0.0), (n, 0.0), (n, n), (0.0, n)):
+                q = 1.0 / (h20 * u + h21 * v + h22)
+                x, y = (h00 * u + h01 * v + h02) * q, (h10 * u + h11 * v + h12) * q
+                points.append([x, y])
+                dpx.append(
+                    [[(h00 - x * h20) * q, (h01 - x * h21) * q], [(h10 - y * h20) * q, (h11 - y * h21) * q]]
+                )
+            if not math.isfinite(sum(sum(p) for p in points)):
+                return fail("the fit diverged")
+            corners_model = np.array(points)
+            corners = lens.distort(corners_model) - (sx, sy) if distorted else corners_model
             try:
                 cov = robust**2 * small_inverse(normal, symmetric=True)[:8, :8]
             except np.linalg.LinAlgError:
                 return fail("the fit is singular")
             # Corner k is H (m_k - dW(m_k) dH) to first order: d corner / d dH = -dpx/dm dW/ddH.
-            hm = h[None, :2, :2]
-            wm = m4[0] @ h[2, :2] + h[2, 2]
-            dpx = (hm - corners_ideal[:, :, None] * h[None, 2:3, :2]) / wm[:, None, None]  # (4, 2, 2)
-            corners_cov = corner_covariance(-(dpx @ self._dw), cov, corners_ideal, lens)
-        if not np.all(np.isfinite(corners_cov)):
+            corners_cov = corner_covariance(-(np.array(dpx) @ self._dw), cov, corners_model, lens)
+        if not np.isfinite(corners_cov).all():
             return fail("the fit is singular")
         return SymbolFit(
             ok=True,
