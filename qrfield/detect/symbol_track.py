@@ -73,7 +73,9 @@ def _scales(h: list[float], n: int) -> tuple[float, float]:
 class _Template:
     """The model evaluated at fixed symbol points for one scale and edge width."""
 
-    def __init__(self, cells: np.ndarray, h: np.ndarray, edge_px: float, points: int) -> None:
+    def __init__(
+        self, cells: np.ndarray, h: np.ndarray, edge_px: float, points: int, lens: Lens | None = None
+    ) -> None:
         size = cells.shape[0]
         n = size - 2 * QUIET_RINGS
         self.scales = _scales(h.ravel().tolist(), n)
@@ -93,6 +95,10 @@ class _Template:
         w = uv @ h[2, :2] + h[2, 2]
         px = q / w[:, None]
         jac = (h[None, :2, :2] - px[:, :, None] * h[None, 2:3, :2]) / w[:, None, None]  # d px / d uv
+        if lens is not None and lens.distorted:
+            # The edges are blurred in the image's pixels, not the ideal ones: the model's distances
+            # across them go through the lens (as in the full fit's samples).
+            jac = lens.distort_jacobian(px) @ jac
         det = jac[:, 0, 0] * jac[:, 1, 1] - jac[:, 0, 1] * jac[:, 1, 0]
         grad_u = np.column_stack([jac[:, 1, 1], -jac[:, 0, 1]]) / det[:, None]  # rows of the inverse
         grad_v = np.column_stack([-jac[:, 1, 0], jac[:, 0, 0]]) / det[:, None]
@@ -289,7 +295,9 @@ class WarmFit:
         edge = state.edge_px
         template = self._template
         if template is None or not template.fits(h, edge):
-            template = self._template = _Template(self.cells, np.array(h).reshape(3, 3), edge, self.points)
+            template = self._template = _Template(
+                self.cells, np.array(h).reshape(3, 3), edge, self.points, lens
+            )
         if len(template.t) < 60:
             return fail("too few template points")
         image = grey.astype(np.float32)
