@@ -341,6 +341,52 @@ def hard_views(count: int, seed: int = 2024, start: int = 0) -> Iterator[HardVie
         yield hard_view(index, seed)
 
 
+def hard_sequence(index: int, frames: int = 60, seed: int = 2024) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """A moving card drawn like the set's views: ``frames`` (image (H, W) uint8, true corners V1..V4
+    (4, 2) px) of sequence ``index`` (even pinhole, odd the distorted lens), a pure function of
+    (seed, index).
+
+    The card (a payload of 5-80 bytes, a side of 50-100 mm) slides about 100 mm across the view,
+    moves 50 mm in depth about z 260-420 mm and turns 90 degrees about its normal while it tilts by
+    up to 35 degrees: a few pixels a frame, as a hand-held card at 30 frames a second. Blur 0.6 px,
+    noise 2 grey levels. For the tracker, which the independent views do not exercise.
+    """
+    import cv2
+
+    rng = np.random.default_rng([seed, 1_000_003, index])
+    camera = DISTORTED_CAMERA if index % 2 else _pinhole()
+    text = "".join(
+        rng.choice(list(string.ascii_letters + string.digits + " /:.?="), int(rng.integers(5, 81)))
+    )
+    matrix, _ = symbol_matrix(text, "LMQH"[int(rng.integers(4))])
+    side = float(rng.uniform(50.0, 100.0))
+    z0 = float(rng.uniform(300.0, 370.0))
+    phase = rng.uniform(0.0, 2 * math.pi, 3)
+    turn = 1.0 if rng.random() < 0.5 else -1.0
+    light, dark, background = (
+        float(rng.uniform(190.0, 230.0)),
+        float(rng.uniform(20.0, 50.0)),
+        float(rng.uniform(60.0, 160.0)),
+    )
+    noise = np.random.default_rng([seed, 1_000_033, index])
+    for i in range(frames):
+        s = i / max(frames - 1, 1)
+        position = [
+            -50.0 + 100.0 * s,
+            -20.0 + 30.0 * s + 10.0 * math.sin(phase[0] + 4 * s),
+            z0 + 50.0 * math.sin(3 * s + phase[1]),
+        ]
+        angles = [15.0 * math.sin(5 * s + phase[2]), -20.0 + 35.0 * s, 30.0 + 90.0 * s * turn]
+        pose = Pose(position, angles)
+        image = rasterise(camera, pose, side, matrix, background, light, dark)
+        image = cv2.GaussianBlur(image, (0, 0), sigmaX=0.6, borderType=cv2.BORDER_REPLICATE)
+        image = np.clip(np.round(image + noise.normal(0.0, 2.0, image.shape)), 0, 255).astype(np.uint8)
+        corners = cv2.projectPoints(
+            marker_vertices(side), cv2.Rodrigues(pose.rotation)[0], pose.position_mm, camera.K, camera.dist
+        )[0].reshape(4, 2)
+        yield image, corners
+
+
 # ---------------------------------------------------------------------- ``qrfield benchmark hardset``
 HELP = (
     "the hard benchmark set of `qrfield benchmark detect`: its make-up, render time and a check of its truth"
