@@ -212,8 +212,9 @@ def _windows(layout: _Layout, uv: np.ndarray, r: int) -> tuple[np.ndarray, np.nd
 
 
 _LAYOUTS: dict[tuple[int, int], tuple[np.ndarray, _Layout]] = {}
-#: Boundary offsets 0 .. m of a window of m cells.
-_SPANS = {m: np.arange(m + 1, dtype=np.float64) for m in (3, 5)}
+#: Boundary offsets 0 .. m of a window of m cells, as a column (m + 1, 1) against a trailing axis
+#: of points.
+_SPANS = {m: np.arange(m + 1, dtype=np.float64)[:, None] for m in (3, 5)}
 
 
 def _layout(cells: np.ndarray, r: int) -> _Layout:
@@ -242,38 +243,88 @@ def darkness_at(
     cells start at boundaries ``corner`` (k, 2) with colours ``colour`` (k, m, m) (see _windows),
     ``inv_grad`` (k, 2) px per module unit across u and v edges there, edge width ``edge_px``.
     With ``derivatives`` also (dD/du, dD/dv) (k, 2) and dD/ds (k,) (None without ``edge_derivative``).
-    u and v are handled side by side on a trailing axis of 2 (few, larger numpy operations).
     """
+    offset = np.ascontiguousarray((uv - corner).T)
+    out = _darkness_t(
+        offset,
+        np.ascontiguousarray(inv_grad.T),
+        np.ascontiguousarray(colour.transpose(1, 2, 0)),
+        edge_px,
+        derivatives,
+        edge_derivative,
+    )
+    if not derivatives:
+        return out
+    d, d_uv, d_s = out
+    return d, d_uv.T, d_s
+
+
+def _darkness_t(
+    offset: np.ndarray,
+    inv_grad_t: np.ndarray,
+    colour_t: np.ndarray,
+    edge_px: float,
+    derivatives: bool = True,
+    edge_derivative: bool = True,
+):
+    """:func:`darkness_at` on points along the last axis: ``offset`` (2, k) = uv - corner,
+    ``inv_grad_t`` (2, k), ``colour_t`` (m, m, k) (colour_t[row, column] = colour[:, row, column]);
+    returns D (k,) and, with ``derivatives``, (dD/du, dD/dv) (2, k) and dD/ds (k,) or None.
+
+    Points on the last axis keep every operation on contiguous runs of k (the (k, 2, m + 1) layout
+    made numpy's loops strided and its small matmul/einsum contractions slow: measured 3x).
+    """
+    m = colour_t.shape[0]
+    k = offset.shape[1]
     # Distance to each boundary in px across it, then F = the logistic of width s convolved
     # with the pixel's 1 px footprint (its variance across any edge direction is 1/12 px^2):
     # F(z) = 1/2 + s/2 [L((z + 1/2) / s) - L((z - 1/2) / s)], L = ln cosh.
-    z = ((uv - corner)[:, :, None] - _SPANS[colour.shape[1]]) * inv_grad[:, :, None]  # (k, 2, m+1) px
+    z = (offset[:, None, :] - _SPANS[m]) * inv_grad_t[:, None, :]  # (u|v, m+1 boundaries, k) px
     # In float32 (the transcendental functions are most of the cost; 1e-7 is far below noise).
-    x = (np.stack([z + 0.5, z - 0.5]) * (1.0 / edge_px)).astype(np.float32)  # (2, k, 2, m+1)
+    inv_s = 1.0 / edge_px
+    x = np.empty((2, 2, m + 1, k), dtype=np.float32)  # (z + 1/2 | z - 1/2, u|v, boundary, point)
+    np.multiply(z + 0.5, inv_s, out=x[0])
+    np.multiply(z - 0.5, inv_s, out=x[1])
     ax = np.abs(x)
-    e = np.exp(-2.0 * ax)
-    lc = ax + np.log1p(e)  # ln cosh x + ln 2 (the constant cancels in differences)
-    f = 0.5 + (0.5 * edge_px) * (lc[0] - lc[1])
-    share = f[:, :, :-1] - f[:, :, 1:]  # each cell's share F(z_j) - F(z_j+1), (k, 2, m)
+    e = np.multiply(ax, -2.0)
+    np.exp(e, out=e)
+    lc = np.log1p(e)
+    lc += ax  # ln cosh x + ln 2 (the constant cancels in differences)
+    f = lc[0] - lc[1]
+    f *= 0.5 * edge_px
+    f += 0.5
+    # Each cell's share F(z_j) - F(z_j+1) (u|v, m cells, k), and the cell map summed over u per row.
+    share = (f[:, :-1] - f[:, 1:]).astype(np.float64)
     if not derivatives:
-        return np.einsum("kr,krc,kc->k", share[:, 1], colour, share[:, 0])
-    t = np.copysign((1.0 - e) / (1.0 + e), x)  # tanh x
-    df = (0.5 * (t[0] - t[1])) * inv_grad[:, :, None]  # dF/du (module units)
-    dshare = df[:, :, :-1] - df[:, :, 1:]
+        rows = colour_t[:, 0] * share[0, 0]
+        for c in range(1, m):
+            rows += colour_t[:, c] * share[0, c]
+        return (share[1] * rows).sum(axis=0)
+    t = np.subtract(1.0, e)
+    t /= 1.0 + e
+    np.copysign(t, x, out=t)  # tanh x
+    df = (0.5 * (t[0] - t[1])) * inv_grad_t[:, None, :]  # dF/du (module units)
+    dshare = df[:, :-1] - df[:, 1:]
+    along_u = 3 if edge_derivative else 2
+    by_u = np.empty((along_u, m, k))  # share, dshare, [sshare] across u
+    by_u[0] = share[0]
+    by_u[1] = dshare[0]
     if edge_derivative:
         xt = lc - x * t
         fs = 0.5 * (xt[0] - xt[1])  # dF/ds, s in px (the ln 2 cancels here too)
-        sshare = fs[:, :, :-1] - fs[:, :, 1:]
-        stack = np.stack([share[:, 0], dshare[:, 0], sshare[:, 0]], axis=-1)
-    else:
-        stack = np.stack([share[:, 0], dshare[:, 0]], axis=-1)
-    rows = colour @ stack  # (k, m rows, 2|3): colour summed over u per row
-    by_v = np.einsum("kr,krj->kj", share[:, 1], rows)  # D, dD/du, [dD/ds from u]
-    d_v = np.einsum("kr,kr->k", dshare[:, 1], rows[:, :, 0])
+        sshare = (fs[:, :-1] - fs[:, 1:]).astype(np.float64)
+        by_u[2] = sshare[0]
+    rows = colour_t[None, :, 0] * by_u[:, None, 0]  # (share|dshare|sshare, m rows, k)
+    for c in range(1, m):
+        rows += colour_t[None, :, c] * by_u[:, None, c]
+    by_v = (share[1] * rows).sum(axis=1)  # D, dD/du, [dD/ds from u]
+    d_uv = np.empty((2, k))
+    d_uv[0] = by_v[1]
+    d_uv[1] = (dshare[1] * rows[0]).sum(axis=0)
     d_s = None
     if edge_derivative:
-        d_s = by_v[:, 2] + np.einsum("kr,kr->k", sshare[:, 1], rows[:, :, 0])
-    return by_v[:, 0], np.column_stack([by_v[:, 1], d_v]), d_s
+        d_s = by_v[2] + (sshare[1] * rows[0]).sum(axis=0)
+    return by_v[0], d_uv, d_s
 
 
 class _Problem:
@@ -330,16 +381,22 @@ class _Problem:
         # Where each pixel starts in module coordinates; the cells around it must all be known.
         uvw = p @ g[:, :2].T + g[:, 2]
         uv = uvw[:, :2] / uvw[:, 2:3]
-        ok, self.colour, self.corner = _windows(layout, uv, r)
+        ok, colour, corner = _windows(layout, uv, r)
         self.xs, self.ys = xs[ok], ys[ok]
         self.values = grey[self.ys, self.xs].astype(np.float64)
-        self.p = p[ok]
-        self.ph = np.column_stack([np.ones(len(self.p)), self.p])
+        # Per-pixel terms with the pixels along the last axis (see _darkness_t): p (2, k), the
+        # lighting basis (1, x, y) (3, k), the windows' first boundaries (2, k), colours (m, m, k).
+        self.p_t = np.ascontiguousarray(p[ok].T)
+        self.ph_t = np.empty((3, len(self.xs)))
+        self.ph_t[0] = 1.0
+        self.ph_t[1:] = self.p_t
+        self.corner_t = np.ascontiguousarray(corner.T)
+        self.colour_t = np.ascontiguousarray(colour.transpose(1, 2, 0))
         # px per module unit across u and across v edges (k, 2): 1 / |du/dp|, 1 / |dv/dp|.
         duv = (g[None, :2, :2] - uv[ok][:, :, None] * g[None, 2:3, :2]) / (uvw[ok, 2:3, None] * scale)
         if lens.distorted:
             duv = duv @ jl[ok]
-        self.inv_grad = 1.0 / np.sqrt((duv * duv).sum(axis=2))
+        self.inv_grad_t = np.ascontiguousarray((1.0 / np.sqrt((duv * duv).sum(axis=2))).T)
         self.radius = r
 
     def __len__(self) -> int:
@@ -348,36 +405,47 @@ class _Problem:
     def darkness(
         self, geo: np.ndarray, edge_px: float, derivatives: bool = True, edge_derivative: bool = True
     ):
-        """D (k,) and, with ``derivatives``, (dD/du, dD/dv) (k, 2), dD/ds (k,) (None without
-        ``edge_derivative``), the module coordinates (k, 2) and the homography's w (k,)."""
+        """D (k,) and, with ``derivatives``, (dD/du, dD/dv) (2, k), dD/ds (k,) (None without
+        ``edge_derivative``), the module coordinates (2, k) and the homography's w (k,)."""
         g = _g_from_params(geo)
-        uvw = self.p @ g[:, :2].T + g[:, 2]
-        w = uvw[:, 2]
-        uv = uvw[:, :2] / w[:, None]
-        out = darkness_at(uv, self.corner, self.inv_grad, self.colour, edge_px, derivatives, edge_derivative)
+        x, y = self.p_t
+        w = g[2, 0] * x + g[2, 1] * y + 1.0
+        uv = np.empty((2, len(w)))
+        np.multiply(g[0, 0], x, out=uv[0])
+        uv[0] += g[0, 1] * y
+        uv[0] += g[0, 2]
+        np.multiply(g[1, 0], x, out=uv[1])
+        uv[1] += g[1, 1] * y
+        uv[1] += g[1, 2]
+        uv /= w
+        out = _darkness_t(
+            uv - self.corner_t, self.inv_grad_t, self.colour_t, edge_px, derivatives, edge_derivative
+        )
         if not derivatives:
             return out
         return (*out, uv, w)
 
     def residuals(self, geo: np.ndarray, edge_px: float, light: np.ndarray, free_edge: bool):
-        """Residuals (k,) image - model and their Jacobian (k, 8 [+1] + 6) with respect to
-        (homography, [edge width,] lighting): J = d resid / d parameters = -d model / d parameters."""
+        """Residuals (k,) image - model and their Jacobian, transposed: (8 [+1] + 6, k) with respect
+        to (homography, [edge width,] lighting): J = d resid / d parameters = -d model / d parameters.
+        (Each parameter's row is contiguous: filling it and forming J^T W J cost less than on (k, n).)
+        """
         d, d_uv, d_s, uv, w = self.darkness(geo, edge_px, edge_derivative=free_edge)
-        ab = self.ph @ light.reshape(2, 3).T  # (k, 2): light level A and contrast B
-        b = ab[:, 1]
-        resid = self.values - ab[:, 0] + b * d
-        k = len(d)
+        ph = self.ph_t
+        a = light[0] + light[1] * ph[1] + light[2] * ph[2]  # light level A
+        b = light[3] + light[4] * ph[1] + light[5] * ph[2]  # contrast B
+        resid = self.values - a + b * d
         col = 9 if free_edge else 8
-        jac = np.empty((k, col + 6))
+        jac = np.empty((col + 6, len(d)))
         # d model / d (u, v) = -B dD/d(u, v); du/dg0* = (1, x, y) / w, du/dg2* = -u (x, y) / w
-        m = d_uv * (b / w)[:, None]  # = -(d model / d (u, v)) / w
-        jac[:, 0:3] = self.ph * m[:, :1]
-        jac[:, 3:6] = self.ph * m[:, 1:]
-        jac[:, 6:8] = self.p * (-(m * uv).sum(axis=1))[:, None]
+        m = d_uv * (b / w)  # = -(d model / d (u, v)) / w, (2, k)
+        np.multiply(ph, m[0], out=jac[0:3])
+        np.multiply(ph, m[1], out=jac[3:6])
+        np.multiply(self.p_t, -(m[0] * uv[0] + m[1] * uv[1]), out=jac[6:8])
         if free_edge:
-            jac[:, 8] = b * d_s
-        jac[:, col : col + 3] = -self.ph
-        jac[:, col + 3 : col + 6] = self.ph * d[:, None]
+            np.multiply(b, d_s, out=jac[8])
+        np.negative(ph, out=jac[col : col + 3])
+        np.multiply(ph, d, out=jac[col + 3 : col + 6])
         return resid, jac
 
 
@@ -466,9 +534,9 @@ class _Solver:
         for _ in range(max_iter):
             iterations += 1
             w = self.weights(resid, scale)
-            jw = jac * w[:, None]
-            normal = jw.T @ jac
-            grad = jw.T @ resid
+            jw = jac * w
+            normal = jw @ jac.T
+            grad = jw @ resid
             step = None
             for _attempt in range(6):
                 damped = normal + (lam + 1e-12) * np.diag(np.diag(normal) + 1e-9)
@@ -505,12 +573,14 @@ class _Solver:
 def _solve_lighting(problem: _Problem, geo: np.ndarray, edge_px: float) -> tuple[np.ndarray, np.ndarray]:
     """Lighting terms by linear least squares at a fixed geometry; returns them and the residuals."""
     d = problem.darkness(geo, edge_px, derivatives=False)
-    a = np.concatenate([problem.ph, -problem.ph * d[:, None]], axis=1)
+    a_t = np.empty((6, len(d)))  # the design matrix, transposed: (1, x, y, -D, -D x, -D y)
+    a_t[:3] = problem.ph_t
+    np.multiply(problem.ph_t, -d, out=a_t[3:])
     try:
-        light = np.linalg.solve(a.T @ a, a.T @ problem.values)
+        light = np.linalg.solve(a_t @ a_t.T, a_t @ problem.values)
     except np.linalg.LinAlgError:
-        light = np.linalg.lstsq(a, problem.values, rcond=None)[0]
-    return light, problem.values - a @ light
+        light = np.linalg.lstsq(a_t.T, problem.values, rcond=None)[0]
+    return light, problem.values - light @ a_t
 
 
 def fit_symbol(
@@ -622,7 +692,7 @@ def fit_symbol(
             return fail(f"a corner moved {moved:.1f} px from its start", iterations)
         # Covariance: robust scale^2 (J^T W J)^-1, its homography block taken to the corners.
         w = _Solver.weights(resid, robust)
-        normal = (jac * w[:, None]).T @ jac
+        normal = (jac * w) @ jac.T
         try:
             cov = robust**2 * np.linalg.inv(normal)[:8, :8]
         except np.linalg.LinAlgError:
