@@ -244,87 +244,85 @@ def darkness_at(
     ``inv_grad`` (k, 2) px per module unit across u and v edges there, edge width ``edge_px``.
     With ``derivatives`` also (dD/du, dD/dv) (k, 2) and dD/ds (k,) (None without ``edge_derivative``).
     """
-    offset = np.ascontiguousarray((uv - corner).T)
-    out = _darkness_t(
-        offset,
+    dark = _Darkness(
+        np.ascontiguousarray((uv - corner).T),
         np.ascontiguousarray(inv_grad.T),
         np.ascontiguousarray(colour.transpose(1, 2, 0)),
         edge_px,
-        derivatives,
-        edge_derivative,
     )
     if not derivatives:
-        return out
-    d, d_uv, d_s = out
-    return d, d_uv.T, d_s
+        return dark.value
+    d_uv, d_s = dark.derivatives(edge_derivative)
+    return dark.value, d_uv.T, d_s
 
 
-def _darkness_t(
-    offset: np.ndarray,
-    inv_grad_t: np.ndarray,
-    colour_t: np.ndarray,
-    edge_px: float,
-    derivatives: bool = True,
-    edge_derivative: bool = True,
-):
-    """:func:`darkness_at` on points along the last axis: ``offset`` (2, k) = uv - corner,
-    ``inv_grad_t`` (2, k), ``colour_t`` (m, m, k) (colour_t[row, column] = colour[:, row, column]);
-    returns D (k,) and, with ``derivatives``, (dD/du, dD/dv) (2, k) and dD/ds (k,) or None.
+class _Darkness:
+    """The model's darkness at points along the last axis, its derivatives on demand.
 
-    Points on the last axis keep every operation on contiguous runs of k (the (k, 2, m + 1) layout
-    made numpy's loops strided and its small matmul/einsum contractions slow: measured 3x).
+    ``offset`` (2, k) = uv - corner, ``inv_grad_t`` (2, k) and ``colour_t`` (m, m, k)
+    (colour_t[row, column] = colour[:, row, column]) as :func:`darkness_at`'s arguments transposed:
+    points on the last axis keep every operation on contiguous runs of k (the (k, 2, m + 1) layout
+    made numpy's loops strided and its small matmul/einsum contractions slow). ``value`` (k,) is
+    D; :meth:`derivatives` adds (dD/du, dD/dv) (2, k) and dD/ds (k,) from the same edge terms (the
+    fit asks for them only for a step it keeps).
     """
-    m = colour_t.shape[0]
-    k = offset.shape[1]
-    # Distance to each boundary in px across it, then F = the logistic of width s convolved
-    # with the pixel's 1 px footprint (its variance across any edge direction is 1/12 px^2):
-    # F(z) = 1/2 + s/2 [L((z + 1/2) / s) - L((z - 1/2) / s)], L = ln cosh.
-    z = (offset[:, None, :] - _SPANS[m]) * inv_grad_t[:, None, :]  # (u|v, m+1 boundaries, k) px
-    # In float32 (the transcendental functions are most of the cost; 1e-7 is far below noise).
-    inv_s = 1.0 / edge_px
-    x = np.empty((2, 2, m + 1, k), dtype=np.float32)  # (z + 1/2 | z - 1/2, u|v, boundary, point)
-    np.multiply(z + 0.5, inv_s, out=x[0])
-    np.multiply(z - 0.5, inv_s, out=x[1])
-    ax = np.abs(x)
-    e = np.multiply(ax, -2.0)
-    np.exp(e, out=e)
-    lc = np.log1p(e)
-    lc += ax  # ln cosh x + ln 2 (the constant cancels in differences)
-    f = lc[0] - lc[1]
-    f *= 0.5 * edge_px
-    f += 0.5
-    # Each cell's share F(z_j) - F(z_j+1) (u|v, m cells, k), and the cell map summed over u per row.
-    share = (f[:, :-1] - f[:, 1:]).astype(np.float64)
-    if not derivatives:
+
+    def __init__(self, offset: np.ndarray, inv_grad_t: np.ndarray, colour_t: np.ndarray, edge_px: float):
+        m = colour_t.shape[0]
+        k = offset.shape[1]
+        # Distance to each boundary in px across it, then F = the logistic of width s convolved
+        # with the pixel's 1 px footprint (its variance across any edge direction is 1/12 px^2):
+        # F(z) = 1/2 + s/2 [L((z + 1/2) / s) - L((z - 1/2) / s)], L = ln cosh.
+        z = (offset[:, None, :] - _SPANS[m]) * inv_grad_t[:, None, :]  # (u|v, m+1 boundaries, k) px
+        # In float32 (the transcendental functions are most of the cost; 1e-7 is far below noise).
+        inv_s = 1.0 / edge_px
+        x = np.empty((2, 2, m + 1, k), dtype=np.float32)  # (z + 1/2 | z - 1/2, u|v, boundary, point)
+        np.multiply(z + 0.5, inv_s, out=x[0])
+        np.multiply(z - 0.5, inv_s, out=x[1])
+        ax = np.abs(x)
+        e = np.multiply(ax, -2.0)
+        np.exp(e, out=e)
+        lc = np.log1p(e)
+        lc += ax  # ln cosh x + ln 2 (the constant cancels in differences)
+        f = lc[0] - lc[1]
+        f *= 0.5 * edge_px
+        f += 0.5
+        # Each cell's share F(z_j) - F(z_j+1) (u|v, m cells, k); the cell map summed over u per row
+        # with the shares across u (m rows, k); D sums those rows with the shares across v.
+        share = (f[:, :-1] - f[:, 1:]).astype(np.float64)
         rows = colour_t[:, 0] * share[0, 0]
         for c in range(1, m):
             rows += colour_t[:, c] * share[0, c]
-        return (share[1] * rows).sum(axis=0)
-    t = np.subtract(1.0, e)
-    t /= 1.0 + e
-    np.copysign(t, x, out=t)  # tanh x
-    df = (0.5 * (t[0] - t[1])) * inv_grad_t[:, None, :]  # dF/du (module units)
-    dshare = df[:, :-1] - df[:, 1:]
-    along_u = 3 if edge_derivative else 2
-    by_u = np.empty((along_u, m, k))  # share, dshare, [sshare] across u
-    by_u[0] = share[0]
-    by_u[1] = dshare[0]
-    if edge_derivative:
-        xt = lc - x * t
-        fs = 0.5 * (xt[0] - xt[1])  # dF/ds, s in px (the ln 2 cancels here too)
-        sshare = (fs[:, :-1] - fs[:, 1:]).astype(np.float64)
-        by_u[2] = sshare[0]
-    rows = colour_t[None, :, 0] * by_u[:, None, 0]  # (share|dshare|sshare, m rows, k)
-    for c in range(1, m):
-        rows += colour_t[None, :, c] * by_u[:, None, c]
-    by_v = (share[1] * rows).sum(axis=1)  # D, dD/du, [dD/ds from u]
-    d_uv = np.empty((2, k))
-    d_uv[0] = by_v[1]
-    d_uv[1] = (dshare[1] * rows[0]).sum(axis=0)
-    d_s = None
-    if edge_derivative:
-        d_s = by_v[2] + (sshare[1] * rows[0]).sum(axis=0)
-    return by_v[0], d_uv, d_s
+        self.value = (share[1] * rows).sum(axis=0)
+        self._terms = (x, e, lc, share, rows, inv_grad_t, colour_t)
+
+    def derivatives(self, edge_derivative: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+        """(dD/du, dD/dv) (2, k) and dD/ds (k,) (None without ``edge_derivative``)."""
+        x, e, lc, share, rows, inv_grad_t, colour_t = self._terms
+        m, k = rows.shape
+        t = np.subtract(1.0, e)
+        t /= 1.0 + e
+        np.copysign(t, x, out=t)  # tanh x
+        df = (0.5 * (t[0] - t[1])) * inv_grad_t[:, None, :]  # dF/du (module units)
+        dshare = df[:, :-1] - df[:, 1:]
+        by_u = np.empty((2 if edge_derivative else 1, m, k))  # dshare, [sshare] across u
+        by_u[0] = dshare[0]
+        if edge_derivative:
+            xt = lc - x * t
+            fs = 0.5 * (xt[0] - xt[1])  # dF/ds, s in px (the ln 2 cancels here too)
+            sshare = (fs[:, :-1] - fs[:, 1:]).astype(np.float64)
+            by_u[1] = sshare[0]
+        rows_d = colour_t[None, :, 0] * by_u[:, None, 0]  # (dshare|sshare, m rows, k)
+        for c in range(1, m):
+            rows_d += colour_t[None, :, c] * by_u[:, None, c]
+        by_v = (share[1] * rows_d).sum(axis=1)  # dD/du, [dD/ds from u]
+        d_uv = np.empty((2, k))
+        d_uv[0] = by_v[0]
+        d_uv[1] = (dshare[1] * rows).sum(axis=0)
+        d_s = None
+        if edge_derivative:
+            d_s = by_v[1] + (sshare[1] * rows).sum(axis=0)
+        return d_uv, d_s
 
 
 class _Problem:
@@ -402,39 +400,31 @@ class _Problem:
     def __len__(self) -> int:
         return len(self.xs)
 
-    def darkness(
-        self, geo: np.ndarray, edge_px: float, derivatives: bool = True, edge_derivative: bool = True
-    ):
-        """D (k,) and, with ``derivatives``, (dD/du, dD/dv) (2, k), dD/ds (k,) (None without
-        ``edge_derivative``), the module coordinates (2, k) and the homography's w (k,)."""
+    def darkness(self, geo: np.ndarray, edge_px: float) -> tuple[_Darkness, np.ndarray, np.ndarray]:
+        """The model's darkness at the pixels for homography parameters ``geo``, with their module
+        coordinates (2, k) and the homography's w (k,)."""
         g = _g_from_params(geo)
-        x, y = self.p_t
-        w = g[2, 0] * x + g[2, 1] * y + 1.0
-        uv = np.empty((2, len(w)))
-        np.multiply(g[0, 0], x, out=uv[0])
-        uv[0] += g[0, 1] * y
-        uv[0] += g[0, 2]
-        np.multiply(g[1, 0], x, out=uv[1])
-        uv[1] += g[1, 1] * y
-        uv[1] += g[1, 2]
-        uv /= w
-        out = _darkness_t(
-            uv - self.corner_t, self.inv_grad_t, self.colour_t, edge_px, derivatives, edge_derivative
-        )
-        if not derivatives:
-            return out
-        return (*out, uv, w)
+        uvw = (self.p_t.T @ g[:, :2].T + g[:, 2]).T
+        w = uvw[2]
+        uv = uvw[:2] / w
+        return _Darkness(uv - self.corner_t, self.inv_grad_t, self.colour_t, edge_px), uv, w
 
-    def residuals(self, geo: np.ndarray, edge_px: float, light: np.ndarray, free_edge: bool):
-        """Residuals (k,) image - model and their Jacobian, transposed: (8 [+1] + 6, k) with respect
-        to (homography, [edge width,] lighting): J = d resid / d parameters = -d model / d parameters.
-        (Each parameter's row is contiguous: filling it and forming J^T W J cost less than on (k, n).)
-        """
-        d, d_uv, d_s, uv, w = self.darkness(geo, edge_px, edge_derivative=free_edge)
+    def residuals(self, geo: np.ndarray, edge_px: float, light: np.ndarray) -> tuple[np.ndarray, tuple]:
+        """Residuals (k,) image - model, and what :meth:`jacobian` needs for them."""
+        dark, uv, w = self.darkness(geo, edge_px)
         ph = self.ph_t
-        a = light[0] + light[1] * ph[1] + light[2] * ph[2]  # light level A
-        b = light[3] + light[4] * ph[1] + light[5] * ph[2]  # contrast B
-        resid = self.values - a + b * d
+        a, b = (ph.T @ light.reshape(2, 3).T).T  # light level A, contrast B
+        return self.values - a + b * dark.value, (dark, uv, w, b)
+
+    def jacobian(self, at: tuple, free_edge: bool) -> np.ndarray:
+        """The residuals' Jacobian at ``at`` (from :meth:`residuals`), transposed: (8 [+1] + 6, k)
+        with respect to (homography, [edge width,] lighting): J = d resid / d parameters =
+        -d model / d parameters. (Each parameter's row is contiguous: filling it and forming
+        J^T W J cost less than on (k, n).)"""
+        dark, uv, w, b = at
+        d_uv, d_s = dark.derivatives(edge_derivative=free_edge)
+        d = dark.value
+        ph = self.ph_t
         col = 9 if free_edge else 8
         jac = np.empty((col + 6, len(d)))
         # d model / d (u, v) = -B dD/d(u, v); du/dg0* = (1, x, y) / w, du/dg2* = -u (x, y) / w
@@ -446,7 +436,7 @@ class _Problem:
             np.multiply(b, d_s, out=jac[8])
         np.negative(ph, out=jac[col : col + 3])
         np.multiply(ph, d, out=jac[col + 3 : col + 6])
-        return resid, jac
+        return np.ascontiguousarray(jac.T)
 
 
 def _g_from_params(theta: np.ndarray) -> np.ndarray:
@@ -525,7 +515,8 @@ class _Solver:
         """Iterate from (geo, edge_px, light); returns them, the last residuals and Jacobian, the
         robust scale and the iterations done."""
         pr = self.problem
-        resid, jac = pr.residuals(geo, edge_px, light, self.free_edge)
+        resid, at = pr.residuals(geo, edge_px, light)
+        jac = pr.jacobian(at, self.free_edge)
         scale = self.start_scale if math.isfinite(self.start_scale) else self.robust_scale(resid)
         cost = self.cost(resid, scale)
         lam = 1e-4
@@ -534,9 +525,9 @@ class _Solver:
         for _ in range(max_iter):
             iterations += 1
             w = self.weights(resid, scale)
-            jw = jac * w
-            normal = jw @ jac.T
-            grad = jw @ resid
+            jw = jac * w[:, None]
+            normal = jw.T @ jac
+            grad = jw.T @ resid
             step = None
             for _attempt in range(6):
                 damped = normal + (lam + 1e-12) * np.diag(np.diag(normal) + 1e-9)
@@ -552,10 +543,11 @@ class _Solver:
                     new_edge = float(np.clip(edge_px + delta[8], MIN_EDGE_PX, 6.0))
                     k = 9
                 new_light = light + delta[k : k + 6]
-                r2, j2 = pr.residuals(new_geo, new_edge, new_light, self.free_edge)
+                r2, at = pr.residuals(new_geo, new_edge, new_light)
                 c2 = self.cost(r2, scale)
                 if np.isfinite(c2) and c2 <= cost and np.all(np.isfinite(r2)):
-                    step = (new_geo, new_edge, new_light, r2, j2, c2)
+                    # (the Jacobian only for a step that is kept)
+                    step = (new_geo, new_edge, new_light, r2, pr.jacobian(at, self.free_edge), c2)
                     lam = lam / 10
                     break
                 lam = max(lam, 1e-4) * 10
@@ -572,15 +564,16 @@ class _Solver:
 
 def _solve_lighting(problem: _Problem, geo: np.ndarray, edge_px: float) -> tuple[np.ndarray, np.ndarray]:
     """Lighting terms by linear least squares at a fixed geometry; returns them and the residuals."""
-    d = problem.darkness(geo, edge_px, derivatives=False)
+    d = problem.darkness(geo, edge_px)[0].value
     a_t = np.empty((6, len(d)))  # the design matrix, transposed: (1, x, y, -D, -D x, -D y)
     a_t[:3] = problem.ph_t
     np.multiply(problem.ph_t, -d, out=a_t[3:])
+    a = np.ascontiguousarray(a_t.T)
     try:
-        light = np.linalg.solve(a_t @ a_t.T, a_t @ problem.values)
+        light = np.linalg.solve(a.T @ a, a.T @ problem.values)
     except np.linalg.LinAlgError:
-        light = np.linalg.lstsq(a_t.T, problem.values, rcond=None)[0]
-    return light, problem.values - light @ a_t
+        light = np.linalg.lstsq(a, problem.values, rcond=None)[0]
+    return light, problem.values - a @ light
 
 
 def fit_symbol(
@@ -692,7 +685,7 @@ def fit_symbol(
             return fail(f"a corner moved {moved:.1f} px from its start", iterations)
         # Covariance: robust scale^2 (J^T W J)^-1, its homography block taken to the corners.
         w = _Solver.weights(resid, robust)
-        normal = (jac * w) @ jac.T
+        normal = (jac * w[:, None]).T @ jac
         try:
             cov = robust**2 * np.linalg.inv(normal)[:8, :8]
         except np.linalg.LinAlgError:
