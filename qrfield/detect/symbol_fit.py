@@ -35,6 +35,7 @@ floor (MODEL_FLOOR_PX).
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass
 
@@ -212,20 +213,32 @@ def _windows(layout: _Layout, uv: np.ndarray, r: int) -> tuple[np.ndarray, np.nd
 
 
 _LAYOUTS: dict[tuple[int, int], tuple[np.ndarray, _Layout]] = {}
+#: The last few layouts by (r, the map's shape, dtype and bytes); a layout is a pure function of them.
+_LAYOUTS_BY_CONTENT: dict[tuple, _Layout] = {}
 #: Boundary offsets 0 .. m of a window of m cells, as a column (m + 1, 1) against a trailing axis
 #: of points.
 _SPANS = {m: np.arange(m + 1, dtype=np.float64)[:, None] for m in (3, 5)}
 
 
 def _layout(cells: np.ndarray, r: int) -> _Layout:
-    """The (cached) layout of a cell map: keyed by the map object, which the callers keep."""
+    """The (cached) layout of a cell map: by the map object, which the callers keep. A map equal
+    to a recent one (a code found again, as on a new stream's first frame) shares its cells and
+    edges, not its candidates (those are cached to 5 % of the module size: sharing them would let
+    the order of earlier fits change a fit)."""
     key = (id(cells), r)
     hit = _LAYOUTS.get(key)
     if hit is not None and hit[0] is cells:
         return hit[1]
+    content = (r, cells.shape, cells.dtype.str, cells.tobytes())
+    base = _LAYOUTS_BY_CONTENT.get(content)
+    if base is None:
+        if len(_LAYOUTS_BY_CONTENT) >= 8:
+            _LAYOUTS_BY_CONTENT.clear()
+        base = _LAYOUTS_BY_CONTENT[content] = _Layout(cells, r)
+    layout = copy.copy(base)
+    layout._candidates = {}
     if len(_LAYOUTS) > 64:
         _LAYOUTS.clear()
-    layout = _Layout(cells, r)
     _LAYOUTS[key] = (cells, layout)
     return layout
 
