@@ -35,6 +35,7 @@ floor (MODEL_FLOOR_PX).
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass
 
@@ -212,19 +213,32 @@ def _windows(layout: _Layout, uv: np.ndarray, r: int) -> tuple[np.ndarray, np.nd
 
 
 _LAYOUTS: dict[tuple[int, int], tuple[np.ndarray, _Layout]] = {}
-#: Boundary offsets 0 .. m of a window of m cells.
-_SPANS = {m: np.arange(m + 1, dtype=np.float64) for m in (3, 5)}
+#: The last few layouts by (r, the map's shape, dtype and bytes); a layout is a pure function of them.
+_LAYOUTS_BY_CONTENT: dict[tuple, _Layout] = {}
+#: Boundary offsets 0 .. m of a window of m cells, as a column (m + 1, 1) against a trailing axis
+#: of points.
+_SPANS = {m: np.arange(m + 1, dtype=np.float64)[:, None] for m in (3, 5)}
 
 
 def _layout(cells: np.ndarray, r: int) -> _Layout:
-    """The (cached) layout of a cell map: keyed by the map object, which the callers keep."""
+    """The (cached) layout of a cell map: by the map object, which the callers keep. A map equal
+    to a recent one (a code found again, as on a new stream's first frame) shares its cells and
+    edges, not its candidates (those are cached to 5 % of the module size: sharing them would let
+    the order of earlier fits change a fit)."""
     key = (id(cells), r)
     hit = _LAYOUTS.get(key)
     if hit is not None and hit[0] is cells:
         return hit[1]
+    content = (r, cells.shape, cells.dtype.str, cells.tobytes())
+    base = _LAYOUTS_BY_CONTENT.get(content)
+    if base is None:
+        if len(_LAYOUTS_BY_CONTENT) >= 8:
+            _LAYOUTS_BY_CONTENT.clear()
+        base = _LAYOUTS_BY_CONTENT[content] = _Layout(cells, r)
+    layout = copy.copy(base)
+    layout._candidates = {}
     if len(_LAYOUTS) > 64:
         _LAYOUTS.clear()
-    layout = _Layout(cells, r)
     _LAYOUTS[key] = (cells, layout)
     return layout
 
@@ -242,38 +256,86 @@ def darkness_at(
     cells start at boundaries ``corner`` (k, 2) with colours ``colour`` (k, m, m) (see _windows),
     ``inv_grad`` (k, 2) px per module unit across u and v edges there, edge width ``edge_px``.
     With ``derivatives`` also (dD/du, dD/dv) (k, 2) and dD/ds (k,) (None without ``edge_derivative``).
-    u and v are handled side by side on a trailing axis of 2 (few, larger numpy operations).
     """
-    # Distance to each boundary in px across it, then F = the logistic of width s convolved
-    # with the pixel's 1 px footprint (its variance across any edge direction is 1/12 px^2):
-    # F(z) = 1/2 + s/2 [L((z + 1/2) / s) - L((z - 1/2) / s)], L = ln cosh.
-    z = ((uv - corner)[:, :, None] - _SPANS[colour.shape[1]]) * inv_grad[:, :, None]  # (k, 2, m+1) px
-    # In float32 (the transcendental functions are most of the cost; 1e-7 is far below noise).
-    x = (np.stack([z + 0.5, z - 0.5]) * (1.0 / edge_px)).astype(np.float32)  # (2, k, 2, m+1)
-    ax = np.abs(x)
-    e = np.exp(-2.0 * ax)
-    lc = ax + np.log1p(e)  # ln cosh x + ln 2 (the constant cancels in differences)
-    f = 0.5 + (0.5 * edge_px) * (lc[0] - lc[1])
-    share = f[:, :, :-1] - f[:, :, 1:]  # each cell's share F(z_j) - F(z_j+1), (k, 2, m)
+    dark = _Darkness(
+        np.ascontiguousarray((uv - corner).T),
+        np.ascontiguousarray(inv_grad.T),
+        np.ascontiguousarray(colour.transpose(1, 2, 0)),
+        edge_px,
+    )
     if not derivatives:
-        return np.einsum("kr,krc,kc->k", share[:, 1], colour, share[:, 0])
-    t = np.copysign((1.0 - e) / (1.0 + e), x)  # tanh x
-    df = (0.5 * (t[0] - t[1])) * inv_grad[:, :, None]  # dF/du (module units)
-    dshare = df[:, :, :-1] - df[:, :, 1:]
-    if edge_derivative:
-        xt = lc - x * t
-        fs = 0.5 * (xt[0] - xt[1])  # dF/ds, s in px (the ln 2 cancels here too)
-        sshare = fs[:, :, :-1] - fs[:, :, 1:]
-        stack = np.stack([share[:, 0], dshare[:, 0], sshare[:, 0]], axis=-1)
-    else:
-        stack = np.stack([share[:, 0], dshare[:, 0]], axis=-1)
-    rows = colour @ stack  # (k, m rows, 2|3): colour summed over u per row
-    by_v = np.einsum("kr,krj->kj", share[:, 1], rows)  # D, dD/du, [dD/ds from u]
-    d_v = np.einsum("kr,kr->k", dshare[:, 1], rows[:, :, 0])
-    d_s = None
-    if edge_derivative:
-        d_s = by_v[:, 2] + np.einsum("kr,kr->k", sshare[:, 1], rows[:, :, 0])
-    return by_v[:, 0], np.column_stack([by_v[:, 1], d_v]), d_s
+        return dark.value
+    d_uv, d_s = dark.derivatives(edge_derivative)
+    return dark.value, d_uv.T, d_s
+
+
+class _Darkness:
+    """The model's darkness at points along the last axis, its derivatives on demand.
+
+    ``offset`` (2, k) = uv - corner, ``inv_grad_t`` (2, k) and ``colour_t`` (m, m, k)
+    (colour_t[row, column] = colour[:, row, column]) as :func:`darkness_at`'s arguments transposed:
+    points on the last axis keep every operation on contiguous runs of k (the (k, 2, m + 1) layout
+    made numpy's loops strided and its small matmul/einsum contractions slow). ``value`` (k,) is
+    D; :meth:`derivatives` adds (dD/du, dD/dv) (2, k) and dD/ds (k,) from the same edge terms (the
+    fit asks for them only for a step it keeps).
+    """
+
+    def __init__(self, offset: np.ndarray, inv_grad_t: np.ndarray, colour_t: np.ndarray, edge_px: float):
+        m = colour_t.shape[0]
+        k = offset.shape[1]
+        # Distance to each boundary in px across it, then F = the logistic of width s convolved
+        # with the pixel's 1 px footprint (its variance across any edge direction is 1/12 px^2):
+        # F(z) = 1/2 + s/2 [L((z + 1/2) / s) - L((z - 1/2) / s)], L = ln cosh.
+        z = (offset[:, None, :] - _SPANS[m]) * inv_grad_t[:, None, :]  # (u|v, m+1 boundaries, k) px
+        # In float32 (the transcendental functions are most of the cost; 1e-7 is far below noise).
+        inv_s = 1.0 / edge_px
+        x = np.empty((2, 2, m + 1, k), dtype=np.float32)  # (z + 1/2 | z - 1/2, u|v, boundary, point)
+        np.multiply(z + 0.5, inv_s, out=x[0])
+        np.multiply(z - 0.5, inv_s, out=x[1])
+        ax = np.abs(x)
+        e = np.multiply(ax, -2.0)
+        np.exp(e, out=e)
+        lc = np.log1p(e)
+        lc += ax  # ln cosh x + ln 2 (the constant cancels in differences)
+        f = lc[0] - lc[1]
+        f *= 0.5 * edge_px
+        f += 0.5
+        # Each cell's share F(z_j) - F(z_j+1) (u|v, m cells, k); the cell map summed over u per row
+        # with the shares across u (m rows, k); D sums those rows with the shares across v.
+        share = (f[:, :-1] - f[:, 1:]).astype(np.float64)
+        rows = colour_t[:, 0] * share[0, 0]
+        for c in range(1, m):
+            rows += colour_t[:, c] * share[0, c]
+        self.value = (share[1] * rows).sum(axis=0)
+        self._terms = (x, e, lc, share, rows, inv_grad_t, colour_t)
+
+    def derivatives(self, edge_derivative: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+        """(dD/du, dD/dv) (2, k) and dD/ds (k,) (None without ``edge_derivative``)."""
+        x, e, lc, share, rows, inv_grad_t, colour_t = self._terms
+        m, k = rows.shape
+        t = np.subtract(1.0, e)
+        t /= 1.0 + e
+        np.copysign(t, x, out=t)  # tanh x
+        df = (0.5 * (t[0] - t[1])) * inv_grad_t[:, None, :]  # dF/du (module units)
+        dshare = df[:, :-1] - df[:, 1:]
+        by_u = np.empty((2 if edge_derivative else 1, m, k))  # dshare, [sshare] across u
+        by_u[0] = dshare[0]
+        if edge_derivative:
+            xt = lc - x * t
+            fs = 0.5 * (xt[0] - xt[1])  # dF/ds, s in px (the ln 2 cancels here too)
+            sshare = (fs[:, :-1] - fs[:, 1:]).astype(np.float64)
+            by_u[1] = sshare[0]
+        rows_d = colour_t[None, :, 0] * by_u[:, None, 0]  # (dshare|sshare, m rows, k)
+        for c in range(1, m):
+            rows_d += colour_t[None, :, c] * by_u[:, None, c]
+        by_v = (share[1] * rows_d).sum(axis=1)  # dD/du, [dD/ds from u]
+        d_uv = np.empty((2, k))
+        d_uv[0] = by_v[0]
+        d_uv[1] = (dshare[1] * rows).sum(axis=0)
+        d_s = None
+        if edge_derivative:
+            d_s = by_v[1] + (sshare[1] * rows).sum(axis=0)
+        return d_uv, d_s
 
 
 class _Problem:
@@ -330,55 +392,64 @@ class _Problem:
         # Where each pixel starts in module coordinates; the cells around it must all be known.
         uvw = p @ g[:, :2].T + g[:, 2]
         uv = uvw[:, :2] / uvw[:, 2:3]
-        ok, self.colour, self.corner = _windows(layout, uv, r)
+        ok, colour, corner = _windows(layout, uv, r)
         self.xs, self.ys = xs[ok], ys[ok]
         self.values = grey[self.ys, self.xs].astype(np.float64)
-        self.p = p[ok]
-        self.ph = np.column_stack([np.ones(len(self.p)), self.p])
+        # Per-pixel terms with the pixels along the last axis (see _darkness_t): p (2, k), the
+        # lighting basis (1, x, y) (3, k), the windows' first boundaries (2, k), colours (m, m, k).
+        self.p_t = np.ascontiguousarray(p[ok].T)
+        self.ph_t = np.empty((3, len(self.xs)))
+        self.ph_t[0] = 1.0
+        self.ph_t[1:] = self.p_t
+        self.corner_t = np.ascontiguousarray(corner.T)
+        self.colour_t = np.ascontiguousarray(colour.transpose(1, 2, 0))
         # px per module unit across u and across v edges (k, 2): 1 / |du/dp|, 1 / |dv/dp|.
         duv = (g[None, :2, :2] - uv[ok][:, :, None] * g[None, 2:3, :2]) / (uvw[ok, 2:3, None] * scale)
         if lens.distorted:
             duv = duv @ jl[ok]
-        self.inv_grad = 1.0 / np.sqrt((duv * duv).sum(axis=2))
+        self.inv_grad_t = np.ascontiguousarray((1.0 / np.sqrt((duv * duv).sum(axis=2))).T)
         self.radius = r
 
     def __len__(self) -> int:
         return len(self.xs)
 
-    def darkness(
-        self, geo: np.ndarray, edge_px: float, derivatives: bool = True, edge_derivative: bool = True
-    ):
-        """D (k,) and, with ``derivatives``, (dD/du, dD/dv) (k, 2), dD/ds (k,) (None without
-        ``edge_derivative``), the module coordinates (k, 2) and the homography's w (k,)."""
+    def darkness(self, geo: np.ndarray, edge_px: float) -> tuple[_Darkness, np.ndarray, np.ndarray]:
+        """The model's darkness at the pixels for homography parameters ``geo``, with their module
+        coordinates (2, k) and the homography's w (k,)."""
         g = _g_from_params(geo)
-        uvw = self.p @ g[:, :2].T + g[:, 2]
-        w = uvw[:, 2]
-        uv = uvw[:, :2] / w[:, None]
-        out = darkness_at(uv, self.corner, self.inv_grad, self.colour, edge_px, derivatives, edge_derivative)
-        if not derivatives:
-            return out
-        return (*out, uv, w)
+        uvw = (self.p_t.T @ g[:, :2].T + g[:, 2]).T
+        w = uvw[2]
+        uv = uvw[:2] / w
+        return _Darkness(uv - self.corner_t, self.inv_grad_t, self.colour_t, edge_px), uv, w
 
-    def residuals(self, geo: np.ndarray, edge_px: float, light: np.ndarray, free_edge: bool):
-        """Residuals (k,) image - model and their Jacobian (k, 8 [+1] + 6) with respect to
-        (homography, [edge width,] lighting): J = d resid / d parameters = -d model / d parameters."""
-        d, d_uv, d_s, uv, w = self.darkness(geo, edge_px, edge_derivative=free_edge)
-        ab = self.ph @ light.reshape(2, 3).T  # (k, 2): light level A and contrast B
-        b = ab[:, 1]
-        resid = self.values - ab[:, 0] + b * d
-        k = len(d)
+    def residuals(self, geo: np.ndarray, edge_px: float, light: np.ndarray) -> tuple[np.ndarray, tuple]:
+        """Residuals (k,) image - model, and what :meth:`jacobian` needs for them."""
+        dark, uv, w = self.darkness(geo, edge_px)
+        ph = self.ph_t
+        a, b = (ph.T @ light.reshape(2, 3).T).T  # light level A, contrast B
+        return self.values - a + b * dark.value, (dark, uv, w, b)
+
+    def jacobian(self, at: tuple, free_edge: bool) -> np.ndarray:
+        """The residuals' Jacobian at ``at`` (from :meth:`residuals`), transposed: (8 [+1] + 6, k)
+        with respect to (homography, [edge width,] lighting): J = d resid / d parameters =
+        -d model / d parameters. (Each parameter's row is contiguous: filling it and forming
+        J^T W J cost less than on (k, n).)"""
+        dark, uv, w, b = at
+        d_uv, d_s = dark.derivatives(edge_derivative=free_edge)
+        d = dark.value
+        ph = self.ph_t
         col = 9 if free_edge else 8
-        jac = np.empty((k, col + 6))
+        jac = np.empty((col + 6, len(d)))
         # d model / d (u, v) = -B dD/d(u, v); du/dg0* = (1, x, y) / w, du/dg2* = -u (x, y) / w
-        m = d_uv * (b / w)[:, None]  # = -(d model / d (u, v)) / w
-        jac[:, 0:3] = self.ph * m[:, :1]
-        jac[:, 3:6] = self.ph * m[:, 1:]
-        jac[:, 6:8] = self.p * (-(m * uv).sum(axis=1))[:, None]
+        m = d_uv * (b / w)  # = -(d model / d (u, v)) / w, (2, k)
+        np.multiply(ph, m[0], out=jac[0:3])
+        np.multiply(ph, m[1], out=jac[3:6])
+        np.multiply(self.p_t, -(m[0] * uv[0] + m[1] * uv[1]), out=jac[6:8])
         if free_edge:
-            jac[:, 8] = b * d_s
-        jac[:, col : col + 3] = -self.ph
-        jac[:, col + 3 : col + 6] = self.ph * d[:, None]
-        return resid, jac
+            np.multiply(b, d_s, out=jac[8])
+        np.negative(ph, out=jac[col : col + 3])
+        np.multiply(ph, d, out=jac[col + 3 : col + 6])
+        return np.ascontiguousarray(jac.T)
 
 
 def _g_from_params(theta: np.ndarray) -> np.ndarray:
@@ -457,7 +528,8 @@ class _Solver:
         """Iterate from (geo, edge_px, light); returns them, the last residuals and Jacobian, the
         robust scale and the iterations done."""
         pr = self.problem
-        resid, jac = pr.residuals(geo, edge_px, light, self.free_edge)
+        resid, at = pr.residuals(geo, edge_px, light)
+        jac = pr.jacobian(at, self.free_edge)
         scale = self.start_scale if math.isfinite(self.start_scale) else self.robust_scale(resid)
         cost = self.cost(resid, scale)
         lam = 1e-4
@@ -484,10 +556,11 @@ class _Solver:
                     new_edge = float(np.clip(edge_px + delta[8], MIN_EDGE_PX, 6.0))
                     k = 9
                 new_light = light + delta[k : k + 6]
-                r2, j2 = pr.residuals(new_geo, new_edge, new_light, self.free_edge)
+                r2, at = pr.residuals(new_geo, new_edge, new_light)
                 c2 = self.cost(r2, scale)
                 if np.isfinite(c2) and c2 <= cost and np.all(np.isfinite(r2)):
-                    step = (new_geo, new_edge, new_light, r2, j2, c2)
+                    # (the Jacobian only for a step that is kept)
+                    step = (new_geo, new_edge, new_light, r2, pr.jacobian(at, self.free_edge), c2)
                     lam = lam / 10
                     break
                 lam = max(lam, 1e-4) * 10
@@ -504,8 +577,11 @@ class _Solver:
 
 def _solve_lighting(problem: _Problem, geo: np.ndarray, edge_px: float) -> tuple[np.ndarray, np.ndarray]:
     """Lighting terms by linear least squares at a fixed geometry; returns them and the residuals."""
-    d = problem.darkness(geo, edge_px, derivatives=False)
-    a = np.concatenate([problem.ph, -problem.ph * d[:, None]], axis=1)
+    d = problem.darkness(geo, edge_px)[0].value
+    a_t = np.empty((6, len(d)))  # the design matrix, transposed: (1, x, y, -D, -D x, -D y)
+    a_t[:3] = problem.ph_t
+    np.multiply(problem.ph_t, -d, out=a_t[3:])
+    a = np.ascontiguousarray(a_t.T)
     try:
         light = np.linalg.solve(a.T @ a, a.T @ problem.values)
     except np.linalg.LinAlgError:
