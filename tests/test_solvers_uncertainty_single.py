@@ -25,9 +25,9 @@ def _reference_fields(result, corners, camera, cov):
     x_list, y_list = normalised_single(c, flat, camera)
     x, y = np.array(x_list), np.array(y_list)
     cov_n = unc.normalised_cov(cov, x, y, camera)
-    mirror = unc._mirror_start(result, x_list, y_list)
-    rotations = [result.rotation] + ([] if mirror is None else [mirror[0]])
-    positions = [result.position_mm] + ([] if mirror is None else [mirror[1]])
+    mirror = unc._mirror_start(result, result.rotation.tolist(), result.position_mm.tolist(), x_list, y_list)
+    rotations = [result.rotation] + ([] if mirror is None else [np.array(mirror[0])])
+    positions = [result.position_mm] + ([] if mirror is None else [np.array(mirror[1])])
     projection = unc.rigid_projection(np.array(rotations), np.array(positions), SIDE_MM)
     if result.method == "numerical":
         jac = unc.numerical_jacobian(result.vertices_mm[:, 2], x, y)

@@ -391,17 +391,16 @@ def _mirror_candidate(
     return _result_single(z_alt, n_alt, status_alt, worst_alt, x, y, side, camera, corners, flat, s)
 
 
-def reflected_pose(
-    result: PoseResult, x: list[float], y: list[float]
-) -> tuple[np.ndarray, np.ndarray] | None:
-    """(R, t) of the rigid pose on the plane of ``result`` reflected about the line of sight to its
-    centre (the start of the mirror search), or None when that plane lies behind the camera.
+def reflected_pose_single(
+    rows: list[list[float]], centre: list[float], x: list[float], y: list[float]
+) -> tuple[list[list[float]], list[float]] | None:
+    """(rows of R, t mm) of the rigid pose on the plane of the pose (``rows`` of R, ``centre`` mm)
+    reflected about the line of sight to its centre (the start of the mirror search), or None when
+    that plane lies behind the camera.
 
     The mirror test of :mod:`.uncertainty` starts from it when the search found no distinct mirror.
     """
-    rows, centre = result.rotation.tolist(), result.position_mm.tolist()
     guess = _mirror_guess(rows, centre, x, y)
     if guess is None:
         return None
-    rows_m, centre_m = kernel.pose_from_vertices(guess, x, y, math.sqrt, max)
-    return np.array(rows_m), np.array(centre_m)
+    return kernel.pose_from_vertices(guess, x, y, math.sqrt, max)
