@@ -108,25 +108,17 @@ def _numerical_terms(z: list[float], x: list[float], y: list[float]) -> tuple[np
     Kabsch matrix, so that d omega = H^-1 q[:3] and dt = q[3:] / 4."""
     vx = [z[i] * x[i] for i in range(4)]
     vy = [z[i] * y[i] for i in range(4)]
-    a = [0.0] * 16  # Jz^T Jz, row-major 4 x 4
-    b = [0.0] * 32  # Jz^T Jn, row-major 4 x 8
-    for i, j in PAIRS:
+    m = [0.0] * 72  # row k: [Jz | Jn] of pair k (6 x 12, row-major), two nonzeros in each part
+    for k, (i, j) in enumerate(PAIRS):
         dx, dy, dz = vx[i] - vx[j], vy[i] - vy[j], z[i] - z[j]
         norm = math.sqrt(dx * dx + dy * dy + dz * dz)
         ex, ey, ez = dx / norm, dy / norm, dz / norm
-        ji = ex * x[i] + ey * y[i] + ez
-        jj = -(ex * x[j] + ey * y[j] + ez)
-        a[5 * i] += ji * ji
-        a[5 * j] += jj * jj
-        a[4 * i + j] += ji * jj
-        a[4 * j + i] += ji * jj
+        row = 12 * k
+        m[row + i] = ex * x[i] + ey * y[i] + ez
+        m[row + j] = -(ex * x[j] + ey * y[j] + ez)
         # Jn's row k: (ex z_i, ey z_i) at corner i, (-ex z_j, -ey z_j) at corner j.
-        nix, niy, njx, njy = ex * z[i], ey * z[i], -ex * z[j], -ey * z[j]
-        for row, jv in ((8 * i, ji), (8 * j, jj)):
-            b[row + 2 * i] += jv * nix
-            b[row + 2 * i + 1] += jv * niy
-            b[row + 2 * j] += jv * njx
-            b[row + 2 * j + 1] += jv * njy
+        m[row + 4 + 2 * i], m[row + 5 + 2 * i] = ex * z[i], ey * z[i]
+        m[row + 4 + 2 * j], m[row + 5 + 2 * j] = -ex * z[j], -ey * z[j]
     mx, my, mz = sum(vx) * 0.25, sum(vy) * 0.25, sum(z) * 0.25
     arms = [(vx[i] - mx, vy[i] - my, z[i] - mz) for i in range(4)]
     # K^T: columns (p_i x m_i, m_i); S: the unit-step terms of sum_i p_i x dV_i (rows 0-2) and
@@ -141,9 +133,11 @@ def _numerical_terms(z: list[float], x: list[float], y: list[float]) -> tuple[np
         s[8 + u], s[16 + u] = zi * pz, -zi * py  # z_i p_i x e_x
         s[v], s[16 + v] = -zi * pz, zi * px  # z_i p_i x e_y
         s[24 + u], s[32 + v] = zi, zi
-    flat = np.array(a + b + kt + s)
-    w = small_solve(flat[:16].reshape(4, 4), flat[16:48].reshape(4, 8))  # (Jz^T Jz)^-1 Jz^T Jn
-    q = flat[72:].reshape(6, 8) - flat[48:72].reshape(6, 4) @ w
+    flat = np.array(m + kt + s)
+    jm = flat[:72].reshape(6, 12)
+    normal = jm[:, :4].T @ jm  # [Jz^T Jz | Jz^T Jn], 4 x 12
+    w = small_solve(normal[:, :4], normal[:, 4:])  # (Jz^T Jz)^-1 Jz^T Jn
+    q = flat[96:].reshape(6, 8) - flat[72:96].reshape(6, 4) @ w
     sxx = syy = szz = sxy = sxz = syz = 0.0
     for px, py, pz in arms:
         sxx += px * px
