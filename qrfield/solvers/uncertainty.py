@@ -196,12 +196,19 @@ def information_matrix(cov_n: np.ndarray) -> np.ndarray:
     """(8, 8) block-diagonal inverse of one corner set's normalised covariance (4, 2, 2); a floor of
     1e-12 of the largest variance (and 1e-30, about 1e-12 px^2, when all are 0) keeps exact
     corners usable."""
-    w = [0.0] * 64
-    w_blocks = information_blocks(cov_n.reshape(16).tolist())
-    for i in range(4):
-        k = 18 * i  # row 2i, column 2i of the flat 8 x 8
-        w[k], w[k + 1], w[k + 8], w[k + 9] = w_blocks[4 * i : 4 * i + 4]
-    return np.array(w).reshape(8, 8)
+    return block_diagonal(information_blocks(cov_n.reshape(16).tolist()))
+
+
+def block_diagonal(blocks: list[float]) -> np.ndarray:
+    """(8, 8) block-diagonal matrix of the four 2x2 blocks given as 16 floats (corner, row, column);
+    (m, 8, 8) for m such sets of 16 floats one after the other."""
+    m = len(blocks) // 16
+    out = [0.0] * (64 * m)
+    for k in range(m):
+        for i in range(4):
+            at, b = 64 * k + 18 * i, 16 * k + 4 * i  # row 2i, column 2i of matrix k
+            out[at], out[at + 1], out[at + 8], out[at + 9] = blocks[b : b + 4]
+    return np.array(out).reshape(8, 8) if m == 1 else np.array(out).reshape(m, 8, 8)
 
 
 def information_blocks(c: list[float]) -> list[float]:

@@ -25,14 +25,7 @@ import numpy as np
 from qrfield.camera import CameraModel
 from qrfield.linalg import small_solve
 from qrfield.solvers.kernel import PAIRS
-from qrfield.solvers.uncertainty import _BLOCK_DIAGONAL, distortion_terms, euler_rows, information_blocks
-
-
-def block_diagonal(blocks: list[float]) -> np.ndarray:
-    """(8, 8) block-diagonal matrix of the four 2x2 blocks given as 16 floats (corner, row, column)."""
-    out = np.zeros(64)
-    out[_BLOCK_DIAGONAL] = blocks
-    return out.reshape(8, 8)
+from qrfield.solvers.uncertainty import block_diagonal, distortion_terms, euler_rows, information_blocks
 
 
 def normalised_cov_single(
@@ -216,10 +209,10 @@ def branch_chi2_many(
     r = n_obs - np.array([projections[k][0] for k in front])  # (m, 8)
     jtw = jac.transpose(0, 2, 1) @ info  # (m, 6, 8)
     g = jtw @ r[:, :, None]  # (m, 6, 1)
-    if len(front) == 1:
-        step = small_solve(jtw[0] @ jac[0], g[0])[None]
-    else:
-        step = np.linalg.solve(jtw @ jac, g)
+    normal = jtw @ jac
+    step = np.empty_like(g)
+    for k in range(len(front)):  # cv2's LU per branch: less overhead than one batched np.linalg.solve
+        step[k] = small_solve(normal[k], g[k])
     chi2 = ((r @ info) * r).sum(axis=1) - (g * step).sum(axis=(1, 2))
     for k, value in zip(front, chi2.tolist(), strict=True):
         out[k] = value if value > 0.0 else 0.0
@@ -251,8 +244,7 @@ def uncertainty_fields(
     """
     from qrfield.solvers.uncertainty import is_ambiguous
 
-    sigma_n = block_diagonal(cov16)
-    info = block_diagonal(information_blocks(cov16))
+    sigma_n, info = block_diagonal(cov16 + information_blocks(cov16))  # Sigma_n and its inverse W
     n_obs = np.array([x[0], y[0], x[1], y[1], x[2], y[2], x[3], y[3]])
     projections = []
     slots = []  # per pose: (index of its branch, index of its mirror's or None)
