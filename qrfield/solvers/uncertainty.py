@@ -39,7 +39,8 @@ import numpy as np
 
 from qrfield.camera import CameraModel
 from qrfield.geometry import marker_vertices
-from qrfield.solvers.result import PoseResult, SolverError
+from qrfield.solvers.rays import has_distortion, normalised_single
+from qrfield.solvers.result import PoseResult, SolverError, updated
 
 #: The mirror candidate counts as fitting the corners within their uncertainty when its
 #: reprojection chi-square exceeds the answer's by less than this, i.e. when the mirror is at least
@@ -424,9 +425,6 @@ def with_uncertainties(
     fields stay NaN and the mirror test falls back on the ratio ``ambiguity``). A result that did
     not converge gets only ``corners_std_px``. ``xy``: the corners' normalised coordinates when known.
     """
-    from qrfield.solvers.rays import normalised_single
-    from qrfield.solvers.result import updated
-
     fields: list[dict[str, object]] = [{} for _ in results]
     if cov is not None:
         c = cov.reshape(16).tolist()
@@ -449,7 +447,6 @@ def with_uncertainties(
         # One corner set: Python floats and a few fused numpy calls (uncertainty_single), the same
         # numbers as the array functions above to float rounding.
         from qrfield.solvers import uncertainty_single as one
-        from qrfield.solvers.rays import has_distortion
 
         x_list, y_list = xy if xy is not None else normalised_single(corners, flat, camera)
         cov16 = one.normalised_cov_single(cov, x_list, y_list, camera, has_distortion(camera))
