@@ -91,7 +91,8 @@ def solve_methods(
     """
     settings = settings or {}
     for method in methods:
-        settings_class(method)
+        if method not in METHODS:
+            settings_class(method)  # raises SolverError naming the methods (no imports for known ones)
     cam = check_camera(camera)
     side = check_side(side_mm)
     corners, flat = check_corners_single(corners_px)

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -134,7 +134,9 @@ class _Candidate:
         facing = sum(self.rows[k][2] * self.position[k] for k in range(3)) > 0.0
         return facing and all(v[2] > 0.0 for v in self.vertices) and math.isfinite(self.error)
 
-    def result(self, corners: np.ndarray) -> PoseResult:
+    def result(
+        self, corners: np.ndarray, alternative: PoseResult | None = None, ambiguity: float | None = None
+    ) -> PoseResult:
         return PoseResult(
             method="ippe",
             position_mm=np.array(self.position),
@@ -147,6 +149,8 @@ class _Candidate:
             reprojection_px=self.error,
             reason="",
             corners_px=corners,
+            alternative=alternative,
+            ambiguity=ambiguity,
         )
 
 
@@ -217,7 +221,7 @@ def solve_ippe(
         # the closed-form mirror, so that the ambiguity compares the two branches.
         second = raw
     ambiguity = ambiguity_ratio(first.error, second.error)
-    return replace(first.result(corners), alternative=second.result(corners), ambiguity=ambiguity)
+    return first.result(corners, second.result(corners), ambiguity)
 
 
 def _other_branch(candidates: list, answer: _Candidate) -> list:

@@ -54,7 +54,7 @@ from qrfield.settings import setting, validated
 from qrfield.solvers import kernel
 from qrfield.solvers.floats import angles_single, reprojection_single
 from qrfield.solvers.rays import normalised_single
-from qrfield.solvers.result import PoseResult, SolverError
+from qrfield.solvers.result import PoseResult, SolverError, built
 from qrfield.solvers.uncertainty import ambiguity_ratio
 
 #: A Gauss-Newton step whose largest depth change is below this (mm, 0.1 micrometre) means the
@@ -294,20 +294,34 @@ def _result_single(
     if not _usable(status, z):
         return PoseResult.failed("numerical", corners, _reason(status, worst, n, s), iterations=n)
     rows, centre, reprojection = pose or _pose_single(z, x, y, side, camera, flat)
-    return PoseResult(
-        method="numerical",
-        position_mm=np.array(centre),
-        angles_deg=np.array(angles_single(rows)),
-        rotation=np.array(rows),
-        vertices_mm=np.array([[z[i] * x[i], z[i] * y[i], z[i]] for i in range(4)]),
-        converged=status == CONVERGED,
-        iterations=n,
-        residual_mm=worst,
-        reprojection_px=reprojection,
-        reason=_reason(status, worst, n, s),
-        corners_px=corners,
-        alternative=alternative,
-        ambiguity=ambiguity,
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rows
+    z0, z1, z2, z3 = z
+    # One array for the four pose fields (views of it): a numpy call instead of four.
+    values = np.array(
+        [
+            *centre,
+            *angles_single(rows),
+            r00, r01, r02, r10, r11, r12, r20, r21, r22,
+            z0 * x[0], z0 * y[0], z0, z1 * x[1], z1 * y[1], z1,
+            z2 * x[2], z2 * y[2], z2, z3 * x[3], z3 * y[3], z3,
+        ]
+    )  # fmt: skip
+    return built(
+        {
+            "method": "numerical",
+            "position_mm": values[0:3],
+            "angles_deg": values[3:6],
+            "rotation": values[6:15].reshape(3, 3),
+            "vertices_mm": values[15:27].reshape(4, 3),
+            "converged": status == CONVERGED,
+            "iterations": n,
+            "residual_mm": worst,
+            "reprojection_px": reprojection,
+            "reason": _reason(status, worst, n, s),
+            "corners_px": corners,
+            "alternative": alternative,
+            "ambiguity": ambiguity,
+        }
     )
 
 
@@ -391,17 +405,16 @@ def _mirror_candidate(
     return _result_single(z_alt, n_alt, status_alt, worst_alt, x, y, side, camera, corners, flat, s)
 
 
-def reflected_pose(
-    result: PoseResult, x: list[float], y: list[float]
-) -> tuple[np.ndarray, np.ndarray] | None:
-    """(R, t) of the rigid pose on the plane of ``result`` reflected about the line of sight to its
-    centre (the start of the mirror search), or None when that plane lies behind the camera.
+def reflected_pose_single(
+    rows: list[list[float]], centre: list[float], x: list[float], y: list[float]
+) -> tuple[list[list[float]], list[float]] | None:
+    """(rows of R, t mm) of the rigid pose on the plane of the pose (``rows`` of R, ``centre`` mm)
+    reflected about the line of sight to its centre (the start of the mirror search), or None when
+    that plane lies behind the camera.
 
     The mirror test of :mod:`.uncertainty` starts from it when the search found no distinct mirror.
     """
-    rows, centre = result.rotation.tolist(), result.position_mm.tolist()
     guess = _mirror_guess(rows, centre, x, y)
     if guess is None:
         return None
-    rows_m, centre_m = kernel.pose_from_vertices(guess, x, y, math.sqrt, max)
-    return np.array(rows_m), np.array(centre_m)
+    return kernel.pose_from_vertices(guess, x, y, math.sqrt, max)

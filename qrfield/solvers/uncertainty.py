@@ -33,14 +33,14 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
 from qrfield.camera import CameraModel
 from qrfield.geometry import marker_vertices
-from qrfield.solvers.result import PoseResult, SolverError
+from qrfield.solvers.rays import has_distortion, normalised_single
+from qrfield.solvers.result import PoseResult, SolverError, updated
 
 #: The mirror candidate counts as fitting the corners within their uncertainty when its
 #: reprojection chi-square exceeds the answer's by less than this, i.e. when the mirror is at least
@@ -197,12 +197,19 @@ def information_matrix(cov_n: np.ndarray) -> np.ndarray:
     """(8, 8) block-diagonal inverse of one corner set's normalised covariance (4, 2, 2); a floor of
     1e-12 of the largest variance (and 1e-30, about 1e-12 px^2, when all are 0) keeps exact
     corners usable."""
-    w = [0.0] * 64
-    w_blocks = information_blocks(cov_n.reshape(16).tolist())
-    for i in range(4):
-        k = 18 * i  # row 2i, column 2i of the flat 8 x 8
-        w[k], w[k + 1], w[k + 8], w[k + 9] = w_blocks[4 * i : 4 * i + 4]
-    return np.array(w).reshape(8, 8)
+    return block_diagonal(information_blocks(cov_n.reshape(16).tolist()))
+
+
+def block_diagonal(blocks: list[float]) -> np.ndarray:
+    """(8, 8) block-diagonal matrix of the four 2x2 blocks given as 16 floats (corner, row, column);
+    (m, 8, 8) for m such sets of 16 floats one after the other."""
+    m = len(blocks) // 16
+    out = [0.0] * (64 * m)
+    for k in range(m):
+        for i in range(4):
+            at, b = 64 * k + 18 * i, 16 * k + 4 * i  # row 2i, column 2i of matrix k
+            out[at], out[at + 1], out[at + 8], out[at + 9] = blocks[b : b + 4]
+    return np.array(out).reshape(8, 8) if m == 1 else np.array(out).reshape(m, 8, 8)
 
 
 def information_blocks(c: list[float]) -> list[float]:
@@ -418,63 +425,61 @@ def with_uncertainties(
     fields stay NaN and the mirror test falls back on the ratio ``ambiguity``). A result that did
     not converge gets only ``corners_std_px``. ``xy``: the corners' normalised coordinates when known.
     """
-    from qrfield.solvers.rays import normalised_single
-
     fields: list[dict[str, object]] = [{} for _ in results]
     if cov is not None:
-        std = corners_std_px(cov)
+        c = cov.reshape(16).tolist()
+        std = np.array([math.sqrt(max(c[k] + c[k + 3], 0.0)) for k in range(0, 16, 4)])  # corners_std_px
         for f in fields:
             f["corners_std_px"] = std
-    solved = [i for i, r in enumerate(results) if r.converged and np.isfinite(r.rotation).all()]
+    poses = {}  # index -> (method, rows of R, t, angles, depths) of each converged, finite pose
+    for i, r in enumerate(results):
+        if r.converged:
+            rows = r.rotation.tolist()
+            if all(math.isfinite(v) for row in rows for v in row):
+                poses[i] = (r.method, rows, r.position_mm.tolist(), r.angles_deg.tolist(), None)
     if cov is None:
-        for i in solved:
+        for i in poses:
             r = results[i]
             if r.alternative is not None and r.ambiguity is not None:
                 better = r.alternative.reprojection_px < r.reprojection_px
                 fields[i]["ambiguous"] = bool(better or r.ambiguity >= AMBIGUITY_FALLBACK)
-    elif solved:
+    elif poses:
         # One corner set: Python floats and a few fused numpy calls (uncertainty_single), the same
         # numbers as the array functions above to float rounding.
         from qrfield.solvers import uncertainty_single as one
-        from qrfield.solvers.rays import has_distortion
 
         x_list, y_list = xy if xy is not None else normalised_single(corners, flat, camera)
         cov16 = one.normalised_cov_single(cov, x_list, y_list, camera, has_distortion(camera))
-        sigma_n = one.block_diagonal(cov16)
-        info = one.block_diagonal(information_blocks(cov16))
-        n_obs = np.array([v for pair in zip(x_list, y_list, strict=True) for v in pair])
+        solved = list(poses)
         for i in solved:
-            result = results[i]
-            projection = one.rigid_projection_single(
-                result.rotation.tolist(), result.position_mm.tolist(), side
-            )
-            if result.method == "numerical":
-                jac = one.numerical_jacobian_single(result.vertices_mm[:, 2].tolist(), x_list, y_list)
-            else:
-                jac = one.ippe_jacobian_single(np.array(projection[1]), camera)
-            alpha, beta, _ = result.angles_deg.tolist()
-            pose_cov = one.pose_covariance_single(jac, sigma_n, euler_rows(alpha, beta))
-            std = np.sqrt(np.maximum(np.diagonal(pose_cov), 0.0))
-            chi2 = one.branch_chi2_single(projection, n_obs, info)
-            fields[i].update(pose_cov=pose_cov, position_std_mm=std[:3], angles_std_deg=std[3:], chi2=chi2)
-            mirror = _mirror_start(result, x_list, y_list)
-            if mirror is not None:
-                mirror_projection = one.rigid_projection_single(mirror[0].tolist(), mirror[1].tolist(), side)
-                mirror_chi2 = one.branch_chi2_single(mirror_projection, n_obs, info)
-                fields[i].update(mirror_chi2=mirror_chi2, ambiguous=is_ambiguous(chi2, mirror_chi2))
-    return [replace(r, **f) if f else r for r, f in zip(results, fields, strict=True)]
+            if results[i].method == "numerical":
+                method, rows, t, angles, _ = poses[i]
+                poses[i] = (method, rows, t, angles, results[i].vertices_mm[:, 2].tolist())
+        mirrors = [_mirror_start(results[i], poses[i][1], poses[i][2], x_list, y_list) for i in solved]
+        computed = one.uncertainty_fields(
+            [poses[i] for i in solved], mirrors, x_list, y_list, cov16, camera, side
+        )
+        for i, f in zip(solved, computed, strict=True):
+            fields[i].update(f)
+    return [updated(r, f) if f else r for r, f in zip(results, fields, strict=True)]
 
 
-def _mirror_start(result: PoseResult, x: list[float], y: list[float]) -> tuple[np.ndarray, np.ndarray] | None:
-    """(R, t) of the mirror candidate: the method's alternative, or for the numerical model without
-    one the reflected plane its mirror search starts from; None when no mirror is in view."""
-    if result.alternative is not None and np.isfinite(result.alternative.rotation).all():
-        return result.alternative.rotation, result.alternative.position_mm
+def _mirror_start(
+    result: PoseResult, rows: list[list[float]], centre: list[float], x: list[float], y: list[float]
+) -> tuple[list[list[float]], list[float]] | None:
+    """(rows of R, t mm) of the mirror candidate of ``result`` (whose pose is ``rows``, ``centre``):
+    the method's alternative, or for the numerical model without one the reflected plane its
+    mirror search starts from; None when no mirror is in view."""
+    alternative = result.alternative
+    if alternative is not None:
+        alt_rows = alternative.rotation.tolist()
+        if all(math.isfinite(v) for row in alt_rows for v in row):
+            return alt_rows, alternative.position_mm.tolist()
     if result.method != "numerical":
         return None  # IPPE's second candidate was behind the camera or facing away: no mirror
-    from qrfield.solvers.numerical import reflected_pose
+    from qrfield.solvers.numerical import reflected_pose_single
 
-    return reflected_pose(result, x, y)
+    return reflected_pose_single(rows, centre, x, y)
 
 
 def batch_uncertainty(

@@ -6,6 +6,8 @@ method), written for the single solve that every video frame makes: there the ar
 spend most of their time in the overhead of about 80 numpy calls on 8 x 6 matrices. Here the
 per-vertex terms are Python floats, the matrices are built once from them, and the small linear
 systems go to qrfield.linalg.small_solve (cv2's LU: a quarter of np.linalg.solve's overhead here).
+The branches of one corner set (each method's answer and its mirror) share their numpy calls:
+one array of their projections' Jacobians, one batched chi-square (:func:`branch_chi2_many`).
 The numbers agree with the array functions to float rounding (tests/test_solvers_uncertainty_single.py
 compares both on seeded poses, pinhole and distorted, both methods).
 
@@ -23,14 +25,7 @@ import numpy as np
 from qrfield.camera import CameraModel
 from qrfield.linalg import small_solve
 from qrfield.solvers.kernel import PAIRS
-from qrfield.solvers.uncertainty import _BLOCK_DIAGONAL, distortion_terms
-
-
-def block_diagonal(blocks: list[float]) -> np.ndarray:
-    """(8, 8) block-diagonal matrix of the four 2x2 blocks given as 16 floats (corner, row, column)."""
-    out = np.zeros(64)
-    out[_BLOCK_DIAGONAL] = blocks
-    return out.reshape(8, 8)
+from qrfield.solvers.uncertainty import block_diagonal, distortion_terms, euler_rows, information_blocks
 
 
 def normalised_cov_single(
@@ -59,16 +54,16 @@ def normalised_cov_single(
 
 def rigid_projection_single(
     rows: list[list[float]], t: list[float], side: float
-) -> tuple[list[float], list[list[float]], float]:
+) -> tuple[list[float], list[float], float]:
     """The rigid square at pose (rows of R, t mm): its normalised projection (8 floats x1, y1, ...),
-    that projection's Jacobian (8 rows of 6: d/d(omega rad, t mm)) and its nearest vertex depth
-    (mm; <= 0 makes the other two meaningless). :func:`qrfield.solvers.uncertainty.rigid_projection`
-    of one pose."""
+    that projection's Jacobian (48 floats: 8 rows of 6, d/d(omega rad, t mm)) and its nearest
+    vertex depth (mm; <= 0 makes the other two meaningless).
+    :func:`qrfield.solvers.uncertainty.rigid_projection` of one pose."""
     h = side / 2.0
     (r00, r01, _), (r10, r11, _), (r20, r21, _) = rows
     tx, ty, tz = t
     proj: list[float] = []
-    jac: list[list[float]] = []
+    jac: list[float] = []
     nearest = math.inf
     for qx, qy in ((-h, -h), (h, -h), (h, h), (-h, h)):
         ax, ay, az = r00 * qx + r01 * qy, r10 * qx + r11 * qy, r20 * qx + r21 * qy
@@ -77,9 +72,93 @@ def rigid_projection_single(
         inv_z = 1.0 / pz if pz != 0.0 else math.inf
         u, v = (ax + tx) * inv_z, (ay + ty) * inv_z
         proj += [u, v]
-        jac.append([-u * ay * inv_z, (az + u * ax) * inv_z, -ay * inv_z, inv_z, 0.0, -u * inv_z])
-        jac.append([(-v * ay - az) * inv_z, v * ax * inv_z, ax * inv_z, 0.0, inv_z, -v * inv_z])
+        jac += [-u * ay * inv_z, (az + u * ax) * inv_z, -ay * inv_z, inv_z, 0.0, -u * inv_z]
+        jac += [(-v * ay - az) * inv_z, v * ax * inv_z, ax * inv_z, 0.0, inv_z, -v * inv_z]
     return proj, jac, nearest
+
+
+def _inverse3(m: list[float]) -> list[float]:
+    """The inverse of a 3 x 3 matrix given as 9 floats (row-major), by its adjugate."""
+    a, b, c, d, e, f, g, h, i = m
+    co0, co1, co2 = e * i - f * h, f * g - d * i, d * h - e * g
+    det = a * co0 + b * co1 + c * co2
+    return [
+        co0 / det,
+        (c * h - b * i) / det,
+        (b * f - c * e) / det,
+        co1 / det,
+        (a * i - c * g) / det,
+        (c * d - a * f) / det,
+        co2 / det,
+        (b * g - a * h) / det,
+        (a * e - b * d) / det,
+    ]
+
+
+def _numerical_terms(z: list[float], x: list[float], y: list[float]) -> tuple[np.ndarray, list[float]]:
+    """(q, H^-1) of :func:`numerical_jacobian_single`: q (6, 8) the sums sum_i p_i x dV_i (rows
+    0-2) and sum_i dV_i (rows 3-5) over the normalised corners, H^-1 (9 floats) the inverse of the
+    Kabsch matrix, so that d omega = H^-1 q[:3] and dt = q[3:] / 4."""
+    vx = [z[i] * x[i] for i in range(4)]
+    vy = [z[i] * y[i] for i in range(4)]
+    m = [0.0] * 72  # row k: [Jz | Jn] of pair k (6 x 12, row-major), two nonzeros in each part
+    for k, (i, j) in enumerate(PAIRS):
+        dx, dy, dz = vx[i] - vx[j], vy[i] - vy[j], z[i] - z[j]
+        norm = math.sqrt(dx * dx + dy * dy + dz * dz)
+        ex, ey, ez = dx / norm, dy / norm, dz / norm
+        row = 12 * k
+        m[row + i] = ex * x[i] + ey * y[i] + ez
+        m[row + j] = -(ex * x[j] + ey * y[j] + ez)
+        # Jn's row k: (ex z_i, ey z_i) at corner i, (-ex z_j, -ey z_j) at corner j.
+        m[row + 4 + 2 * i], m[row + 5 + 2 * i] = ex * z[i], ey * z[i]
+        m[row + 4 + 2 * j], m[row + 5 + 2 * j] = -ex * z[j], -ey * z[j]
+    mx, my, mz = sum(vx) * 0.25, sum(vy) * 0.25, sum(z) * 0.25
+    arms = [(vx[i] - mx, vy[i] - my, z[i] - mz) for i in range(4)]
+    # K^T: columns (p_i x m_i, m_i); S: the unit-step terms of sum_i p_i x dV_i (rows 0-2) and
+    # sum_i dV_i (rows 3-5).
+    kt = [0.0] * 24  # row-major 6 x 4
+    s = [0.0] * 48  # row-major 6 x 8
+    for i, (px, py, pz) in enumerate(arms):
+        xi, yi, zi = x[i], y[i], z[i]
+        kt[i], kt[4 + i], kt[8 + i] = py - pz * yi, pz * xi - px, px * yi - py * xi
+        kt[12 + i], kt[16 + i], kt[20 + i] = xi, yi, 1.0
+        u, v = 2 * i, 2 * i + 1
+        s[8 + u], s[16 + u] = zi * pz, -zi * py  # z_i p_i x e_x
+        s[v], s[16 + v] = -zi * pz, zi * px  # z_i p_i x e_y
+        s[24 + u], s[32 + v] = zi, zi
+    flat = np.array(m + kt + s)
+    jm = flat[:72].reshape(6, 12)
+    normal = jm[:, :4].T @ jm  # [Jz^T Jz | Jz^T Jn], 4 x 12
+    w = small_solve(normal[:, :4], normal[:, 4:])  # (Jz^T Jz)^-1 Jz^T Jn
+    q = flat[96:].reshape(6, 8) - flat[72:96].reshape(6, 4) @ w
+    sxx = syy = szz = sxy = sxz = syz = 0.0
+    for px, py, pz in arms:
+        sxx += px * px
+        syy += py * py
+        szz += pz * pz
+        sxy += px * py
+        sxz += px * pz
+        syz += py * pz
+    h_inv = _inverse3([syy + szz, -sxy, -sxz, -sxy, sxx + szz, -syz, -sxz, -syz, sxx + syy])
+    return q, h_inv
+
+
+def _pose_rows(q: np.ndarray, g: list[float], d: float, euler: list[list[float]] | None) -> np.ndarray:
+    """(6, 8) Jacobian with rotation rows G q[:3] and position rows d q[3:] (G: 9 floats): of
+    p = (omega, t) when ``euler`` is None, else of (x, y, z mm, alpha, beta, gamma deg) with the
+    Euler-rate rows E (deg/rad): rows d q[3:], then (E G) q[:3]; one matmul either way."""
+    if euler is None:
+        top, bottom = g, [d, 0.0, 0.0, 0.0, d, 0.0, 0.0, 0.0, d]
+        t = [*top[0:3], 0.0, 0.0, 0.0, *top[3:6], 0.0, 0.0, 0.0, *top[6:9], 0.0, 0.0, 0.0]
+        t += [0.0, 0.0, 0.0, *bottom[0:3], 0.0, 0.0, 0.0, *bottom[3:6], 0.0, 0.0, 0.0, *bottom[6:9]]
+        return np.array(t).reshape(6, 6) @ q
+    t = [0.0, 0.0, 0.0, d, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, d, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, d]
+    for e0, e1, e2 in euler:  # rows of E G, then zeros for the position columns
+        t += [e0 * g[k] + e1 * g[3 + k] + e2 * g[6 + k] for k in range(3)] + [0.0, 0.0, 0.0]
+    return np.array(t).reshape(6, 6) @ q
+
+
+_EYE9 = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
 
 
 def numerical_jacobian_single(z: list[float], x: list[float], y: list[float]) -> np.ndarray:
@@ -93,52 +172,8 @@ def numerical_jacobian_single(z: list[float], x: list[float], y: list[float]) ->
     with the centred vertices p_i: d omega = H^-1 sum_i p_i x dV_i, dt = sum_i dV_i / 4, where
     p_i x dV_i = z_i p_i x (unit step) - w_i (p_i x m_i).
     """
-    vx = [z[i] * x[i] for i in range(4)]
-    vy = [z[i] * y[i] for i in range(4)]
-    a = [[0.0] * 4 for _ in range(4)]  # Jz^T Jz
-    b = [[0.0] * 8 for _ in range(4)]  # Jz^T Jn
-    for i, j in PAIRS:
-        dx, dy, dz = vx[i] - vx[j], vy[i] - vy[j], z[i] - z[j]
-        norm = math.sqrt(dx * dx + dy * dy + dz * dz)
-        ex, ey, ez = dx / norm, dy / norm, dz / norm
-        ji = ex * x[i] + ey * y[i] + ez
-        jj = -(ex * x[j] + ey * y[j] + ez)
-        a[i][i] += ji * ji
-        a[j][j] += jj * jj
-        a[i][j] += ji * jj
-        a[j][i] += ji * jj
-        # Jn's row k: (ex z_i, ey z_i) at corner i, (-ex z_j, -ey z_j) at corner j.
-        nix, niy, njx, njy = ex * z[i], ey * z[i], -ex * z[j], -ey * z[j]
-        for row, jv in ((b[i], ji), (b[j], jj)):
-            row[2 * i] += jv * nix
-            row[2 * i + 1] += jv * niy
-            row[2 * j] += jv * njx
-            row[2 * j + 1] += jv * njy
-    w = small_solve(np.array(a), np.array(b))  # (4, 8)
-    mx, my, mz = sum(vx) * 0.25, sum(vy) * 0.25, sum(z) * 0.25
-    arms = [(vx[i] - mx, vy[i] - my, z[i] - mz) for i in range(4)]
-    # K: rows (p_i x m_i, m_i); S: the unit-step terms of sum_i p_i x dV_i (rows 0-2) and sum_i dV_i (3-5).
-    k_rows = []
-    s_rows = [[0.0] * 8 for _ in range(6)]
-    for i, (px, py, pz) in enumerate(arms):
-        xi, yi, zi = x[i], y[i], z[i]
-        k_rows.append([py - pz * yi, pz * xi - px, px * yi - py * xi, xi, yi, 1.0])
-        u, v = 2 * i, 2 * i + 1
-        s_rows[1][u], s_rows[2][u] = zi * pz, -zi * py  # z_i p_i x e_x
-        s_rows[0][v], s_rows[2][v] = -zi * pz, zi * px  # z_i p_i x e_y
-        s_rows[3][u], s_rows[4][v] = zi, zi
-    q = np.array(s_rows) - np.array(k_rows).T @ w  # (6, 8): sum_i p_i x dV_i, then sum_i dV_i
-    sxx = sum(p[0] * p[0] for p in arms)
-    syy = sum(p[1] * p[1] for p in arms)
-    szz = sum(p[2] * p[2] for p in arms)
-    sxy = sum(p[0] * p[1] for p in arms)
-    sxz = sum(p[0] * p[2] for p in arms)
-    syz = sum(p[1] * p[2] for p in arms)
-    h = np.array([[syy + szz, -sxy, -sxz], [-sxy, sxx + szz, -syz], [-sxz, -syz, sxx + syy]])
-    out = np.empty((6, 8))
-    out[:3] = small_solve(h, q[:3])
-    out[3:] = 0.25 * q[3:]
-    return out
+    q, h_inv = _numerical_terms(z, x, y)
+    return _pose_rows(q, h_inv, 0.25, None)
 
 
 def ippe_jacobian_single(jac: np.ndarray, camera: CameraModel) -> np.ndarray:
@@ -155,18 +190,91 @@ def pose_covariance_single(jac: np.ndarray, cov_n: np.ndarray, euler: list[list[
     return full @ cov_n @ full.T
 
 
+def branch_chi2_many(
+    projections: list[tuple[list[float], list[float], float]],
+    jac: np.ndarray,
+    n_obs: np.ndarray,
+    info: np.ndarray,
+) -> list[float]:
+    """Chi-square of each branch at its own chi-square optimum (one Gauss-Newton step, predicted),
+    from the branches' rigid projections (:func:`rigid_projection_single`) and their Jacobians
+    stacked (k, 8, 6): :func:`qrfield.solvers.uncertainty.branch_chi2` of k poses in one batch;
+    inf where a vertex is behind the camera."""
+    out = [math.inf] * len(projections)
+    front = [k for k, p in enumerate(projections) if p[2] > 0.0]
+    if not front:
+        return out
+    if len(front) < len(projections):
+        jac = jac[front]
+    r = n_obs - np.array([projections[k][0] for k in front])  # (m, 8)
+    jtw = jac.transpose(0, 2, 1) @ info  # (m, 6, 8)
+    g = jtw @ r[:, :, None]  # (m, 6, 1)
+    normal = jtw @ jac
+    step = np.empty_like(g)
+    for k in range(len(front)):  # cv2's LU per branch: less overhead than one batched np.linalg.solve
+        step[k] = small_solve(normal[k], g[k])
+    chi2 = ((r @ info) * r).sum(axis=1) - (g * step).sum(axis=(1, 2))
+    for k, value in zip(front, chi2.tolist(), strict=True):
+        out[k] = value if value > 0.0 else 0.0
+    return out
+
+
 def branch_chi2_single(
-    projection: tuple[list[float], list[list[float]], float], n_obs: np.ndarray, info: np.ndarray
+    projection: tuple[list[float], list[float], float], n_obs: np.ndarray, info: np.ndarray
 ) -> float:
-    """Chi-square of one branch at its own chi-square optimum (one Gauss-Newton step, predicted):
-    :func:`qrfield.solvers.uncertainty.branch_chi2` of one pose; inf when a vertex is behind the camera."""
-    proj, jac_rows, nearest = projection
-    if not nearest > 0.0:
-        return math.inf
-    r = n_obs - np.array(proj)
-    jac = np.array(jac_rows)
-    jtw = jac.T @ info
-    g = jtw @ r
-    step = small_solve(jtw @ jac, g)
-    chi2 = float(r @ info @ r) - float(g @ step)
-    return max(chi2, 0.0)
+    """:func:`branch_chi2_many` of one branch."""
+    return branch_chi2_many([projection], np.array(projection[1]).reshape(1, 8, 6), n_obs, info)[0]
+
+
+def uncertainty_fields(
+    poses: list[tuple[str, list[list[float]], list[float], list[float], list[float]]],
+    mirrors: list[tuple[list[list[float]], list[float]] | None],
+    x: list[float],
+    y: list[float],
+    cov16: list[float],
+    camera: CameraModel,
+    side: float,
+) -> list[dict[str, object]]:
+    """The uncertainty fields (pose_cov, position_std_mm, angles_std_deg, chi2 and, with a mirror,
+    mirror_chi2 and ambiguous) of k converged poses of one corner set.
+
+    ``poses``: per pose (method, rows of R, t mm, angles deg, depths z mm of "numerical"'s
+    vertices); ``mirrors``: per pose its mirror start (rows of R, t mm) or None; x, y the corners'
+    normalised coordinates; ``cov16`` their normalised covariance (:func:`normalised_cov_single`).
+    """
+    from qrfield.solvers.uncertainty import is_ambiguous
+
+    sigma_n, info = block_diagonal(cov16 + information_blocks(cov16))  # Sigma_n and its inverse W
+    n_obs = np.array([x[0], y[0], x[1], y[1], x[2], y[2], x[3], y[3]])
+    projections = []
+    slots = []  # per pose: (index of its branch, index of its mirror's or None)
+    for (_, rows, t, _, _), mirror in zip(poses, mirrors, strict=True):
+        slots.append((len(projections), None if mirror is None else len(projections) + 1))
+        projections.append(rigid_projection_single(rows, t, side))
+        if mirror is not None:
+            projections.append(rigid_projection_single(mirror[0], mirror[1], side))
+    jac_flat: list[float] = []
+    for p in projections:
+        jac_flat += p[1]
+    jac = np.array(jac_flat).reshape(len(projections), 8, 6)
+    chi2 = branch_chi2_many(projections, jac, n_obs, info)
+    out = []
+    for (method, _, _, angles, z), (own, other) in zip(poses, slots, strict=True):
+        euler = euler_rows(angles[0], angles[1])
+        if method == "numerical":
+            full = _pose_rows(*_numerical_terms(z, x, y), 0.25, euler)
+        else:
+            full = _pose_rows(ippe_jacobian_single(jac[own], camera), _EYE9, 1.0, euler)
+        pose_cov = full @ sigma_n @ full.T
+        std = np.sqrt(np.maximum(pose_cov.diagonal(), 0.0))
+        fields: dict[str, object] = {
+            "pose_cov": pose_cov,
+            "position_std_mm": std[:3],
+            "angles_std_deg": std[3:],
+            "chi2": chi2[own],
+        }
+        if other is not None:
+            fields["mirror_chi2"] = chi2[other]
+            fields["ambiguous"] = is_ambiguous(chi2[own], chi2[other])
+        out.append(fields)
+    return out
