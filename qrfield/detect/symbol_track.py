@@ -43,8 +43,8 @@ from qrfield.detect.symbol_fit import (
 )
 from qrfield.linalg import small_inverse, small_solve
 
-#: Template points (module coordinates near the known edges).
-TEMPLATE_POINTS = 600
+#: Template points (module coordinates near the known edges); see tracking.TRACK_ITERATIONS.
+TEMPLATE_POINTS = 800
 #: Relative change of the code's scale (px per module along u or v) or of the edge width after
 #: which the template is made again.
 TEMPLATE_TOLERANCE = 0.15
@@ -225,6 +225,20 @@ def _compose_inverse(h: list[float], delta: np.ndarray) -> list[float] | None:
     return out
 
 
+def _largest_move(before: list[float], after: list[float], n: float) -> float:
+    """The largest distance (px) between the corners V1..V4 of an n-module symbol through the
+    homographies ``before`` and ``after`` (9 floats each)."""
+    largest = 0.0
+    for u, v in ((0.0, 0.0), (n, 0.0), (n, n), (0.0, n)):
+        moved = []
+        for h00, h01, h02, h10, h11, h12, h20, h21, h22 in (before, after):
+            q = 1.0 / (h20 * u + h21 * v + h22)
+            moved.append(((h00 * u + h01 * v + h02) * q, (h10 * u + h11 * v + h12) * q))
+        (x0, y0), (x1, y1) = moved
+        largest = max(largest, math.hypot(x1 - x0, y1 - y0))
+    return largest
+
+
 def _shifted(h: list[float], sx: float, sy: float) -> list[float]:
     """T o H for the translation T by (-sx, -sy): H's pixels in a crop whose origin is at (sx, sy)."""
     h00, h01, h02, h10, h11, h12, h20, h21, h22 = h
@@ -258,6 +272,10 @@ class WarmFit:
             axis=1,
         )
 
+    def forget_template(self) -> None:
+        """Make the template again at the next fit (whatever its scale)."""
+        self._template = None
+
     def fit(
         self,
         grey: np.ndarray,
@@ -265,9 +283,13 @@ class WarmFit:
         state: FitState,
         offset: tuple[int, int] = (0, 0),
         iterations: int = 2,
+        settle_px: float = 0.0,
     ) -> SymbolFit:
         """Corners V1..V4 (pixels of ``grey``, a crop at ``offset`` of the camera's image) from the
         predicted corners and the last frame's edge width and lighting; never raises for content.
+
+        At most ``iterations`` Gauss-Newton steps; with ``settle_px`` > 0 it stops after a step
+        that moved no corner by ``settle_px`` or more (a good prediction needs one step).
 
         The homography, its updates and the corners are kept in Python floats, and through a
         pinhole the crop's offset is folded into the homography (every tracked frame runs this:
@@ -313,7 +335,8 @@ class WarmFit:
         if not distorted:
             h = _shifted(h, sx, sy)
         with np.errstate(all="ignore"):
-            for _ in range(iterations):
+            done = 0
+            for done in range(1, iterations + 1):
                 hm = np.array(h).reshape(3, 3)
                 inside = None  # all inside, the usual case
                 if distorted:
@@ -351,12 +374,23 @@ class WarmFit:
                     delta = small_solve(normal, jw_t @ resid, symmetric=True)
                 except np.linalg.LinAlgError:
                     return fail("the fit is singular")
+                before = h
                 h = _compose_inverse(h, delta)
                 if h is None:
                     return fail("the fit diverged")
                 light = light + delta[8:]
+                if settle_px > 0.0 and done < iterations and _largest_move(before, h, n) < settle_px:
+                    break
             half = k // 2
+            # The noise scale of the covariance and of the next frame's weights: the last samples'
+            # residuals, taken before the last step (they also hold what that step corrected,
+            # which keeps the std honest for a fit of one step: docs/uncertainty.md).
             robust = max(1.4826 * float(np.partition(np.abs(resid), half)[half]), 0.5)
+            # How well the fit explains the image where the last step went, to first order
+            # (r - J delta, J = d model / d parameters): what the tracker's checks compare with
+            # the track's reference (after one step from a prediction 0.5 px off the samples'
+            # own residuals are half as large again).
+            fitted = max(1.4826 * float(np.partition(np.abs(resid - delta @ jac_t), half)[half]), 0.5)
             contrast = float(light[3])
             if abs(contrast) < MIN_CONTRAST:
                 return fail(f"too little contrast ({abs(contrast):.0f} grey levels)")
@@ -386,10 +420,10 @@ class WarmFit:
             ok=True,
             corners_px=corners,
             corners_cov=corners_cov,
-            residual=robust,
+            residual=fitted,
             contrast=contrast,
             edge_px=edge,
             samples=k,
-            iterations=iterations,
+            iterations=done,
             state=FitState(edge, light, robust),
         )

@@ -41,9 +41,13 @@ from qrfield.detect.patterns import check_patterns
 from qrfield.detect.symbol_fit import START_EDGE_PX, FitState, SymbolFit, fit_symbol
 from qrfield.detect.symbol_track import WarmFit
 
-#: Gauss-Newton steps of a warm fit (one step from a prediction 0.1-0.2 px off leaves 0.013-0.021
-#: px, twice the noise's share, and tracked corners lose 10-20 % in accuracy: measured).
-TRACK_ITERATIONS = 2
+#: Gauss-Newton steps of a warm fit: at most TRACK_ITERATIONS, stopping after a step that moved
+#: no corner by TRACK_SETTLE_PX. From a prediction 0.1 px off one step of TEMPLATE_POINTS = 800
+#: leaves about 0.02 px, less than a second step's own noise: it costs 20 % less than two steps of
+#: 600 and its corners are better (issue 13h, docs/detection.md "Speed"). A prediction that
+#: missed by more (a jerk) takes more steps here rather than the costly measured move.
+TRACK_ITERATIONS = 3
+TRACK_SETTLE_PX = 0.3
 #: A fit of step 1 still sees the code while its residual stays below this share of its contrast ...
 MAX_RESIDUAL_SHARE = 0.2
 #: ... and below this multiple of the track's reference residual (the fit's when a backend last
@@ -364,7 +368,16 @@ class Tracker:
         if warm:
             if track.warm is None or track.warm.cells is not cells or track.warm.lens is not lens:
                 track.warm = WarmFit(cells, lens)
-            fit = track.warm.fit(grey, predicted, track.fit_state, offset, TRACK_ITERATIONS)
+            fit = track.warm.fit(grey, predicted, track.fit_state, offset, TRACK_ITERATIONS, TRACK_SETTLE_PX)
+            if not _warm_holds(fit, track) and fit.ok and fit.iterations < TRACK_ITERATIONS:
+                # It settled where it stands but explains the image less well than the track's
+                # reference: the template (made at another scale) may have aged. Once more with
+                # one made here; a fit that slid off a module misfits a new template as much, and
+                # goes on to the measured move below.
+                track.warm.forget_template()
+                fit = track.warm.fit(
+                    grey, fit.corners_px, fit.state, offset, TRACK_ITERATIONS, TRACK_SETTLE_PX
+                )
             if _warm_holds(fit, track):
                 score = track.detection.quality if track.score is None else track.score
                 result = _refined(fit, score, cells)
