@@ -4,7 +4,7 @@
 every pixel it samples, on every iteration: accurate, but some milliseconds of numpy work. A
 tracked code changes little from one frame to the next, so here the model is evaluated once, at
 fixed points of the symbol (module coordinates near its known edges: the *template*), and each
-frame only maps those points into the image, samples the image there (bilinear, cv2.remap on a
+frame only maps those points into the image, samples the image there (Lanczos, cv2.remap on a
 float copy) and solves a small linear system (Baker and Matthews' inverse compositional
 Lucas-Kanade: the Jacobian lives in the symbol's coordinates and does not change):
 
@@ -13,13 +13,14 @@ Lucas-Kanade: the Jacobian lives in the symbol's coordinates and does not change
 with T the template's darkness, A and B the lighting (linear across the code, fitted with the
 geometry), H the homography from module coordinates to ideal pixels and dH the increment of the
 step (8 terms). The template is rebuilt when the code's scale in the image, or the edge width,
-has changed by more than TEMPLATE_TOLERANCE since it was made. Huber weights at 1.5 robust
-residual scales, as in the full fit. The corners' covariance follows from the last step's normal
-matrix, as there.
+has changed by more than TEMPLATE_TOLERANCE since it was made, and when the tracker asks (a
+settled fit that misfits its aged template: :meth:`WarmFit.forget_template`). Huber weights at
+1.5 robust residual scales, as in the full fit. The corners' covariance follows from the last
+step's normal matrix, as there.
 
-Sampling the image between pixel centres (bilinear) smooths it a little depending on where the
-points fall; over hundreds of points at all phases this averages out (measured on the moving
-sequence of ``qrfield benchmark detect``: docs/detection.md).
+Sampling the image between pixel centres smooths it a little depending on where the points fall
+(and cv2.remap rounds the positions to 1/32 px); over hundreds of points at all phases this
+averages out (measured on the moving sequences of ``qrfield benchmark detect``: docs/detection.md).
 """
 
 from __future__ import annotations

@@ -350,9 +350,10 @@ class Tracker:
         image: np.ndarray | None = None,
     ) -> Detection | None:
         """Step 1 for one track on a crop ``grey`` at ``offset`` of an image of ``shape`` (H, W):
-        the warm whole-symbol fit from the prediction, else from the move measured in ``image``
-        (the whole frame), else the full fit or the detector's refinement from the measured start
-        (the prediction when the move cannot be measured); each must pass the track's residual bar."""
+        the warm whole-symbol fit from the prediction (refitted on a new template when it settled
+        but misfits), else from the move measured in ``image`` (the whole frame), else the full fit
+        or the detector's refinement from the measured start (the prediction when the move cannot
+        be measured); each must pass the track's residual bar."""
         settings = self.settings
         if settings.symbol_fit and not np.isfinite(track.reference_residual):
             # A backend found this code but the symbol fit did not hold there: nothing to tell a
