@@ -141,3 +141,16 @@ def test_quality_follows_the_uncertainty():
     assert quality_of(0.98, small) == pytest.approx(0.98)
     assert quality_of(0.98, large) < GOOD_QUALITY
     assert quality_of(0.98, None) < GOOD_QUALITY  # no covariance: never good
+
+
+def test_a_fits_corner_std_is_the_root_of_each_covariance_trace() -> None:
+    from qrfield.detect.symbol_fit import SymbolFit
+
+    rng = np.random.default_rng(9)
+    a = rng.normal(0, 0.1, (4, 2, 2))
+    cov = a @ a.transpose(0, 2, 1)
+    cov[3] = [[-0.5, 0.0], [0.0, 0.1]]  # not a covariance: no std
+    std = SymbolFit(True, np.zeros((4, 2)), cov, "").corners_std_px
+    np.testing.assert_allclose(std[:3], np.sqrt(np.trace(cov[:3], axis1=1, axis2=2)), rtol=1e-15)
+    assert np.isnan(std[3])
+    assert np.isnan(SymbolFit(False, np.zeros((4, 2)), None, "no fit").corners_std_px).all()

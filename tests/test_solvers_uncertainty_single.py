@@ -258,3 +258,19 @@ def test_built_and_updated_are_the_dataclass_constructor_and_replace():
         updated(fast, {"chi": 1.0})
     with pytest.raises(TypeError, match="missing"):
         built({k: v for k, v in values.items() if k != "reason"})
+
+
+def test_one_corner_sets_std_in_floats_is_the_array_formulas() -> None:
+    """corners_std_px of one (4, 2, 2) set (floats) against the (N, 4, 2, 2) array path and by hand:
+    sqrt of each block's trace, 0 for a negative trace, NaN kept."""
+    from qrfield.solvers.uncertainty import corners_std_px
+
+    rng = np.random.default_rng(5)
+    a = rng.normal(0, 0.2, (4, 2, 2))
+    cov = a @ a.transpose(0, 2, 1)
+    cov[2] = [[-1.0, 0.0], [0.0, 0.5]]  # a negative trace
+    cov[3, 0, 0] = np.nan
+    one, batch = corners_std_px(cov), corners_std_px(cov[None])[0]
+    np.testing.assert_array_equal(one, batch)
+    np.testing.assert_allclose(one[:2], np.sqrt(cov[:2, 0, 0] + cov[:2, 1, 1]), rtol=1e-15)
+    assert one[2] == 0.0 and np.isnan(one[3])

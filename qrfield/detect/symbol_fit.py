@@ -116,7 +116,10 @@ class SymbolFit:
         """(4,) RMS radius of each corner's uncertainty, px (sqrt of the covariance's trace)."""
         if self.corners_cov is None:
             return np.full(4, np.nan)
-        return np.sqrt(np.trace(self.corners_cov, axis1=1, axis2=2))
+        # In floats: every tracked frame asks (NaN for a negative trace, as np.sqrt gives).
+        c = self.corners_cov.reshape(16).tolist()
+        traces = (c[0] + c[3], c[4] + c[7], c[8] + c[11], c[12] + c[15])
+        return np.array([math.sqrt(t) if t >= 0.0 else math.nan for t in traces])
 
 
 # ---------------------------------------------------------------------------------------- helpers

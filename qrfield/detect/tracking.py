@@ -181,15 +181,9 @@ def _warm_holds(fit: SymbolFit, track: _Track) -> bool:
 
 
 def _refined(fit: SymbolFit, score: float, cells: np.ndarray) -> Refined:
-    """The Refined of a tracked fit; its corner quality is SymbolFit.corners_std_px (the sqrt of
-    each covariance's trace), here in floats (every tracked frame runs this)."""
-    if fit.corners_cov is None:
-        std = fit.corners_std_px
-    else:
-        c = fit.corners_cov.reshape(16).tolist()
-        traces = (c[0] + c[3], c[4] + c[7], c[8] + c[11], c[12] + c[15])
-        std = np.array([math.sqrt(t) if t >= 0.0 else math.nan for t in traces])
-    return Refined(fit.corners_px, fit.corners_cov, std, score, True, fit.state, fit.residual, cells)
+    return Refined(
+        fit.corners_px, fit.corners_cov, fit.corners_std_px, score, True, fit.state, fit.residual, cells
+    )
 
 
 class Tracker:

@@ -149,6 +149,9 @@ def isotropic_cov(std_px: float, batch: int | None = None) -> np.ndarray:
 
 def corners_std_px(cov: np.ndarray) -> np.ndarray:
     """(..., 4) RMS radius of each corner's uncertainty, sqrt(trace of its 2x2 block), px."""
+    if cov.shape == (4, 2, 2):  # one corner set (every frame's solve): in floats
+        c = cov.reshape(16).tolist()
+        return np.array([math.sqrt(max(c[k] + c[k + 3], 0.0)) for k in range(0, 16, 4)])
     return np.sqrt(np.maximum(cov[..., 0, 0] + cov[..., 1, 1], 0.0))
 
 
@@ -427,8 +430,7 @@ def with_uncertainties(
     """
     fields: list[dict[str, object]] = [{} for _ in results]
     if cov is not None:
-        c = cov.reshape(16).tolist()
-        std = np.array([math.sqrt(max(c[k] + c[k + 3], 0.0)) for k in range(0, 16, 4)])  # corners_std_px
+        std = corners_std_px(cov)
         for f in fields:
             f["corners_std_px"] = std
     poses = {}  # index -> (method, rows of R, t, angles, depths) of each converged, finite pose
