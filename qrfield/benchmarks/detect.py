@@ -129,6 +129,7 @@ def _hard_sequences(count: int, seed: int) -> None:
     and the whitened errors of the reported covariance."""
     import numpy as np
 
+    from qrfield.benchmarks._corners import calibration_text, whiten
     from qrfield.benchmarks.hardset import DISTORTED_CAMERA, _pinhole, hard_sequence
     from qrfield.detect import Detector, DetectorSettings, Tracker
 
@@ -166,17 +167,10 @@ def _hard_sequences(count: int, seed: int) -> None:
                     diff = found[0].corners_px - truth
                     errors.append(float(np.linalg.norm(diff, axis=1).max()))
                     if found[0].corners_cov is not None:
-                        for k in range(4):
-                            whitened.extend(
-                                np.linalg.solve(np.linalg.cholesky(found[0].corners_cov[k]), diff[k])
-                            )
+                        whitened.extend(whiten(diff, found[0].corners_cov))
             e, z = np.array(errors), np.array(whitened)
             figures = f"{np.median(e):.3f} / {np.percentile(e, 90):.3f} / {e.max():.3f}" if e.size else "-"
-            calibration = (
-                f"z RMS {np.sqrt(np.mean(z**2)):.2f}, {100 * np.mean(np.abs(z) < 2):.1f} % within 2"
-                if z.size
-                else "-"
-            )
+            calibration = calibration_text(z) if z.size else "-"
             print(f"{lens:<10}{name:<26}{len(e):>5}/{frames:<3}   {figures:<49}{calibration}")
 
 
@@ -187,6 +181,7 @@ def _time_sequence(cam, side: float, count: int, repeats: int) -> bool:
     import cv2
     import numpy as np
 
+    from qrfield.benchmarks._corners import calibration_text, whiten
     from qrfield.detect import Detector, DetectorSettings, Tracker
     from qrfield.geometry import Pose
     from qrfield.methods import METHODS
@@ -282,16 +277,10 @@ def _time_sequence(cam, side: float, count: int, repeats: int) -> bool:
             diff = found[0].corners_px - true
             errors.append(float(np.linalg.norm(diff, axis=1).max()))
             if found[0].corners_cov is not None:
-                for k in range(4):
-                    whitened.extend(np.linalg.solve(np.linalg.cholesky(found[0].corners_cov[k]), diff[k]))
+                whitened.extend(whiten(diff, found[0].corners_cov))
     if errors:
         e, z = np.array(errors), np.array(whitened)
-        calibration = (
-            f"; their covariance: z RMS {np.sqrt(np.mean(z**2)):.2f}, "
-            f"{100 * np.mean(np.abs(z) < 2):.1f} % within 2"
-            if z.size
-            else ""
-        )
+        calibration = f"; their covariance: {calibration_text(z)}" if z.size else ""
         print(
             f"{cam.name:<22}tracked corners, worst per frame: median {np.median(e):.3f} px, "
             f"90th pct {np.percentile(e, 90):.3f} px, max {e.max():.3f} px ({len(e)} frames){calibration}"

@@ -267,6 +267,16 @@ def _module_px(corners: np.ndarray, n: int) -> float:
     return float(sides.min()) / n
 
 
+def true_corners(camera: CameraModel, pose: Pose, side_mm: float) -> np.ndarray:
+    """(4, 2) pixels of the corners V1..V4 of a code of ``side_mm`` at ``pose``, by
+    ``cv2.projectPoints`` with the lens' distortion: the set's truth."""
+    import cv2
+
+    rvec = cv2.Rodrigues(pose.rotation)[0]
+    projected, _ = cv2.projectPoints(marker_vertices(side_mm), rvec, pose.position_mm, camera.K, camera.dist)
+    return projected.reshape(4, 2)
+
+
 def hard_view(index: int, seed: int = 2024) -> HardView:
     """View ``index`` of the hard set with ``seed``: the same view every time."""
     import cv2
@@ -304,9 +314,7 @@ def hard_view(index: int, seed: int = 2024) -> HardView:
     phi = rng.uniform(0.0, 2 * math.pi)
     image = rasterise(camera, pose, side, matrix, background, light, dark)
     image = cv2.GaussianBlur(image, (0, 0), sigmaX=blur, borderType=cv2.BORDER_REPLICATE)
-    corners = cv2.projectPoints(
-        marker_vertices(side), cv2.Rodrigues(pose.rotation)[0], pose.position_mm, camera.K, camera.dist
-    )[0].reshape(4, 2)
+    corners = true_corners(camera, pose, side)
     # Lighting: a linear ramp in direction phi, +-gradient across the code's extent.
     w, h = camera.size
     centre = corners.mean(axis=0)
@@ -381,10 +389,7 @@ def hard_sequence(index: int, frames: int = 60, seed: int = 2024) -> Iterator[tu
         image = rasterise(camera, pose, side, matrix, background, light, dark)
         image = cv2.GaussianBlur(image, (0, 0), sigmaX=0.6, borderType=cv2.BORDER_REPLICATE)
         image = np.clip(np.round(image + noise.normal(0.0, 2.0, image.shape)), 0, 255).astype(np.uint8)
-        corners = cv2.projectPoints(
-            marker_vertices(side), cv2.Rodrigues(pose.rotation)[0], pose.position_mm, camera.K, camera.dist
-        )[0].reshape(4, 2)
-        yield image, corners
+        yield image, true_corners(camera, pose, side)
 
 
 # ---------------------------------------------------------------------- ``qrfield benchmark hardset``
