@@ -7,6 +7,7 @@ import time
 
 import numpy as np
 import pytest
+from PySide6 import QtWidgets
 
 from qrfield.camera import resolve_camera
 from qrfield.geometry import Pose
@@ -65,3 +66,5 @@ def test_a_fast_live_camera_is_drained_and_results_stay_current(qtbot, camera_vg
     finally:
         assert stop_worker(worker, thread)
     assert not sources[0].is_open and worker.source is None
+    # Back on the GUI thread once its loop ended: the QObject is never deleted on a worker thread.
+    assert worker.thread() is QtWidgets.QApplication.instance().thread()
