@@ -529,7 +529,11 @@ class MainWindow(QtWidgets.QMainWindow):
         self.save_settings()
         self.simulation_tab.shutdown()
         self.worker_stopped = stop_worker(self.worker, self.thread, self.WORKER_STOP_MS)
-        if not self.worker_stopped:
+        if self.worker_stopped:
+            # Deleted with the window, on the GUI thread (the worker is back on it by now).
+            self.worker.setParent(self)
+            self.thread.setParent(self)
+        else:
             # ui.worker keeps the worker and its thread alive until the thread ends.
             message = (
                 f"the frame loop did not end within {self.WORKER_STOP_MS / 1000:g} s "

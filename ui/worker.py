@@ -16,7 +16,8 @@ result but the engine itself, running for the window's whole life.
 
 Shutdown (:func:`stop_worker`, docs/architecture.md "Shutdown"): stop the loop, then join the thread
 with a bounded wait. When its loop ends, the worker moves itself back to the application's thread,
-so that the QObject is never deleted on, or after the end of, the worker thread. A worker whose
+so that the QObject is never deleted on, or after the end of, the worker thread (the window then
+makes the worker and its QThread its children). A worker whose
 thread does not end in time stays referenced here (:func:`unjoined_workers`) until it does: neither
 it nor its QThread is destroyed while running, whatever Qt does to the window meanwhile.
 """
@@ -25,6 +26,7 @@ from __future__ import annotations
 
 import threading
 import time
+import weakref
 from dataclasses import dataclass
 from typing import Any
 
@@ -80,7 +82,9 @@ class PipelineWorker(QtCore.QObject):
         super().__init__()
         #: The newest result not yet drawn (the GUI takes it on its redraw timer).
         self.latest: Mailbox[Processed] = Mailbox()
-        self.loop = FrameLoop(config, events=self, opener=source_factory, hold_when_down=True)
+        # A proxy: no worker <-> loop cycle, so the worker is freed where its last reference goes
+        # (the GUI thread), never by a garbage collection that happens to run on another thread.
+        self.loop = FrameLoop(config, events=weakref.proxy(self), opener=source_factory, hold_when_down=True)
 
     # ---------------------------------------------------------------- called from the GUI thread
     def configure(self, config: RunConfig, *, reopen: bool = False) -> int:
@@ -162,9 +166,11 @@ class PipelineWorker(QtCore.QObject):
         self.latest.put(item)
 
 
-#: Every started worker with its thread until :func:`stop_worker` (or :func:`wait_for_workers`)
-#: has seen the thread end: this reference keeps both alive while the thread runs.
+#: Every started worker with its thread until its thread is seen to end: this reference keeps
+#: both alive while the thread runs. Those whose owner gave up waiting (stop_worker False) are
+#: deleted here, on the GUI thread, once their thread has ended.
 _started: dict[int, tuple[PipelineWorker, QtCore.QThread]] = {}
+_abandoned: set[int] = set()
 _started_lock = threading.Lock()
 
 
@@ -183,26 +189,29 @@ def start_worker(worker: PipelineWorker) -> QtCore.QThread:
 
 
 def stop_worker(worker: PipelineWorker, thread: QtCore.QThread, timeout_ms: int = STOP_WAIT_MS) -> bool:
-    """Stop the loop, close the source, join the thread; True when the thread has ended.
+    """Stop the loop, close the source, join the thread (GUI thread); True when it has ended.
 
     False: the thread still runs after ``timeout_ms`` (a source stuck in a read or close); the
-    worker and thread stay referenced (:func:`unjoined_workers`) until it ends."""
+    worker and thread stay referenced here (:func:`unjoined_workers`) until it ends, and are then
+    deleted on the GUI thread."""
     worker.stop()
     thread.quit()
-    ended = bool(thread.wait(timeout_ms))
-    if ended:
-        with _started_lock:
-            _started.pop(id(worker), None)
-    return ended
+    if thread.wait(timeout_ms):
+        _ended(id(worker))
+        return True
+    with _started_lock:
+        _abandoned.add(id(worker))
+    return False
 
 
 def unjoined_workers() -> list[tuple[PipelineWorker, QtCore.QThread]]:
     """Started workers whose thread has not ended (still running in a window, or stopped and
-    not ended in time); those whose thread has ended are forgotten here."""
+    not ended in time); call on the GUI thread (those seen ended are let go here)."""
     with _started_lock:
-        for key, (_worker, thread) in list(_started.items()):
-            if thread.isFinished():
-                del _started[key]
+        ended = [key for key, (_w, thread) in _started.items() if thread.isFinished()]
+    for key in ended:
+        _ended(key)
+    with _started_lock:
         return list(_started.values())
 
 
@@ -213,3 +222,14 @@ def wait_for_workers(timeout_ms: int = STOP_WAIT_MS) -> bool:
         left_ms = max(0, int((deadline - time.monotonic()) * 1000))
         stop_worker(worker, thread, left_ms)
     return not unjoined_workers()
+
+
+def _ended(key: int) -> None:
+    """The thread of worker ``key`` has ended: forget it; delete an abandoned one (GUI thread)."""
+    with _started_lock:
+        pair = _started.pop(key, None)
+        abandoned = key in _abandoned
+        _abandoned.discard(key)
+    if pair is not None and abandoned:
+        for qobject in pair:
+            qobject.deleteLater()

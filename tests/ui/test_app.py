@@ -192,6 +192,28 @@ def test_close_stops_the_worker_and_closes_the_source(make_window, qtbot) -> Non
     assert window.thread.isFinished() and not source.is_open and window.worker.source is None
 
 
+def test_the_worker_and_its_thread_are_deleted_with_the_window_on_the_gui_thread(qtbot, tmp_path) -> None:
+    from PySide6 import QtCore
+
+    from qrfield.runconfig import ConfigStore
+    from ui.main_window import MainWindow
+
+    window = MainWindow(ConfigStore(tmp_path / "config"), {"source": "virtual"})
+    deleted: list[threading.Thread] = []
+    for qobject in (window.worker, window.thread):
+        qobject.destroyed.connect(
+            lambda *_: deleted.append(threading.current_thread()), QtCore.Qt.ConnectionType.DirectConnection
+        )
+    try:
+        window.show()
+        qtbot.waitUntil(lambda: window.frames_shown >= 1, timeout=WAIT_MS)
+    finally:
+        window.close()
+        window.deleteLater()
+    qtbot.waitUntil(lambda: len(deleted) == 2, timeout=WAIT_MS)
+    assert all(thread is threading.main_thread() for thread in deleted)
+
+
 class StuckOnClose(FrameSource):
     """The virtual bench whose close hangs until ``release`` is set, as a camera driver stuck in
     its close would."""
