@@ -39,7 +39,8 @@ import numpy as np
 
 from qrfield.camera import CameraModel
 from qrfield.geometry import marker_vertices
-from qrfield.solvers.rays import has_distortion, normalised_single
+from qrfield.lens import distortion_jacobian_terms, has_distortion
+from qrfield.solvers.rays import normalised_single
 from qrfield.solvers.result import PoseResult, SolverError, updated
 
 #: The mirror candidate counts as fitting the corners within their uncertainty when its
@@ -172,17 +173,8 @@ def distortion_jacobian(x: np.ndarray, y: np.ndarray, camera: CameraModel) -> np
 
 def distortion_terms(x: Any, y: Any, camera: CameraModel) -> tuple[Any, Any, Any]:
     """The entries (d00, d01 = d10, d11) of :func:`distortion_jacobian` at (x, y): Python floats or
-    arrays (...) alike (the single path passes floats)."""
-    k1, k2, p1, p2, k3 = camera.dist.tolist()
-    r2 = x * x + y * y
-    radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-    g = 2.0 * (k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2))  # 2 d radial / d r2
-    cross = x * y * g + 2.0 * p1 * x + 2.0 * p2 * y
-    return (
-        radial + x * x * g + 2.0 * p1 * y + 6.0 * p2 * x,
-        cross,
-        radial + y * y * g + 6.0 * p1 * y + 2.0 * p2 * x,
-    )
+    arrays (...) alike (the single path passes floats; qrfield.lens.distortion_jacobian_terms)."""
+    return distortion_jacobian_terms(camera.dist.tolist(), x, y)
 
 
 def normalised_cov(cov_px: np.ndarray, x: np.ndarray, y: np.ndarray, camera: CameraModel) -> np.ndarray:
