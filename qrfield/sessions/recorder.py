@@ -30,8 +30,8 @@ def session_run_config(base: RunConfig, info: SessionInfo) -> RunConfig:
     session's own camera model, QR side, solver and solver settings (what its rows claim)."""
     import dataclasses
 
-    from qrfield.methods import settings_class
     from qrfield.settings import from_dict
+    from qrfield.solvers import settings_class
 
     settings = from_dict(settings_class(info.solver), info.solver_settings, strict=False)
     return dataclasses.replace(
