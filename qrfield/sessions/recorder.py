@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from qrfield.runconfig import RunConfig
+from qrfield.seams import LoopEventsBase
 from qrfield.sessions.averaging import FrameCollector, Measurement, circular_mean_deg
 from qrfield.sessions.groundtruth import GroundTruth
 from qrfield.sessions.store import SessionInfo
@@ -67,7 +68,7 @@ def _converged(pose: Any) -> bool:
     )
 
 
-class RowRecorder:
+class RowRecorder(LoopEventsBase):
     """A frame loop's event handler that collects frames for one row at a time (thread-safe).
 
     ``say(text)`` receives the loop's messages (source opened or failed, notes).
