@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from qrfield.benchmarks._pose_real import FOLDER, boofcv_cameras, square_cases
-from qrfield.benchmarks._pose_views import VIEW_SETS, BenchView
 from qrfield.cli import main
+from qrfield.testing.pose_views import VIEW_SETS, BenchView
+from qrfield.testing.real_squares import FOLDER, boofcv_cameras, square_cases
 
 
 @pytest.fixture(scope="module")
@@ -54,9 +54,9 @@ def test_four_real_corners_agree_with_the_whole_board_within_their_std(real_case
 
 def test_bench_pose_runs_on_a_view_set_given_by_name(monkeypatch, capsys, tmp_path):
     """The view set is a parameter: a stand-in set registered under a name is what the benchmark measures."""
-    from qrfield.benchmarks._pose_views import cameras
     from qrfield.geometry import Pose
     from qrfield.render import render_view
+    from qrfield.testing.pose_views import cameras
 
     def tiny(count: int, seed: int) -> list[BenchView]:
         camera = cameras()[0]

@@ -1,5 +1,5 @@
 """The whole-symbol fit against truth that is not qrfield's own: segno's symbols, the hard set's
-rasteriser and cv2.projectPoints (qrfield.benchmarks.hardset), pinhole and distorted."""
+rasteriser and cv2.projectPoints (qrfield.testing.hardset), pinhole and distorted."""
 
 from __future__ import annotations
 
@@ -8,13 +8,13 @@ import pytest
 
 segno = pytest.importorskip("segno", reason="segno (a dev dependency) encodes the hard set's symbols")
 
-from qrfield.benchmarks.hardset import hard_view, rasterise  # noqa: E402
 from qrfield.detect import Detector  # noqa: E402
 from qrfield.detect.detection import GOOD_QUALITY, quality_of  # noqa: E402
 from qrfield.detect.symbol import QUIET_RINGS, decoded_cells, fixed_cells, verified_matrix  # noqa: E402
 from qrfield.detect.symbol_fit import fit_symbol  # noqa: E402
 from qrfield.geometry import Pose  # noqa: E402
 from qrfield.render import qr_symbol, render_view  # noqa: E402
+from qrfield.testing.hardset import hard_view, rasterise  # noqa: E402
 
 #: Hard-set views (seed 2024) where the edge-line refinement (the code before the whole-symbol fit)
 #: put V3 more than 1 px off (pinhole 18 and 38, distorted 53, 81 and 89).

@@ -272,8 +272,8 @@ def test_the_hard_set_view_whose_v4_is_18_px_off_is_not_a_good_pose() -> None:
     """Hard set seed 7, view 58: zxing's V4 is 17.9 px off and cannot be refined; IPPE made a
     converged pose several degrees off from it, which the pipeline reported as OK before."""
     pytest.importorskip("segno", reason="segno (a dev dependency) encodes the hard set's symbols")
-    from qrfield.benchmarks.hardset import hard_view
     from qrfield.solvers import solve
+    from qrfield.testing.hardset import hard_view
 
     view = hard_view(58, seed=7)
     result = Pipeline(view.camera, view.side_mm, METHODS).process(Frame(view.image, 100.0, 0))

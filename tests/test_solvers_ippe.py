@@ -223,8 +223,8 @@ def test_the_alternative_is_always_the_other_branch_of_the_ambiguity():
     then the "mirror" was the answer again and the flip warning fired on good views (25 of these
     600 seeded noisy views before the fix, 16 of them with ambiguity >= 0.8). The alternative must
     be the other branch: its card normal well away from the answer's."""
-    from qrfield.benchmarks._pose_views import corner_set
-    from qrfield.benchmarks.pose import draw_noise, random_corner_cov
+    from qrfield.testing.corner_noise import draw_noise, random_corner_cov
+    from qrfield.testing.pose_views import corner_set
 
     views = corner_set(600, seed=9)
     rng = np.random.default_rng(2)

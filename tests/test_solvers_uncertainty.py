@@ -13,13 +13,13 @@ import numpy as np
 import pytest
 from solver_cases import DISTORTED, SIDE_MM, cases
 
-from qrfield.benchmarks._pose_views import corner_set
-from qrfield.benchmarks.pose import draw_noise, random_corner_cov
 from qrfield.camera import resolve_camera
 from qrfield.geometry import Pose, angle_difference, angles_from_rotation, project_points, rotation_matrix
 from qrfield.methods import METHODS
 from qrfield.solvers import SolverError, solve, solve_batch
 from qrfield.solvers import uncertainty as unc
+from qrfield.testing.corner_noise import draw_noise, random_corner_cov
+from qrfield.testing.pose_views import corner_set
 
 CAMERAS = ("picam-v2@640x480", DISTORTED.name)
 
