@@ -27,6 +27,7 @@ def views():
     return [hard_view(index) for index in VIEWS]
 
 
+@pytest.mark.slow
 def test_small_blurred_codes_are_found_read_and_refined(views):
     for view in views:
         assert 1.2 <= view.module_px < 2.0

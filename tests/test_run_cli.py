@@ -18,6 +18,8 @@ import pytest
 from qrfield.geometry import Pose, angle_difference
 from qrfield.render import render_view
 
+pytestmark = pytest.mark.slow
+
 REPO = Path(__file__).resolve().parent.parent
 
 

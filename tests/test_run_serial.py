@@ -25,7 +25,7 @@ from serial_truth import command_line, frames_and_answers
 
 from qrfield.geometry import angle_difference
 
-pytestmark = pytest.mark.timeout(90)
+pytestmark = [pytest.mark.timeout(90), pytest.mark.slow]
 REPO = Path(__file__).resolve().parent.parent
 # The virtual bench's default pose (qrfield.sources.VirtualBenchSettings): mm and degrees.
 BENCH = np.array([10.0, -5.0, 300.0, 15.0, -20.0, 10.0])

@@ -36,6 +36,7 @@ def run_parser(binary: Path, data: bytes) -> list[str]:
     return result.stdout.decode().splitlines()
 
 
+@pytest.mark.slow
 def test_c_parser_reads_encoded_frames_in_fixed_point(parser_binary):
     rng = np.random.default_rng(5)
     frames, expected = [], []

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-pytestmark = pytest.mark.timeout(30)
+pytestmark = [pytest.mark.timeout(30), pytest.mark.slow]
 REPO = Path(__file__).resolve().parent.parent
 
 GOOD_NOQR = b"$QRF,7,100,,,,,,,NOQR*6D\r\n"  # checksum worked out by hand in test_serial_frames.py

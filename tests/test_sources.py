@@ -257,6 +257,7 @@ def test_picamera2_at_640x480_on_an_imx219_measures_300_mm_as_300_mm(stand_in) -
     assert np.allclose(zs, 300.0, atol=5.0), zs
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("sensor", "profile", "size", "mode"),
     [

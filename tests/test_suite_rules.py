@@ -7,6 +7,10 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
+import pytest
+
+pytestmark = pytest.mark.slow
+
 REPO = Path(__file__).resolve().parents[1]
 TESTS = REPO / "tests"
 BENCHMARKS = REPO / "qrfield" / "benchmarks"

@@ -14,7 +14,7 @@ from qrfield.geometry import Pose, angle_difference
 from qrfield.render import render_view
 from qrfield.sources import Frame, FrameSource, SourceError, VirtualBenchSettings, open_source
 
-pytestmark = pytest.mark.gui
+pytestmark = [pytest.mark.gui, pytest.mark.slow]
 WAIT_MS = 15000
 
 

@@ -41,6 +41,7 @@ class FastLiveCamera(FrameSource):
         pass
 
 
+@pytest.mark.slow
 def test_a_fast_live_camera_is_drained_and_results_stay_current(qtbot, camera_vga) -> None:
     image = render_view(camera_vga, 50.0, Pose([0, 0, 300], [10, 10, 0]), noise_sigma=2.0, seed=1).image
     sources: list[FastLiveCamera] = []
