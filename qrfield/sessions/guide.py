@@ -53,6 +53,16 @@ class GuideSettings:
         help="log automatically only when every difference to the target is within this many times "
         "the acceptance criteria (0 = at any difference); a tap logs at any difference",
     )
+    still_timeout_s: float = setting(
+        60.0,
+        label="wait for still",
+        unit="s",
+        minimum=1.0,
+        maximum=3600.0,
+        decimals=0,
+        help="a row asked for 'once still' (the terminal's Enter, the virtual bench) is given up when "
+        "the card is not still within this long",
+    )
 
 
 @dataclass(frozen=True)
