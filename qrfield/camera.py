@@ -41,6 +41,7 @@ import numpy as np
 
 from qrfield import paths
 from qrfield.files import Fields, FileFormatError, describe_value, read_json
+from qrfield.lens import has_distortion, undistort_points
 from qrfield.limits import DISTORTION_ROUND_TRIP_PX, DISTORTION_SCALE, FOCAL_PX, IMAGE_SIDE_PX, LimitError
 
 #: Fields every camera JSON file must have.
@@ -248,7 +249,8 @@ class CameraModel:
 
     @property
     def has_distortion(self) -> bool:
-        return bool(np.any(self.dist != 0.0))
+        """True when any distortion coefficient is non-zero (qrfield.lens.has_distortion)."""
+        return has_distortion(self)
 
     @property
     def fov_deg(self) -> tuple[float, float]:
@@ -517,8 +519,6 @@ def _distortion_problem(
     image's border at its pixel edges), or ""."""
     import cv2
 
-    from qrfield.solvers.rays import UNDISTORT_CRITERIA  # the solvers' iteration is what must work
-
     K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
     D = np.asarray(dist, dtype=float)
     if corners:
@@ -540,11 +540,8 @@ def _distortion_problem(
         )
     pts = outline.reshape(-1, 1, 2)
     with np.errstate(all="ignore"):
-        if hasattr(cv2, "undistortPointsIter"):  # OpenCV 4.x
-            ideal = cv2.undistortPointsIter(pts, K, D, None, None, UNDISTORT_CRITERIA)
-        else:  # OpenCV 5
-            ideal = cv2.undistortPoints(pts, K, D, R=None, P=None, criteria=UNDISTORT_CRITERIA)
-        ideal = ideal.reshape(-1, 2)
+        # The solvers' iteration (qrfield.lens) is what must work.
+        ideal = undistort_points(pts, K, D).reshape(-1, 2)
         if not np.all(np.isfinite(ideal)):
             return f"cannot be inverted over the {width}x{height} image (OpenCV's undistortion diverges)"
         rays = np.column_stack([ideal, np.ones(len(ideal))])

@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from qrfield.seams import BaseSink
 from qrfield.sessions.averaging import FrameCollector, Measurement
 from qrfield.sessions.criteria import AcceptanceCriteria, Grades
 from qrfield.sessions.groundtruth import GroundTruth
@@ -107,9 +108,9 @@ class _Request:
     frames: list[Any] = field(default_factory=list)
 
 
-class Guide:
-    """See the module docstring. Thread-safe: frames come on the loop's thread, the owner calls
-    the rest from its own."""
+class Guide(BaseSink):
+    """See the module docstring. A :class:`qrfield.seams.Sink` of the frame loop. Thread-safe:
+    frames come on the loop's thread, the owner calls the rest from its own."""
 
     def __init__(
         self,
@@ -257,9 +258,6 @@ class Guide:
                 self._problem = f"row not logged: no frames ({reason}); {got} of {self.frames_per_row} came"
                 self._request = None
             self._detector.restart(f"no frames: {reason}")
-
-    def on_source_up(self) -> None:
-        pass
 
     # ---------------------------------------------------------------- internals (under the lock)
     def _start_collecting(self, request: _Request) -> None:

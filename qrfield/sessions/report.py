@@ -119,9 +119,9 @@ def _truth(rows: Sequence[LoggedRow]) -> tuple[np.ndarray, np.ndarray, np.ndarra
 
 def _prediction(rows: Sequence[LoggedRow], info: SessionInfo, noise: Any, draws: int | None) -> Any:
     """The simulation at the rows' complete ground truths (None entries for incomplete ones)."""
-    from qrfield.methods import settings_class
     from qrfield.settings import from_dict
     from qrfield.simulation.targets import predict_poses
+    from qrfield.solvers import settings_class
 
     position, angles, complete = _truth(rows)
     settings = from_dict(settings_class(info.solver), info.solver_settings, strict=False)

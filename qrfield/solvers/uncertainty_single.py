@@ -259,9 +259,9 @@ def uncertainty_fields(
     jac = np.array(jac_flat).reshape(len(projections), 8, 6)
     chi2 = branch_chi2_many(projections, jac, n_obs, info)
     out = []
-    for (method, _, _, angles, z), (own, other) in zip(poses, slots, strict=True):
+    for (_, _, _, angles, z), (own, other) in zip(poses, slots, strict=True):
         euler = euler_rows(angles[0], angles[1])
-        if method == "numerical":
+        if z is not None:  # a depth model (the numerical one): through its depths
             full = _pose_rows(*_numerical_terms(z, x, y), 0.25, euler)
         else:
             full = _pose_rows(ippe_jacobian_single(jac[own], camera), _EYE9, 1.0, euler)
