@@ -280,15 +280,23 @@ class AnalysisTab(QtWidgets.QWidget):
 
     def run(self) -> bool:
         """Start the analysis of the chosen session in the background; False if it cannot start."""
+        return self._start(
+            self.job, analyse_into_session, self.run_button, "an analysis is running", "analysing"
+        )
+
+    def _start(
+        self, job: BackgroundJob, work: Any, button: QtWidgets.QPushButton, busy: str, doing: str
+    ) -> bool:
+        """Run ``work(chosen session)`` on ``job``, its button off meanwhile; False if it cannot start."""
         session_dir = self.chosen()
         if not session_dir:
             self._set_state("choose a session first", error=True)
             return False
-        if not self.job.start(analyse_into_session, session_dir):
-            self._set_state("an analysis is running", error=False)
+        if not job.start(work, session_dir):
+            self._set_state(busy, error=False)
             return False
-        self.run_button.setEnabled(False)
-        self._set_state(f"analysing {short_path(session_dir)} …", error=False)
+        button.setEnabled(False)
+        self._set_state(f"{doing} {short_path(session_dir)} …", error=False)
         return True
 
     def _set_state(self, text: str, error: bool) -> None:
@@ -371,16 +379,13 @@ class AnalysisTab(QtWidgets.QWidget):
 
     def open_report(self) -> bool:
         """Write the chosen session's report.html in the background, then open it."""
-        session_dir = self.chosen()
-        if not session_dir:
-            self._set_state("choose a session first", error=True)
-            return False
-        if not self.report_job.start(report_into_session, session_dir):
-            self._set_state("a report is being written", error=False)
-            return False
-        self.report_button.setEnabled(False)
-        self._set_state(f"writing the report of {short_path(session_dir)} …", error=False)
-        return True
+        return self._start(
+            self.report_job,
+            report_into_session,
+            self.report_button,
+            "a report is being written",
+            "writing the report of",
+        )
 
     def _report_done(self, result: dict[str, Any]) -> None:
         self.report_button.setEnabled(True)

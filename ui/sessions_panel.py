@@ -618,13 +618,7 @@ class SessionPanel(QtWidgets.QWidget):
         if not self.guide.arm():
             self._say("the guide is collecting a row already", "info")
             return False
-        self.progress.setRange(0, self.session.info.frames_per_row)
-        self.progress.setValue(0)
-        self._say(
-            f"collecting {self.session.info.frames_per_row} frames for target {self.target.number}…", "info"
-        )
-        self._update_state()
-        return True
+        return self._collecting(self.session.info.frames_per_row, f"target {self.target.number}")
 
     def _take_guided_rows(self) -> None:
         """Log the rows the guide finished (GUI thread), then show the next target to do."""
@@ -791,11 +785,13 @@ class SessionPanel(QtWidgets.QWidget):
         self._following = self.form.following
         self._collector = FrameCollector(self.session.info.frames_per_row, method=self.session.info.solver)
         self._t_press = time.monotonic()
-        self.progress.setRange(0, self._collector.frames_wanted)
+        return self._collecting(self._collector.frames_wanted, f"row {self.session.next_row}")
+
+    def _collecting(self, frames: int, what: str) -> bool:
+        """A row is being collected: the progress bar at 0 of ``frames``, the status says so."""
+        self.progress.setRange(0, frames)
         self.progress.setValue(0)
-        self._say(
-            f"collecting {self._collector.frames_wanted} frames for row {self.session.next_row}…", "info"
-        )
+        self._say(f"collecting {frames} frames for {what}…", "info")
         self._update_state()
         return True
 

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import signal
 import sys
 import threading
 import time
@@ -61,11 +60,8 @@ def say(text: str) -> None:
     print(f"qrfield session run-plan: {text}", file=sys.stderr, flush=True)
 
 
-def _interrupt(signum: int, _frame: Any) -> None:
-    raise KeyboardInterrupt
-
-
 def run(args: argparse.Namespace) -> int:
+    from qrfield.commands.session import loop_thread
     from qrfield.engine import FrameLoop
     from qrfield.runconfig import effective_settings
     from qrfield.sessions import Session
@@ -110,19 +106,14 @@ def run(args: argparse.Namespace) -> int:
         )
         recorder = RowRecorder(info, say)
         loop = FrameLoop(config, events=recorder, sinks=(guide,))
-        thread = threading.Thread(target=loop.run, name="frame loop", daemon=True)
-        previous = signal.signal(signal.SIGTERM, _interrupt)
-        thread.start()
         try:
-            runner = _Runner(session, progress, guide, loop, config, thread, guide_settings.still_timeout_s)
-            return runner.run()
+            with loop_thread(loop) as thread:
+                return _Runner(
+                    session, progress, guide, loop, config, thread, guide_settings.still_timeout_s
+                ).run()
         except KeyboardInterrupt:
             say("stopped: the rows logged so far are kept; run the same command to continue")
             return 130
-        finally:
-            loop.stop()
-            thread.join(5.0)
-            signal.signal(signal.SIGTERM, previous)
     finally:
         session.close()
 

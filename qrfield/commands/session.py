@@ -13,10 +13,11 @@ adding one is one entry.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import signal
 import sys
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -186,10 +187,7 @@ def _run_log(args: argparse.Namespace) -> int:
         config = session_run_config(effective.run_config(camera=session.info.camera), session.info)
         recorder = RowRecorder(session.info, say)
         loop = FrameLoop(config, events=recorder)
-        thread = threading.Thread(target=loop.run, name="frame loop", daemon=True)
-        previous = signal.signal(signal.SIGTERM, _interrupt)
-        thread.start()
-        try:
+        with loop_thread(loop) as thread:
 
             def ended() -> bool:
                 return not thread.is_alive()
@@ -197,12 +195,23 @@ def _run_log(args: argparse.Namespace) -> int:
             if truth is not None or follow:
                 return _log_one(session, recorder, truth, args, follow, ended)
             return _log_interactive(session, recorder, args, combinations, ended)
-        finally:
-            loop.stop()
-            thread.join(5.0)
-            signal.signal(signal.SIGTERM, previous)
     finally:
         session.close()
+
+
+@contextlib.contextmanager
+def loop_thread(loop: Any) -> Iterator[threading.Thread]:
+    """Run a frame loop on a daemon thread for the block (SIGTERM ends the block as Ctrl-C does);
+    then stop the loop and join its thread (it closes the source)."""
+    thread = threading.Thread(target=loop.run, name="frame loop", daemon=True)
+    previous = signal.signal(signal.SIGTERM, _interrupt)
+    thread.start()
+    try:
+        yield thread
+    finally:
+        loop.stop()
+        thread.join(5.0)
+        signal.signal(signal.SIGTERM, previous)
 
 
 def _log_one(session: Any, recorder: Any, truth: Any, args: Any, follow: bool, ended: Any) -> int:
