@@ -181,9 +181,10 @@ def test_fast_blocks_give_the_array_functions_numbers(camera_name):
             )
             assert got_chi2[-1] == math.inf == want_chi2[-1]
             np.testing.assert_allclose(got_chi2[:-1], want_chi2[:-1], rtol=1e-7, atol=1e-9)
-            assert one.branch_chi2_single(projections[0], n_obs, info) == pytest.approx(
-                want_chi2[0], rel=1e-9, abs=1e-12
+            first = one.branch_chi2_many(
+                [projections[0]], np.array(projections[0][1]).reshape(1, 8, 6), n_obs, info
             )
+            assert first[0] == pytest.approx(want_chi2[0], rel=1e-9, abs=1e-12)
 
 
 def test_numerical_jacobian_of_the_fast_terms_against_central_differences():
