@@ -200,7 +200,8 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     for i in range(args.frames):
         (x, y, z), (a, b, g) = pos_list[i], ang_list[i]
-        f"$QRF,{i % 65536},{i},3,{x:.1f},{y:.1f},{z:.1f},{a:.2f},{b:.2f},{g:.2f},0.2,0.2,1.0,,,,OK\r\n".encode()
+        pose = f"{x:.1f},{y:.1f},{z:.1f},{a:.2f},{b:.2f},{g:.2f}"
+        f"$QRF,{i % 65536},{i},3,{pose},0.2,0.2,1.0,,,,OK\r\n".encode()
     base_s = time.perf_counter() - t0
     print(
         f"{'encode':<34}{args.frames / encode_s:>12.0f} lines/s   baseline f-string "
