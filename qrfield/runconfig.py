@@ -21,8 +21,9 @@ serial      SerialLinkSettings           ``--serial-NAME`` (``--serial [PORT]`` 
 The app writes the file when it closes (with sections of its own: window, simulation, session
 folder, ...); the commands read it and never write it. Unknown keys are ignored and bad values fall
 back to their defaults with a note (:attr:`ConfigStore.problems`), so a damaged or older file never
-stops anything; a file that cannot be read as a JSON object at all is kept as
-``app.json.bad-<time>`` (whoever reads it first moves it aside, so the app never saves defaults
+stops the app (``qrfield run`` is strict: a bad value it would use stops it at start, naming the
+file and the key, ``effective_settings(strict=True)``); a file that cannot be read as a JSON object
+at all is kept as ``app.json.bad-<time>`` (whoever reads it first moves it aside, so the app never saves defaults
 over it), with one line saying so. :func:`effective_settings` says where each value came from
 (``qrfield config``).
 """

@@ -426,14 +426,18 @@ def _parse_pose(texts: Sequence[str]) -> tuple[Triplet, Triplet, Sigmas, Sigmas]
     return position, angles, spos, sang  # type: ignore[return-value]
 
 
-def _parse_qrf(parts: list[str]) -> QrfFrame:
+def _head(parts: list[str], statuses: tuple[str, ...]) -> tuple[int, int, str]:
+    """seq, t_ms and status of a $QRF or $QRM line (17 fields, the status last)."""
     if len(parts) != 17:
-        raise ValueError(f"$QRF has {len(parts)} fields, expected 17")
-    seq = _parse_uint(parts[1], "seq", SEQ_MODULUS)
-    t_ms = _parse_uint(parts[2], "t_ms", T_MS_MODULUS)
+        raise ValueError(f"${parts[0]} has {len(parts)} fields, expected 17")
     status = parts[16]
-    if status not in FRAME_STATUSES:
-        raise ValueError(f"status {status!r} is not one of {', '.join(FRAME_STATUSES)}")
+    if status not in statuses:
+        raise ValueError(f"status {status!r} is not one of {', '.join(statuses)}")
+    return _parse_uint(parts[1], "seq", SEQ_MODULUS), _parse_uint(parts[2], "t_ms", T_MS_MODULUS), status
+
+
+def _parse_qrf(parts: list[str]) -> QrfFrame:
+    seq, t_ms, status = _head(parts, FRAME_STATUSES)
     if parts[3] == "" and status in AGELESS_STATUSES:
         age = None
     else:
@@ -447,13 +451,7 @@ def _parse_qrf(parts: list[str]) -> QrfFrame:
 
 
 def _parse_qrm(parts: list[str]) -> QrmMeasurement:
-    if len(parts) != 17:
-        raise ValueError(f"$QRM has {len(parts)} fields, expected 17")
-    seq = _parse_uint(parts[1], "seq", SEQ_MODULUS)
-    t_ms = _parse_uint(parts[2], "t_ms", T_MS_MODULUS)
-    status = parts[16]
-    if status not in MEAS_STATUSES:
-        raise ValueError(f"measurement status {status!r} is not one of {', '.join(MEAS_STATUSES)}")
+    seq, t_ms, status = _head(parts, MEAS_STATUSES)
     if status not in POSE_STATUSES:
         if any(parts[3:16]):
             raise ValueError(f"status {status} has empty number fields")
