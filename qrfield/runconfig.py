@@ -23,8 +23,8 @@ folder, ...); the commands read it and never write it. Unknown keys are ignored 
 back to their defaults with a note (:attr:`ConfigStore.problems`), so a damaged or older file never
 stops the app (``qrfield run`` is strict: a bad value it would use stops it at start, naming the
 file and the key, ``effective_settings(strict=True)``); a file that cannot be read as a JSON object
-at all is kept as ``app.json.bad-<time>`` (whoever reads it first moves it aside, so the app never saves defaults
-over it), with one line saying so. :func:`effective_settings` says where each value came from
+at all is kept as ``app.json.bad-<time>`` (whoever reads it first moves it aside, so the app never
+saves defaults over it), with one line saying so. :func:`effective_settings` says where each value came from
 (``qrfield config``).
 """
 
