@@ -89,8 +89,9 @@ class SettingSpec:
             if self.check is not None:
                 try:
                     self.check(value)
-                except ValueError as exc:
-                    raise SettingError(f"setting {name}: {exc}") from None
+                except ValueError as exc:  # a SettingError subclass (BackendError) keeps its class
+                    kind = type(exc) if isinstance(exc, SettingError) else SettingError
+                    raise kind(f"setting {name}: {exc}") from None
             return value
         if self.type in (int, float):
             if isinstance(value, bool):
