@@ -13,18 +13,21 @@ adding one is one entry.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import signal
 import sys
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-HELP = "make experiment sessions and log rows without the app (new, log, undo, list, show, export)"
+HELP = "make experiment sessions and log rows without the app (new, log, run-plan, undo, list, show, export)"
 DESCRIPTION = (
     "Experiment sessions on disk, as the app's Session tab makes them: 'new' creates one, 'log' "
-    "measures a row (averaged frames against a ground truth measured by hand), 'undo' withdraws the "
+    "measures a row (averaged frames against a ground truth measured by hand), 'run-plan' logs a plan's "
+    "targets one by one (the virtual bench is set to each; from a camera the terminal asks), 'undo' "
+    "withdraws the "
     "last row, 'list' and 'show' read them, 'export' writes the rows in force for a spreadsheet."
 )
 
@@ -184,10 +187,7 @@ def _run_log(args: argparse.Namespace) -> int:
         config = session_run_config(effective.run_config(camera=session.info.camera), session.info)
         recorder = RowRecorder(session.info, say)
         loop = FrameLoop(config, events=recorder)
-        thread = threading.Thread(target=loop.run, name="frame loop", daemon=True)
-        previous = signal.signal(signal.SIGTERM, _interrupt)
-        thread.start()
-        try:
+        with loop_thread(loop) as thread:
 
             def ended() -> bool:
                 return not thread.is_alive()
@@ -195,12 +195,23 @@ def _run_log(args: argparse.Namespace) -> int:
             if truth is not None or follow:
                 return _log_one(session, recorder, truth, args, follow, ended)
             return _log_interactive(session, recorder, args, combinations, ended)
-        finally:
-            loop.stop()
-            thread.join(5.0)
-            signal.signal(signal.SIGTERM, previous)
     finally:
         session.close()
+
+
+@contextlib.contextmanager
+def loop_thread(loop: Any) -> Iterator[threading.Thread]:
+    """Run a frame loop on a daemon thread for the block (SIGTERM ends the block as Ctrl-C does);
+    then stop the loop and join its thread (it closes the source)."""
+    thread = threading.Thread(target=loop.run, name="frame loop", daemon=True)
+    previous = signal.signal(signal.SIGTERM, _interrupt)
+    thread.start()
+    try:
+        yield thread
+    finally:
+        loop.stop()
+        thread.join(5.0)
+        signal.signal(signal.SIGTERM, previous)
 
 
 def _log_one(session: Any, recorder: Any, truth: Any, args: Any, follow: bool, ended: Any) -> int:
@@ -403,6 +414,11 @@ SUBCOMMANDS: dict[str, Subcommand] = {
     "log": Subcommand(
         "measure and log one row (or, without --truth, ask for each field)", _add_log, _run_log
     ),
+    "run-plan": Subcommand(
+        "log a plan's targets one by one: the virtual bench is set to each, a camera's operator is asked",
+        lambda parser: _run_plan().add_arguments(parser),
+        lambda args: _run_plan().run(args),
+    ),
     "undo": Subcommand("withdraw the last row (a withdrawal record is appended)", _add_undo, _run_undo),
     "list": Subcommand("list the sessions in a folder", _add_list, _run_list),
     "show": Subcommand("print a session's setup and rows", _add_show, _run_show),
@@ -410,6 +426,12 @@ SUBCOMMANDS: dict[str, Subcommand] = {
         "write the rows still in force as a clean CSV (units in the column names)", _add_export, _run_export
     ),
 }
+
+
+def _run_plan() -> Any:
+    from qrfield.commands import _run_plan as module
+
+    return module
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -422,9 +444,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from qrfield.sessions import GroundTruthError, SessionError
+    from qrfield.sessions.plan import PlanError
 
     try:
         return int(args._session_run(args) or 0)
+    except PlanError as exc:
+        for problem in exc.problems:
+            say(f"error: {problem}")
+        return 2
     except GroundTruthError as exc:
         for name, message in exc.errors.items():
             say(f"error: {name}: {message}")
