@@ -98,7 +98,8 @@ class Pair:
     def from_pose(cls, tool_in_base: np.ndarray, pose: Any, label: str = "") -> Pair:
         """A pair from a tool pose and a converged ``PoseResult`` (its position, angles, pose_cov)."""
         if not getattr(pose, "converged", True) or not np.all(np.isfinite(pose.position_mm)):
-            raise HandEyeError(f"pair {label or ''}: the code's pose did not converge".replace("  ", " "))
+            where = f"pair {label}" if label else "a pair"
+            raise HandEyeError(f"{where}: the code's pose did not converge")
         return cls(
             tool_in_base,
             transform_from_pose(pose.position_mm, pose.angles_deg),
