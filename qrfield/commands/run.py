@@ -11,6 +11,11 @@ commands are answered (:mod:`qrfield.serial_controller`): a pose is OK only from
 (SIM from the virtual bench, a video or a folder), NOSRC goes out while the source is down, and
 ``--source auto`` then never falls back to the virtual bench unless ``--allow-virtual`` is given.
 
+With ``--frame tool`` or ``--frame base`` (and a hand-eye file, docs/handeye.md) the poses on stdout
+are in the gripper's tool frame or the robot's base frame, their uncertainty with the calibration's
+added; each JSON line says which in ``pose_frame``. The serial link's $QRF lines stay in the camera
+frame until serial protocol 2 reports the frame (HELLO).
+
 stdout is best effort: lines are written by a thread of their own, so a reader that stops reading
 never holds up the frame loop, the serial line or shutdown (lines it did not take are counted on
 stderr). SIGINT (Ctrl-C) and SIGTERM stop the run cleanly after the current frame. Exit codes: 0
@@ -140,6 +145,7 @@ def _gripper_link(settings: Any, say: _Stderr) -> Any:
 def run(args: argparse.Namespace) -> int:
     from qrfield.camera import camera_origin
     from qrfield.engine import FAILED, STOPPED, FrameLoop
+    from qrfield.handeye import InFrame, PoseFrame
     from qrfield.runconfig import effective_settings
     from qrfield.sources import source_kind
     from qrfield.stdout_lines import LineWriter
@@ -155,6 +161,11 @@ def run(args: argparse.Namespace) -> int:
     if source_kind(config.source) != "virtual":
         for note in effective.assumed():
             say(note)
+    pose_frame = PoseFrame.from_settings(effective.groups["handeye"], args.config_dir)
+    if not pose_frame.identity:
+        say(pose_frame.describe())
+        if serial:
+            say("serial: $QRF poses stay in the camera frame until serial protocol 2 reports the frame")
     writer = LineWriter(sys.stdout)
     stop_signal = {"name": ""}
     link = _gripper_link(effective.serial_settings(), say) if serial else None
@@ -162,7 +173,10 @@ def run(args: argparse.Namespace) -> int:
     events = _Events(
         say, writer, link, f"camera {camera.name} from {camera_origin(camera)}" if camera.path else ""
     )
-    sinks: list[Any] = [_StdoutSink(writer, args.json_lines)] + ([link] if link is not None else [])
+    stdout_sink: Any = _StdoutSink(writer, args.json_lines)
+    if not pose_frame.identity:
+        stdout_sink = InFrame(stdout_sink, pose_frame)
+    sinks: list[Any] = [stdout_sink] + ([link] if link is not None else [])
     loop = FrameLoop(config, events=events, sinks=sinks, max_frames=args.frames)
     events.loop = loop
 
@@ -207,8 +221,16 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _json_line(result: Any, simulated: bool) -> str:
-    return json.dumps(result.to_json_dict(simulated))
+    from qrfield.handeye.frames import frame_of
+
+    out = result.to_json_dict(simulated)
+    out["pose_frame"] = frame_of(result)  # camera, tool or base (docs/handeye.md)
+    return json.dumps(out)
 
 
 def _human_line(result: Any, simulated: bool) -> str:
-    return result.summary(simulated)
+    from qrfield.handeye.frames import frame_of
+    from qrfield.handeye.setups import CAMERA
+
+    frame = frame_of(result)
+    return result.summary(simulated) + ("" if frame == CAMERA else f"  [{frame} frame]")
