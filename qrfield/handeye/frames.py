@@ -101,6 +101,14 @@ class PoseFrame:
             return cls()
         return cls(settings.frame, HandEyeCalibration.load(calibration_path(settings, config_dir)))
 
+    @classmethod
+    def from_saved(cls, frame: str, calibration: dict[str, Any], session: str) -> PoseFrame:
+        """The PoseFrame a session recorded (session.json's ``pose_frame`` and ``handeye``: the
+        hand-eye file's contents at ``session new``); HandEyeError naming the session if unusable."""
+        if not calibration:
+            return cls(frame)
+        return cls(frame, HandEyeCalibration.from_dict(calibration, f"session {session}: field 'handeye'"))
+
     @property
     def identity(self) -> bool:
         """Poses stay in the camera frame (nothing to do)."""
