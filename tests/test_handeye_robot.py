@@ -75,7 +75,8 @@ def _measured_pairs(robot, camera, tools, seed):
 def test_fifteen_drawn_views_give_the_transform_within_2_mm_and_0_3_deg_honestly(setup, camera_vga):
     robot = SimulatedRobot.example(setup)
     z_scores, ratios = [], []
-    for seed in (1, 2):
+    # Other views per set-up: with the same camera-side views both set-ups are the same problem.
+    for seed in (1, 2) if setup == "eye-in-hand" else (3, 4):
         tools = robot.viewing_tool_poses(camera_vga, SIDE, 15, seed=seed)
         pairs, pose_errors, left_out = _measured_pairs(robot, camera_vga, tools, seed)
         assert len(pairs) >= 12, left_out

@@ -23,7 +23,6 @@ from qrfield.handeye.rigid import (
     invert,
     make_transform,
     pose_from_transform,
-    rotation_exp,
     transform_from_pose,
 )
 from qrfield.handeye.setups import EYE_IN_HAND, check_setup
@@ -130,12 +129,7 @@ class SimulatedRobot:
 
 def _with_normal_turn(rotation: np.ndarray, turn_deg: float) -> np.ndarray:
     """A rotation with the card's normal (third column) of ``rotation`` and the turn ``turn_deg``
-    about it: the shortest rotation taking +Z to the normal, after Rz(turn)."""
-    normal = rotation[:, 2]
-    axis = np.cross([0.0, 0.0, 1.0], normal)
-    s, c = float(np.linalg.norm(axis)), float(normal[2])
-    if s < 1e-12:
-        align = np.eye(3) if c > 0 else np.diag([1.0, -1.0, -1.0])
-    else:
-        align = rotation_exp(axis / s * np.arctan2(s, c))
-    return align @ rotation_matrix([0.0, 0.0, turn_deg])
+    about it: the shortest rotation taking +Z to the normal (the sampler's own), after Rz(turn)."""
+    from qrfield.sampling import _align_z
+
+    return _align_z(rotation[:, 2]) @ rotation_matrix([0.0, 0.0, turn_deg])
