@@ -8,6 +8,8 @@ import time
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from qrfield.geometry import Pose, rotation_matrix
 from qrfield.handeye import HandEyeError, PairCollector, read_pairs_csv
@@ -96,3 +98,18 @@ def test_the_collector_takes_the_next_converged_unambiguous_result_after_the_too
     assert len(collector) == 1
     with pytest.raises(HandEyeError, match="1 usable pairs"):
         collector.solve("eye-in-hand")
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.text(alphabet=st.sampled_from(list('xyzqwimage,.-+e0123456789 \n#"\tn\u00e9')), max_size=200))
+def test_any_pairs_text_is_rows_or_one_clear_error(tmp_path, text):
+    path = tmp_path / "pairs.csv"
+    path.write_text("x,y,z,qw,qx,qy,qz,image\n" + text, encoding="utf-8")
+    try:
+        rows = read_pairs_csv(path)
+    except HandEyeError as exc:
+        assert "\n" not in str(exc) and str(path) in str(exc)
+        return
+    for row in rows:
+        r = row.tool_in_base[:3, :3]
+        np.testing.assert_allclose(r @ r.T, np.eye(3), atol=1e-9)

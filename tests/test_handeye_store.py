@@ -7,6 +7,8 @@ import json
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from qrfield.handeye import HandEyeCalibration, HandEyeError, Pair, solve_handeye
 from qrfield.handeye.rigid import transform_from_pose
@@ -90,3 +92,36 @@ def test_a_damaged_file_is_one_clear_line_naming_the_file(tmp_path, content, mes
 def test_a_missing_file_says_how_to_make_one(tmp_path):
     with pytest.raises(HandEyeError, match=r"qrfield handeye PAIRS.csv"):
         HandEyeCalibration.load(tmp_path / "none.json")
+
+
+json_values = st.recursive(
+    st.none() | st.booleans() | st.floats(allow_nan=False, allow_infinity=False) | st.text(max_size=8),
+    lambda inner: st.lists(inner, max_size=5) | st.dictionaries(st.text(max_size=8), inner, max_size=5),
+    max_leaves=30,
+)
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(
+    st.fixed_dictionaries(
+        {"setup": st.sampled_from(["eye-in-hand", "eye-to-hand", "x"])},
+        optional={
+            "camera_to_tool": json_values,
+            "camera_to_base": json_values,
+            "residual_mm": json_values,
+            "residual_deg": json_values,
+            "n_pairs": json_values,
+            "covariance": json_values,
+        },
+    )
+)
+def test_any_json_object_is_a_calibration_or_one_clear_error(tmp_path, data):
+    path = tmp_path / "handeye.json"
+    path.write_text(json.dumps(data), encoding="utf-8")
+    try:
+        calibration = HandEyeCalibration.load(path)
+    except HandEyeError as exc:
+        assert "\n" not in str(exc) and str(path) in str(exc)
+        return
+    r = calibration.transform[:3, :3]
+    np.testing.assert_allclose(r @ r.T, np.eye(3), atol=1e-9)

@@ -57,6 +57,8 @@ from qrfield.handeye.setups import EYE_IN_HAND, TARGET_FRAME, HandEyeError, chec
 METHOD = "park-martin + weighted least squares"
 #: The covariance assumed for a pair without one: 1 mm and 1 deg, independent (unit weights).
 UNIT_COV = np.eye(6)
+#: Added to every pair's covariance diagonal (mm^2, deg^2): (1e-6 mm)^2, (1e-6 deg)^2.
+COV_FLOOR = 1e-12
 #: The refinement's limits: iterations, and the relative change of the cost that ends it.
 MAX_ITERATIONS = 100
 COST_TOLERANCE = 1e-12
@@ -344,7 +346,9 @@ def solve_handeye(
     m = model_terms(tool, setup)
     weighted = all(p.code_cov is not None for p in pairs)
     cov = np.array([p.code_cov for p in pairs]) if weighted else np.repeat(UNIT_COV[None], len(pairs), 0)
-    cov = 0.5 * (cov + np.swapaxes(cov, 1, 2))
+    # Symmetric, and a floor far below any real pose's uncertainty so that a component the solver
+    # reported as exactly 0 does not make the whitening singular.
+    cov = 0.5 * (cov + np.swapaxes(cov, 1, 2)) + np.eye(6) * COV_FLOOR
     x0 = park_martin(m, c)
     x, y = x0, other_from(x0, m, c)
     iterations = 0
