@@ -4,15 +4,15 @@ One :class:`Pipeline` serves one stream (the headless runner and the app's worke
 own one). :meth:`Pipeline.process` never raises for a frame: whatever goes wrong becomes the
 result's ``status`` and ``reason``, so a frame loop keeps running.
 
-Statuses (those of the serial frame, docs/conventions.md, plus ERROR):
+Statuses (:class:`qrfield.status.ResultStatus`):
     OK      the first chosen method converged: a pose is given;
     NOQR    no code found (or none with the selected text);
     NOCONV  a code was found but the first chosen method did not converge (its reason says why), or
             its corners are not fit for a pose (not refined: the backend's own, possibly several
             px off; ``Detection.untrusted`` says why): then no method is run and no pose is given;
     ERROR   anything else (the camera model does not fit the frame, a solver raised): see reason.
-Reported to other programs (``qrfield run`` output), OK from a source that is not a live camera
-is SIM (:meth:`FrameResult.reported_status`), as on the serial link.
+Reported to other programs (``qrfield run`` output, the app), OK becomes AMBIG or SIM by the one rule
+of :func:`qrfield.status.reported_status` (:meth:`FrameResult.reported_status`), as on the serial link.
 
 Timing: ``t_ms`` is the frame's capture time in ms since the stream started (the first frame
 processed, or the ``t0`` given); ``latency_ms`` runs from capture to the finished result.
@@ -32,13 +32,13 @@ from qrfield.camera import CameraModel, CameraModelError
 from qrfield.geometry import Pose
 from qrfield.methods import METHODS
 from qrfield.sources.base import Frame
+from qrfield.status import Reported, ResultStatus, reported_status, usable_pose
 
-OK, NOQR, NOCONV, ERROR = "OK", "NOQR", "NOCONV", "ERROR"
-#: What OK becomes in a result reported from a source that is not a live camera (JSON lines).
-SIM = "SIM"
-#: The statuses of a FrameResult (not the serial wire's: qrfield.serial_frames.WIRE_STATUSES, which
-#: qrfield.serial_frames.RESULT_TO_WIRE_STATUS maps these to).
-RESULT_STATUSES = (OK, NOQR, NOCONV, ERROR)
+# The result statuses under their old names (other modules and programs import them from here).
+OK, NOQR, NOCONV, ERROR = ResultStatus.OK, ResultStatus.NOQR, ResultStatus.NOCONV, ResultStatus.ERROR
+SIM = Reported.SIM
+#: The statuses of a FrameResult (qrfield.status.ResultStatus).
+RESULT_STATUSES = tuple(ResultStatus)
 
 #: Keys of a pose result's JSON (those of ``qrfield solve --json``), null when there is no pose.
 POSE_JSON_KEYS = (
@@ -96,18 +96,25 @@ class FrameResult:
         """The first method's PoseResult, or None."""
         return next(iter(self.poses.values()), None)
 
+    @property
+    def ambiguous(self) -> bool:
+        """The first method's pose is usable and its flip (mirror) ambiguity is unresolved."""
+        primary = self.primary
+        return usable_pose(primary) and bool(getattr(primary, "ambiguous", False))
+
     def converged_pose(self, method: str) -> Pose | None:
         """The converged pose of ``method`` as a Pose (mm, degrees), else None."""
         result = self.poses.get(method)
-        if result is None or not result.converged or not np.all(np.isfinite(result.position_mm)):
+        if not usable_pose(result):
             return None
         return Pose(result.position_mm, result.angles_deg)
 
-    def reported_status(self, simulated: bool = False) -> str:
-        """The status as reported to other programs: SIM instead of OK when the frame did not come
-        from a live camera (``simulated``: the virtual bench, a video, a folder; the serial link's
-        rule, docs/conventions.md), so a program that acts only on OK never acts on a made-up pose."""
-        return SIM if simulated and self.status == OK else self.status
+    def reported_status(self, simulated: bool = False) -> Reported:
+        """The status as reported to other programs (:func:`qrfield.status.reported_status`): SIM
+        instead of OK when the frame did not come from a live camera (``simulated``: the virtual
+        bench, a video, a folder), AMBIG for a live camera's ambiguous pose, so a program that acts
+        only on OK never acts on a made-up or ambiguous pose."""
+        return reported_status(self.status, live=not simulated, ambiguous=self.ambiguous)
 
     def to_json_dict(self, simulated: bool = False) -> dict[str, Any]:
         """One JSON line of ``qrfield run --json-lines``: the keys of ``qrfield solve --json``
@@ -123,7 +130,7 @@ class FrameResult:
             out["corners"] = [[float(u), float(v)] for u, v in self.detection.corners_px]
         out.update(
             t_ms=self.t_ms,
-            status=self.reported_status(simulated),
+            status=str(self.reported_status(simulated)),
             simulated=bool(simulated),
             reason=self.reason,
             frame=self.index,

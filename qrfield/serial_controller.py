@@ -34,16 +34,15 @@ import numpy as np
 
 from qrfield.serial_frames import (
     COMMAND_TALKER,
-    RESULT_TO_WIRE_STATUS,
     SEQ_MODULUS,
     T_MS_MODULUS,
     ControllerCommand,
     FrameError,
     encode_answer,
     encode_measurement,
-    pose_status,
 )
 from qrfield.serial_link import LinkStatus, SerialLink, SerialLinkSettings, publish_result
+from qrfield.status import WireStatus, pose_reported, reported_status, usable_pose, wire_status
 
 #: MEAS takes 1..MAX_MEAS_FRAMES frames.
 MAX_MEAS_FRAMES = 100
@@ -139,11 +138,11 @@ class CommandHandler:
                 return
             self._meas = None
             if self._source_down:
-                status = "NOSRC"
-            elif not meas.poses and meas.last_status in ("NOQR", "NOCONV"):
+                status = WireStatus.NOSRC
+            elif not meas.poses and meas.last_status in (WireStatus.NOQR, WireStatus.NOCONV):
                 status = meas.last_status
             else:
-                status = "TIMEOUT"
+                status = WireStatus.TIMEOUT
             line = self._failure(status, meas)
         self._send(line)
 
@@ -160,10 +159,12 @@ class CommandHandler:
                 return
             meas.frames_seen += 1
             meas.last_t_ms = self._last_t_ms
-            status = getattr(result, "status", "")
-            meas.last_status = RESULT_TO_WIRE_STATUS.get(status, "NOCONV")
+            try:
+                meas.last_status = wire_status(reported_status(getattr(result, "status", ""), live=True))
+            except ValueError:
+                meas.last_status = WireStatus.NOCONV
             pose = getattr(result, "primary", None)
-            if status == "OK" and pose is not None and bool(np.all(np.isfinite(pose.position_mm))):
+            if meas.last_status == WireStatus.OK and usable_pose(pose):
                 meas.poses.append(pose)
                 meas.simulated = meas.simulated or simulated
             if len(meas.poses) >= meas.n:
@@ -195,7 +196,7 @@ class CommandHandler:
         average = average_frames(meas.poses)
         std_pos = np.nan_to_num(average.std_position_mm, nan=0.0)  # one frame: no spread to give
         std_ang = np.nan_to_num(average.std_angles_deg, nan=0.0)
-        status = pose_status(meas.simulated)
+        status = wire_status(pose_reported(live=not meas.simulated))
         try:
             return encode_measurement(
                 self._next_seq(),
@@ -208,7 +209,7 @@ class CommandHandler:
                 average.n_converged,
             )
         except FrameError:  # a mean beyond the frame's limits (absurd numbers): no pose to give
-            return self._failure("NOCONV", meas)
+            return self._failure(WireStatus.NOCONV, meas)
 
 
 class GripperLink:

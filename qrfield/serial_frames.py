@@ -44,18 +44,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-#: The statuses a $QRF frame carries on the wire (docs/conventions.md); not the pipeline's
-#: result statuses (qrfield.pipeline.RESULT_STATUSES), which RESULT_TO_WIRE_STATUS maps to these.
-WIRE_STATUSES = ("OK", "SIM", "NOQR", "NOCONV", "STALE", "NOSRC")
-#: Statuses whose pose fields are filled (OK, SIM), empty (NOQR, NOCONV, NOSRC), or either (STALE).
-POSE_STATUSES = ("OK", "SIM")
-EMPTY_STATUSES = ("NOQR", "NOCONV", "NOSRC")
-#: Statuses of a $QRM answer: a mean pose (OK, SIM) or why there is none.
-MEAS_STATUSES = ("OK", "SIM", "NOQR", "NOCONV", "NOSRC", "TIMEOUT")
-#: Pipeline result status (qrfield.pipeline.RESULT_STATUSES) -> the wire status it is sent as: an
-#: ERROR frame has no pose, which the controller must treat like a pose that did not converge. OK
-#: goes out as OK only from a live camera, else as SIM (:func:`pose_status`).
-RESULT_TO_WIRE_STATUS = {"OK": "OK", "NOQR": "NOQR", "NOCONV": "NOCONV", "ERROR": "NOCONV"}
+from qrfield.status import QRF_POSE_STATUSES, QRF_STATUSES, QRM_STATUSES, WireStatus
+
+#: The statuses a $QRF frame carries on the wire (qrfield.status: the one home of the words and of
+#: the rule from a pipeline result to them, qrfield.status.reported_status / wire_status).
+WIRE_STATUSES = tuple(str(s) for s in QRF_STATUSES)
+#: Statuses whose pose fields are filled (OK, AMBIG, SIM), empty (NOQR, NOCONV, NOSRC), or either (STALE).
+POSE_STATUSES = tuple(str(s) for s in QRF_STATUSES if s in QRF_POSE_STATUSES)
+EMPTY_STATUSES = (WireStatus.NOQR.value, WireStatus.NOCONV.value, WireStatus.NOSRC.value)
+#: Statuses of a $QRM answer: a mean pose (OK, AMBIG, SIM) or why there is none.
+MEAS_STATUSES = tuple(str(s) for s in QRM_STATUSES)
 #: The controller's talker, and the talkers of our answers.
 COMMAND_TALKER, ANSWER_TALKER, MEASUREMENT_TALKER = "QRC", "QRA", "QRM"
 #: Longest reason text in a $QRA ERR answer (docs/conventions.md), bytes.
@@ -82,13 +80,6 @@ class FrameError(ValueError):
 
 class PoseValueError(FrameError):
     """The pose has the right shape but a value is not finite or out of range (see MAX_*)."""
-
-
-def pose_status(simulated: bool) -> str:
-    """The status a measured pose goes out with: OK only from a live camera, SIM from anything
-    else (the virtual bench, a recording, a stand-in; docs/conventions.md). The app's pose panel
-    shows the same word."""
-    return "SIM" if simulated else "OK"
 
 
 def checksum(body: bytes) -> int:

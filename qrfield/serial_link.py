@@ -37,7 +37,6 @@ import numpy as np
 from qrfield.mailbox import Mailbox
 from qrfield.serial_frames import (  # re-exported: one import gives the whole serial API
     MAX_LINE_BYTES,
-    RESULT_TO_WIRE_STATUS,
     SEQ_MODULUS,
     T_MS_MODULUS,
     WIRE_STATUSES,
@@ -56,9 +55,9 @@ from qrfield.serial_frames import (  # re-exported: one import gives the whole s
     encode_command,
     encode_frame,
     encode_measurement,
-    pose_status,
 )
 from qrfield.settings import setting, validated
+from qrfield.status import WireStatus, reported_status, usable_pose, wire_status
 
 CONNECTING = "connecting"
 CONNECTED = "connected"
@@ -73,7 +72,6 @@ __all__ = [
     "DISCONNECTED",
     "LOOP_URL",
     "MAX_LINE_BYTES",
-    "RESULT_TO_WIRE_STATUS",
     "WIRE_STATUSES",
     "ControllerCommand",
     "DecoderCounters",
@@ -94,7 +92,6 @@ __all__ = [
     "encode_measurement",
     "list_ports",
     "open_pyserial",
-    "pose_status",
     "publish_result",
 ]
 
@@ -336,7 +333,7 @@ class SerialLink:
         t_ms: int | float | None,
         position_mm: Sequence[float] | np.ndarray | None,
         angles_deg: Sequence[float] | np.ndarray | None,
-        status: str = "OK",
+        status: str = WireStatus.OK,
     ) -> bool:
         """Hand the newest pose to the link; returns at once and never blocks on the port.
 
@@ -352,7 +349,7 @@ class SerialLink:
             position, angles = check_pose_fields(status, position_mm, angles_deg)
         except PoseValueError as exc:
             self._error(f"pose at t_ms={t_ms} sent as NOCONV: {exc}")
-            position, angles, status = None, None, "NOCONV"
+            position, angles, status = None, None, WireStatus.NOCONV
         if t_ms is None:
             t = self.stream_time_ms()
         else:
@@ -555,7 +552,7 @@ class SerialLink:
                 if waiting and now >= next_send:
                     item = self._pose.take()
                 elif down and not waiting and now >= self._nosrc_due:
-                    item = _Pending(self._now_t_ms(), None, None, "NOSRC", time.perf_counter())
+                    item = _Pending(self._now_t_ms(), None, None, WireStatus.NOSRC, time.perf_counter())
                     self._nosrc_due = now + NOSRC_INTERVAL_S
                 elif not waiting and stale_due is not None and now >= max(stale_due, next_send):
                     item, is_stale = self._last_frame, True
@@ -602,7 +599,11 @@ class SerialLink:
     def _write(self, item: _Pending, is_stale: bool) -> None:
         try:
             frame = encode_frame(
-                self._seq, item.t_ms, item.position, item.angles, "STALE" if is_stale else item.status
+                self._seq,
+                item.t_ms,
+                item.position,
+                item.angles,
+                WireStatus.STALE if is_stale else item.status,
             )
         except ValueError as exc:  # publish() validated already; never let the thread die
             self._error(f"cannot encode frame: {exc}")
@@ -655,15 +656,19 @@ class SerialLink:
 def publish_result(link: SerialLink, result: object, simulated: bool = True) -> bool:
     """Hand one pipeline result (:class:`qrfield.pipeline.FrameResult`) to ``link``; never blocks.
 
-    Maps the pipeline's status with :data:`RESULT_TO_WIRE_STATUS` (ERROR and unknown statuses go
-    out as NOCONV, pose fields empty); a pose carries its first method's position (mm) and angles
-    (degrees), as OK only when ``simulated`` is False (the frame came from a live camera:
-    :func:`qrfield.sources.is_live_camera`), else as SIM. Returns what :meth:`SerialLink.publish`
-    returns (False once the link is closed).
+    The status goes out by the one rule of :mod:`qrfield.status` (``reported_status`` then
+    ``wire_status``): ERROR and unknown statuses as NOCONV with empty pose fields; a pose carries its
+    first method's position (mm) and angles (degrees), as OK only when ``simulated`` is False (the
+    frame came from a live camera: :func:`qrfield.sources.is_live_camera`), else as SIM. Returns
+    what :meth:`SerialLink.publish` returns (False once the link is closed).
     """
-    status = RESULT_TO_WIRE_STATUS.get(getattr(result, "status", ""), "NOCONV")
-    pose = getattr(result, "primary", None) if status == "OK" else None
+    try:
+        status = wire_status(reported_status(getattr(result, "status", ""), live=not simulated))
+    except ValueError:
+        status = WireStatus.NOCONV
+    pose = getattr(result, "primary", None)
     t_ms = getattr(result, "t_ms", None)
-    if pose is None:
-        return link.publish(t_ms, None, None, "NOQR" if status == "NOQR" else "NOCONV")
-    return link.publish(t_ms, pose.position_mm, pose.angles_deg, pose_status(simulated))
+    if status not in (WireStatus.OK, WireStatus.SIM) or not usable_pose(pose):
+        empty = WireStatus.NOQR if status == WireStatus.NOQR else WireStatus.NOCONV
+        return link.publish(t_ms, None, None, empty)
+    return link.publish(t_ms, pose.position_mm, pose.angles_deg, status)

@@ -9,10 +9,19 @@ import numpy as np
 import pytest
 
 from qrfield.geometry import Pose, angle_difference, angles_from_rotation, rotation_matrix
-from qrfield.handeye import HandEyeCalibration, HandEyeError, HandEyeSettings, InFrame, PoseFrame
+from qrfield.handeye import (
+    HandEyeCalibration,
+    HandEyeError,
+    HandEyeSettings,
+    InFrame,
+    InFrameEvents,
+    PoseFrame,
+)
 from qrfield.handeye.frames import frame_of, transform_pose
 from qrfield.handeye.rigid import rotation_exp
 from qrfield.pipeline import OK, FrameResult
+from qrfield.seams import BaseSink, LoopEvents, LoopEventsBase
+from qrfield.seams import Sink as SinkProtocol
 from qrfield.solvers import solve
 from qrfield.solvers.uncertainty import isotropic_cov
 
@@ -118,19 +127,31 @@ def test_in_frame_hands_every_call_on_with_the_result_moved(camera_vga):
     result, _ = _frame_result(camera_vga)
     seen = []
 
-    class Sink:
+    class Sink(BaseSink):
         def on_result(self, r, simulated):
             seen.append(("on_result", frame_of(r), simulated))
-
-        def processed(self, frame, r, behind):
-            seen.append(("processed", frame_of(r), behind))
 
         def on_source_down(self, reason):
             seen.append(("down", reason))
 
-    wrapped = InFrame(Sink(), PoseFrame("tool", calibration()))
-    wrapped.on_result(result, True)
-    wrapped.processed(None, result, 2)
-    wrapped.on_source_down("gone")
-    assert seen == [("on_result", "tool", True), ("processed", "tool", 2), ("down", "gone")]
-    assert math.isfinite(result.primary.position_mm[0])
+    class Events(LoopEventsBase):
+        def processed(self, frame, r, behind):
+            seen.append(("processed", frame_of(r), behind))
+
+        def note(self, message):
+            seen.append(("note", message))
+
+    frame = PoseFrame("tool", calibration())
+    sink, events = InFrame(Sink(), frame), InFrameEvents(Events(), frame)
+    assert isinstance(sink, SinkProtocol) and isinstance(events, LoopEvents)
+    sink.on_result(result, True)
+    sink.on_source_down("gone")
+    events.processed(None, result, 2)
+    events.note("hello")
+    assert seen == [
+        ("on_result", "tool", True),
+        ("down", "gone"),
+        ("processed", "tool", 2),
+        ("note", "hello"),
+    ]
+    assert frame_of(result) == "camera" and math.isfinite(result.primary.position_mm[0])

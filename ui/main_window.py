@@ -22,9 +22,10 @@ import numpy as np
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from qrfield.camera import DEFAULT_CAMERA, CameraModel, CameraModelError, resolve_camera
-from qrfield.methods import methods_from_choice, settings_classes
+from qrfield.methods import methods_from_choice
 from qrfield.runconfig import ConfigStore, RunConfig, RunSettings
 from qrfield.serial_link import SerialLinkSettings
+from qrfield.solvers import settings_classes
 from qrfield.sources import Picamera2Settings, VirtualBenchSettings
 from ui.analysis_tab import AnalysisTab
 from ui.calibration_dialog import CalibrationDialog, CalibrationDialogSettings
@@ -39,7 +40,7 @@ from ui.controls import (
     view_settings_from,
 )
 from ui.plots import PosePlots
-from ui.pose_panel import PosePanel, shown_status, simulated_source_name
+from ui.pose_panel import PosePanel, simulated_source_name
 from ui.preview import PreviewPane, PreviewView
 from ui.serial_panel import SerialPanel
 from ui.session_dialogs import touch_button
@@ -477,7 +478,7 @@ class MainWindow(QtWidgets.QMainWindow):
                 result_side(self),
                 camera,
             )
-        status = shown_status(result.status, item.simulated)
+        status = result.reported_status(item.simulated)
         self.preview.show_info(
             f"{status}  {self._rates[0]:.1f} fps  latency {result.latency_ms:.0f} ms "
             f"(detect {result.detect_ms:.0f}, solve {result.solve_ms:.1f})  #{result.index}"

@@ -4,7 +4,8 @@ method (and the virtual bench's true pose beside them), each value with its stan
 status below (with the flip warning of the core's mirror test, ``PoseResult.ambiguous``).
 
 The headline shows the engine's state, in the serial link's words (docs/conventions.md): the
-pipeline's status (NOQR, NOCONV, ERROR), OK only for a pose from a live camera and SIM for one from
+pipeline's status (NOQR, NOCONV, ERROR), OK only for an unambiguous pose from a live camera, AMBIG for an
+ambiguous one (qrfield.status.reported_status), and SIM for one from
 anything else (the virtual bench, a recording, a stand-in: ``simulated``), with a badge beside the
 values that cannot be missed ("SIMULATED — virtual bench, not a camera"). While no frames come
 (:meth:`PosePanel.show_source_down`) it says NOSRC with dashes, or, when a real pose was shown
@@ -20,9 +21,8 @@ from typing import Any
 import numpy as np
 from PySide6 import QtCore, QtGui, QtWidgets
 
-from qrfield.pipeline import OK
-from qrfield.serial_frames import pose_status
 from qrfield.sessions.criteria import AcceptanceCriteria
+from qrfield.status import Reported, WireStatus
 from ui.text import fixed
 
 ROWS = (("x", "mm"), ("y", "mm"), ("z", "mm"), ("α", "°"), ("β", "°"), ("γ", "°"))
@@ -33,15 +33,17 @@ SIZES = {False: (22, 15, 12, 11, 100), True: (13, 11, 9, 7, 56)}
 #: Grid rows: the headline, the simulated-source badge, the column headers, then the six values.
 FIRST_VALUE_ROW = 3
 NBSP = "\u00a0"
-#: The states the headline shows besides the pipeline's and the link's statuses.
-NOSRC, STALE = "NOSRC", "STALE"
-#: Headline colours by state (SIM is not green: a made-up pose never looks like a measured one).
+#: The states the headline shows besides the pipeline's reported statuses: the link's own.
+NOSRC, STALE = WireStatus.NOSRC, WireStatus.STALE
+#: Headline colours by state (SIM is not green: a made-up pose never looks like a measured one;
+#: AMBIG is not green either: a pose whose flip is unresolved is not to be acted on).
 SIM_COLOUR = "#7b3fc4"
 STATE_COLOURS = {
-    "OK": "#2a2",
-    "SIM": SIM_COLOUR,
-    "NOQR": "#c80",
-    "NOCONV": "#c40",
+    Reported.OK: "#2a2",
+    Reported.AMBIG: "#c60",
+    Reported.SIM: SIM_COLOUR,
+    Reported.NOQR: "#c80",
+    Reported.NOCONV: "#c40",
     NOSRC: "#888",
     STALE: "#888",
 }
@@ -61,12 +63,6 @@ SIMULATED_SOURCE_NAMES = {
 def simulated_source_name(source_name: str) -> str:
     """The badge's words for an opened source's ``name`` ("virtual" -> "virtual bench")."""
     return SIMULATED_SOURCE_NAMES.get(source_name.partition(":")[0], "this source")
-
-
-def shown_status(status: str, simulated: bool) -> str:
-    """A pipeline status as the app shows it: OK becomes SIM when the frame is not from a live
-    camera (the serial link's rule, :func:`qrfield.serial_frames.pose_status`)."""
-    return pose_status(simulated) if status == OK else status
 
 
 def format_value(value: float, row: int) -> str:
@@ -247,8 +243,8 @@ class PosePanel(QtWidgets.QWidget):
         """Show a qrfield.pipeline.FrameResult; ``simulated``: its frame is not from a live camera
         (``ui.worker.Processed.simulated``), so a pose is SIM, never OK, and the badge shows."""
         self.set_columns(methods, truth=result.truth is not None)
-        self.state = shown_status(result.status, simulated)
-        text = self.state
+        self.state = result.reported_status(simulated)
+        text = str(self.state)
         if result.detection is not None and result.detection.text:
             text += f"   “{result.detection.text}”"
         if result.reason:

@@ -28,6 +28,8 @@ from typing import Any
 
 import numpy as np
 
+from qrfield.status import ResultStatus
+
 #: The ceiling's corner noise, px per coordinate.
 CEILING_NOISE_PX = 0.05
 #: Module size bands, px: the four bands, then the issue's aggregates and all views.
@@ -264,7 +266,7 @@ def _cause(outcome: Outcome, name: str) -> str:
     solved = outcome.poses[name]
     if solved.passed:
         return "met"
-    if outcome.status == "NOQR":
+    if outcome.status == ResultStatus.NOQR:
         return "not found"
     if not solved.converged:
         return "not trusted / converged"
@@ -283,7 +285,7 @@ def _print_causes(outcomes: list[Outcome]) -> None:
                 continue
             found = [_cause(o, name) for o in sel]
             print(f"{name + ', ' + label:<36}" + "".join(f"{found.count(c):>26}" for c in causes))
-    notes = sorted({o.reason for o in outcomes if o.status == "NOCONV" and o.reason})
+    notes = sorted({o.reason for o in outcomes if o.status == ResultStatus.NOCONV and o.reason})
     for note in notes[:4]:
         print(f"   NOCONV: {note}")
 

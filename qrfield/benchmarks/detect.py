@@ -28,6 +28,8 @@ import argparse
 import time
 from pathlib import Path
 
+from qrfield.status import ResultStatus
+
 #: Timing rounds per resolution; the fastest round counts (the same rule for the baseline).
 REPEATS = 5
 
@@ -213,7 +215,7 @@ def _time_sequence(cam, side: float, count: int, repeats: int) -> bool:
 
     def through(pipeline):
         def run(frame, index) -> bool:
-            return pipeline.process(Frame(frame, time.monotonic(), index)).status == "OK"
+            return pipeline.process(Frame(frame, time.monotonic(), index)).status == ResultStatus.OK
 
         return run
 

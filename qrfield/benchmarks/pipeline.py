@@ -15,6 +15,7 @@ import os
 import time
 
 from qrfield.methods import BOTH, METHOD_CHOICES, methods_from_choice
+from qrfield.status import ResultStatus
 
 HELP = "time the measurement pipeline on the virtual bench (headless and with the GUI redrawing)"
 
@@ -57,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
                 lambda p=pipeline, out=results, s=source: out.append(p.process(s.read())),
                 args.seconds,
             )
-        ok = sum(r.status == "OK" for r in results)
+        ok = sum(r.status == ResultStatus.OK for r in results)
         detect_ms = float(np.mean([r.detect_ms for r in results]))
         solve_ms = float(np.mean([r.solve_ms for r in results]))
         latency_ms = float(np.mean([r.latency_ms for r in results]))

@@ -18,6 +18,8 @@ import os
 import threading
 import time
 
+from qrfield.status import WireStatus
+
 HELP = "frames per second encoded and written through the serial link, and publish-to-wire latency"
 
 
@@ -87,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
     # 1. Encoding.
     t0 = time.perf_counter()
     for i in range(args.frames):
-        encode_frame(i % 65536, i, pos_list[i], ang_list[i], "OK")
+        encode_frame(i % 65536, i, pos_list[i], ang_list[i], WireStatus.OK)
     encode_s = time.perf_counter() - t0
     t0 = time.perf_counter()
     for i in range(args.frames):
@@ -100,7 +102,7 @@ def run(args: argparse.Namespace) -> int:
     )
 
     # 2. Throughput through the link vs bare writes, pty and loop://.
-    frame = encode_frame(0, 0, pos_list[0], ang_list[0], "OK")
+    frame = encode_frame(0, 0, pos_list[0], ang_list[0], WireStatus.OK)
     for kind in ("pty", "loop://"):
         master = slave = -1
         reader = None
@@ -162,7 +164,9 @@ def run(args: argparse.Namespace) -> int:
     bare_ms: list[float] = []
     for i in range(args.latency_frames):
         t_ms = 2_000_000 + i
-        line = encode_frame(i % 65536, t_ms, pos_list[i % args.frames], ang_list[i % args.frames], "OK")
+        line = encode_frame(
+            i % 65536, t_ms, pos_list[i % args.frames], ang_list[i % args.frames], WireStatus.OK
+        )
         t0 = time.perf_counter()
         port.write(line)
         key = str(t_ms).encode()

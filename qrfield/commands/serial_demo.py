@@ -17,6 +17,8 @@ import sys
 import time
 from dataclasses import dataclass
 
+from qrfield.status import ResultStatus
+
 HELP = "stream a synthetic moving pose to a serial port (test a controller without camera or app)"
 
 
@@ -87,9 +89,9 @@ def run(args: argparse.Namespace) -> int:
             t_ms = round(t_s * 1000.0)
             noqr = args.noqr_every > 0 and (t_s % args.noqr_every) >= args.noqr_every - 1.0
             if noqr:
-                link.on_result(_DemoResult(t_ms, "NOQR", None), simulated=True)
+                link.on_result(_DemoResult(t_ms, ResultStatus.NOQR, None), simulated=True)
             else:
-                link.on_result(_DemoResult(t_ms, "OK", _DemoPose(*demo_pose(t_s))), simulated=True)
+                link.on_result(_DemoResult(t_ms, ResultStatus.OK, _DemoPose(*demo_pose(t_s))), simulated=True)
             frame += 1
             if time.monotonic() >= next_report:
                 print(link.status().summary(), file=sys.stderr, flush=True)

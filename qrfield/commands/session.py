@@ -165,7 +165,7 @@ def _interrupt(signum: int, _frame: Any) -> None:
 
 def _run_log(args: argparse.Namespace) -> int:
     from qrfield.engine import FrameLoop
-    from qrfield.handeye import InFrame, PoseFrame
+    from qrfield.handeye import InFrameEvents, PoseFrame
     from qrfield.runconfig import effective_settings
     from qrfield.sessions import Session, known_combinations, validate_field
     from qrfield.sessions.recorder import RowRecorder, session_run_config
@@ -191,7 +191,8 @@ def _run_log(args: argparse.Namespace) -> int:
         config = session_run_config(effective.run_config(camera=session.info.camera), session.info)
         recorder = RowRecorder(session.info, say)
         pose_frame = PoseFrame.from_saved(session.info.pose_frame, session.info.handeye, session.info.name)
-        loop = FrameLoop(config, events=recorder if pose_frame.identity else InFrame(recorder, pose_frame))
+        events = recorder if pose_frame.identity else InFrameEvents(recorder, pose_frame)
+        loop = FrameLoop(config, events=events)
         thread = threading.Thread(target=loop.run, name="frame loop", daemon=True)
         previous = signal.signal(signal.SIGTERM, _interrupt)
         thread.start()

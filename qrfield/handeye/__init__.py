@@ -9,7 +9,7 @@ docs/conventions.md ("Hand-eye") and docs/handeye.md. Parts:
   over every pair with each pose's covariance; residuals; the transform's covariance);
 - :mod:`~qrfield.handeye.store`: ``handeye.json`` (:class:`HandEyeCalibration`);
 - :mod:`~qrfield.handeye.frames`: poses and their covariance in the tool or base frame
-  (:class:`PoseFrame`, :class:`InFrame` in front of a frame loop's sink);
+  (:class:`PoseFrame`; :class:`InFrame`, :class:`InFrameEvents` in front of a frame loop's sink or events);
 - :mod:`~qrfield.handeye.measure`: the code's pose in one image, judged fit for a pair;
 - :mod:`~qrfield.handeye.pairs`: ``pairs.csv`` and :class:`PairCollector` (pairs from a frame loop);
 - :mod:`~qrfield.handeye.settings`: the ``frame`` and ``handeye_file`` settings;
@@ -18,7 +18,7 @@ docs/conventions.md ("Hand-eye") and docs/handeye.md. Parts:
 
 from __future__ import annotations
 
-from qrfield.handeye.frames import InFrame, PoseFrame
+from qrfield.handeye.frames import InFrame, InFrameEvents, PoseFrame
 from qrfield.handeye.pairs import PairCollector, read_pairs_csv
 from qrfield.handeye.robot import SimulatedRobot
 from qrfield.handeye.settings import HandEyeSettings
@@ -49,6 +49,7 @@ __all__ = [
     "HandEyeResult",
     "HandEyeSettings",
     "InFrame",
+    "InFrameEvents",
     "Pair",
     "PairCollector",
     "PoseFrame",

@@ -10,9 +10,9 @@ std fields of a pose in the tool frame include the calibration's uncertainty.
 
 :class:`PoseFrame` does that for a :class:`~qrfield.solvers.PoseResult`, a true
 :class:`~qrfield.geometry.Pose` and a whole :class:`~qrfield.pipeline.FrameResult`;
-:class:`InFrame` puts it in front of any frame-loop sink or event handler (``on_result``,
-``processed``), so the frame loop and the pipeline are untouched: the step sits where a result is
-handed on (``qrfield run``'s stdout, a session's recorder).
+:class:`InFrame` puts it in front of a frame-loop sink (``on_result``) and :class:`InFrameEvents`
+in front of an events handler (``processed``), so the frame loop and the pipeline are untouched: the
+step sits where a result is handed on (``qrfield run``'s stdout, a session's recorder).
 """
 
 from __future__ import annotations
@@ -29,6 +29,7 @@ from qrfield.geometry import Pose, angle_difference, angles_from_rotation, rotat
 from qrfield.handeye.rigid import rotation_exp, skew
 from qrfield.handeye.setups import CAMERA, FRAMES, HandEyeError, setup_for_frame
 from qrfield.handeye.store import FILE_NAME, HandEyeCalibration
+from qrfield.seams import BaseSink, LoopEvents, LoopEventsBase, Sink
 
 #: Central-difference step for the angles' Jacobian, degrees.
 _STEP_DEG = 1e-5
@@ -128,8 +129,6 @@ class PoseFrame:
     def pose_result(self, result: Any) -> Any:
         """A PoseResult (and its mirror candidate) in this frame: position, angles, rotation,
         vertices, and the std fields and pose_cov with the calibration's uncertainty added."""
-        from qrfield.solvers.result import updated
-
         if self.calibration is None or result is None:
             return result
         x, x_cov = self.calibration.transform, self.calibration.covariance
@@ -148,7 +147,7 @@ class PoseFrame:
             changes.update(pose_cov=new_cov, position_std_mm=std[:3], angles_std_deg=std[3:])
         if result.alternative is not None:
             changes["alternative"] = self.pose_result(result.alternative)
-        return updated(result, changes)
+        return dataclasses.replace(result, **changes)
 
     def pose(self, pose: Pose | None) -> Pose | None:
         """A true pose (the virtual bench's) in this frame."""
@@ -186,24 +185,45 @@ def calibration_path(settings: Any, config_dir: str | os.PathLike[str] | None = 
     return Path(name).expanduser() if name else paths.config_dir(config_dir) / FILE_NAME
 
 
-class InFrame:
-    """A frame-loop sink or event handler whose results arrive in ``pose_frame``.
+class InFrame(BaseSink):
+    """A frame-loop sink whose results arrive in ``pose_frame`` (the other calls pass unchanged)."""
 
-    ``on_result(result, simulated)`` and ``processed(frame, result, behind)`` are handed on with the
-    result in the frame; every other attribute is the inner object's.
-    """
-
-    def __init__(self, inner: Any, pose_frame: PoseFrame) -> None:
-        self._inner = inner
+    def __init__(self, inner: Sink, pose_frame: PoseFrame) -> None:
+        self.inner = inner
         self.pose_frame = pose_frame
 
-    def on_result(self, result: Any, simulated: bool) -> None:
-        self._inner.on_result(self.pose_frame.frame_result(result), simulated)
+    def on_result(self, result: Any, simulated: bool) -> Any:
+        return self.inner.on_result(self.pose_frame.frame_result(result), simulated)
 
-    def processed(self, frame: Any, result: Any, behind: int) -> None:
-        handler = getattr(self._inner, "processed", None)
-        if handler is not None:
-            handler(frame, self.pose_frame.frame_result(result), behind)
+    def on_source_down(self, reason: str) -> None:
+        self.inner.on_source_down(reason)
 
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self._inner, name)
+    def on_source_up(self) -> None:
+        self.inner.on_source_up()
+
+
+class InFrameEvents(LoopEventsBase):
+    """A frame loop's events handler whose ``processed`` results arrive in ``pose_frame`` (a
+    session's recorder); the other events pass unchanged."""
+
+    def __init__(self, inner: LoopEvents, pose_frame: PoseFrame) -> None:
+        self.inner = inner
+        self.pose_frame = pose_frame
+
+    def opened(self, description: str, again: bool) -> None:
+        self.inner.opened(description, again)
+
+    def failed(self, message: str, ended: bool) -> None:
+        self.inner.failed(message, ended)
+
+    def note(self, message: str) -> None:
+        self.inner.note(message)
+
+    def processed(self, frame: Any, result: Any, frames_behind: int) -> None:
+        self.inner.processed(frame, self.pose_frame.frame_result(result), frames_behind)
+
+    def source_down(self, reason: str) -> None:
+        self.inner.source_down(reason)
+
+    def source_up(self) -> None:
+        self.inner.source_up()

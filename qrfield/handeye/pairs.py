@@ -31,6 +31,7 @@ from qrfield.handeye.rigid import transform_from_quaternion
 from qrfield.handeye.setups import HandEyeError
 from qrfield.handeye.solve import HandEyeResult, Pair, solve_handeye
 from qrfield.limits import TOOL_POSITION_MM, LimitError
+from qrfield.seams import BaseSink
 
 #: The columns pairs.csv must have.
 COLUMNS = ("x", "y", "z", "qw", "qx", "qy", "qz", "image")
@@ -104,7 +105,7 @@ def read_pairs_csv(path: str | os.PathLike[str]) -> list[ToolRow]:
     return out
 
 
-class PairCollector:
+class PairCollector(BaseSink):
     """Hand-eye pairs from a frame loop (thread-safe: results arrive on the loop's thread, the
     rest is called from another, e.g. the serial command handler).
 
@@ -140,12 +141,6 @@ class PairCollector:
             self._pairs.append(Pair.from_pose(tool, pose, label or f"frame {result.index}"))
             self._waiting = None
             self._done.set()
-
-    def on_source_down(self, reason: str) -> None:
-        pass
-
-    def on_source_up(self) -> None:
-        pass
 
     # ----- the caller's thread
     def expect(self, tool_in_base: np.ndarray, label: str = "") -> None:

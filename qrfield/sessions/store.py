@@ -57,7 +57,7 @@ from qrfield.files import (
 )
 from qrfield.handeye.setups import FRAMES
 from qrfield.limits import SIDE_MM, LimitError
-from qrfield.methods import METHODS, settings_class
+from qrfield.methods import METHODS
 from qrfield.sessions.averaging import Measurement
 from qrfield.sessions.criteria import AcceptanceCriteria, SessionSettings
 from qrfield.sessions.files import FileOps, atomic_write, fsync_dir, unique_path
@@ -802,6 +802,8 @@ class Session:
 def _checked_solver_settings(solver: str, settings: dict[str, Any]) -> dict[str, Any]:
     """The solver's settings validated by its own declaration."""
     try:
+        from qrfield.solvers import settings_class  # the solvers load only when a session is made
+
         return to_dict(from_dict(settings_class(solver), settings))
     except SettingError as exc:
         raise SessionError(f"solver settings: {exc}") from None
