@@ -98,6 +98,10 @@ def test_the_collector_takes_the_next_converged_unambiguous_result_after_the_too
     assert len(collector) == 1
     with pytest.raises(HandEyeError, match="1 usable pairs"):
         collector.solve("eye-in-hand")
+    # record(): expect + wait, and a timeout is one line saying why.
+    with pytest.raises(HandEyeError, match=r"no pair within 0\.01 s: no frame measured"):
+        collector.record(tool, 0.01)
+    assert len(collector) == 1
 
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])

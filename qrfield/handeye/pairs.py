@@ -11,7 +11,7 @@ the line and the column (:func:`read_pairs_csv`).
 tool pose (:meth:`PairCollector.expect`), it takes the next result captured after that whose pose
 converged and is not ambiguous (:func:`qrfield.handeye.measure.pair_problem`); :meth:`PairCollector.solve`
 solves the pairs so far. It is what serial protocol 2's ``$QRC,TOOL`` and ``$QRC,HANDEYE`` will
-call (``expect`` + ``wait``, ``solve``), docs/handeye.md.
+call (:meth:`PairCollector.record`, :meth:`PairCollector.solve`), docs/handeye.md.
 """
 
 from __future__ import annotations
@@ -156,6 +156,16 @@ class PairCollector(BaseSink):
         """Wait up to ``timeout_s`` for the expected pair; True when it was recorded (False: still
         waiting, and :attr:`passed_over` says why the frames so far were not taken)."""
         return self._done.wait(timeout_s)
+
+    def record(self, tool_in_base: np.ndarray, timeout_s: float, label: str = "") -> int:
+        """:meth:`expect` then :meth:`wait`: the number of pairs once this one is recorded, or
+        HandEyeError saying why no frame within ``timeout_s`` made one (what ``$QRC,TOOL`` answers)."""
+        self.expect(tool_in_base, label)
+        if not self.wait(timeout_s):
+            self.cancel()
+            why = self.passed_over[-1] if self.passed_over else "no frame measured"
+            raise HandEyeError(f"no pair within {timeout_s:g} s: {why}")
+        return len(self)
 
     def cancel(self) -> None:
         """Stop waiting for the expected pair."""
