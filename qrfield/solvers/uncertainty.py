@@ -31,6 +31,7 @@ ratio mirror / answer above exp(-FLIP_DELTA_CHI2 / 2)). There the error is not G
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from typing import Any
@@ -41,7 +42,7 @@ from qrfield.camera import CameraModel
 from qrfield.geometry import marker_vertices
 from qrfield.lens import distortion_jacobian_terms, has_distortion
 from qrfield.solvers.rays import normalised_single
-from qrfield.solvers.result import PoseResult, SolverError, updated
+from qrfield.solvers.result import PoseResult, SolverError
 
 #: The mirror candidate counts as fitting the corners within their uncertainty when its
 #: reprojection chi-square exceeds the answer's by less than this, i.e. when the mirror is at least
@@ -457,7 +458,7 @@ def with_uncertainties(
         )
         for i, f in zip(solved, computed, strict=True):
             fields[i].update(f)
-    return [updated(r, f) if f else r for r, f in zip(results, fields, strict=True)]
+    return [dataclasses.replace(r, **f) if f else r for r, f in zip(results, fields, strict=True)]
 
 
 def _mirror_start(

@@ -219,13 +219,6 @@ def branch_chi2_many(
     return out
 
 
-def branch_chi2_single(
-    projection: tuple[list[float], list[float], float], n_obs: np.ndarray, info: np.ndarray
-) -> float:
-    """:func:`branch_chi2_many` of one branch."""
-    return branch_chi2_many([projection], np.array(projection[1]).reshape(1, 8, 6), n_obs, info)[0]
-
-
 def uncertainty_fields(
     poses: list[tuple[str, list[list[float]], list[float], list[float], list[float]]],
     mirrors: list[tuple[list[list[float]], list[float]] | None],
