@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from qrfield.camera import CameraModel
+from qrfield.lens import distort_normalised
 
 #: Below this distance of |R[0,2]| from 1 the extraction treats beta as +-90 (gimbal lock).
 GIMBAL_EPS = 1e-9
@@ -156,12 +157,7 @@ def project_points(points_mm: np.ndarray, camera: CameraModel) -> np.ndarray:
     x = p[..., 0] / p[..., 2]
     y = p[..., 1] / p[..., 2]
     if camera.has_distortion:
-        k1, k2, p1, p2, k3 = camera.dist
-        r2 = x * x + y * y
-        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-        xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
-        yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
-        x, y = xd, yd
+        x, y = distort_normalised(camera.dist, x, y)
     return np.stack([camera.fx * x + camera.cx, camera.fy * y + camera.cy], axis=-1)
 
 

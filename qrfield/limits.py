@@ -68,7 +68,7 @@ IMAGE_SIDE_PX = Limit("image size", "px", 8.0, 65_535.0, "OpenCV's image dimensi
 #: outside it (a code cut by the image border, its hidden vertex extrapolated), no farther.
 CORNER_MARGIN_FRACTION = 0.25
 #: A lens model is usable when undistorting every border pixel of its image (the solvers' own
-#: iteration, :data:`qrfield.solvers.rays.UNDISTORT_CRITERIA`) and distorting it back lands within
+#: iteration, :data:`qrfield.lens.UNDISTORT_CRITERIA`) and distorting it back lands within
 #: this many pixels of where it started, and the radial part grows monotonically up to there.
 DISTORTION_ROUND_TRIP_PX = 0.01
 #: How much a lens model may stretch or shrink the image's edge (distorted radius / undistorted

@@ -24,6 +24,7 @@ import numpy as np
 
 from qrfield.camera import CameraModel
 from qrfield.geometry import Pose, project_points, transform_points
+from qrfield.lens import undistort_points
 from qrfield.visibility import view_problem
 
 #: Quiet zone around the symbol, in modules (ISO/IEC 18004 asks for 4).
@@ -105,11 +106,7 @@ def _ideal_pixel_map(camera: CameraModel) -> tuple[np.ndarray, np.ndarray]:
     """For every camera pixel, the pixel of the ideal (distortion-free) pinhole image it sees."""
     u, v = np.meshgrid(np.arange(camera.width, dtype=np.float64), np.arange(camera.height, dtype=np.float64))
     pts = np.stack([u.ravel(), v.ravel()], axis=-1).reshape(-1, 1, 2)
-    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-10)
-    if hasattr(cv2, "undistortPointsIter"):  # OpenCV 4.x
-        ideal = cv2.undistortPointsIter(pts, camera.K, camera.dist, None, camera.K, criteria)
-    else:  # OpenCV 5 folded the iterative variant into undistortPoints(..., criteria)
-        ideal = cv2.undistortPoints(pts, camera.K, camera.dist, R=None, P=camera.K, criteria=criteria)
+    ideal = undistort_points(pts, camera.K, camera.dist, pixels=True)
     ideal = ideal.reshape(camera.height, camera.width, 2).astype(np.float32)
     return ideal[..., 0].copy(), ideal[..., 1].copy()
 

@@ -104,8 +104,8 @@ class Section:
 def sections() -> dict[str, Section]:
     """The run configuration's sections, in file order (imports the settings' modules)."""
     from qrfield.detect import DetectorSettings
-    from qrfield.methods import settings_classes
     from qrfield.serial_link import SerialLinkSettings
+    from qrfield.solvers import settings_classes
     from qrfield.sources import Picamera2Settings, UsbCameraSettings, VirtualBenchSettings
 
     solvers = settings_classes()

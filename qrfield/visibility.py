@@ -26,11 +26,11 @@ import functools
 import math
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
 from qrfield.camera import CameraModel
 from qrfield.geometry import marker_vertices, project_points, transform_points
+from qrfield.lens import undistort_points
 
 #: Vertices must be this far in front of the camera (mm).
 MIN_DEPTH_MM = 1e-6
@@ -57,11 +57,7 @@ def view_radius(camera: CameraModel) -> float:
             np.column_stack([np.full_like(v, w - 0.5), v]),
         ]
     ).reshape(-1, 1, 2)
-    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-10)
-    if hasattr(cv2, "undistortPointsIter"):  # OpenCV 4.x
-        ideal = cv2.undistortPointsIter(border, camera.K, camera.dist, None, None, criteria)
-    else:  # OpenCV 5
-        ideal = cv2.undistortPoints(border, camera.K, camera.dist, R=None, P=None, criteria=criteria)
+    ideal = undistort_points(border, camera.K, camera.dist)
     return 1.001 * float(np.hypot(ideal[..., 0], ideal[..., 1]).max())
 
 

@@ -22,9 +22,10 @@ import numpy as np
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from qrfield.camera import DEFAULT_CAMERA, CameraModel, CameraModelError, resolve_camera
-from qrfield.methods import methods_from_choice, settings_classes
+from qrfield.methods import methods_from_choice
 from qrfield.runconfig import ConfigStore, RunConfig, RunSettings
 from qrfield.serial_link import SerialLinkSettings
+from qrfield.solvers import settings_classes
 from qrfield.sources import Picamera2Settings, VirtualBenchSettings
 from ui.analysis_tab import AnalysisTab
 from ui.calibration_dialog import CalibrationDialog, CalibrationDialogSettings

@@ -27,6 +27,8 @@ import sys
 import time
 from typing import Any
 
+from qrfield.seams import BaseSink, LoopEventsBase
+
 HELP = "measure poses from a camera source without a window (headless; JSON lines for other programs)"
 
 
@@ -55,7 +57,7 @@ class _Stderr:
         print(f"qrfield run: {message}", file=sys.stderr, flush=True)
 
 
-class _Events:
+class _Events(LoopEventsBase):
     """The frame loop's events, said on stderr; a broken stdout without a serial link stops the run."""
 
     def __init__(self, say: _Stderr, writer: Any, link: Any, camera_line: str = "") -> None:
@@ -97,7 +99,7 @@ class _Events:
             self.loop.stop()  # the reader went away (e.g. `| head`) and nothing else listens
 
 
-class _StdoutSink:
+class _StdoutSink(BaseSink):
     """Each result as one line on stdout (through the LineWriter: never blocks)."""
 
     def __init__(self, writer: Any, json_lines: bool) -> None:
@@ -106,12 +108,6 @@ class _StdoutSink:
     def on_result(self, result: Any, simulated: bool) -> None:
         line = (_json_line if self.json_lines else _human_line)(result, simulated)
         self.writer.write(line)
-
-    def on_source_down(self, reason: str) -> None:
-        pass
-
-    def on_source_up(self) -> None:
-        pass
 
 
 def _gripper_link(settings: Any, say: _Stderr) -> Any:

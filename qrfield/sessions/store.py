@@ -54,7 +54,7 @@ from qrfield.files import (
     read_json,
 )
 from qrfield.limits import SIDE_MM, LimitError
-from qrfield.methods import METHODS, settings_class
+from qrfield.methods import METHODS
 from qrfield.sessions.averaging import Measurement
 from qrfield.sessions.criteria import AcceptanceCriteria, SessionSettings
 from qrfield.sessions.files import FileOps, atomic_write, fsync_dir, unique_path
@@ -772,6 +772,8 @@ class Session:
 def _checked_solver_settings(solver: str, settings: dict[str, Any]) -> dict[str, Any]:
     """The solver's settings validated by its own declaration."""
     try:
+        from qrfield.solvers import settings_class  # the solvers load only when a session is made
+
         return to_dict(from_dict(settings_class(solver), settings))
     except SettingError as exc:
         raise SessionError(f"solver settings: {exc}") from None

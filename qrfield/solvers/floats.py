@@ -9,6 +9,7 @@ import math
 
 from qrfield.camera import CameraModel
 from qrfield.geometry import GIMBAL_EPS
+from qrfield.lens import distort_normalised
 
 
 def angles_single(r: list[list[float]]) -> list[float]:
@@ -35,7 +36,6 @@ def reprojection_single(
     h = side / 2.0
     dist = camera.dist.tolist()
     distort = dist != [0.0, 0.0, 0.0, 0.0, 0.0]
-    k1, k2, p1, p2, k3 = dist
     fx, fy, cx, cy = camera.fx, camera.fy, camera.cx, camera.cy
     (r00, r01, _), (r10, r11, _), (r20, r21, _) = r
     tx, ty, tz = t
@@ -47,12 +47,7 @@ def reprojection_single(
         xn = (r00 * qx + r01 * qy + tx) / pz
         yn = (r10 * qx + r11 * qy + ty) / pz
         if distort:
-            r2 = xn * xn + yn * yn
-            radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-            xn, yn = (
-                xn * radial + 2.0 * p1 * xn * yn + p2 * (r2 + 2.0 * xn * xn),
-                yn * radial + p1 * (r2 + 2.0 * yn * yn) + 2.0 * p2 * xn * yn,
-            )
+            xn, yn = distort_normalised(dist, xn, yn)
         du = fx * xn + cx - flat[i]
         dv = fy * yn + cy - flat[i + 1]
         total += du * du + dv * dv

@@ -34,9 +34,10 @@ import numpy as np
 
 from qrfield.camera import CameraModel
 from qrfield.geometry import ippe_object_points, rotation_from_ippe, rotation_to_ippe
+from qrfield.lens import has_distortion
 from qrfield.settings import setting, validated
 from qrfield.solvers.floats import angles_single, reprojection_single
-from qrfield.solvers.rays import has_distortion, normalised_single
+from qrfield.solvers.rays import normalised_single
 from qrfield.solvers.result import BatchResult, PoseResult, SolverError
 from qrfield.solvers.uncertainty import ambiguity_ratio, batch_uncertainty
 

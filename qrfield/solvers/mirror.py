@@ -12,13 +12,14 @@ and ``mirror_chi2`` of the answer's (the mirror test run from its side), and the
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
 from qrfield.camera import CameraModel
 from qrfield.solvers.checks import check_camera, check_corners_single, check_side
 from qrfield.solvers.rays import normalised_single
-from qrfield.solvers.result import PoseResult, updated
+from qrfield.solvers.result import PoseResult
 from qrfield.solvers.uncertainty import check_corners_cov, with_uncertainties
 
 
@@ -52,11 +53,9 @@ def mirror_result(
     side = check_side(side_mm)
     corners, flat = check_corners_single(result.corners_px)
     cov = None if corners_cov is None else check_corners_cov(corners_cov)
-    answer = updated(result, {"alternative": None})
+    answer = replace(result, alternative=None)
     # The ambiguity ratio is symmetric (better over worse); the mirror test is run afresh.
-    start = updated(
-        result.alternative, {"alternative": answer, "ambiguity": result.ambiguity, "ambiguous": False}
-    )
+    start = replace(result.alternative, alternative=answer, ambiguity=result.ambiguity, ambiguous=False)
     xy = normalised_single(corners, flat, cam)
     mirror = with_uncertainties([start], corners, flat, cam, side, cov, xy)[0]
     if not math.isfinite(float(mirror.reprojection_px)):

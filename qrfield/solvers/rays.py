@@ -3,7 +3,7 @@
 Normalised coordinates (x, y) of a pixel are those of the undistorted point on the image plane at
 unit depth: the line of sight is (x, y, 1) in the camera frame (OpenCV: +X right, +Y down, +Z
 forward). Without distortion x = (u - cx) / fx, y = (v - cy) / fy exactly; with distortion OpenCV
-iterates to UNDISTORT_CRITERIA.
+iterates to qrfield.lens.UNDISTORT_CRITERIA.
 """
 
 from __future__ import annotations
@@ -11,27 +11,13 @@ from __future__ import annotations
 import numpy as np
 
 from qrfield.camera import CameraModel
-
-#: Iteration of cv2.undistortPoints: exact to far below a micro-pixel for usual lenses (OpenCV's
-#: default of 5 iterations leaves errors of 1e-3 px and more near the image corners).
-#: (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, count, eps); cv2 is imported lazily (fast CLI).
-UNDISTORT_CRITERIA = (1 | 2, 100, 1e-15)
+from qrfield.lens import has_distortion, undistort_points
 
 
 def undistort(points: np.ndarray, camera: CameraModel, pixels: bool = False) -> np.ndarray:
-    """Undistorted (M, 1, 2) normalised coordinates of pixels (M, 1, 2), or ideal pixels if ``pixels``."""
-    import cv2
-
-    pts = np.ascontiguousarray(points, dtype=float)
-    target = camera.K if pixels else None
-    if hasattr(cv2, "undistortPointsIter"):  # OpenCV 4.x; OpenCV 5 takes the criteria below
-        return cv2.undistortPointsIter(pts, camera.K, camera.dist, None, target, UNDISTORT_CRITERIA)
-    return cv2.undistortPoints(pts, camera.K, camera.dist, R=None, P=target, criteria=UNDISTORT_CRITERIA)
-
-
-def has_distortion(camera: CameraModel) -> bool:
-    """camera.has_distortion without a numpy call (the single path runs it on every solve)."""
-    return camera.dist.tolist() != [0.0, 0.0, 0.0, 0.0, 0.0]
+    """Undistorted (M, 1, 2) normalised coordinates of pixels (M, 1, 2), or ideal pixels if ``pixels``
+    (:func:`qrfield.lens.undistort_points`)."""
+    return undistort_points(points, camera.K, camera.dist, pixels)
 
 
 def normalised_single(

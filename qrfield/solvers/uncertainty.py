@@ -31,6 +31,7 @@ ratio mirror / answer above exp(-FLIP_DELTA_CHI2 / 2)). There the error is not G
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from typing import Any
@@ -39,8 +40,9 @@ import numpy as np
 
 from qrfield.camera import CameraModel
 from qrfield.geometry import marker_vertices
-from qrfield.solvers.rays import has_distortion, normalised_single
-from qrfield.solvers.result import PoseResult, SolverError, updated
+from qrfield.lens import distortion_jacobian_terms, has_distortion
+from qrfield.solvers.rays import normalised_single
+from qrfield.solvers.result import PoseResult, SolverError
 
 #: The mirror candidate counts as fitting the corners within their uncertainty when its
 #: reprojection chi-square exceeds the answer's by less than this, i.e. when the mirror is at least
@@ -178,17 +180,8 @@ def distortion_jacobian(x: np.ndarray, y: np.ndarray, camera: CameraModel) -> np
 
 def distortion_terms(x: Any, y: Any, camera: CameraModel) -> tuple[Any, Any, Any]:
     """The entries (d00, d01 = d10, d11) of :func:`distortion_jacobian` at (x, y): Python floats or
-    arrays (...) alike (the single path passes floats)."""
-    k1, k2, p1, p2, k3 = camera.dist.tolist()
-    r2 = x * x + y * y
-    radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-    g = 2.0 * (k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2))  # 2 d radial / d r2
-    cross = x * y * g + 2.0 * p1 * x + 2.0 * p2 * y
-    return (
-        radial + x * x * g + 2.0 * p1 * y + 6.0 * p2 * x,
-        cross,
-        radial + y * y * g + 6.0 * p1 * y + 2.0 * p2 * x,
-    )
+    arrays (...) alike (the single path passes floats; qrfield.lens.distortion_jacobian_terms)."""
+    return distortion_jacobian_terms(camera.dist.tolist(), x, y)
 
 
 def normalised_cov(cov_px: np.ndarray, x: np.ndarray, y: np.ndarray, camera: CameraModel) -> np.ndarray:
@@ -459,8 +452,10 @@ def with_uncertainties(
         x_list, y_list = xy if xy is not None else normalised_single(corners, flat, camera)
         cov16 = one.normalised_cov_single(cov, x_list, y_list, camera, has_distortion(camera))
         solved = list(poses)
+        from qrfield.solvers.registry import uses_depth_model  # here: the registry imports the solvers
+
         for i in solved:
-            if results[i].method == "numerical":
+            if uses_depth_model(results[i].method):  # its covariance goes through the depths
                 method, rows, t, angles, _ = poses[i]
                 poses[i] = (method, rows, t, angles, results[i].vertices_mm[:, 2].tolist())
         mirrors = [_mirror_start(results[i], poses[i][1], poses[i][2], x_list, y_list) for i in solved]
@@ -469,7 +464,7 @@ def with_uncertainties(
         )
         for i, f in zip(solved, computed, strict=True):
             fields[i].update(f)
-    return [updated(r, f) if f else r for r, f in zip(results, fields, strict=True)]
+    return [dataclasses.replace(r, **f) if f else r for r, f in zip(results, fields, strict=True)]
 
 
 def _mirror_start(
@@ -483,7 +478,9 @@ def _mirror_start(
         alt_rows = alternative.rotation.tolist()
         if all(math.isfinite(v) for row in alt_rows for v in row):
             return alt_rows, alternative.position_mm.tolist()
-    if result.method != "numerical":
+    from qrfield.solvers.registry import uses_depth_model  # here: the registry imports the solvers
+
+    if not uses_depth_model(result.method):
         return None  # IPPE's second candidate was behind the camera or facing away: no mirror
     from qrfield.solvers.numerical import reflected_pose_single
 
@@ -504,7 +501,8 @@ def batch_uncertainty(
 ) -> dict[str, np.ndarray]:
     """The std fields of a BatchResult ((N, 4), (N, 3), (N, 3)) for N corner sets (N, 4, 2) with
     covariances (N, 4, 2, 2); pose stds only at ``rows`` (bool (N,), the converged ones), from
-    rotation (N, 3, 3), position (N, 3), angles (N, 3) and, for "numerical", depths (N, 4)."""
+    rotation (N, 3, 3), position (N, 3), angles (N, 3) and, for a depth model (the numerical one),
+    depths (N, 4), else None (``method`` names the method for messages)."""
     from qrfield.solvers.rays import normalised_batch
 
     count = corners.shape[0]
@@ -517,7 +515,7 @@ def batch_uncertainty(
     if idx.size == 0:
         return out
     x, y = normalised_batch(corners[idx], camera)
-    if method == "numerical":
+    if depths is not None:  # a depth model (the numerical one): through its depths
         jac = numerical_jacobian(depths[idx], x, y)
     else:
         jac = ippe_jacobian(rotation[idx], position[idx], side, camera)

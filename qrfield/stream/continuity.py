@@ -34,12 +34,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from qrfield.geometry import rotation_from_vector, rotation_vector
-from qrfield.solvers.result import PoseResult, updated
+from qrfield.solvers.result import PoseResult
 from qrfield.solvers.uncertainty import FLIP_DELTA_CHI2, FRAME_SHARED_SHARE
 from qrfield.status import usable_pose
 from qrfield.stream.poses import vector_cov
@@ -153,9 +153,7 @@ def widened(pose: PoseResult, other_rotation: np.ndarray) -> PoseResult:
     cov[3:, 3:] += (wanted - have) * np.outer(axis, axis)
     pose_cov = angles_cov(cov, pose.angles_deg)
     position_std, angles_std = pose_std(pose_cov)
-    return updated(
-        pose, {"pose_cov": pose_cov, "position_std_mm": position_std, "angles_std_deg": angles_std}
-    )
+    return replace(pose, pose_cov=pose_cov, position_std_mm=position_std, angles_std_deg=angles_std)
 
 
 class BranchHistory:
@@ -213,7 +211,7 @@ class BranchHistory:
             chosen = widened(chosen, other.rotation)
         elif reflected is not None and (plane := reflected(chosen)) is not None:
             chosen = widened(chosen, plane)
-        return Decision(updated(chosen, {"ambiguous": False}), BY_HISTORY, False, flipped)
+        return Decision(replace(chosen, ambiguous=False), BY_HISTORY, False, flipped)
 
     # ------------------------------------------------------------------ the rule
     def _usable(self, pose: PoseResult, t_ms: int, text: str | None) -> _Record | None:

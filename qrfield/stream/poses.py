@@ -12,12 +12,14 @@ consistent. Conventions: docs/conventions.md (camera frame, V1..V4, mm and degre
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from qrfield.camera import CameraModel
 from qrfield.geometry import angles_from_rotation, marker_vertices, transform_points
 from qrfield.solvers.floats import reprojection_single
-from qrfield.solvers.result import PoseResult, updated
+from qrfield.solvers.result import PoseResult
 from qrfield.solvers.uncertainty import euler_jacobian, pose_std
 
 
@@ -76,18 +78,14 @@ def moved_result(
     pose_cov = angles_cov(cov, angles)
     position_std, angles_std = pose_std(pose_cov)
     flat = np.asarray(base.corners_px, dtype=float).reshape(8).tolist()
-    return updated(
+    return replace(
         base,
-        {
-            "position_mm": position,
-            "angles_deg": angles,
-            "rotation": rotation,
-            "vertices_mm": transform_points(rotation, position, marker_vertices(side_mm)),
-            "reprojection_px": reprojection_single(
-                rotation.tolist(), position.tolist(), side_mm, camera, flat
-            ),
-            "pose_cov": pose_cov,
-            "position_std_mm": position_std,
-            "angles_std_deg": angles_std,
-        },
+        position_mm=position,
+        angles_deg=angles,
+        rotation=rotation,
+        vertices_mm=transform_points(rotation, position, marker_vertices(side_mm)),
+        reprojection_px=reprojection_single(rotation.tolist(), position.tolist(), side_mm, camera, flat),
+        pose_cov=pose_cov,
+        position_std_mm=position_std,
+        angles_std_deg=angles_std,
     )

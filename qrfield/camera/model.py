@@ -1,4 +1,4 @@
-"""Camera models: pinhole intrinsics plus OpenCV's five distortion coefficients.
+"""The camera model: pinhole intrinsics plus OpenCV's five distortion coefficients (CameraModel).
 
 Conventions (docs/conventions.md): pixels follow OpenCV, the centre of the top-left pixel is (0, 0), so the
 centre of a W x H image is ((W-1)/2, (H-1)/2). fx, fy, cx, cy are in pixels; the distortion
@@ -28,33 +28,31 @@ focal length in mm is known (thin lens).
 
 from __future__ import annotations
 
-import functools
 import json
 import math
 import os
 from dataclasses import dataclass, field, replace
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from qrfield import paths
+from qrfield.camera.distortion import check_distortion
+from qrfield.camera.fields import (
+    ASPECT_TOLERANCE,
+    REQUIRED_FIELDS,
+    SENSOR_FIELDS,
+    CameraModelError,
+    _jsonable,
+    _validate,
+    _whole_numbers,
+    check_crop,
+    format_crop,
+    image_distance_mm,
+    sensor_fields,
+)
 from qrfield.files import Fields, FileFormatError, describe_value, read_json
-from qrfield.limits import DISTORTION_ROUND_TRIP_PX, DISTORTION_SCALE, FOCAL_PX, IMAGE_SIDE_PX, LimitError
-
-#: Fields every camera JSON file must have.
-REQUIRED_FIELDS = ("width", "height", "fx", "fy", "cx", "cy")
-#: Largest relative aspect-ratio mismatch accepted when rescaling to another resolution.
-ASPECT_TOLERANCE = 0.01
-#: Optional fields of the camera JSON format: the sensor geometry a profile was made at.
-SENSOR_FIELDS = ("sensor_resolution", "sensor_crop", "sensor_mode", "lens_position", "focal_length_mm")
-#: The camera model used when none is named (the virtual bench renders through it, too).
-DEFAULT_CAMERA = "picam-v2@640x480"
-
-
-class CameraModelError(ValueError):
-    """A camera model, file or name that cannot be used; the message names file and field."""
+from qrfield.lens import has_distortion
 
 
 @dataclass(frozen=True)
@@ -248,7 +246,8 @@ class CameraModel:
 
     @property
     def has_distortion(self) -> bool:
-        return bool(np.any(self.dist != 0.0))
+        """True when any distortion coefficient is non-zero (qrfield.lens.has_distortion)."""
+        return has_distortion(self)
 
     @property
     def fov_deg(self) -> tuple[float, float]:
@@ -427,404 +426,3 @@ class CameraModel:
 
     def __hash__(self) -> int:
         return hash(json.dumps(self.to_dict(), sort_keys=True))
-
-
-def _validate(fx: float, fy: float, cx: float, cy: float, width: int, height: int, where: str) -> None:
-    """Raise CameraModelError (prefixed with ``where``) for unusable intrinsics (qrfield.limits)."""
-    if width <= 0 or height <= 0:
-        raise CameraModelError(f"{where}: image size {width}x{height} must be positive")
-    for key, value in (("width", width), ("height", height)):
-        try:
-            IMAGE_SIDE_PX.check(value, f"{where}: field '{key}'")
-        except LimitError as exc:
-            raise CameraModelError(str(exc)) from None
-    for key, value in (("fx", fx), ("fy", fy)):
-        if not math.isfinite(value) or value <= 0:
-            raise CameraModelError(
-                f"{where}: field '{key}' must be a positive focal length in pixels, got {value!r}"
-            )
-        try:
-            FOCAL_PX.check(value, f"{where}: field '{key}'")
-        except LimitError as exc:
-            raise CameraModelError(str(exc)) from None
-    if not (-0.5 <= cx <= width - 0.5):
-        raise CameraModelError(
-            f"{where}: field 'cx' = {cx!r} puts the principal point outside the {width}-pixel-wide image"
-        )
-    if not (-0.5 <= cy <= height - 0.5):
-        raise CameraModelError(
-            f"{where}: field 'cy' = {cy!r} puts the principal point outside the {height}-pixel-high image"
-        )
-
-
-def check_distortion(camera: CameraModel, where: str) -> None:
-    """CameraModelError naming ``where`` and 'dist' when the lens model cannot be inverted over the image.
-
-    Usable means (qrfield.limits.DISTORTION_ROUND_TRIP_PX): every point of the ellipse inscribed in
-    the image (through the middles of its four edges), undistorted by the solvers' own iteration and
-    distorted back by cv2.projectPoints, lands within that many pixels of itself, and the radial
-    factor r (1 + k1 r^2 + k2 r^4 + k3 r^6) keeps growing out to there (the model does not fold back
-    inside it). k1 = 1e6 fails the first (OpenCV's iteration oscillates); k1 = -1 on a wide lens both.
-    The image's corners beyond the ellipse are not required: a real calibration with k3 often folds
-    there, where its chessboard views never reached (:func:`distortion_note` says so).
-    """
-    if not camera.has_distortion:
-        return
-    problem = _distortion_problem(*_distortion_key(camera), corners=False)
-    if problem:
-        coefficients = ", ".join(f"{d:g}" for d in camera.dist)
-        raise CameraModelError(f"{where}: field 'dist' ({coefficients}) {problem}")
-
-
-def distortion_note(camera: CameraModel) -> str:
-    """ "" when the lens model can be inverted over the whole image, corners included; else one line
-    saying that poses from codes in the corners are unreliable (for calibrate's advice)."""
-    if not camera.has_distortion:
-        return ""
-    problem = _distortion_problem(*_distortion_key(camera), corners=True)
-    if not problem:
-        return ""
-    return (
-        f"the lens model {problem.replace('over the', 'in the corners of the')}: poses from codes "
-        "near the corners are unreliable; take views that reach the corners, or calibrate with --fix-k3"
-    )
-
-
-def _distortion_key(camera: CameraModel) -> tuple[Any, ...]:
-    return (
-        camera.fx,
-        camera.fy,
-        camera.cx,
-        camera.cy,
-        camera.width,
-        camera.height,
-        tuple(camera.dist.tolist()),
-    )
-
-
-@functools.lru_cache(maxsize=64)
-def _distortion_problem(
-    fx: float,
-    fy: float,
-    cx: float,
-    cy: float,
-    width: int,
-    height: int,
-    dist: tuple[float, ...],
-    corners: bool,
-) -> str:
-    """Why the model cannot be inverted over the inscribed ellipse (or, ``corners``, the whole
-    image's border at its pixel edges), or ""."""
-    import cv2
-
-    from qrfield.solvers.rays import UNDISTORT_CRITERIA  # the solvers' iteration is what must work
-
-    K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
-    D = np.asarray(dist, dtype=float)
-    if corners:
-        n = 64  # points per side of the border (pixel edges), corners included
-        u = np.linspace(-0.5, width - 0.5, n + 1)
-        v = np.linspace(-0.5, height - 0.5, n + 1)
-        outline = np.concatenate(
-            [
-                np.column_stack([u, np.full_like(u, -0.5)]),
-                np.column_stack([u, np.full_like(u, height - 0.5)]),
-                np.column_stack([np.full_like(v, -0.5), v]),
-                np.column_stack([np.full_like(v, width - 0.5), v]),
-            ]
-        )
-    else:
-        t = np.linspace(0.0, 2.0 * np.pi, 256, endpoint=False)
-        outline = np.column_stack(
-            [(width - 1) / 2.0 + width / 2.0 * np.cos(t), (height - 1) / 2.0 + height / 2.0 * np.sin(t)]
-        )
-    pts = outline.reshape(-1, 1, 2)
-    with np.errstate(all="ignore"):
-        if hasattr(cv2, "undistortPointsIter"):  # OpenCV 4.x
-            ideal = cv2.undistortPointsIter(pts, K, D, None, None, UNDISTORT_CRITERIA)
-        else:  # OpenCV 5
-            ideal = cv2.undistortPoints(pts, K, D, R=None, P=None, criteria=UNDISTORT_CRITERIA)
-        ideal = ideal.reshape(-1, 2)
-        if not np.all(np.isfinite(ideal)):
-            return f"cannot be inverted over the {width}x{height} image (OpenCV's undistortion diverges)"
-        rays = np.column_stack([ideal, np.ones(len(ideal))])
-        back, _ = cv2.projectPoints(rays, np.zeros(3), np.zeros(3), K, D)
-        miss = float(np.nanmax(np.abs(back.reshape(-1, 2) - outline)))
-    if not math.isfinite(miss) or miss > DISTORTION_ROUND_TRIP_PX:
-        return (
-            f"cannot be inverted over the {width}x{height} image: undistorting points of the image and "
-            f"distorting them back misses by {miss:.3g} px (at most {DISTORTION_ROUND_TRIP_PX:g} px)"
-        )
-    distorted = np.column_stack([(outline[:, 0] - cx) / fx, (outline[:, 1] - cy) / fy])
-    with np.errstate(all="ignore"):
-        scale = np.hypot(distorted[:, 0], distorted[:, 1]) / np.hypot(ideal[:, 0], ideal[:, 1])
-    scale = scale[np.isfinite(scale)]
-    for extreme in (float(scale.min()), float(scale.max())) if scale.size else ():
-        if not DISTORTION_SCALE.minimum <= extreme <= DISTORTION_SCALE.maximum:
-            return (
-                f"{'stretches' if extreme > 1 else 'shrinks'} the {width}x{height} image's edge "
-                f"{extreme:.3g} times (a real lens: {DISTORTION_SCALE.minimum:.2g}.."
-                f"{DISTORTION_SCALE.maximum:g}); is it a calibration of this camera?"
-            )
-    k1, k2, k3 = D[0], D[1] if D.size > 1 else 0.0, D[4] if D.size > 4 else 0.0
-    r = np.linspace(0.0, float(np.hypot(ideal[:, 0], ideal[:, 1]).max()), 2001)
-    growth = 1.0 + 3.0 * k1 * r**2 + 5.0 * k2 * r**4 + 7.0 * k3 * r**6  # d/dr of r * radial factor
-    if np.any(growth <= 0.0):
-        fold = float(r[np.argmax(growth <= 0.0)])
-        return (
-            f"folds back over the {width}x{height} image: its radial distortion stops growing "
-            f"{math.degrees(math.atan(fold)):.1f} degrees off the axis, inside the field of view"
-        )
-    return ""
-
-
-def image_distance_mm(focal_length_mm: float, dioptres: float) -> float:
-    """Lens-to-sensor distance (mm) of a thin lens of focal length f focused at 1/dioptres metres."""
-    inverse = 1.0 / focal_length_mm - dioptres / 1000.0
-    if inverse <= 0:
-        raise CameraModelError(
-            f"a {focal_length_mm:g} mm lens cannot focus at {dioptres:g} dioptres "
-            "(closer than its focal length)"
-        )
-    return 1.0 / inverse
-
-
-def format_crop(crop: Any) -> str:
-    """A sensor rectangle as rpicam-hello prints it: ``(x, y)/WxH``."""
-    try:
-        x, y, w, h = (int(v) for v in crop)
-    except (TypeError, ValueError):
-        return repr(crop)
-    return f"({x}, {y})/{w}x{h}"
-
-
-def check_crop(
-    crop: tuple[int, int, int, int], resolution: tuple[int, int] | None, where: str
-) -> tuple[int, int, int, int]:
-    """``crop`` (x, y, w, h) if it is a non-empty rectangle inside ``resolution`` (when known)."""
-    x, y, w, h = crop
-    if w <= 0 or h <= 0 or x < 0 or y < 0:
-        raise CameraModelError(f"{where}: sensor crop {crop} needs x, y >= 0 and a positive size")
-    if resolution is not None and (x + w > resolution[0] or y + h > resolution[1]):
-        raise CameraModelError(
-            f"{where}: sensor crop {format_crop(crop)} reaches outside the "
-            f"{resolution[0]}x{resolution[1]} sensor"
-        )
-    return crop
-
-
-def _whole_numbers(values: Any, count: int, key: str, where: str) -> tuple[int, ...]:
-    """``values`` as a tuple of ``count`` whole numbers; CameraModelError naming ``key`` otherwise."""
-    try:
-        items = list(values)
-    except TypeError:
-        items = None
-    if (
-        items is None
-        or len(items) != count
-        or any(isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) for v in items)
-        or any(not math.isfinite(v) or v != int(v) for v in items)
-    ):
-        raise CameraModelError(
-            f"{where}: field '{key}' must be a list of {count} whole numbers, got {values!r}"
-        )
-    return tuple(int(v) for v in items)
-
-
-def sensor_fields(values: dict[str, Any], where: str) -> dict[str, Any]:
-    """The optional sensor fields (SENSOR_FIELDS) checked and coerced; None/"" stay unset.
-
-    CameraModelError (prefixed with ``where``) names the field that is wrong."""
-    out: dict[str, Any] = {}
-    resolution = values.get("sensor_resolution")
-    if resolution is not None:
-        resolution = _whole_numbers(resolution, 2, "sensor_resolution", where)
-        if min(resolution) <= 0:
-            raise CameraModelError(f"{where}: field 'sensor_resolution' {resolution} must be positive")
-        out["sensor_resolution"] = resolution
-    crop = values.get("sensor_crop")
-    if crop is not None:
-        out["sensor_crop"] = check_crop(_whole_numbers(crop, 4, "sensor_crop", where), resolution, where)
-    mode = values.get("sensor_mode")
-    if mode not in (None, ""):
-        if not isinstance(mode, str):
-            raise CameraModelError(f"{where}: field 'sensor_mode' must be text, got {mode!r}")
-        out["sensor_mode"] = mode
-    for key in ("lens_position", "focal_length_mm"):
-        value = values.get(key)
-        if value is None:
-            continue
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise CameraModelError(f"{where}: field '{key}' must be a number, got {value!r}")
-        if value < 0 or (key == "focal_length_mm" and value == 0):
-            raise CameraModelError(f"{where}: field '{key}' must be positive, got {value!r}")
-        out[key] = float(value)
-    return out
-
-
-def _jsonable(value: Any) -> Any:
-    return list(value) if isinstance(value, tuple) else value
-
-
-# ---------------------------------------------------------------------- lookup by name
-
-
-def preset_dir() -> Path:
-    """Folder of the presets shipped with qrfield (the repository's ``calib/``)."""
-    try:
-        return Path(str(resources.files("qrfield_calib")))
-    except ModuleNotFoundError:  # running from a source tree that is not installed
-        return Path(__file__).resolve().parent.parent / "calib"
-
-
-def user_profile_dirs() -> list[Path]:
-    """Folders searched for ``NAME.json`` before the shipped presets, in order.
-
-    ``$QRFIELD_CALIB_DIR`` (if set), then the user's profile folder. The current folder's
-    ``./calib`` is not searched by name: see the module docstring.
-    """
-    dirs = []
-    env = os.environ.get("QRFIELD_CALIB_DIR", "").strip()
-    if env:
-        dirs.append(Path(env).expanduser())
-    dirs.append(paths.user_calib_dir())
-    return dirs
-
-
-def camera_origin(camera: CameraModel) -> str:
-    """Where a camera model came from, with the file's path, for the line every command prints."""
-    if not camera.path:
-        return camera.notes.split(";")[0] if camera.notes else "built in"
-    file = Path(camera.path)
-    try:
-        preset = file.resolve().parent == preset_dir().resolve()
-    except OSError:
-        preset = False
-    if preset:
-        return f"shipped preset {file}"
-    shadowed = (preset_dir() / file.name).is_file() and any(file.parent == d for d in user_profile_dirs())
-    note = " (it replaces the shipped preset of that name)" if shadowed else ""
-    return f"profile {file}{note}"
-
-
-def say_camera(camera: CameraModel, command: str) -> None:
-    """One line on stderr naming the camera model and the file it came from (docs/cli.md)."""
-    import sys
-
-    print(f"qrfield {command}: camera {camera.name} from {camera_origin(camera)}", file=sys.stderr)
-
-
-def preset_names() -> list[str]:
-    """Names of the shipped presets (e.g. ``picam-v2``)."""
-    return sorted(p.stem for p in preset_dir().glob("*.json"))
-
-
-def parse_size(text: str) -> tuple[int, int]:
-    """Parse ``WxH`` (e.g. ``640x480``) into (width, height); CameraModelError if malformed."""
-    parts = text.lower().split("x")
-    if len(parts) != 2 or not all(p.strip().isdigit() for p in parts):
-        raise CameraModelError(f"image size {text!r} is not of the form WxH, e.g. 640x480")
-    width, height = int(parts[0]), int(parts[1])
-    if width <= 0 or height <= 0:
-        raise CameraModelError(f"image size {text!r} must be positive")
-    try:
-        for value in (width, height):
-            IMAGE_SIDE_PX.check(value, f"image size {text!r}")
-    except LimitError as exc:
-        raise CameraModelError(str(exc)) from None
-    return width, height
-
-
-def resolve_camera(spec: str) -> CameraModel:
-    """A camera from ``NAME[@WxH]`` or ``PATH[@WxH]`` (see the module docstring)."""
-    spec = spec.strip()
-    if not spec:
-        raise CameraModelError("empty camera name; give a preset such as picam-v2@640x480")
-    # A file that exists is taken whole, so that a path may contain '@' (/home/me@lab/cam.json).
-    whole_file = Path(spec).expanduser().is_file()
-    base, _, size_text = spec.rpartition("@") if "@" in spec and not whole_file else (spec, "", "")
-    size = parse_size(size_text) if size_text else None
-    path = Path(base).expanduser()
-    if base.endswith(".json") or os.sep in base or path.is_file():
-        camera = CameraModel.load(path)
-    else:
-        if base in (".", "..") or "/" in base:  # a name, never a path outside the folders searched
-            raise CameraModelError(f"no camera profile named {base!r}")
-        candidates = [d / f"{base}.json" for d in user_profile_dirs()] + [preset_dir() / f"{base}.json"]
-        found = next((c for c in candidates if c.is_file()), None)
-        if found is None:
-            local = Path("calib") / f"{base}.json"
-            hint = (
-                f"; ./{local} is not searched by name: give its path, --camera {local}"
-                if local.is_file()
-                else ""
-            )
-            raise CameraModelError(
-                f"no camera profile named {base!r}; presets: {', '.join(preset_names())} "
-                f"(or give a path to a JSON file, or --focal-px F --size WxH){hint}"
-            )
-        camera = CameraModel.load(found)
-    return camera.scaled(*size) if size else camera
-
-
-def add_camera_arguments(parser: Any, default: str | None = None, focal_only: bool = False) -> None:
-    """Add ``--camera``, ``--focal-px`` and ``--size`` to an argparse parser.
-
-    ``focal_only``: the command takes images, whose own size serves when ``--size`` is left out
-    (see :func:`camera_from_args`).
-    """
-    parser.add_argument(
-        "--camera",
-        default=default,
-        metavar="CAM",
-        help="camera profile NAME[@WxH] (your profiles in ~/.config/qrfield/calib, then the presets "
-        "picam-v1, picam-v2, picam-v3, picam-hq-6mm, webcam-60) or PATH.json[@WxH]; the file used is printed",
-    )
-    from qrfield.arguments import limited
-
-    parser.add_argument(
-        "--focal-px",
-        type=limited(FOCAL_PX, "--focal-px"),
-        metavar="F",
-        help=f"focal length in pixels ({FOCAL_PX.describe()}), with --size"
-        + (
-            " (with IMAGE files, --size may be left out: each image's own size is taken)"
-            if focal_only
-            else ""
-        ),
-    )
-    parser.add_argument("--size", metavar="WxH", help="image size for --focal-px, e.g. 640x480")
-    # Remembered so that camera_from_args can tell a default --camera from one the user typed.
-    parser.set_defaults(_camera_default=default)
-
-
-def camera_from_args(args: Any, focal_only: bool = False) -> CameraModel | None:
-    """The camera named by ``--camera`` or ``--focal-px``/``--size``.
-
-    ``--focal-px``/``--size`` win over a default ``--camera``; CameraModelError if neither is
-    given, or if both a typed ``--camera`` and ``--focal-px``/``--size`` are (which one was meant?).
-    ``focal_only``: ``--focal-px`` without ``--size`` is accepted and gives None: the caller makes
-    :meth:`CameraModel.from_focal` at each image's own size (``args.focal_px``).
-    """
-    focal, size = getattr(args, "focal_px", None), getattr(args, "size", None)
-    if focal is not None or size is not None:
-        camera = getattr(args, "camera", None)
-        if camera and camera != getattr(args, "_camera_default", None):
-            raise CameraModelError(f"give either --camera ({camera}) or --focal-px/--size, not both")
-        if focal is not None and size is None and focal_only:
-            _checked_focal(focal)
-            return None
-        if focal is None or size is None:
-            raise CameraModelError("--focal-px and --size go together, e.g. --focal-px 620 --size 640x480")
-        width, height = parse_size(size)
-        return CameraModel.from_focal(_checked_focal(focal), width, height)
-    if not getattr(args, "camera", None):
-        raise CameraModelError("name a camera: --camera NAME[@WxH] or --focal-px F --size WxH")
-    return resolve_camera(args.camera)
-
-
-def _checked_focal(focal: Any) -> float:
-    try:
-        return FOCAL_PX.check(focal, "--focal-px")
-    except LimitError as exc:
-        raise CameraModelError(str(exc)) from None
