@@ -192,7 +192,8 @@ class FrameResult:
         return out
 
     def summary(self, simulated: bool = False) -> str:
-        """One compact human line: frame, time, status (:meth:`reported_status`) and each method's pose."""
+        """One compact human line: frame, time, status (:meth:`reported_status`), each method's pose
+        and what the live stream did (``[flip from history]``, ``[filtered]``)."""
         line = f"#{self.index:<5d} t={self.t_ms / 1000:8.3f}s {self.reported_status(simulated):<6s}"
         for k, (name, pose) in enumerate(self.poses.items()):
             if not np.all(np.isfinite(pose.position_mm)):
@@ -207,6 +208,10 @@ class FrameResult:
             )
         if self.reason:
             line += f"  ({self.reason})"
+        if self.resolved_by == "history":
+            line += "  [flip from history]"
+        if self.filtered:
+            line += "  [filtered]"
         return line + f"  lat={self.latency_ms:.1f}ms"
 
 

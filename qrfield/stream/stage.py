@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from qrfield.solvers.mirror import mirror_result, reflected_rotation
+from qrfield.solvers.registry import uses_depth_model
 from qrfield.solvers.result import PoseResult
 from qrfield.status import usable_pose
 from qrfield.stream.continuity import BY_FRAME, BranchHistory
@@ -119,7 +120,7 @@ class StreamStage:
             result.t_ms,
             text,
             mirror=lambda p: mirror_result(p, camera, side_mm, corners_cov),
-            reflected=(lambda p: reflected_rotation(p, camera)) if name == "numerical" else None,
+            reflected=(lambda p: reflected_rotation(p, camera)) if uses_depth_model(name) else None,
         )
         out, filtered, reset = decision.pose, False, ""
         if state.filter is not None and not decision.ambiguous:
