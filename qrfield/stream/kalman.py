@@ -11,9 +11,9 @@ w rad): :func:`qrfield.stream.poses.vector_cov`).
   card share much of their error (the corner fit's error is fixed by the view, not drawn afresh per
   frame: docs/uncertainty.md, ``FRAME_SHARED_SHARE`` = rho), and no filter averages that part away:
   the filter takes (1 - rho) C_frame as its noise and reports P + rho C_bar (C_bar the recent
-  frames' running mean), so that its sigma stays honest for a still card. Position and rotation are two blocks (the frame covariance's
-  coupling between them is left out: near frontal it is strong and unreliable, and a precise
-  position would move the rotation through it; measured on the tuning seeds of the benchmark).
+  frames' running mean), so that its sigma stays honest for a still card. Position and rotation
+  are two blocks (the frame covariance's coupling between them is left out: near frontal it is
+  strong and unreliable, and a precise position moved the rotation through it by degrees).
 - Process noise from S: the pose is a random walk whose variance grows by r_max dt_bar dt / S^2 in
   dt, the same in every direction of a block (position; rotation), r_max the largest variance of the
   recent frames' own noise in that block and dt_bar the recent frame interval. Along the noisiest
