@@ -21,7 +21,9 @@ w rad): :func:`qrfield.stream.poses.vector_cov`).
   K = sqrt(q dt / r) = dt / S); along more precise ones it follows faster (a precise coordinate is
   not assumed to hold still). The price: a card moving at a steady rate v is reported about S late
   (S times the frame rate frames, v S behind) while the filter stays on; ``qrfield benchmark
-  stream`` measures it. A random walk was chosen over a constant-velocity model by measurement: the
+  stream`` measures it. The reported covariance holds that lag too: the running mean innovation
+  nu (over about S / LAG_WEIGHT) leaves the estimate (I - K) nu behind the frames, added as its
+  outer product (the share of it that the frames' noise does not explain). A random walk was chosen over a constant-velocity model by measurement: the
   frames' errors drift with the view (their lag-1 correlation on a moving far card is 0.5-0.7),
   which a velocity state takes for motion and extrapolates (the tuning seeds 1 and 2 of the
   benchmark: fewer frames within 2 deg / 5 mm and more confidently wrong ones at modules of 1.2 and
@@ -53,6 +55,8 @@ NOISE_WEIGHT = 0.1
 #: A frame's noise enters that mean at most this many times the mean (one frame with a huge std
 #: does not make the filter forget).
 NOISE_CLIP = 10.0
+#: The mean innovation is a running mean over about S / LAG_WEIGHT (the lag builds within about S).
+LAG_WEIGHT = 3.0
 #: Riccati steps from a single frame to the steady state at a start.
 STEADY_STEPS = 60
 
@@ -107,6 +111,8 @@ class PoseFilter:
         self._t_ms: int | None = None
         self._key: object = None
         self._noise = np.zeros((6, 6))
+        self._innovation = np.zeros(6)  # the running mean innovation (over about S)
+        self._lag = np.zeros(6)  # how far the estimate trails the frames, (x, y, z mm, w rad)
         self._dt = 0.0  # the running mean frame interval, s (kept over the gate's resets)
 
     def update(
@@ -148,7 +154,8 @@ class PoseFilter:
                 # The shared part of the recent frames' noise (their running mean), not this frame's
                 # alone: a frame's covariance near frontal jumps by 10x and more from frame to frame.
                 recent = (self._shared / self._own)[:, None] ** 2 * self._noise
-                return Estimate(self._rotation.copy(), self._position.copy(), self._p + recent, True)
+                cov = self._p + recent + np.outer(self._lag, self._lag)
+                return Estimate(self._rotation.copy(), self._position.copy(), cov, True)
             why = f"a jump the covariance cannot explain (chi-square {chi2:.0f} > {GATE_CHI2})"
         self._start(rotation, position, own, t_ms, key)
         return Estimate(rotation.copy(), position.copy(), cov.copy(), False, why)
@@ -174,6 +181,8 @@ class PoseFilter:
         self._t_ms = t_ms
         self._key = key
         self._noise = own.copy()
+        self._innovation = np.zeros(6)
+        self._lag = np.zeros(6)
         self._dt = self._dt or NOMINAL_FRAME_S
         q = self._growth(self._dt, own)
         p = own.copy()
@@ -210,3 +219,17 @@ class PoseFilter:
         self._p = ik @ self._p @ ik.T + gain @ own @ gain.T
         self._position = self._position + step[:3]
         self._rotation = rotation_from_vector(step[3:]) @ self._rotation
+        # How far the estimate trails: a steady motion leaves a mean innovation nu and an estimate
+        # (I - K) nu behind the frames (a random walk's lag), which P does not hold.
+        weight = min(1.0, LAG_WEIGHT * max(self._dt, 1e-3) / self.time_constant_s)
+        self._innovation = (1.0 - weight) * self._innovation + weight * innovation
+        # Only what the noise cannot explain: a running mean of innovations of covariance s has
+        # covariance about weight / (2 - weight) s; its chi-square there is 6 on average for a still
+        # card, so the lag counts by the share 1 - 6 / chi-square beyond that.
+        spread = s * (weight / (2.0 - weight))
+        try:
+            chi2 = float(self._innovation @ np.linalg.solve(spread, self._innovation))
+        except np.linalg.LinAlgError:
+            chi2 = 0.0
+        share = max(0.0, 1.0 - 6.0 / chi2) if chi2 > 6.0 else 0.0
+        self._lag = math.sqrt(share) * (ik @ self._innovation)
