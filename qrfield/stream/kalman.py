@@ -23,11 +23,12 @@ w rad): :func:`qrfield.stream.poses.vector_cov`).
   (S times the frame rate frames, v S behind) while the filter stays on; ``qrfield benchmark
   stream`` measures it. The reported covariance holds that lag too: the running mean innovation
   nu (over about S / LAG_WEIGHT) leaves the estimate (I - K) nu behind the frames, added as its
-  outer product (the share of it that the frames' noise does not explain). A random walk was chosen over a constant-velocity model by measurement: the
-  frames' errors drift with the view (their lag-1 correlation on a moving far card is 0.5-0.7),
-  which a velocity state takes for motion and extrapolates (the tuning seeds 1 and 2 of the
-  benchmark: fewer frames within 2 deg / 5 mm and more confidently wrong ones at modules of 1.2 and
-  1.4 px, and an overshoot after each start on the still card).
+  outer product (the share of it that the frames' noise does not explain). A random walk was
+  chosen over a constant-velocity model by measurement: the frames' errors drift with the view
+  (their lag-1 correlation on a moving far card is 0.5-0.7), which a velocity state takes for
+  motion and extrapolates (the tuning seeds 1 and 2 of the benchmark: fewer frames within 2 deg /
+  5 mm and more confidently wrong ones at modules of 1.2 and 1.4 px, and an overshoot after each
+  start on the still card).
 - Resets: when the innovation's chi-square exceeds GATE_CHI2 under the frame's whole covariance and
   the filter's (a jump, or a motion faster than S lets the filter follow), after a gap of more than
   GAP_S without a measurement, on another code, and by :meth:`PoseFilter.reset`. The first frame
