@@ -133,3 +133,23 @@ def test_filter_s_on_the_command_line_and_in_app_json(tmp_path: Path) -> None:
     assert not any(line["filtered"] for line in off)
     bad = _qrfield(*bench, "--filter-s", "-1", tmp_path=tmp_path)
     assert bad.returncode != 0 and "filter_s" in bad.stderr and "Traceback" not in bad.stderr
+
+
+def test_the_stream_benchmark_runs_and_prints_every_mode(tmp_path: Path) -> None:
+    args = [
+        "benchmark",
+        "stream",
+        "--seeds",
+        "1",
+        "--frames",
+        "4",
+        "--only",
+        "still 450 mm",
+        "--sections",
+        "1,2",
+    ]
+    done = _qrfield(*args, "--still-views", "1", "--still-frames", "3", tmp_path=tmp_path)
+    assert done.returncode == 0, done.stderr
+    for mode in ("single frame", "continuity", "filter 0.2 s", "filter 0.5 s"):
+        assert mode in done.stdout
+    assert "seeds [1] were used for tuning" in done.stdout and "RMS (mean - truth) / sem" in done.stdout

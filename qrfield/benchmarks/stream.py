@@ -33,6 +33,7 @@ from __future__ import annotations
 import argparse
 import copy
 import math
+import os
 import string
 import time
 from collections.abc import Callable
@@ -539,6 +540,8 @@ def run(args: argparse.Namespace) -> int:
         print("benchmark stream needs the segno package (the hard set's encoder)")
         return 1
     sections = {s.strip() for s in str(args.sections).split(",")}
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    print(f"qrfield benchmark stream (load average {load:.1f}; figures of accuracy, not of time)")
     if "1" in sections:
         _sequences(args)
     if "2" in sections:
