@@ -17,6 +17,11 @@ bench unless ``--allow-virtual`` is given. The port is opened exclusively: a por
 No silent states: an unknown backend, method or setting value, on the command line or in app.json
 (the message names the file and the key), stops the run at start with exit code 2.
 
+With ``--frame tool`` or ``--frame base`` (and a hand-eye file, docs/handeye.md) the poses on stdout
+are in the gripper's tool frame or the robot's base frame, their uncertainty with the calibration's
+added; each JSON line says which in ``pose_frame``. The serial link's $QRF lines stay in the camera
+frame (HELLO reports ``camera``) until the hand-eye commands reach the link.
+
 stdout is best effort: lines are written by a thread of their own, so a reader that stops reading
 never holds up the frame loop, the serial line or shutdown (lines it did not take are counted on
 stderr). SIGINT (Ctrl-C) and SIGTERM stop the run cleanly after the current frame. Exit codes: 0
@@ -146,6 +151,7 @@ def _gripper_link(settings: Any, say: _Stderr, config: Any) -> Any:
 def run(args: argparse.Namespace) -> int:
     from qrfield.camera import camera_origin
     from qrfield.engine import FAILED, STOPPED, FrameLoop
+    from qrfield.handeye import InFrame, PoseFrame
     from qrfield.runconfig import effective_settings
     from qrfield.sources import source_kind
     from qrfield.stdout_lines import LineWriter
@@ -161,6 +167,11 @@ def run(args: argparse.Namespace) -> int:
     if source_kind(config.source) != "virtual":
         for note in effective.assumed():
             say(note)
+    pose_frame = PoseFrame.from_settings(effective.groups["handeye"], args.config_dir)
+    if not pose_frame.identity:
+        say(pose_frame.describe())
+        if serial:
+            say("serial: $QRF poses stay in the camera frame (HELLO says camera) for now")
     config.make_pipeline()  # every detector, solver and camera setting is checked now, not per frame
     link = _gripper_link(effective.serial_settings(), say, config) if serial else None
     writer = LineWriter(sys.stdout)
@@ -169,7 +180,10 @@ def run(args: argparse.Namespace) -> int:
     events = _Events(
         say, writer, link, f"camera {camera.name} from {camera_origin(camera)}" if camera.path else ""
     )
-    sinks: list[Any] = [_StdoutSink(writer, args.json_lines)] + ([link] if link is not None else [])
+    stdout_sink: Any = _StdoutSink(writer, args.json_lines)
+    if not pose_frame.identity:
+        stdout_sink = InFrame(stdout_sink, pose_frame)
+    sinks: list[Any] = [stdout_sink] + ([link] if link is not None else [])
     loop = FrameLoop(config, events=events, sinks=sinks, max_frames=args.frames)
     events.loop = loop
 
@@ -214,8 +228,16 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _json_line(result: Any, simulated: bool) -> str:
-    return json.dumps(result.to_json_dict(simulated))
+    from qrfield.handeye.frames import frame_of
+
+    out = result.to_json_dict(simulated)
+    out["pose_frame"] = frame_of(result)  # camera, tool or base (docs/handeye.md)
+    return json.dumps(out)
 
 
 def _human_line(result: Any, simulated: bool) -> str:
-    return result.summary(simulated)
+    from qrfield.handeye.frames import frame_of
+    from qrfield.handeye.setups import CAMERA
+
+    frame = frame_of(result)
+    return result.summary(simulated) + ("" if frame == CAMERA else f"  [{frame} frame]")
