@@ -317,3 +317,146 @@ def test_a_file_that_cannot_be_written_is_an_error_and_the_pairs_stay(tmp_path) 
         "not saved"
     )
     assert len(h.handeye.status().pairs) == 6
+
+
+def pose_result(position, angles, std=(0.05, 0.05, 0.2, 0.03, 0.03, 0.01)):
+    """A real PoseResult (qrfield.solvers) at a pose, with a diagonal covariance."""
+    from qrfield.geometry import rotation_matrix
+    from qrfield.solvers import PoseResult
+
+    cov = np.diag(np.square(std))
+    return PoseResult(
+        method="numerical",
+        position_mm=np.array(position, float),
+        angles_deg=np.array(angles, float),
+        rotation=rotation_matrix(angles),
+        vertices_mm=np.zeros((4, 3)),
+        converged=True,
+        iterations=3,
+        residual_mm=0.0,
+        reprojection_px=0.1,
+        reason="",
+        corners_px=np.zeros((4, 2)),
+        position_std_mm=np.array(std[:3]),
+        angles_std_deg=np.array(std[3:]),
+        pose_cov=cov,
+    )
+
+
+def frame_result(index, position, angles):
+    from qrfield.pipeline import FrameResult
+
+    return FrameResult(
+        index,
+        index * 50,
+        "OK",
+        poses={"numerical": pose_result(position, angles)},
+        t_capture=time.monotonic(),
+    )
+
+
+def in_tool(x, position, angles):
+    """By hand: the code's pose in the tool frame through x."""
+    from qrfield.geometry import angles_from_rotation, rotation_matrix
+
+    return x[:3, :3] @ np.array(position) + x[:3, 3], angles_from_rotation(
+        x[:3, :3] @ rotation_matrix(angles)
+    )
+
+
+def test_the_link_streams_in_the_tool_frame_and_a_handeye_switches_it_to_the_new_calibration(tmp_path):
+    import os
+    import threading
+
+    from serial_truth import frames_and_answers
+
+    from qrfield.handeye import HandEyeCalibration, PoseFrame
+    from qrfield.serial.controller import GripperLink
+    from qrfield.serial.link import CONNECTED, SerialLinkSettings
+
+    old = transform_from_pose([70.0, -15.0, 40.0], [2.0, -3.0, 91.0])  # 10 mm and 1 deg off X
+    cov = np.diag([0.3, 0.3, 0.3, 0.05, 0.05, 0.05]) ** 2
+    calibration = HandEyeCalibration("eye-in-hand", old, 0.1, 0.02, 15, "test", cov)
+    master, slave = os.openpty()
+    data = bytearray()
+    stop = threading.Event()
+
+    def read() -> None:
+        while not stop.is_set():
+            try:
+                data.extend(os.read(master, 4096))
+            except OSError:
+                return
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    link = GripperLink(
+        SerialLinkSettings(port=os.ttyname(slave), max_rate_hz=0), pose_frame=PoseFrame("tool", calibration)
+    )
+    handeye = link.add_handeye(HandEyeCommands("eye-in-hand", tmp_path / "handeye.json"))
+    rng = np.random.default_rng(11)
+    probe = ([8.0, -4.0, 305.0], [10.0, -12.0, 25.0])
+
+    def answers() -> list[dict]:
+        return frames_and_answers(bytes(data))[1]
+
+    def wait_for(n: int) -> None:
+        deadline = time.monotonic() + 20
+        while len(answers()) < n:
+            assert time.monotonic() < deadline, answers()
+            time.sleep(0.01)
+
+    try:
+        link.start()
+        assert link.wait_for_state(CONNECTED, 10)
+        os.write(master, command_line("HELLO"))
+        wait_for(1)
+        link.on_result(frame_result(0, *probe), simulated=False)
+        time.sleep(0.2)
+        for k, view in enumerate(VIEWS):
+            os.write(master, command_line("TOOL", *tool_args(tool_for(transform_from_pose(*view)))))
+            deadline = time.monotonic() + 20
+            while handeye.status().busy != "TOOL":  # the command has arrived: frames after it count
+                assert time.monotonic() < deadline
+                time.sleep(0.005)
+            position, angles = VIEWS[k]
+            noise = rng.normal(0, [0.05, 0.05, 0.2, 0.03, 0.03, 0.01])
+            link.on_result(frame_result(k + 1, np.add(position, noise[:3]), np.add(angles, noise[3:])), False)
+            wait_for(k + 2)
+        os.write(master, command_line("HANDEYE"))
+        wait_for(len(VIEWS) + 2)
+        link.on_result(frame_result(99, *probe), simulated=False)
+        handled = link.commands.handled
+        os.write(master, command_line("MEAS", "1"))
+        deadline = time.monotonic() + 20
+        while link.commands.handled == handled:  # the MEAS is in: the next frame is its
+            assert time.monotonic() < deadline
+            time.sleep(0.005)
+        link.on_result(frame_result(100, *probe), simulated=False)
+        os.write(master, command_line("HELLO"))
+        wait_for(len(VIEWS) + 4)
+    finally:
+        link.close()
+        stop.set()
+        os.close(slave)
+        os.close(master)
+        reader.join(5)
+    frames, got = frames_and_answers(bytes(data))
+    assert got[0]["values"][-1] == "tool" and got[-1]["values"][-1] == "tool"  # HELLO before and after
+    assert got[len(VIEWS) + 1]["command"] == "HANDEYE" and got[len(VIEWS) + 1]["result"] == "OK"
+    # Before the HANDEYE: the probe through the old calibration, its sigmas with the calibration's.
+    (first,) = [f for f in frames if f["status"] == "OK" and f["t_ms"] == 0]
+    p_old, a_old = in_tool(old, *probe)
+    np.testing.assert_allclose(first["pose"][:3], p_old, atol=0.051)
+    np.testing.assert_allclose(first["pose"][3:], a_old, atol=0.0051)
+    assert all(s >= 0.3 for s in first["sigma"][:3]) and first["status"] == "OK"
+    # After it: the same probe through the new calibration (within the solve's error of X), in
+    # $QRF and $QRM alike.
+    p_new, a_new = in_tool(X, *probe)
+    assert np.linalg.norm(p_new - p_old) > 5.0  # the two calibrations tell apart
+    (last,) = [f for f in frames if f["status"] == "OK" and f["t_ms"] in (4950, 5000)][-1:]
+    meas = got[len(VIEWS) + 2]
+    for pose in (last["pose"], meas["pose"]):
+        assert np.linalg.norm(np.array(pose[:3]) - p_new) < 1.0
+        assert np.abs(np.array(pose[3:]) - a_new).max() < 0.2
+    assert link.pose_frame.calibration.path == tmp_path / "handeye.json"

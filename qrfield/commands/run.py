@@ -199,13 +199,11 @@ def run(args: argparse.Namespace) -> int:
             say(note)
     pose_frame = PoseFrame.from_settings(effective.groups["handeye"], args.config_dir)
     pose_frame.check_source(source_kind(config.source) in ("auto", *LIVE_CAMERA_KINDS))
+    handeye = _handeye_commands(effective, args, config, say) if serial else None
     if not pose_frame.identity:
         say(pose_frame.describe())
     config.make_pipeline()  # every detector, solver and camera setting is checked now, not per frame
-    link = None
-    if serial:
-        handeye = _handeye_commands(effective, args, config, say)
-        link = _gripper_link(effective.serial_settings(), say, config, pose_frame, handeye)
+    link = _gripper_link(effective.serial_settings(), say, config, pose_frame, handeye) if serial else None
     writer = LineWriter(sys.stdout)
     stop_signal = {"name": ""}
     camera = config.camera
