@@ -460,3 +460,51 @@ def test_the_link_streams_in_the_tool_frame_and_a_handeye_switches_it_to_the_new
         assert np.linalg.norm(np.array(pose[:3]) - p_new) < 1.0
         assert np.abs(np.array(pose[3:]) - a_new).max() < 0.2
     assert link.pose_frame.calibration.path == tmp_path / "handeye.json"
+
+
+def test_a_frame_seen_while_the_next_tool_is_armed_never_answers_it(tmp_path) -> None:
+    # The frame loop's thread hands a frame over at the moment the next TOOL is being armed (here:
+    # from inside the arming, on another thread): it must not answer that TOOL with the previous
+    # pair's count (it once did: the first pair's "done" was still set) nor make its pair.
+    import threading
+
+    from qrfield.handeye.pairs import PairCollector
+
+    rng = np.random.default_rng(9)
+    h = Harness(tmp_path)
+    helpers: list[threading.Thread] = []
+
+    class ArmedMidFrame(PairCollector):
+        def expect(self, *args, **kwargs) -> None:
+            helper = threading.Thread(target=h.frame, args=(seen(0, rng),))
+            helpers.append(helper)
+            helper.start()
+            helper.join(0.3)  # the frame thread runs now, or waits until the arming is done
+            super().expect(*args, **kwargs)
+
+    h.handeye.collector = ArmedMidFrame()
+    for n in (1, 2, 3):
+        h.command("TOOL", *tool_args(tool_for(transform_from_pose(*VIEWS[n]))))
+        for helper in helpers:
+            helper.join(5)
+        assert len(h.link.sent) == n - 1  # the frame captured before the arming made no pair
+        h.frame(seen(n, rng))
+        assert [parse_answer_line(line)["values"][0] for line in h.link.sent] == [
+            str(k) for k in range(1, n + 1)
+        ]
+    assert len(h.handeye.status().pairs) == 3
+
+
+def test_clearing_the_pairs_answers_a_waiting_tool_and_starts_a_new_set(tmp_path) -> None:
+    rng = np.random.default_rng(10)
+    h = Harness(tmp_path)
+    for k in (0, 1):
+        h.command("TOOL", *tool_args(tool_for(transform_from_pose(*VIEWS[k]))))
+        h.frame(seen(k, rng))
+    h.command("TOOL", *tool_args(tool_for(transform_from_pose(*VIEWS[2]))))
+    h.handeye.clear()  # the operator's Clear pairs while the TOOL waits
+    h.frame(seen(2, rng))
+    h.command("TOOL", *tool_args(tool_for(transform_from_pose(*VIEWS[3]))))
+    h.frame(seen(3, rng))
+    got = [(a["result"], *a["values"]) for a in h.answers()]
+    assert got == [("OK", "1"), ("OK", "2"), ("ERR", "pairs cleared"), ("OK", "1")]

@@ -100,6 +100,7 @@ class _Tool:
     reply: Callable[[bytes], None]
     deadline: float
     text: str
+    before: int  # pairs before this TOOL: one more means it was recorded
 
 
 def parse_tool(args: tuple[str, ...]) -> np.ndarray:
@@ -202,9 +203,10 @@ class HandEyeCommands:
         except HandEyeError as exc:
             self._answer(command.text, reply, codec.encode_error("TOOL", exc.short))
             return
-        with self._lock:
-            self._tool = _Tool(reply, self._clock() + self.timeout_s, command.text)
-        self.collector.expect(tool, f"pose {len(self.collector) + 1}")
+        with self._lock:  # armed before it is seen as waiting: a frame never answers the wrong TOOL
+            before = len(self.collector)
+            self.collector.expect(tool, f"pose {before + 1}")
+            self._tool = _Tool(reply, self._clock() + self.timeout_s, command.text, before)
 
     def on_frame(self, result: Any, simulated: bool) -> None:
         """One frame result in the camera frame (the frame loop's thread): a pair if TOOL waits."""
@@ -212,29 +214,32 @@ class HandEyeCommands:
             if self._tool is None:
                 return
         self.collector.on_result(result, simulated)
-        if self.collector.wait(0):
-            self._finish_tool(recorded=True)
+        self._finish_tool(timed_out=False)
 
     def poll(self) -> None:
         """Answer a TOOL whose deadline has passed (the link's thread)."""
-        with self._lock:
-            if self._tool is None or self._clock() < self._tool.deadline:
-                return
-        self._finish_tool(recorded=False)
+        self._finish_tool(timed_out=True)
 
-    def _finish_tool(self, recorded: bool) -> None:
+    def _finish_tool(self, timed_out: bool) -> None:
+        """Answer the waiting TOOL once its pair is recorded, or (``timed_out``) past its deadline."""
         with self._lock:
-            tool, self._tool = self._tool, None
-        if tool is None:
-            return  # answered by the other thread
-        if not recorded:
-            self.collector.cancel()  # after this no frame makes the pair: then look once more
-            recorded = self.collector.wait(0)
+            tool = self._tool
+            if tool is None:
+                return
+            recorded = len(self.collector) > tool.before
+            if not recorded and not (timed_out and self._clock() >= tool.deadline):
+                return
+            self._tool = None
+            if not recorded:
+                self.collector.cancel()  # no frame makes the pair after this: look once more
+                recorded = len(self.collector) > tool.before
+            simulated = self.collector.simulated
+            problem = self.collector.last_problem
+            count = len(self.collector)
         if recorded:
-            marks = (SIM_MARK,) if self.collector.simulated else ()
-            line = codec.encode_ok("TOOL", str(len(self.collector)), *marks)
+            line = codec.encode_ok("TOOL", str(count), *((SIM_MARK,) if simulated else ()))
         else:
-            line = codec.encode_error("TOOL", timeout_reason(self.collector.last_problem, self.timeout_s))
+            line = codec.encode_error("TOOL", timeout_reason(problem, self.timeout_s))
         self._answer(tool.text, tool.reply, line)
 
     # ----- HANDEYE
@@ -295,8 +300,12 @@ class HandEyeCommands:
         reply(line)
 
     def clear(self) -> None:
-        """Forget the pairs (a TOOL still waiting gets its answer at its deadline)."""
-        self.collector.clear()
+        """Forget the pairs; a TOOL still waiting is answered ``ERR,pairs cleared`` now."""
+        with self._lock:
+            tool, self._tool = self._tool, None
+            self.collector.clear()
+        if tool is not None:
+            self._answer(tool.text, tool.reply, codec.encode_error("TOOL", "pairs cleared"))
 
     def status(self) -> HandEyeStatus:
         """A snapshot (any thread)."""
