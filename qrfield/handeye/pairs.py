@@ -10,8 +10,8 @@ the line and the column (:func:`read_pairs_csv`).
 :class:`PairCollector` records pairs from the frame loop (a sink: ``on_result``): armed with a
 tool pose (:meth:`PairCollector.expect`), it takes the next result captured after that whose pose
 converged and is not ambiguous (:func:`qrfield.handeye.measure.pair_problem`); :meth:`PairCollector.solve`
-solves the pairs so far. It is what serial protocol 2's ``$QRC,TOOL`` and ``$QRC,HANDEYE`` will
-call (:meth:`PairCollector.record`, :meth:`PairCollector.solve`), docs/handeye.md.
+solves the pairs so far. It is the core of serial protocol 2's ``$QRC,TOOL`` and ``$QRC,HANDEYE``
+(:mod:`qrfield.serial.handeye`: :meth:`PairCollector.expect`, :meth:`PairCollector.solve`), docs/handeye.md.
 """
 
 from __future__ import annotations
