@@ -289,10 +289,10 @@ class SerialPanel(QtWidgets.QWidget):
     def set_context(self, side_mm: float, camera: str, source: str = "") -> None:
         """The QR side (mm) and camera model the measurements use: what HELLO reports; ``source``:
         the app's source (a live camera's poses never go through a simulated calibration)."""
-        from qrfield.sources import LIVE_CAMERA_KINDS, source_kind
+        from qrfield.sources import may_be_live_camera
 
         self._context = (float(side_mm), str(camera))
-        self._live_source = bool(source) and source_kind(source) in ("auto", *LIVE_CAMERA_KINDS)
+        self._live_source = bool(source) and may_be_live_camera(source)
         if self.link is not None:
             self.link.set_context(side_mm=self._context[0], camera=self._context[1])
 

@@ -183,7 +183,7 @@ def run(args: argparse.Namespace) -> int:
     from qrfield.engine import FAILED, STOPPED, FrameLoop
     from qrfield.handeye import InFrame, PoseFrame
     from qrfield.runconfig import effective_settings
-    from qrfield.sources import LIVE_CAMERA_KINDS, source_kind
+    from qrfield.sources import may_be_live_camera, source_kind
     from qrfield.stdout_lines import LineWriter
 
     if args.frames < 0:
@@ -198,7 +198,7 @@ def run(args: argparse.Namespace) -> int:
         for note in effective.assumed():
             say(note)
     pose_frame = PoseFrame.from_settings(effective.groups["handeye"], args.config_dir)
-    pose_frame.check_source(source_kind(config.source) in ("auto", *LIVE_CAMERA_KINDS))
+    pose_frame.check_source(may_be_live_camera(config.source))
     handeye = _handeye_commands(effective, args, config, say) if serial else None
     if not pose_frame.identity:
         say(pose_frame.describe())
