@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pytest
 from serial_truth import command_line, parse_answer_line
+from test_serial_controller import Clock, FakeLink
 
 from qrfield.handeye.rigid import difference, quaternion_from_rotation, transform_from_pose
 from qrfield.serial.codec import FrameDecoder
@@ -81,32 +82,6 @@ def seen(k: int, rng: np.random.Generator, **changes) -> Result:
     position, angles = VIEWS[k]
     noise = rng.normal(0, [0.05, 0.05, 0.2, 0.03, 0.03, 0.01])
     return Result(k, Pose(np.array(position) + noise[:3], np.array(angles) + noise[3:], **changes))
-
-
-class Clock:
-    def __init__(self) -> None:
-        self.t = 100.0
-
-    def __call__(self) -> float:
-        return self.t
-
-
-@dataclass
-class FakeLink:
-    sent: list[bytes] = field(default_factory=list)
-
-    def send_line(self, line: bytes) -> bool:
-        self.sent.append(line)
-        return True
-
-    def set_streaming(self, on: bool) -> None:
-        pass
-
-    def set_rate(self, hz: float) -> None:
-        pass
-
-    def answers_waiting(self) -> int:
-        return 0
 
 
 class Harness:
