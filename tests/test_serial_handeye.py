@@ -9,6 +9,7 @@ TOOL deadline is a fake clock.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import time
@@ -135,6 +136,7 @@ def test_tool_records_pairs_and_handeye_recovers_the_transform_saving_the_file(t
     assert np.linalg.norm(err[:3]) < 2.0 and math.degrees(np.linalg.norm(err[3:])) < 0.3
     status = h.handeye.status()
     assert status.pairs == () and status.done.calibration.n_pairs == len(VIEWS)  # a new set begins
+    assert status == h.handeye.status()  # a display compares snapshots to redraw only on a change
     assert status.done.path == tmp_path / "handeye.json" and status.done.previous is not None
     h.command("TOOL", *tool_args(tool_for(transform_from_pose(*VIEWS[0]))))
     h.frame(seen(0, rng))
@@ -483,3 +485,25 @@ def test_clearing_the_pairs_answers_a_waiting_tool_and_starts_a_new_set(tmp_path
     h.frame(seen(3, rng))
     got = [(a["result"], *a["values"]) for a in h.answers()]
     assert got == [("OK", "1"), ("OK", "2"), ("ERR", "pairs cleared"), ("OK", "1")]
+
+
+def test_status_snapshots_compare_across_two_calibrations(tmp_path) -> None:
+    # The Serial tab redraws when the snapshot changes: two calibrations' snapshots must compare
+    # (their matrices once made the comparison raise).
+    rng = np.random.default_rng(12)
+    h = Harness(tmp_path)
+    shown = []
+    for _ in range(2):
+        for k, view in enumerate(VIEWS):
+            h.command("TOOL", *tool_args(tool_for(transform_from_pose(*view))))
+            h.frame(seen(k, rng))
+        h.command("HANDEYE")
+        h.handeye.close(30.0)
+        shown.append(h.handeye.status())
+    assert (
+        shown[0].done != shown[1].done
+        and shown[0].done.calibration.n_pairs == shown[1].done.calibration.n_pairs
+    )
+    same_but_done = dataclasses.replace(shown[1], last=shown[0].last)
+    assert same_but_done != shown[0]
+    assert (tmp_path / "handeye.json.previous").is_file()  # the first, kept when the second was saved

@@ -70,9 +70,10 @@ class PairInfo:
     code_mm: tuple[float, float, float]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class CalibrationDone:
-    """A calibration made by HANDEYE: what was saved where (``previous``: the file it replaced, kept)."""
+    """A calibration made by HANDEYE: what was saved where (``previous``: the file it replaced, kept).
+    Equal only to itself (its matrices do not compare as one truth value)."""
 
     calibration: HandEyeCalibration
     path: Path
