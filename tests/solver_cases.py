@@ -6,10 +6,10 @@ import functools
 
 import numpy as np
 
-from qrfield.benchmarks.hardset import DISTORTED_CAMERA
 from qrfield.camera import resolve_camera
 from qrfield.geometry import angle_difference
 from qrfield.sampling import random_visible_poses
+from qrfield.testing.hardset import DISTORTED_CAMERA
 
 SIDE_MM = 50.0
 #: A lens with visible barrel distortion (k1, k2, p1, p2, k3), typical of a wide Pi camera (declared

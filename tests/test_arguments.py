@@ -82,6 +82,7 @@ def test_usage_errors_are_one_line_and_returned(capsys):
     assert err.count("\n") == 1 and "required" in err and "see qrfield render --help" in err
 
 
+@pytest.mark.slow
 def test_solve_piped_into_head_is_quiet(tmp_path):
     # Once "BrokenPipeError" and exit code 2 (or "Exception ignored ... Broken pipe" at exit).
     env = {**os.environ, "PYTHONPATH": REPO}

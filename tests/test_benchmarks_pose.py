@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from qrfield.benchmarks._pose_real import FOLDER, boofcv_cameras, square_cases
-from qrfield.benchmarks._pose_views import VIEW_SETS, BenchView
 from qrfield.cli import main
+from qrfield.testing.pose_views import VIEW_SETS, BenchView
+from qrfield.testing.real_squares import FOLDER, boofcv_cameras, square_cases
 
 
 @pytest.fixture(scope="module")
@@ -33,6 +33,7 @@ def test_boofcv_intrinsics_are_read_for_both_cameras(shared_data: Path):
     assert cams["right"].fx == pytest.approx(526.3970637345301)
 
 
+@pytest.mark.slow
 def test_four_real_corners_agree_with_the_whole_board_within_their_std(real_cases):
     """22 real frames, 11 squares each (60 and 90 mm): the error against the 24-corner pose over the
     reported std has an RMS near 1 for every component (measured 0.81-1.17) and 90-99 % of the
@@ -52,11 +53,12 @@ def test_four_real_corners_agree_with_the_whole_board_within_their_std(real_case
         assert max(np.abs(c.errors[3:]).max() for c in good) < 5.0  # measured 2.5 deg (60 mm, std 0.8)
 
 
+@pytest.mark.slow
 def test_bench_pose_runs_on_a_view_set_given_by_name(monkeypatch, capsys, tmp_path):
     """The view set is a parameter: a stand-in set registered under a name is what the benchmark measures."""
-    from qrfield.benchmarks._pose_views import cameras
     from qrfield.geometry import Pose
     from qrfield.render import render_view
+    from qrfield.testing.pose_views import cameras
 
     def tiny(count: int, seed: int) -> list[BenchView]:
         camera = cameras()[0]

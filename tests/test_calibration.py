@@ -146,6 +146,7 @@ def test_exact_corners_recover_the_camera() -> None:
     np.testing.assert_allclose(cam.dist, TRUE_CAMERA.dist, atol=1e-5)
 
 
+@pytest.mark.slow
 def test_rendered_views_round_trip(synthetic_views: list) -> None:
     """Rendered images -> detection -> calibration recovers the true intrinsics."""
     detections = [detect_board(v.image, SYNTH_BOARD, f"view {i}") for i, v in enumerate(synthetic_views)]
@@ -172,6 +173,7 @@ def test_rendered_views_round_trip(synthetic_views: list) -> None:
     assert np.abs(project_points(corner_ray, cam) - project_points(corner_ray, TRUE_CAMERA)).max() < 1.0
 
 
+@pytest.mark.slow
 def test_sector_detector_takes_over(synthetic_views: list, monkeypatch: pytest.MonkeyPatch) -> None:
     """Where the classic detector fails, findChessboardCornersSB finds the board (unless not thorough)."""
     view = synthetic_views[0]
@@ -186,6 +188,7 @@ def test_sector_detector_takes_over(synthetic_views: list, monkeypatch: pytest.M
 # ---------------------------------------------------------------------- skipped views and errors
 
 
+@pytest.mark.slow
 def test_unusable_views_are_skipped_with_reasons(synthetic_views: list, tmp_path: Path) -> None:
     paths = []
     for i, view in enumerate(synthetic_views[:4]):
@@ -268,6 +271,7 @@ def test_coverage_grid_hand_computed() -> None:
     ]
 
 
+@pytest.mark.slow
 def test_result_coverage_follows_the_views(synthetic_views: list) -> None:
     detections = [detect_board(v.image, SYNTH_BOARD) for v in synthetic_views]
     result = calibrate(detections, SYNTH_BOARD)
@@ -289,6 +293,7 @@ def image_files(synthetic_views: list, tmp_path: Path) -> list[str]:
     return paths
 
 
+@pytest.mark.slow
 def test_cli_json_and_camera_profile(
     image_files: list[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
 ) -> None:
@@ -329,6 +334,7 @@ def test_cli_json_and_camera_profile(
     assert resolve_camera("bench").dist[4] == 0.0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("extra", "message"),
     [
@@ -356,6 +362,7 @@ def test_cli_no_usable_images(tmp_path: Path, capsys: pytest.CaptureFixture) -> 
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_cli_takes_a_folder(image_files: list[str], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     (Path(image_files[0]).parent / "readme.txt").write_text("not an image, not listed")
     out = tmp_path / "cam.json"
@@ -415,6 +422,7 @@ def test_a_calibration_saves_the_sensor_geometry_of_the_stream_it_came_from() ->
     assert calibrate(detections, SYNTH_BOARD, stream=other_size).camera.sensor_crop is None
 
 
+@pytest.mark.slow
 def test_cli_records_the_sensor_crop_and_lens_position(
     image_files: list[str], tmp_path: Path, capsys: pytest.CaptureFixture
 ) -> None:

@@ -24,6 +24,7 @@ def _run(*args, env=None):
     )
 
 
+@pytest.mark.slow
 def test_help_lists_subcommands():
     out = _run("--help")
     assert out.returncode == 0
@@ -32,6 +33,7 @@ def test_help_lists_subcommands():
     assert "benchmark (bench)" in out.stdout  # the old name is still listed as an alias
 
 
+@pytest.mark.slow
 def test_core_import_pulls_in_no_qt():
     # Import every module of the core, then look for Qt in what got loaded.
     code = (
@@ -82,6 +84,7 @@ def test_render_json_corners_by_hand(tmp_path, capsys):
     assert image[239, 319] in (0, 255)  # the symbol is drawn where the corners say
 
 
+@pytest.mark.slow
 def test_render_out_of_view_is_one_clear_line(tmp_path):
     out = _run(
         "render",
@@ -99,6 +102,7 @@ def test_render_out_of_view_is_one_clear_line(tmp_path):
     assert len(out.stderr.strip().splitlines()) == 1
 
 
+@pytest.mark.slow
 def test_bad_camera_file_is_one_clear_line(tmp_path):
     bad = tmp_path / "cam.json"
     bad.write_text('{"width": 640}')
@@ -116,6 +120,7 @@ def test_bad_camera_file_is_one_clear_line(tmp_path):
     assert out.returncode == 2 and "missing field" in out.stderr and str(bad) in out.stderr
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("command", ["marker", "render"])
 def test_qr_text_too_long_to_encode_is_one_clear_line(tmp_path, command):
     # 3000 letters exceed a QR code's capacity (2953 bytes at level L): OpenCV raises cv2.error.
@@ -132,6 +137,7 @@ def test_qr_text_too_long_to_encode_is_one_clear_line(tmp_path, command):
     assert not list(tmp_path.iterdir())
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("option", "value", "named"),
     [
@@ -147,6 +153,7 @@ def test_gui_bad_option_is_one_clear_line_before_any_window(option, value, named
     assert len(out.stderr.strip().splitlines()) == 1
 
 
+@pytest.mark.slow
 def test_no_display_says_how_to_run_headless():
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY", "QT_QPA_PLATFORM")}
     env["PYTHONPATH"] = REPO
@@ -158,6 +165,7 @@ def test_no_display_says_how_to_run_headless():
     assert "Traceback" not in out.stderr
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("command", ["benchmark", "bench"])
 def test_benchmark_runs_under_its_name_and_its_old_alias(command):
     # `qrfield bench NAME` was the command's name before: users' scripts type it and it must work the same.

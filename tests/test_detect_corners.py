@@ -23,6 +23,7 @@ def seeded_views(camera_vga):
     ]
 
 
+@pytest.mark.slow
 def test_refined_corners_match_the_rendered_truth(seeded_views):
     # `qrfield benchmark detect` measures 0.04 px RMS on 200 such views; 0.1 px leaves room for other
     # seeds and is still below the 0.15 px target. Raw backend corners are ~1 px off, so

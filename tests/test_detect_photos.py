@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import cv2
+import pytest
 
 from qrfield.detect import Detector
 
@@ -13,6 +14,7 @@ MIN_FOUND = 74
 SEVERAL_CODES = {"qrcode-2/16.png"}
 
 
+@pytest.mark.slow
 def test_real_photos(shared_data):
     root = shared_data / "qr-photos"
     photos = sorted(p for p in root.glob("*/*") if p.suffix in (".png", ".jpg"))

@@ -94,6 +94,7 @@ def test_a_heavily_blurred_code_gives_nothing(camera_vga, blur_px):
     assert Detector().detect(view.image) == []
 
 
+@pytest.mark.slow
 def test_no_bad_corners_are_reported_as_good_on_hard_views(camera_vga):
     # Harder than the benchmark: noise 5, blur 0.6-1.6 px, tilts to 60 degrees, far codes. Whatever is
     # found with quality >= 0.85 must be a sub-pixel corner set; lesser ones must say so.
@@ -122,6 +123,7 @@ def test_no_bad_corners_are_reported_as_good_on_hard_views(camera_vga):
     assert good >= 15
 
 
+@pytest.mark.slow
 def test_noise_frames_are_not_traced_for_finder_patterns(monkeypatch):
     # Tracing the contours of 12 MP of noise took 38 s before the locator learned to decline such
     # frames; it must not trace them at all (while a frame with a code still is traced).

@@ -9,12 +9,12 @@ import pytest
 
 segno = pytest.importorskip("segno", reason="segno (a dev dependency) encodes the hard set's symbols")
 
-from qrfield.benchmarks.hardset import hard_view, symbol_matrix  # noqa: E402
 from qrfield.detect import Detector  # noqa: E402
 from qrfield.detect.backends import find_candidates  # noqa: E402
 from qrfield.detect.lens import Lens  # noqa: E402
 from qrfield.detect.reading import read_symbol  # noqa: E402
 from qrfield.detect.small import busy_regions  # noqa: E402
+from qrfield.testing.hardset import hard_view, symbol_matrix  # noqa: E402
 
 #: Hard-set views (seed 2024) with modules of 1.21-1.73 px that zxing-cpp, zxing-x2 and the contour
 #: locator did not read (versions 3-9, pinhole and distorted): the small backend finds 54, 71 and
@@ -27,6 +27,7 @@ def views():
     return [hard_view(index) for index in VIEWS]
 
 
+@pytest.mark.slow
 def test_small_blurred_codes_are_found_read_and_refined(views):
     for view in views:
         assert 1.2 <= view.module_px < 2.0

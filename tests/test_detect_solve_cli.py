@@ -67,6 +67,7 @@ def test_table_output_and_exit_code(images, capsys):
     assert "text 'card-0'" in out and "sub-pixel" in out and "ippe" in out
 
 
+@pytest.mark.slow
 def test_select_text_and_all_codes(tmp_path, camera_vga, capsys):
     far = render_view(camera_vga, 60.0, Pose([-90.0, 0.0, 500.0], [0.0, 10.0, 5.0]), text="alpha")
     near = render_view(

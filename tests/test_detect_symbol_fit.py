@@ -1,5 +1,5 @@
 """The whole-symbol fit against truth that is not qrfield's own: segno's symbols, the hard set's
-rasteriser and cv2.projectPoints (qrfield.benchmarks.hardset), pinhole and distorted."""
+rasteriser and cv2.projectPoints (qrfield.testing.hardset), pinhole and distorted."""
 
 from __future__ import annotations
 
@@ -8,13 +8,13 @@ import pytest
 
 segno = pytest.importorskip("segno", reason="segno (a dev dependency) encodes the hard set's symbols")
 
-from qrfield.benchmarks.hardset import hard_view, rasterise  # noqa: E402
 from qrfield.detect import Detector  # noqa: E402
 from qrfield.detect.detection import GOOD_QUALITY, quality_of  # noqa: E402
 from qrfield.detect.symbol import QUIET_RINGS, decoded_cells, fixed_cells, verified_matrix  # noqa: E402
 from qrfield.detect.symbol_fit import fit_symbol  # noqa: E402
 from qrfield.geometry import Pose  # noqa: E402
 from qrfield.render import qr_symbol, render_view  # noqa: E402
+from qrfield.testing.hardset import hard_view, rasterise  # noqa: E402
 
 #: Hard-set views (seed 2024) where the edge-line refinement (the code before the whole-symbol fit)
 #: put V3 more than 1 px off (pinhole 18 and 38, distorted 53, 81 and 89).
@@ -37,6 +37,7 @@ def detections():
     return out
 
 
+@pytest.mark.slow
 def test_v3_is_found_where_the_edge_lines_missed_it(detections):
     # Fails before the whole-symbol fit: there V3 came from lines extrapolated along the right and
     # bottom sides, whose modules change with every payload (1.7 to 3.6 px off on these views).
@@ -49,6 +50,7 @@ def test_v3_is_found_where_the_edge_lines_missed_it(detections):
         assert error.max() < 0.3, f"view {index}: corners {np.round(error, 3)} px off"
 
 
+@pytest.mark.slow
 def test_corners_of_several_payloads_versions_and_a_distorted_lens(detections):
     versions = set()
     for index in VARIED_VIEWS:
@@ -64,6 +66,7 @@ def test_corners_of_several_payloads_versions_and_a_distorted_lens(detections):
     assert {detections[i][0].distorted for i in VARIED_VIEWS} == {False, True}
 
 
+@pytest.mark.slow
 def test_covariance_is_symmetric_positive_and_roughly_calibrated(detections):
     z = []
     for view, d in detections.values():
@@ -79,6 +82,7 @@ def test_covariance_is_symmetric_positive_and_roughly_calibrated(detections):
     assert 0.5 < rms < 2.0, f"whitened corner errors have RMS {rms:.2f}"
 
 
+@pytest.mark.slow
 def test_fixed_cells_are_what_segno_draws_for_every_version():
     rng = np.random.default_rng(0)
     for version in range(1, 41):

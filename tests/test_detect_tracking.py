@@ -17,6 +17,7 @@ def _frame(camera, i: int, x_mm: float):
     return render_view(camera, SIDE_MM, pose, noise_sigma=2.0, blur_px=0.6, seed=i)
 
 
+@pytest.mark.slow
 def test_tracker_follows_loses_and_recovers(camera_vga):
     tracker = Tracker()
     modes = []
@@ -61,6 +62,7 @@ def test_tracking_off_always_detects_full_frame(camera_vga):
         assert tracker.last_mode == "full"
 
 
+@pytest.mark.slow
 def test_a_code_coming_into_view_is_picked_up_by_the_periodic_full_look(camera_vga):
     from qrfield.detect import DetectorSettings
 
@@ -84,6 +86,7 @@ def test_a_code_coming_into_view_is_picked_up_by_the_periodic_full_look(camera_v
     assert tracker.last_mode == "refined"  # both tracked now
 
 
+@pytest.mark.slow
 def test_tracking_keeps_the_whole_symbol_fit_warm_through_a_distorted_lens():
     from solver_cases import DISTORTED
 
@@ -141,6 +144,7 @@ def test_a_new_track_follows_a_fast_first_move_without_a_full_fit(camera_vga, mo
     assert full_fits == []  # the tracker never fell back on the full fit
 
 
+@pytest.mark.slow
 def test_a_turning_and_tilting_code_is_held_by_the_warm_fit_as_its_template_ages(camera_vga, monkeypatch):
     """A 100 mm code at 600 mm turning 90 degrees and tilting by 45 over 60 frames: the warm fit's
     template, made at one scale, ages; a settled fit that misfits it is refitted on a new one
@@ -190,6 +194,7 @@ def _wobble(camera, wobble_deg: float, dt_s: float, frames: int):
         yield i, view, pipeline.process(Frame(view.image, time.monotonic(), i, truth=pose)), tracker
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("wobble_deg", "frames"), [(20.0, 64), (30.0, 40)])
 def test_a_fast_swing_never_gives_wrong_corners_as_a_pose(wobble_deg, frames):
     """At 5 frames a swing the constant-velocity prediction is about 2 modules off; the tracker's

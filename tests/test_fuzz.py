@@ -117,6 +117,7 @@ def own_folders(tmp_path_factory, monkeypatch):
 
 
 # ------------------------------------------------------------------------------------ the CLI
+@pytest.mark.slow
 @PROFILE
 @given(
     command=st.sampled_from(command_names()),
@@ -176,6 +177,7 @@ PATHS = [
 ]
 
 
+@pytest.mark.slow
 @PROFILE
 @given(
     command=st.sampled_from(sorted(BASES)),
@@ -227,6 +229,7 @@ VALID_CAMERA = {
 }
 
 
+@pytest.mark.slow
 @PROFILE
 @given(
     content=st.one_of(
@@ -255,6 +258,7 @@ def _session_folder(root: Path, camera: CameraModel) -> Path:
     return session.path
 
 
+@pytest.mark.slow
 @PROFILE
 @given(
     key=st.sampled_from(
@@ -298,6 +302,7 @@ def test_rows_bytes_parse_or_are_refused(data):
         assert all(r.values.get("pass") in ("0", "1") for r in content.rows)
 
 
+@pytest.mark.slow
 @PROFILE
 @given(text=st.text(max_size=300), depth=st.integers(0, 2000))
 def test_study_files_and_overrides_load_or_are_refused(text, depth, tmp_path_factory):
@@ -333,6 +338,7 @@ def test_ground_truth_fields_are_accepted_or_named(fields):
             assert np.isfinite(truth.position_mm).all()
 
 
+@pytest.mark.slow
 @PROFILE
 @given(content=st.binary(max_size=300) | json_values.map(json.dumps) | st.integers(30, 5000).map(deep_json))
 def test_settings_files_are_read_or_kept_aside(content, tmp_path_factory):

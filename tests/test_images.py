@@ -30,6 +30,7 @@ def test_header_size_matches_what_opencv_decodes(tmp_path, suffix, size):
     assert probe_size(path) == (decoded.shape[1], decoded.shape[0]) == (w, h)
 
 
+@pytest.mark.slow
 def test_header_sizes_of_the_real_photos(shared_data):
     photos = sorted((shared_data / "qr-photos").rglob("*.[jp][pn]g"))
     assert len(photos) >= 70
@@ -53,6 +54,7 @@ def big_png(path: Path, width: int, height: int) -> Path:
     return path
 
 
+@pytest.mark.slow
 def test_an_image_above_the_pixel_limit_is_refused_before_decoding(tmp_path, monkeypatch):
     # The 0.8 MB PNG of 32000 x 24000 took 4.5 GB to decode; its size is in its header.
     # (Time and memory: `qrfield benchmark images`.) Smaller here: the rule is the same.
@@ -71,6 +73,7 @@ def test_an_image_above_the_pixel_limit_is_refused_before_decoding(tmp_path, mon
     assert image.shape == (8000, 12000)
 
 
+@pytest.mark.slow
 def test_solve_reports_a_refused_image_and_goes_on(tmp_path, capsys):
     big = big_png(tmp_path / "big.png", 9000, 6000)
     small = tmp_path / "small.png"
@@ -121,6 +124,7 @@ def test_files_folders_and_globs_in_order(tmp_path, monkeypatch):
         read_image("empty")
 
 
+@pytest.mark.slow
 def test_solve_folder_focal_only_each_image_at_its_own_size(tmp_path, capsys):
     # Must show: `solve FOLDER --focal-px 500 --side-mm 50 --json` over images of mixed sizes gives
     # one entry per image; each solved with f = 500 px at its own size (truth: the rendered pose).

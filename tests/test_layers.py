@@ -11,6 +11,8 @@ import ast
 import re
 from pathlib import Path
 
+import pytest
+
 REPO = Path(__file__).resolve().parents[1]
 CORE = REPO / "qrfield"
 ARCHITECTURE = REPO / "docs" / "architecture.md"
@@ -79,6 +81,7 @@ def test_the_table_places_every_module_and_package_of_the_core() -> None:
     assert gone == [], f"the layer table names what is not in qrfield/: {gone}"
 
 
+@pytest.mark.slow
 def test_no_import_goes_up_a_layer() -> None:
     table = layers()
     upward = []

@@ -11,6 +11,8 @@ import ast
 import re
 from pathlib import Path
 
+import pytest
+
 REPO = Path(__file__).resolve().parents[1]
 #: Where the project's own code lives (tests/ has its own rules: the test names say what they test).
 CODE_ROOTS = ("qrfield", "ui", "scripts", "calib")
@@ -44,6 +46,7 @@ def test_the_tree_has_the_packages_this_test_expects():
     assert len(_modules()) > 100
 
 
+@pytest.mark.slow
 def test_every_module_has_a_docstring():
     missing = []
     for path in _modules():

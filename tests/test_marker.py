@@ -84,6 +84,7 @@ def _check_raster(
 # ---------------------------------------------------------------------- PNG
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("side_mm", "dpi", "expected"), [(50.0, 600, L50), (50.0, 254, L50)])
 def test_png_symbol_measures_l_at_its_dpi(side_mm: float, dpi: float, expected: dict, tmp_path: Path) -> None:
     path = tmp_path / "m.png"
@@ -100,6 +101,7 @@ def test_png_symbol_measures_l_at_its_dpi(side_mm: float, dpi: float, expected: 
     assert struct.unpack(">I", data[50:54])[0] == zlib.crc32(data[37:50])
 
 
+@pytest.mark.slow
 def test_png_other_text_and_size() -> None:
     layout = marker_layout("https://example.org/qrfield/bench-7", 30.0)
     assert layout.n == 29 and layout.pitch_mm == pytest.approx(30 / 29)

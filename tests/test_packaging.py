@@ -71,6 +71,7 @@ def _qrfield(env, cwd, *args):
     )
 
 
+@pytest.mark.slow
 def test_headless_run_and_solve_work_without_qt(without_qt, tmp_path):
     check = subprocess.run([sys.executable, "-c", "import PySide6"], env=without_qt, capture_output=True)
     assert check.returncode != 0  # the blocker works
@@ -85,6 +86,7 @@ def test_headless_run_and_solve_work_without_qt(without_qt, tmp_path):
     assert marker.returncode == 0 and (tmp_path / "card.svg").is_file(), marker.stderr
 
 
+@pytest.mark.slow
 def test_gui_without_the_extra_names_it(without_qt, tmp_path):
     done = _qrfield(without_qt, tmp_path, "gui")
     assert done.returncode == 3
@@ -111,6 +113,7 @@ def test_missing_qt_libraries_name_the_apt_package(monkeypatch):
     assert qt_problem(lambda name: None, lambda lib: False) == ""
 
 
+@pytest.mark.slow
 def test_a_command_that_needs_the_app_names_the_extra(without_qt, tmp_path):
     done = _qrfield(without_qt, tmp_path, "benchmark", "pipeline", "--seconds", "0.1")
     assert done.returncode == 3 and "qrfield[gui]" in done.stderr and "Traceback" not in done.stderr

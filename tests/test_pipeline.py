@@ -268,12 +268,13 @@ def test_corners_that_were_not_refined_give_no_pose_as_good(camera_vga) -> None:
     assert refined.status == OK and within_seed_criteria(refined.converged_pose("numerical"), truth)
 
 
+@pytest.mark.slow
 def test_the_hard_set_view_whose_v4_is_18_px_off_is_not_a_good_pose() -> None:
     """Hard set seed 7, view 58: zxing's V4 is 17.9 px off and cannot be refined; IPPE made a
     converged pose several degrees off from it, which the pipeline reported as OK before."""
     pytest.importorskip("segno", reason="segno (a dev dependency) encodes the hard set's symbols")
-    from qrfield.benchmarks.hardset import hard_view
     from qrfield.solvers import solve
+    from qrfield.testing.hardset import hard_view
 
     view = hard_view(58, seed=7)
     result = Pipeline(view.camera, view.side_mm, METHODS).process(Frame(view.image, 100.0, 0))
@@ -284,6 +285,7 @@ def test_the_hard_set_view_whose_v4_is_18_px_off_is_not_a_good_pose() -> None:
     assert rough.converged and not within_seed_criteria(Pose(rough.position_mm, rough.angles_deg), view.pose)
 
 
+@pytest.mark.slow
 def test_edge_line_corners_get_an_assumed_covariance_whose_pose_std_covers_the_error(camera_vga) -> None:
     """Corners of the edge-line refinement carry no covariance of their own; the pose is solved with
     the assumed one (Detection.pose_cov) so that its std says how far to trust it: on seeded views

@@ -49,6 +49,7 @@ def _crossings(image, camera, pose, side, modules):
     return np.array(offsets)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "camera",
     [
@@ -73,6 +74,7 @@ def test_edges_in_the_image_lie_on_the_projected_symbol_outline(camera):
         assert np.abs(offsets).max() < 0.2, np.abs(offsets).max()
 
 
+@pytest.mark.slow
 def test_opencv_and_zxing_read_rendered_codes_at_their_corners():
     # 50 seeded poses: z 150-800 mm, tilt up to 50 degrees from the line of sight, 640x480.
     # OpenCV 5.0's plain QRCodeDetector is itself only good to about a pixel (measured here:
@@ -140,6 +142,7 @@ def test_qr_symbol_is_a_valid_code():
     assert not symbol[-1, -1] or not symbol[-7:, -7:].all()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("k1", [-0.25, 0.3], ids=["barrel", "pincushion"])
 def test_background_image_through_a_lens_is_not_distorted_again(k1):
     # A background image is a camera image: only the new card passes through the lens model.

@@ -19,6 +19,8 @@ from serial_truth import parse_frame_line, split_lines
 from qrfield.geometry import Pose, angle_difference
 from qrfield.render import render_view
 
+pytestmark = pytest.mark.slow
+
 REPO = Path(__file__).resolve().parent.parent
 
 

@@ -87,6 +87,7 @@ def run_on(monkeypatch, capsys, source: FrameSource, frames: int) -> tuple[list[
     return lines, lags, out.err
 
 
+@pytest.mark.slow
 @pytest.mark.usefixtures("slow_pipeline")
 def test_a_live_camera_is_read_latest_only_so_the_lag_stays_bounded(monkeypatch, capsys) -> None:
     frames = 15

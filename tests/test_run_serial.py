@@ -29,7 +29,7 @@ from qrfield import __version__
 from qrfield.camera import DEFAULT_CAMERA, resolve_camera
 from qrfield.geometry import angle_difference
 
-pytestmark = pytest.mark.timeout(90)
+pytestmark = [pytest.mark.timeout(90), pytest.mark.slow]
 REPO = Path(__file__).resolve().parent.parent
 # The virtual bench's default pose (qrfield.sources.VirtualBenchSettings): mm and degrees.
 BENCH = np.array([10.0, -5.0, 300.0, 15.0, -20.0, 10.0])

@@ -13,7 +13,7 @@ from serial_truth import parse_frame_line, split_lines
 from qrfield.cli import main
 from qrfield.commands.serial_demo import demo_pose
 
-pytestmark = pytest.mark.timeout(30)
+pytestmark = [pytest.mark.timeout(30), pytest.mark.slow]
 
 
 def test_serial_demo_streams_sim_then_noqr_frames_to_a_pty(capsys):

@@ -308,6 +308,7 @@ def test_newest_pose_wins_under_a_slow_port_and_the_queue_stays_bounded():
     assert status.frames_dropped == 48 and status.pending == 0
 
 
+@pytest.mark.slow
 def test_rate_limit_caps_frames_per_second_and_the_newest_pose_goes_last():
     port = SlowPort(write_s=0)
     settings = SerialLinkSettings(port="fake", max_rate_hz=20, stale_after_s=0)

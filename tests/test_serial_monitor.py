@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 from serial_truth import crc16
 
-pytestmark = pytest.mark.timeout(30)
+pytestmark = [pytest.mark.timeout(30), pytest.mark.slow]
 REPO = Path(__file__).resolve().parent.parent
 
 

@@ -19,7 +19,7 @@ import pytest
 
 from qrfield.cli import main
 
-pytestmark = pytest.mark.timeout(120)
+pytestmark = [pytest.mark.timeout(120), pytest.mark.slow]
 REPO = Path(__file__).resolve().parent.parent
 BENCH = {"x": 10.0, "y": -5.0, "z": 300.0, "alpha": 15.0, "beta": -20.0, "gamma": 10.0}  # its defaults
 

@@ -178,6 +178,7 @@ def test_resemblance_in_both_readings_when_the_solver_settles_above_its_toleranc
     assert "within criteria 100.00%" in text and "converged and within criteria 0.00%" in text
 
 
+@pytest.mark.slow
 def test_sessions_pull_in_no_qt():
     import os
     import subprocess

@@ -81,6 +81,7 @@ def run_and_kill(session_dir: Path, delay_s: float) -> tuple[int, list[int]]:
     return int(lines[0].split()[1]), confirmed
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not hasattr(os, "fork"), reason="needs os.fork and SIGKILL (POSIX)")
 def test_sigkill_at_random_moments_loses_no_confirmed_row(tmp_path, camera_vga):
     session = Session.create(tmp_path, "crash", camera=camera_vga, side_mm=60.0, solver="numerical")

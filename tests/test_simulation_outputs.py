@@ -50,6 +50,7 @@ def test_progress_bar_prints_share_and_rate_to_a_log():
     assert "100.0 %" in lines[-1] and "200/200 poses" in lines[-1] and "poses/s" in lines[-1]
 
 
+@pytest.mark.slow
 def test_simulate_command_writes_every_output(tmp_path, capsys):
     out = tmp_path / "run"
     code = main(
@@ -144,6 +145,7 @@ def test_a_relative_out_is_the_callers_folder(tmp_path, monkeypatch, capsys):
     assert "nowhere does not exist" in capsys.readouterr().err and not (tmp_path / "nowhere").exists()
 
 
+@pytest.mark.slow
 def test_run_sh_keeps_the_callers_folder(tmp_path):
     # ./run.sh makes the venv in the checkout, then runs the command where the caller is.
     import os

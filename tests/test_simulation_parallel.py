@@ -22,6 +22,7 @@ STUDY = ["x_range=-80,80,40", "y_range=-40,40,40", "z_range=250,400,150", "sweep
          "degradation=round"]  # fmt: skip
 
 
+@pytest.mark.slow
 def test_two_processes_give_the_samples_of_one():
     config = load_study(overrides=STUDY)
     progress = []
@@ -35,6 +36,7 @@ def test_two_processes_give_the_samples_of_one():
     assert [p.done_poses for p in progress] == sorted(p.done_poses for p in progress)
 
 
+@pytest.mark.slow
 def test_a_stop_keeps_the_finished_tasks_and_marks_the_result_partial():
     config = load_study(overrides=STUDY)
     stop = threading.Event()
@@ -75,6 +77,7 @@ def test_small_studies_stay_in_this_process_and_large_ones_use_every_core():
     assert parallel.auto_workers(57_960) == parallel.cpu_count()
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(sys.platform == "win32", reason="SIGINT to a process group is POSIX")
 def test_ctrl_c_in_a_terminal_writes_the_partial_study(tmp_path):
     # Ctrl-C reaches the whole process group (the command and its workers): the workers ignore it,
@@ -101,6 +104,7 @@ def test_ctrl_c_in_a_terminal_writes_the_partial_study(tmp_path):
     assert "Traceback" not in err
 
 
+@pytest.mark.slow
 def test_the_benchmark_prints_both_paths_and_the_ippe_agreement(capsys):
     from qrfield.cli import main
 

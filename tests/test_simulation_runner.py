@@ -148,6 +148,7 @@ def _in_view_by_hand(camera, pose, max_view_deg):
     return math.degrees(math.acos(min(1.0, cos_view))) <= max_view_deg
 
 
+@pytest.mark.slow
 def test_vectorised_study_equals_a_plain_loop_over_the_single_solver(tmp_path):
     from qrfield.solvers import SolverError, solve
 
@@ -331,6 +332,7 @@ def test_the_two_coverage_readings_by_hand_count(tmp_path):
     assert summary["mean_coverage"]["numerical"] == 1.0
 
 
+@pytest.mark.slow
 def test_rounded_corners_reproduce_the_issues_converged_figures():
     # Issue 17: with corners rounded to whole pixels the default study printed 53.66 % and 88.70 %
     # (within criteria), while the thesis' model and its parallelogram variant report converged

@@ -24,6 +24,7 @@ def _seen_by_renderer(camera, side, pose, max_view_deg):
     return math.degrees(math.acos(min(1.0, cos_view))) <= max_view_deg
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("max_view_deg", [90.0, 70.0])
 def test_view_mask_matches_the_renderers_check(camera_vga, max_view_deg):
     rng = np.random.default_rng(5)

@@ -18,6 +18,7 @@ from qrfield.geometry import (
 from qrfield.solvers import IppeSettings, solve, solve_batch
 
 
+@pytest.mark.slow
 def test_exact_round_trip_within_a_micrometre_and_a_microdegree():
     camera, _, corners, positions, angles = cases(150, seed=21)
     for c, p, a in zip(corners, positions, angles, strict=True):
@@ -71,6 +72,7 @@ def test_upright_card_facing_the_camera_is_identity():
     np.testing.assert_allclose(r.position_mm, [0, 0, 400], atol=1e-6)
 
 
+@pytest.mark.slow
 def test_agrees_with_a_direct_opencv_solvepnp_in_our_frame_exact():
     # cv2.solvePnP (iterative, planar homography start) on our marker-frame points: no IPPE, no flip.
     camera, _, corners, _, _ = cases(150, seed=22)
@@ -121,6 +123,7 @@ def test_agrees_with_a_direct_opencv_solvepnp_in_our_frame_noisy():
             assert pos_err < 0.01 and ang_err < 0.01
 
 
+@pytest.mark.slow
 def test_two_candidates_ranked_with_ambiguity_ratio():
     camera, _, corners, _, _ = cases(150, seed=23)
     rng = np.random.default_rng(9)
@@ -217,14 +220,15 @@ def test_poses_set_up_on_purpose_are_exact(angles):
         assert np.abs(angle_difference(result.angles_deg, pose.angles_deg)).max() < 1e-6
 
 
+@pytest.mark.slow
 def test_the_alternative_is_always_the_other_branch_of_the_ambiguity():
     """LM refinement may slide the mirror candidate onto the answer's branch and stop short of it
     (0.1-2 degrees away), or the closed-form third start may replace one candidate only nearly:
     then the "mirror" was the answer again and the flip warning fired on good views (25 of these
     600 seeded noisy views before the fix, 16 of them with ambiguity >= 0.8). The alternative must
     be the other branch: its card normal well away from the answer's."""
-    from qrfield.benchmarks._pose_views import corner_set
-    from qrfield.benchmarks.pose import draw_noise, random_corner_cov
+    from qrfield.testing.corner_noise import draw_noise, random_corner_cov
+    from qrfield.testing.pose_views import corner_set
 
     views = corner_set(600, seed=9)
     rng = np.random.default_rng(2)

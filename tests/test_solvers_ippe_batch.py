@@ -28,6 +28,7 @@ def _single(corners, camera, settings=None):
     return solve_ippe_batch(checked, valid, camera, SIDE_MM, settings)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("camera_name", [PICAM, DISTORTED.name])
 def test_exact_corners_agree_with_the_truth_and_the_single_path(camera_name):
     camera, _, corners, positions, angles = cases(400, seed=31, camera_name=camera_name, max_tilt_deg=80.0)
@@ -50,6 +51,7 @@ def test_exact_corners_agree_with_the_truth_and_the_single_path(camera_name):
     assert np.nanmax(batch.residual_mm) < 1e-6
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("noise_px", [0.3, 1.0])
 def test_noisy_corners_land_on_the_single_paths_minimum(noise_px):
     camera, _, corners, positions, angles = cases(400, seed=32, max_tilt_deg=70.0)

@@ -182,6 +182,7 @@ def _assert_batch_equals_single(corners, camera, settings):
     return b
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "settings",
     [None, SEED_SETTINGS, NumericalSettings(initial_guess="seed", tf=0.8, tolerance_mm=0.3)],
@@ -229,6 +230,7 @@ def test_settings_are_checked():
         solve(corners[0], camera, SIDE_MM, "epnp")
 
 
+@pytest.mark.slow
 def test_batch_in_chunks_equals_single(monkeypatch):
     from qrfield.solvers import numerical_batch
 

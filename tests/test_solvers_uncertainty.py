@@ -13,13 +13,13 @@ import numpy as np
 import pytest
 from solver_cases import DISTORTED, SIDE_MM, cases
 
-from qrfield.benchmarks._pose_views import corner_set
-from qrfield.benchmarks.pose import draw_noise, random_corner_cov
 from qrfield.camera import resolve_camera
 from qrfield.geometry import Pose, angle_difference, angles_from_rotation, project_points, rotation_matrix
 from qrfield.methods import METHODS
 from qrfield.solvers import SolverError, solve, solve_batch
 from qrfield.solvers import uncertainty as unc
+from qrfield.testing.corner_noise import draw_noise, random_corner_cov
+from qrfield.testing.pose_views import corner_set
 
 CAMERAS = ("picam-v2@640x480", DISTORTED.name)
 
@@ -65,6 +65,7 @@ def test_propagated_covariance_equals_central_differences_through_the_solver(cam
         np.testing.assert_allclose(result.corners_std_px, np.sqrt(cov[:, 0, 0] + cov[:, 1, 1]))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("camera_name", CAMERAS)
 @pytest.mark.parametrize("method", METHODS)
 def test_monte_carlo_spread_matches_the_reported_std(camera_name, method):
@@ -112,6 +113,7 @@ def _std(result) -> np.ndarray:
     return np.concatenate([result.position_std_mm, result.angles_std_deg])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", METHODS)
 def test_std_is_calibrated_against_the_injected_noise(noisy_views, method):
     """Targets (issue 13): RMS of error / std in 0.7-1.4 and 90-99 % within 2, per component, over
@@ -127,6 +129,7 @@ def test_std_is_calibrated_against_the_injected_noise(noisy_views, method):
     assert np.all((within > 0.90) & (within < 0.99)), within
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", METHODS)
 def test_flip_flag_catches_the_flips(noisy_views, method):
     """Flips (an angle more than 10 deg off) on these views: the flag catches at least 90 % (measured
@@ -202,6 +205,7 @@ def test_bad_covariances_are_refused_by_name(cov, message):
         unc.isotropic_cov(-0.1)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("camera_name", CAMERAS)
 @pytest.mark.parametrize("method", METHODS)
 def test_batch_std_equals_the_single_solve(camera_name, method):
@@ -258,6 +262,7 @@ def test_distortion_jacobian_against_opencv_model_finite_differences():
     np.testing.assert_allclose(analytic, numeric, atol=1e-6)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("camera_name", ["picam-v2@640x480", DISTORTED.name])
 def test_solve_methods_gives_what_solve_gives_method_by_method(camera_name):
     """The pipeline solves every method in one call (the checks, undistortion and uncertainty once):

@@ -12,13 +12,13 @@ import numpy as np
 import pytest
 from solver_cases import DISTORTED, SIDE_MM, cases
 
-from qrfield.benchmarks.pose import draw_noise, random_corner_cov
 from qrfield.methods import METHODS
 from qrfield.solvers import kernel, numerical, solve_methods
 from qrfield.solvers import uncertainty as unc
 from qrfield.solvers import uncertainty_single as one
 from qrfield.solvers.checks import check_corners_single
 from qrfield.solvers.rays import normalised_single
+from qrfield.testing.corner_noise import draw_noise, random_corner_cov
 
 
 def _reference_mirror_start(result, x, y):

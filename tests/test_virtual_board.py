@@ -12,6 +12,7 @@ from qrfield.geometry import project_points, transform_points
 from qrfield.virtual_board import VirtualChessboard
 
 
+@pytest.mark.slow
 def test_views_are_seeded_whole_and_spread_over_the_image() -> None:
     camera = resolve_camera("picam-v2@640x480")
     board = Board(9, 6, 25.0)
@@ -33,6 +34,7 @@ def test_views_are_seeded_whole_and_spread_over_the_image() -> None:
     assert set(thirds[:, 0]) == {0, 1, 2} and set(thirds[:, 1]) == {0, 1, 2}
 
 
+@pytest.mark.slow
 def test_rendered_view_has_the_corners_of_its_pose() -> None:
     camera = CameraModel(
         fx=600.0, fy=604.0, cx=322.0, cy=236.0, width=640, height=480, dist=[-0.2, 0.05, 0, 0, 0]

@@ -7,7 +7,7 @@ import dataclasses
 import signal
 import sys
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 
 def close_on_signals(
@@ -72,4 +72,22 @@ def main(args: argparse.Namespace) -> int:
         QtCore.QTimer.singleShot(int(quit_after * 1000), finish)
     code = app.exec()
     window.shutdown()
-    return int(code)
+    return int(code) if worker_threads_ended() else leave_now(int(code))
+
+
+def worker_threads_ended(timeout_ms: int = 5000) -> bool:
+    """Wait up to ``timeout_ms`` more for frame loops still ending after the window closed."""
+    from ui.worker import wait_for_workers
+
+    return wait_for_workers(timeout_ms)
+
+
+def leave_now(code: int) -> NoReturn:
+    """A frame loop still runs (a camera driver stuck in a read or close): settings and rows are
+    saved by now, and Qt would abort on destroying a running QThread, so exit at once."""
+    import os
+
+    print("qrfield: the camera's frame loop did not end; exiting without waiting for it", file=sys.stderr)
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code or 1)

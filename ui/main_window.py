@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -51,7 +52,7 @@ from ui.settings_form import SettingsForm
 from ui.simulation_tab import CONFIG_KEY as SIMULATION_KEY
 from ui.simulation_tab import SimulationTab
 from ui.wheel_guard import install_wheel_guard
-from ui.worker import PipelineWorker, Processed, start_worker, stop_worker
+from ui.worker import STOP_WAIT_MS, PipelineWorker, Processed, start_worker, stop_worker
 
 #: Redraw period of the GUI timer, ms (40 Hz, above the usual camera rate); plots redraw at most
 #: every PLOT_PERIOD_S seconds.
@@ -77,6 +78,9 @@ def detector_settings_class() -> type:
 
 class MainWindow(QtWidgets.QMainWindow):
     """The bench app. ``overrides`` (from the command line) replace saved RunSettings fields."""
+
+    #: How long :meth:`shutdown` waits for the worker thread to end, ms.
+    WORKER_STOP_MS = STOP_WAIT_MS
 
     #: Each frame drawn (its image, grey or BGR uint8), for the calibration dialog's preview.
     frameDrawn = QtCore.Signal(object)
@@ -243,6 +247,8 @@ class MainWindow(QtWidgets.QMainWindow):
         self.worker.result_sinks = (self.serial_panel.publisher, self.session_panel.guide)
         self.thread = start_worker(self.worker)
         self._closed = False
+        #: False when shutdown's bounded wait for the worker thread ran out (None before shutdown).
+        self.worker_stopped: bool | None = None
 
     def _wire(self) -> None:
         self.source_controls.openRequested.connect(self._open_source)
@@ -530,14 +536,28 @@ class MainWindow(QtWidgets.QMainWindow):
             self._on_note(f"settings not saved: {exc}")
 
     def shutdown(self) -> None:
-        """Save settings, stop the worker (it closes the source) and join its thread. Idempotent."""
+        """Save settings, stop the worker (it closes the source) and join its thread, then the
+        background jobs; only after this may Qt delete the widgets (closeEvent). Idempotent."""
         if self._closed:
             return
         self._closed = True
         self.timer.stop()
         self.save_settings()
         self.simulation_tab.shutdown()
-        stop_worker(self.worker, self.thread)
+        self.worker_stopped = stop_worker(self.worker, self.thread, self.WORKER_STOP_MS)
+        if self.worker_stopped:
+            # Deleted with the window, on the GUI thread (the worker is back on it by now).
+            self.worker.setParent(self)
+            self.thread.setParent(self)
+        else:
+            # ui.worker keeps the worker and its thread alive until the thread ends.
+            message = (
+                f"the frame loop did not end within {self.WORKER_STOP_MS / 1000:g} s "
+                f"(source {short_source(self.app_settings.source)!r} stuck in a read or close?); "
+                "the window closes and the loop is left to end on its own"
+            )
+            self._on_note(message)
+            print(f"qrfield: {message}", file=sys.stderr)
         self.serial_panel.shutdown()
         if self.calibration_dialog is not None:
             self.calibration_dialog.shutdown()

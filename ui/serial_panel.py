@@ -346,9 +346,13 @@ class SerialPanel(QtWidgets.QWidget):
         self.connect_button.setText("Connect")
         if link is None:
             return
-        closer = BackgroundJob("serial-link close")  # no signal wanted: kept only while it runs
+        # A child of the panel: deleted on the GUI thread, never by its own thread dropping it.
+        closer = BackgroundJob("serial-link close", self)
         closer.start(link.close)
-        self._closers = [job for job in self._closers if job.busy] + [closer]
+        ended = [job for job in self._closers if not job.busy]
+        for job in ended:
+            job.deleteLater()
+        self._closers = [job for job in self._closers if job not in ended] + [closer]
         self._last_link = link
         if wait:
             self.join_closers()
@@ -357,7 +361,6 @@ class SerialPanel(QtWidgets.QWidget):
     def join_closers(self, timeout: float = 3.0) -> None:
         for job in self._closers:
             job.join(timeout)
-        self._closers = []
 
     def shutdown(self) -> None:
         """Close the link and wait for it (the app is quitting)."""

@@ -13,11 +13,20 @@ hangs, a live camera stalls, or the source failed: the serial link's NOSRC), unt
 This long-lived QThread is the app's one exception to :class:`ui.background.BackgroundJob`, the
 app's way of running other work off the GUI thread: the frame loop is not a job that ends with a
 result but the engine itself, running for the window's whole life.
+
+Shutdown (:func:`stop_worker`, docs/architecture.md "Shutdown"): stop the loop, then join the thread
+with a bounded wait. When its loop ends, the worker moves itself back to the application's thread,
+so that the QObject is never deleted on, or after the end of, the worker thread (the window then
+makes the worker and its QThread its children). A worker whose
+thread does not end in time stays referenced here (:func:`unjoined_workers`) until it does: neither
+it nor its QThread is destroyed while running, whatever Qt does to the window meanwhile.
 """
 
 from __future__ import annotations
 
+import threading
 import time
+import weakref
 from dataclasses import dataclass
 from typing import Any
 
@@ -29,7 +38,19 @@ from qrfield.pipeline import FrameResult
 from qrfield.runconfig import RunConfig
 from qrfield.sources import Frame
 
-__all__ = ["PipelineWorker", "Processed", "RunConfig", "start_worker", "stop_worker"]
+__all__ = [
+    "PipelineWorker",
+    "Processed",
+    "RunConfig",
+    "start_worker",
+    "stop_worker",
+    "unjoined_workers",
+    "wait_for_workers",
+]
+
+#: How long :func:`stop_worker` waits for the thread by default, ms: the current frame, closing the
+#: reader (up to 2 s, qrfield.sources.LatestFrameReader.stop) and the source.
+STOP_WAIT_MS = 5000
 
 
 @dataclass(frozen=True)
@@ -61,7 +82,9 @@ class PipelineWorker(QtCore.QObject):
         super().__init__()
         #: The newest result not yet drawn (the GUI takes it on its redraw timer).
         self.latest: Mailbox[Processed] = Mailbox()
-        self.loop = FrameLoop(config, events=self, opener=source_factory, hold_when_down=True)
+        # A proxy: no worker <-> loop cycle, so the worker is freed where its last reference goes
+        # (the GUI thread), never by a garbage collection that happens to run on another thread.
+        self.loop = FrameLoop(config, events=weakref.proxy(self), opener=source_factory, hold_when_down=True)
 
     # ---------------------------------------------------------------- called from the GUI thread
     def configure(self, config: RunConfig, *, reopen: bool = False) -> int:
@@ -117,6 +140,11 @@ class PipelineWorker(QtCore.QObject):
         try:
             self.loop.run()
         finally:
+            # Back to the application's thread before the thread ends: the QObject is then deleted
+            # there (a push from the object's own thread is the one move Qt allows here).
+            app = QtCore.QCoreApplication.instance()
+            if app is not None:
+                self.moveToThread(app.thread())
             self.finished.emit()
 
     # The frame loop's events (on the worker thread): signals to the GUI.
@@ -141,6 +169,14 @@ class PipelineWorker(QtCore.QObject):
         self.latest.put(item)
 
 
+#: Every started worker with its thread until its thread is seen to end: this reference keeps
+#: both alive while the thread runs. Those whose owner gave up waiting (stop_worker False) are
+#: deleted here, on the GUI thread, once their thread has ended.
+_started: dict[int, tuple[PipelineWorker, QtCore.QThread]] = {}
+_abandoned: set[int] = set()
+_started_lock = threading.Lock()
+
+
 def start_worker(worker: PipelineWorker) -> QtCore.QThread:
     """Move ``worker`` to a new QThread and start its loop; returns the thread."""
     thread = QtCore.QThread()
@@ -149,12 +185,54 @@ def start_worker(worker: PipelineWorker) -> QtCore.QThread:
     thread.started.connect(worker.run)
     # Direct: quit() is thread-safe, and the GUI thread may be blocked in thread.wait() meanwhile.
     worker.finished.connect(thread.quit, QtCore.Qt.ConnectionType.DirectConnection)
+    with _started_lock:
+        _started[id(worker)] = (worker, thread)
     thread.start()
     return thread
 
 
-def stop_worker(worker: PipelineWorker, thread: QtCore.QThread, timeout_ms: int = 5000) -> bool:
-    """Stop the loop, close the source, join the thread; True when the thread has ended."""
+def stop_worker(worker: PipelineWorker, thread: QtCore.QThread, timeout_ms: int = STOP_WAIT_MS) -> bool:
+    """Stop the loop, close the source, join the thread (GUI thread); True when it has ended.
+
+    False: the thread still runs after ``timeout_ms`` (a source stuck in a read or close); the
+    worker and thread stay referenced here (:func:`unjoined_workers`) until it ends, and are then
+    deleted on the GUI thread."""
     worker.stop()
     thread.quit()
-    return bool(thread.wait(timeout_ms))
+    if thread.wait(timeout_ms):
+        _ended(id(worker))
+        return True
+    with _started_lock:
+        _abandoned.add(id(worker))
+    return False
+
+
+def unjoined_workers() -> list[tuple[PipelineWorker, QtCore.QThread]]:
+    """Started workers whose thread has not ended (still running in a window, or stopped and
+    not ended in time); call on the GUI thread (those seen ended are let go here)."""
+    with _started_lock:
+        ended = [key for key, (_w, thread) in _started.items() if thread.isFinished()]
+    for key in ended:
+        _ended(key)
+    with _started_lock:
+        return list(_started.values())
+
+
+def wait_for_workers(timeout_ms: int = STOP_WAIT_MS) -> bool:
+    """Stop every started worker and wait up to ``timeout_ms`` in all; True when none still runs."""
+    deadline = time.monotonic() + timeout_ms / 1000
+    for worker, thread in unjoined_workers():
+        left_ms = max(0, int((deadline - time.monotonic()) * 1000))
+        stop_worker(worker, thread, left_ms)
+    return not unjoined_workers()
+
+
+def _ended(key: int) -> None:
+    """The thread of worker ``key`` has ended: forget it; delete an abandoned one (GUI thread)."""
+    with _started_lock:
+        pair = _started.pop(key, None)
+        abandoned = key in _abandoned
+        _abandoned.discard(key)
+    if pair is not None and abandoned:
+        for qobject in pair:
+            qobject.deleteLater()

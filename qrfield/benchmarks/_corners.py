@@ -9,8 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from qrfield.benchmarks.hardset import BANDS, HardView
 from qrfield.detect.detection import GOOD_QUALITY
+from qrfield.testing.hardset import BANDS, HardView
 
 #: A corner further off than this, px, must not be reported with a good quality.
 BAD_CORNER_PX = 0.5

@@ -1,6 +1,6 @@
 """``qrfield benchmark detect``: corner accuracy, uncertainty, speed and detection rates, in one run.
 
-0. The hard set (qrfield.benchmarks.hardset: segno symbols of versions 1-10, 30/50/100 mm codes at
+0. The hard set (qrfield.testing.hardset: segno symbols of versions 1-10, 30/50/100 mm codes at
    z 150-1000 mm, tilt up to 60 deg, noise 0-4, blur 0.3-1.2 px, lighting gradients, pinhole and
    a distorted lens; its truth does not come from qrfield.render): per corner V1..V4 the median,
    90th percentile and largest error by module size band, pinhole and distorted apart, for the
@@ -83,8 +83,8 @@ def _shared_data(path: Path | None) -> Path | None:
 def _hard_set(count: int, seed: int) -> None:
     """Section 0: the hard set through the default pipeline and through the edge lines alone."""
     from qrfield.benchmarks import _corners
-    from qrfield.benchmarks.hardset import hard_views
     from qrfield.detect import Detector, DetectorSettings
+    from qrfield.testing.hardset import hard_views
 
     try:
         import segno  # noqa: F401
@@ -132,8 +132,8 @@ def _hard_sequences(count: int, seed: int) -> None:
     import numpy as np
 
     from qrfield.benchmarks._corners import calibration_text, whiten
-    from qrfield.benchmarks.hardset import DISTORTED_CAMERA, _pinhole, hard_sequence
     from qrfield.detect import Detector, DetectorSettings, Tracker
+    from qrfield.testing.hardset import DISTORTED_CAMERA, _pinhole, hard_sequence
 
     try:
         import segno  # noqa: F401
@@ -142,7 +142,7 @@ def _hard_sequences(count: int, seed: int) -> None:
         return
     print(
         f"\n2b. tracked corners on {count} moving sequences of 60 frames drawn like the hard set "
-        f"(seed {seed}; qrfield.benchmarks.hardset.hard_sequence; even pinhole, odd distorted), "
+        f"(seed {seed}; qrfield.testing.hardset.hard_sequence; even pinhole, odd distorted), "
         "against cv2.projectPoints"
     )
     t0 = time.perf_counter()

@@ -5,7 +5,7 @@ For each set-up (eye-in-hand, eye-to-hand) and each of ``--sets`` seeded cells: 
 off the example cell's) and code place Y is driven to ``--views`` tool poses at which the camera
 sees a 50 mm code at 250-380 mm, tilted up to 32 degrees from the line of sight and turned up to
 90 degrees about its normal. Each view is drawn by the hard set's rasteriser
-(:func:`qrfield.benchmarks.hardset.rasterise`, not :func:`qrfield.render.render_view`: segno's
+(:func:`qrfield.testing.hardset.rasterise`, not :func:`qrfield.render.render_view`: segno's
 symbol, exact area sampling, blur 0.6 px, noise 2 grey levels), detected and solved by the project's
 pipeline (:func:`qrfield.handeye.measure.pose_for_pair`), and the pairs solved.
 
@@ -75,7 +75,7 @@ def _draw(camera, pose, side, matrix, rng):  # type: ignore[no-untyped-def]
     import cv2
     import numpy as np
 
-    from qrfield.benchmarks.hardset import rasterise
+    from qrfield.testing.hardset import rasterise
 
     image = rasterise(camera, pose, side, matrix, 120.0, 215.0, 35.0)
     image = cv2.GaussianBlur(image, (0, 0), sigmaX=0.6, borderType=cv2.BORDER_REPLICATE)
@@ -85,11 +85,11 @@ def _draw(camera, pose, side, matrix, rng):  # type: ignore[no-untyped-def]
 def _cell(robot, camera, args, seed):  # type: ignore[no-untyped-def]
     import numpy as np
 
-    from qrfield.benchmarks.hardset import symbol_matrix
     from qrfield.detect import Detector
     from qrfield.handeye import Pair
     from qrfield.handeye.measure import pose_for_pair
     from qrfield.handeye.rigid import difference, perturbed
+    from qrfield.testing.hardset import symbol_matrix
 
     matrix, _ = symbol_matrix(f"hand-eye cell {seed}", "M")
     rng = np.random.default_rng([seed, 2])

@@ -9,14 +9,14 @@
 2. The flip flag on the same views: recall and precision of ``ambiguous`` on flips (an angle more
    than 10 deg off), for the chi-square test and, for comparison, the fallback without covariance.
 3. End to end on pictures (``--view-set``, default "hard": benchmark detect's hard set,
-   qrfield/benchmarks/hardset.py; "render": qrfield.render views), through the default pipeline:
+   qrfield/testing/hardset.py; "render": qrfield.render views), through the default pipeline:
    share of views that meet the thesis' criteria (2 deg, 5 mm) by module size and lens, for each
    qrfield method beside OpenCV's QRCodeDetectorAruco + IPPE_SQUARE + RefineLM and zxing-cpp
    corners + SQPNP, and the ceiling (true corners + 0.05 px noise); why qrfield's views miss; the
    calibration of the std and the flip flag on the pictures (qrfield/benchmarks/_pose_pictures.py).
 4. Real optics: squares of 4 inner corners of the real Bumblebee2 chessboard frames
    (../shared/data/calibration), solved through BoofCV's calibration, against cv2.solvePnP on the
-   whole board (qrfield/benchmarks/_pose_real.py).
+   whole board (qrfield/testing/real_squares.py, printed by qrfield/benchmarks/_pose_real.py).
 5. Cost: CPU microseconds per solve with and without a covariance (baseline: without).
 """
 
@@ -29,6 +29,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from qrfield.testing.corner_noise import draw_noise, random_corner_cov
 
 HELP = "pose uncertainty calibration, flip flag recall/precision, end to end vs OpenCV and zxing, real optics"
 
@@ -43,7 +45,7 @@ COMPONENTS = ("x", "y", "z", "alpha", "beta", "gamma")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from qrfield.benchmarks._pose_views import VIEW_SETS
+    from qrfield.testing.pose_views import VIEW_SETS
 
     parser.add_argument("--poses", type=int, default=3000, help="corner-level views for 1-2 (default 3000)")
     parser.add_argument("--views", type=int, default=400, help="pictures for 3 (default 400)")
@@ -65,25 +67,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 # ---------------------------------------------------------------------- helpers
-
-
-def random_corner_cov(rng: np.random.Generator) -> np.ndarray:
-    """(4, 2, 2) px^2: a view's scale log-uniform in 0.02-0.5 px, each corner 0.5-2x that, an aspect
-    up to 3:1 and any orientation (independent corners)."""
-    base = math.exp(rng.uniform(math.log(0.02), math.log(0.5)))
-    cov = np.empty((4, 2, 2))
-    for i in range(4):
-        major = base * rng.uniform(0.5, 2.0)
-        minor = major / rng.uniform(1.0, 3.0)
-        angle = rng.uniform(0.0, math.pi)
-        rot = np.array([[math.cos(angle), -math.sin(angle)], [math.sin(angle), math.cos(angle)]])
-        cov[i] = rot @ np.diag([major**2, minor**2]) @ rot.T
-    return cov
-
-
-def draw_noise(rng: np.random.Generator, cov: np.ndarray) -> np.ndarray:
-    """(4, 2) Gaussian corner noise with covariance ``cov`` (4, 2, 2)."""
-    return np.einsum("kij,kj->ki", np.linalg.cholesky(cov), rng.normal(size=(4, 2)))
 
 
 def pose_errors(result: Any, truth: Any) -> np.ndarray:
@@ -134,8 +117,8 @@ def _methods() -> list[tuple[str, str, Any]]:
 
 
 def injected_noise(count: int, seed: int) -> bool:
-    from qrfield.benchmarks._pose_views import corner_set
     from qrfield.solvers import solve
+    from qrfield.testing.pose_views import corner_set
 
     views = corner_set(count, seed)
     rng = np.random.default_rng(seed + 7)
@@ -228,7 +211,7 @@ def _flip_table(flips: dict[str, tuple[np.ndarray, ...]]) -> None:
 def end_to_end(count: int, seed: int, view_set: str) -> bool:
     """Section 3 (qrfield/benchmarks/_pose_pictures.py); True when qrfield meets the issue's targets."""
     from qrfield.benchmarks import _pose_pictures
-    from qrfield.benchmarks._pose_views import VIEW_SETS
+    from qrfield.testing.pose_views import VIEW_SETS
 
     print(
         f"\n3. end to end on pictures: view set {view_set!r}, {count} seeded views (seed {seed}), each "
@@ -248,8 +231,8 @@ def end_to_end(count: int, seed: int, view_set: str) -> bool:
 
 
 def cost(count: int, seed: int) -> None:
-    from qrfield.benchmarks._pose_views import corner_set
     from qrfield.solvers import METHODS, solve, solve_methods
+    from qrfield.testing.pose_views import corner_set
 
     views = corner_set(count, seed)
     rng = np.random.default_rng(seed)

@@ -1,6 +1,6 @@
 """``qrfield benchmark stream``: does the stream's history make its poses better and never wrong?
 
-Video sequences of our own, drawn by the hard set's rasteriser (qrfield/benchmarks/hardset.py:
+Video sequences of our own, drawn by the hard set's rasteriser (qrfield/testing/hardset.py:
 exact area sampling of a segno symbol through the pose and the lens, not qrfield.render), then
 blurred, lit unevenly and given fresh sensor noise every frame, at 30 frames a second. Each frame
 is solved once by the default pipeline (tracker, both methods) with the stream stage off; the
@@ -192,7 +192,7 @@ def make_sequence(name: str, seed: int, count: int) -> Sequence:
     """Sequence ``name`` (SEQUENCES) of ``count`` frames: a pure function of (name, seed)."""
     import cv2
 
-    from qrfield.benchmarks.hardset import DISTORTED_CAMERA, _pinhole, rasterise
+    from qrfield.testing.hardset import DISTORTED_CAMERA, _pinhole, rasterise
 
     kind, version, module_px, z_mm, distorted = SEQUENCES[name]
     rng = np.random.default_rng([seed, 25, list(SEQUENCES).index(name)])
@@ -427,11 +427,11 @@ def still_cards(seed: int, views: int, frames: int) -> list[tuple[list[Any], Any
     results with continuity on, the truth)."""
     import cv2
 
-    from qrfield.benchmarks.hardset import DISTORTED_CAMERA, _pinhole, rasterise, symbol_matrix
     from qrfield.methods import METHODS
     from qrfield.pipeline import Pipeline
     from qrfield.sampling import random_visible_poses
     from qrfield.sources.base import Frame
+    from qrfield.testing.hardset import DISTORTED_CAMERA, _pinhole, rasterise, symbol_matrix
 
     rng = np.random.default_rng([seed, 27])
     out = []

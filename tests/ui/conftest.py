@@ -1,5 +1,7 @@
-"""Qt tests run offscreen; the app's config directory is always a temporary one, and a dialog the
-test did not answer fails the test instead of waiting for a click that never comes."""
+"""Qt tests run offscreen; the app's config directory is always a temporary one, a dialog the
+test did not answer fails the test instead of waiting for a click that never comes, and a test
+that leaves a thread running fails (pytest-qt closes the test's widgets first: the window's
+closeEvent is the app's own shutdown path, MainWindow.shutdown)."""
 
 from __future__ import annotations
 
@@ -8,9 +10,15 @@ import os
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 
 
+import threading
+import time
 from pathlib import Path
 
 import pytest
+
+#: How long a thread that is ending (a cancelled timer, a job sending its last signal) may take
+#: after the test's teardown before it counts as left running, s.
+THREAD_GRACE_S = 5.0
 
 
 @pytest.fixture(autouse=True)
@@ -58,3 +66,32 @@ def make_window(qtbot, tmp_path: Path):
     yield make
     for window in windows:
         window.shutdown()
+
+
+def _left_running(before: set[threading.Thread]) -> list[threading.Thread]:
+    """Python threads started during the test and still alive; a QThread that ran Python code is a
+    _DummyThread, alive for ever in threading's view: QThreads are checked by ui.worker."""
+    return [
+        t
+        for t in threading.enumerate()
+        if t not in before and t.is_alive() and not isinstance(t, threading._DummyThread)
+    ]
+
+
+@pytest.fixture(autouse=True)
+def no_thread_left_running():
+    """After the test and its teardown (windows closed and shut down), no worker QThread and no
+    thread the test started is still running."""
+    from ui.worker import unjoined_workers, wait_for_workers
+
+    before = set(threading.enumerate())
+    yield
+    workers = unjoined_workers()
+    if workers:
+        wait_for_workers()  # for the next tests, then fail this one
+        pytest.fail(f"{len(workers)} frame-loop worker thread(s) still running after the test")
+    deadline = time.monotonic() + THREAD_GRACE_S
+    for thread in _left_running(before):
+        thread.join(max(0.0, deadline - time.monotonic()))
+    left = _left_running(before)
+    assert not left, f"threads still running after the test: {sorted(t.name for t in left)}"

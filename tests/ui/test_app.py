@@ -3,6 +3,7 @@ switching solver and source, a source failing mid-stream, a screenshot, settings
 
 from __future__ import annotations
 
+import threading
 from pathlib import Path
 
 import cv2
@@ -13,7 +14,7 @@ from qrfield.geometry import Pose, angle_difference
 from qrfield.render import render_view
 from qrfield.sources import Frame, FrameSource, SourceError, VirtualBenchSettings, open_source
 
-pytestmark = pytest.mark.gui
+pytestmark = [pytest.mark.gui, pytest.mark.slow]
 WAIT_MS = 15000
 
 
@@ -189,6 +190,82 @@ def test_close_stops_the_worker_and_closes_the_source(make_window, qtbot) -> Non
     source = window.worker.source
     window.close()
     assert window.thread.isFinished() and not source.is_open and window.worker.source is None
+
+
+def test_the_worker_and_its_thread_are_deleted_with_the_window_on_the_gui_thread(qtbot, tmp_path) -> None:
+    from PySide6 import QtCore
+
+    from qrfield.runconfig import ConfigStore
+    from ui.main_window import MainWindow
+
+    window = MainWindow(ConfigStore(tmp_path / "config"), {"source": "virtual"})
+    deleted: list[threading.Thread] = []
+    for qobject in (window.worker, window.thread):
+        qobject.destroyed.connect(
+            lambda *_: deleted.append(threading.current_thread()), QtCore.Qt.ConnectionType.DirectConnection
+        )
+    try:
+        window.show()
+        qtbot.waitUntil(lambda: window.frames_shown >= 1, timeout=WAIT_MS)
+    finally:
+        window.close()
+        window.deleteLater()
+    qtbot.waitUntil(lambda: len(deleted) == 2, timeout=WAIT_MS)
+    assert all(thread is threading.main_thread() for thread in deleted)
+
+
+class StuckOnClose(FrameSource):
+    """The virtual bench whose close hangs until ``release`` is set, as a camera driver stuck in
+    its close would."""
+
+    name = "stuck"
+
+    def __init__(self, inner: FrameSource, release: threading.Event) -> None:
+        super().__init__()
+        self.inner, self.release = inner, release
+
+    def _open_impl(self) -> None:
+        self.inner.open()
+
+    def _read_impl(self, index: int) -> Frame:
+        return self.inner.read()
+
+    def _close_impl(self) -> None:
+        self.release.wait(60.0)
+        self.inner.close()
+
+
+def test_a_worker_that_does_not_end_in_time_is_said_and_kept_alive_until_it_ends(
+    make_window, qtbot, capsys
+) -> None:
+    from PySide6 import QtWidgets
+
+    from ui.worker import unjoined_workers
+
+    release = threading.Event()
+
+    def factory(spec: str, **kwargs) -> FrameSource:
+        source = StuckOnClose(open_source("virtual", **kwargs), release)
+        source.open()
+        return source
+
+    window = make_window({"source": "virtual"}, source_factory=factory)
+    window.WORKER_STOP_MS = 300
+    qtbot.waitUntil(lambda: window.frames_shown >= 1, timeout=WAIT_MS)
+    worker, thread = window.worker, window.thread
+    try:
+        window.close()  # the bounded wait runs out: the window closes anyway, and says why
+        assert window.worker_stopped is False and thread.isRunning()
+        assert "frame loop did not end within 0.3 s" in capsys.readouterr().err
+        assert "did not end" in window.notes[-1]
+        # Kept referenced while it runs: nothing deletes the worker or its QThread meanwhile.
+        assert any(w is worker and t is thread for w, t in unjoined_workers())
+    finally:
+        release.set()
+    qtbot.waitUntil(thread.isFinished, timeout=WAIT_MS)
+    # Its loop ended: the worker is back on the GUI thread, where it will be deleted.
+    assert worker.thread() is QtWidgets.QApplication.instance().thread()
+    assert not any(w is worker for w, _ in unjoined_workers())
 
 
 def test_virtual_bench_controls_move_the_true_pose(make_window, qtbot) -> None:

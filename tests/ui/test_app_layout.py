@@ -12,7 +12,7 @@ from PySide6 import QtCore, QtGui, QtWidgets
 
 from ui.session_dialogs import TOUCH_PX
 
-pytestmark = pytest.mark.gui
+pytestmark = [pytest.mark.gui, pytest.mark.slow]
 WAIT_MS = 15000
 SIZES = [(800, 480), (1024, 600), (1300, 820)]
 #: The Session tab's buttons for a session's actions (finger-sized).

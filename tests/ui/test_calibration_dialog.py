@@ -22,7 +22,7 @@ from qrfield.sources import Frame, FrameSource
 from qrfield.sources.base import Pacer
 from ui.main_window import MainWindow
 
-pytestmark = pytest.mark.gui
+pytestmark = [pytest.mark.gui, pytest.mark.slow]
 WAIT_MS = 20000
 CAMERA = "picam-v2@640x480"
 

@@ -21,7 +21,7 @@ import pytest
 
 from qrfield.cli import main
 
-pytestmark = [pytest.mark.gui, pytest.mark.timeout(120)]
+pytestmark = [pytest.mark.gui, pytest.mark.timeout(120), pytest.mark.slow]
 REPO = Path(__file__).resolve().parents[2]
 WAIT_MS = 20000
 

@@ -122,6 +122,7 @@ def test_the_verdict_uses_the_criteria_it_is_given(qtbot) -> None:
     assert "within 2° and 1\u00a0mm" in lines[0] and lines[1].startswith("✘ numerical")
 
 
+@pytest.mark.slow
 def test_the_window_judges_by_the_open_sessions_criteria(make_window, tmp_path, monkeypatch) -> None:
     from qrfield.sessions import AcceptanceCriteria
 

@@ -20,7 +20,7 @@ from qrfield.geometry import Pose
 from qrfield.render import render_view
 from qrfield.sources import Frame, FrameSource, is_live_camera
 
-pytestmark = pytest.mark.gui
+pytestmark = [pytest.mark.gui, pytest.mark.slow]
 WAIT_MS = 20000
 CAMERA = "picam-v2@640x480"
 BADGE = "SIMULATED — virtual bench, not a camera"

@@ -20,7 +20,7 @@ from qrfield.serial.link import CLOSED, CONNECTED, DISCONNECTED, SerialLinkSetti
 from ui.main_window import MainWindow
 from ui.serial_panel import STATE_COLOURS, SerialPanel
 
-pytestmark = pytest.mark.gui
+pytestmark = [pytest.mark.gui, pytest.mark.slow]
 WAIT_MS = 15000
 
 

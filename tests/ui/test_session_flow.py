@@ -18,7 +18,7 @@ from session_steps import FRAMES, bench, create_session, log_by_enter, rows_csv,
 from qrfield.sources import Frame, FrameSource, SourceError, open_source
 from ui.sessions_panel import STATUS_STYLES
 
-pytestmark = pytest.mark.gui
+pytestmark = [pytest.mark.gui, pytest.mark.slow]
 WAIT_MS = 15000
 LEFT = QtCore.Qt.MouseButton.LeftButton
 

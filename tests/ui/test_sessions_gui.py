@@ -34,7 +34,7 @@ from qrfield.geometry import angle_difference
 from qrfield.sessions.files import FileOps
 from ui.main_window import MainWindow
 
-pytestmark = pytest.mark.gui
+pytestmark = [pytest.mark.gui, pytest.mark.slow]
 WAIT_MS = 15000
 LEFT = QtCore.Qt.MouseButton.LeftButton
 # docs/conventions.md, "Experiment sessions on disk", typed here from the document (not from the code).

@@ -13,7 +13,7 @@ from PySide6 import QtCore
 from qrfield.simulation import load_study, run_study
 from ui.simulation_tab import SimulationTab
 
-pytestmark = pytest.mark.gui
+pytestmark = [pytest.mark.gui, pytest.mark.slow]
 WAIT_MS = 60_000
 CAMERA = "picam-v2@640x480"
 

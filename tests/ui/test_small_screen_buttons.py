@@ -13,7 +13,7 @@ from test_app_layout import WAIT_MS, clipped_by_parents, cut_labels, in_scroll_a
 from qrfield.camera import resolve_camera
 from ui.calibration_dialog import RESULT_PAGE, VIEWS_PAGE, CalibrationDialog
 
-pytestmark = pytest.mark.gui
+pytestmark = [pytest.mark.gui, pytest.mark.slow]
 SIZES = [(800, 480), (1024, 600)]
 IDS = [f"{w}x{h}" for w, h in SIZES]
 CAMERA = "picam-v2@640x480"

@@ -102,6 +102,7 @@ def test_a_focused_control_takes_the_wheel(page, qtbot) -> None:
     assert combo.currentText() == "ippe"
 
 
+@pytest.mark.slow
 def test_the_app_installs_one_guard(make_window, qtbot) -> None:
     from ui.wheel_guard import WheelGuard
 
@@ -111,6 +112,7 @@ def test_the_app_installs_one_guard(make_window, qtbot) -> None:
     assert len(app.findChildren(WheelGuard)) == 1
 
 
+@pytest.mark.slow
 def test_scrolling_the_solver_page_does_not_switch_the_solver(make_window, qtbot) -> None:
     """The bug as reported: the wheel over the method box switched numerical to ippe."""
     window = make_window({"source": "virtual", "method": "numerical"})

@@ -7,6 +7,7 @@ import time
 
 import numpy as np
 import pytest
+from PySide6 import QtWidgets
 
 from qrfield.camera import resolve_camera
 from qrfield.geometry import Pose
@@ -40,6 +41,7 @@ class FastLiveCamera(FrameSource):
         pass
 
 
+@pytest.mark.slow
 def test_a_fast_live_camera_is_drained_and_results_stay_current(qtbot, camera_vga) -> None:
     image = render_view(camera_vga, 50.0, Pose([0, 0, 300], [10, 10, 0]), noise_sigma=2.0, seed=1).image
     sources: list[FastLiveCamera] = []
@@ -65,3 +67,5 @@ def test_a_fast_live_camera_is_drained_and_results_stay_current(qtbot, camera_vg
     finally:
         assert stop_worker(worker, thread)
     assert not sources[0].is_open and worker.source is None
+    # Back on the GUI thread once its loop ended: the QObject is never deleted on a worker thread.
+    assert worker.thread() is QtWidgets.QApplication.instance().thread()

@@ -16,9 +16,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from qrfield.benchmarks.hardset import DISTORTED_CAMERA
 from qrfield.camera import CameraModel, resolve_camera
 from qrfield.geometry import Pose
+from qrfield.testing.hardset import DISTORTED_CAMERA
 
 #: The lens with visible barrel distortion of the hard benchmark set (also the tests' DISTORTED case).
 DISTORTED = DISTORTED_CAMERA
@@ -125,11 +125,11 @@ def render_set(count: int, seed: int) -> list[BenchView]:
 
 
 def hard_set(count: int, seed: int) -> list[BenchView]:
-    """The hard benchmark set of ``qrfield benchmark detect`` (qrfield.benchmarks.hardset: segno
+    """The hard benchmark set of ``qrfield benchmark detect`` (qrfield.testing.hardset: segno
     symbols of versions 1-10, 30/50/100 mm codes, z 150-1000 mm, tilt up to 60 deg, noise 0-4, blur
     0.3-1.2 px, lighting gradients, pinhole and DISTORTED; module size its views' shortest side over
     the modules)."""
-    from qrfield.benchmarks.hardset import hard_views
+    from qrfield.testing.hardset import hard_views
 
     return [
         BenchView(v.camera, v.side_mm, v.pose, v.corners_px, v.image, v.modules, v.text, v.module_px)
