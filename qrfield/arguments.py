@@ -103,6 +103,21 @@ def limited(limit: Limit, option: str) -> Callable[[str], float]:
     return parse
 
 
+def text(option: str) -> Callable[[str], str]:
+    """An argparse ``type=`` for a text option (a QR payload, a name, a note): refused in one line
+    when it is not UTF-8 (:func:`qrfield.texts.check_text`), before anything is done with it."""
+    from qrfield.texts import TextError, check_text
+
+    def parse(value: str) -> str:
+        try:
+            return check_text(value, option)
+        except TextError as exc:
+            raise argparse.ArgumentTypeError(str(exc).removeprefix(f"{option}: ")) from None
+
+    parse.__name__ = "text"
+    return parse
+
+
 def add_side_argument(parser: Any, default: float | None = None, *, configured: str = "") -> None:
     """``--side-mm L``: the QR symbol's side without its quiet zone (mm), checked against
     :data:`qrfield.limits.SIDE_MM`; required unless a ``default`` is given, or ``configured`` says

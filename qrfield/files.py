@@ -32,7 +32,6 @@ import errno
 import io
 import itertools
 import json
-import math
 import os
 import re
 import stat
@@ -43,6 +42,9 @@ from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
+
+from qrfield.limits import LimitError, as_number
+from qrfield.texts import TextError, check_text
 
 #: Largest file a reader reads unless it says otherwise (bytes): far above any profile, session or
 #: study file, far below what would hurt a Raspberry Pi.
@@ -109,15 +111,16 @@ class Fields:
         return default
 
     def number(self, key: str, default: Any = None) -> float:
-        """A finite number (JSON number; not true/false, not text)."""
+        """A finite number (JSON number; not true/false, not text, not too large for a float)."""
         value = self._get(key, _MISSING if default is None else default)
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise FileFormatError(
                 f"{self.where}: field '{key}' must be a number, got {describe_value(value)}"
             )
-        if not math.isfinite(value):
-            raise FileFormatError(f"{self.where}: field '{key}' must be finite, got {value!r}")
-        return float(value)
+        try:
+            return as_number(value, f"{self.where}: field '{key}'", "the value")
+        except LimitError as exc:
+            raise FileFormatError(str(exc)) from None
 
     def integer(self, key: str, default: Any = None) -> int:
         """A whole number (3 or 3.0)."""
@@ -227,16 +230,31 @@ def nesting_depth(text: str, language: str = "json") -> int:
 
 
 def _check_values(value: Any, where: str, max_chars: int, path: str = "") -> None:
-    """Refuse any text (key or value) longer than ``max_chars``; depth is already bounded."""
+    """Refuse any text (key or value) longer than ``max_chars`` or not UTF-8 (a ``"\\ud800"``
+    escape), and any number that is not a finite float (:func:`qrfield.limits.as_number`: a
+    400-digit integer, ``1e400``), naming the key; depth is already bounded."""
     if isinstance(value, str):
         if len(value) > max_chars:
             raise FileFormatError(
                 f"{where}: value {path or '(top)'} is {len(value)} characters long, more than {max_chars}"
             )
+        try:
+            check_text(value, f"{where}: value {path or '(top)'}")
+        except TextError as exc:
+            raise FileFormatError(str(exc)) from None
+    elif isinstance(value, (int, float)) and not isinstance(value, bool):
+        try:
+            as_number(value, f"{where}: value {path or '(top)'}", "the number")
+        except LimitError as exc:
+            raise FileFormatError(str(exc)) from None
     elif isinstance(value, dict):
         for key, item in value.items():
             if isinstance(key, str) and len(key) > max_chars:
                 raise FileFormatError(f"{where}: a key is {len(key)} characters long, more than {max_chars}")
+            try:
+                check_text(key, f"{where}: a key in {path or '(top)'}")
+            except TextError as exc:
+                raise FileFormatError(str(exc)) from None
             _check_values(item, where, max_chars, f"{path}.{key}" if path else str(key))
     elif isinstance(value, list):
         for i, item in enumerate(value):

@@ -24,6 +24,7 @@ from typing import Any
 
 from qrfield.limits import DEFAULT_MAX_MEGAPIXELS
 from qrfield.settings import setting
+from qrfield.texts import check_path_for_library
 
 #: File name endings taken as images when a folder is given.
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".pgm", ".ppm", ".pbm", ".pnm")
@@ -307,6 +308,7 @@ def write_image(path: str | os.PathLike[str], image: Any, *, overwrite: bool = T
     suffix = target.suffix.lower()
     if not suffix:
         raise OSError(f"cannot write {target}: no file extension to tell the image format (.png, .jpg, ...)")
+    check_path_for_library(suffix, f"cannot write {target}: its extension")
     try:
         ok, encoded = cv2.imencode(suffix, image)
     except cv2.error as exc:

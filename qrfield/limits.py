@@ -18,6 +18,45 @@ class LimitError(ValueError):
     """A number outside its physical limits, or not a finite number; the message names it."""
 
 
+#: Longest number text read (characters): a float has 17 significant digits and an exponent, so
+#: this is far beyond any real value, and short enough that int() and float() stay instant.
+MAX_NUMBER_CHARS = 64
+
+
+def as_number(value: Any, where: str, label: str = "value") -> float:
+    """The one reader of a number from a user or a file: ``value`` (an int, a float, or a number's
+    text) as a finite float, else LimitError naming ``where`` (the option, or the file and key).
+
+    Refused: true/false, what is not a number, a text longer than :data:`MAX_NUMBER_CHARS`, an
+    integer too large for a float (a 400-digit integer in a JSON file: float() would raise
+    OverflowError), and infinities and NaN (``1e400`` in a file reads as infinity).
+    """
+    if isinstance(value, bool):
+        raise LimitError(f"{where}: {label} must be a number, got {value!r}")
+    if isinstance(value, str):
+        text = value.strip()
+        if len(text) > MAX_NUMBER_CHARS:
+            raise LimitError(
+                f"{where}: {label} must be a number, got a text of {len(text)} characters "
+                f"(more than {MAX_NUMBER_CHARS})"
+            )
+        value = text
+    elif isinstance(value, int) and value.bit_length() > 1024:  # beyond the largest float
+        digits = math.floor(math.log10(abs(value))) + 1  # not len(str()): it refuses over 4300 digits
+        digits -= 10 ** (digits - 1) > abs(value)  # log10 rounds 99...9 up to the next power
+        raise LimitError(f"{where}: {label} is an integer of {digits} digits, too large for a number")
+    try:
+        number = float(value)
+    except OverflowError:  # an integer just under 2**1024 but above the largest float
+        raise LimitError(f"{where}: {label} is an integer too large for a number") from None
+    except (TypeError, ValueError):
+        shown = repr(value) if len(repr(value)) <= 40 else repr(value)[:40] + "..."
+        raise LimitError(f"{where}: {label} must be a number, got {shown}") from None
+    if not math.isfinite(number):
+        raise LimitError(f"{where}: {label} must be a finite number, got {value!r}")
+    return number
+
+
 @dataclass(frozen=True)
 class Limit:
     """A closed range ``minimum..maximum`` of a quantity in ``unit``, with why it is what it is."""
@@ -34,15 +73,8 @@ class Limit:
 
     def check(self, value: Any, where: str) -> float:
         """``value`` as a float inside the limits, else LimitError: ``WHERE: LABEL V UNIT is ...``."""
-        if isinstance(value, bool):
-            raise LimitError(f"{where}: {self.label} must be a number, got {value!r}")
-        try:
-            number = float(value)
-        except (TypeError, ValueError, OverflowError):
-            raise LimitError(f"{where}: {self.label} must be a number, got {value!r}") from None
         unit = f" {self.unit}" if self.unit else ""
-        if not math.isfinite(number):
-            raise LimitError(f"{where}: {self.label} must be a finite number{unit}, got {value!r}")
+        number = as_number(value, where, self.label)
         if number < self.minimum:
             raise LimitError(
                 f"{where}: {self.label} {number:g}{unit} is below the smallest accepted, "

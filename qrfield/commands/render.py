@@ -6,7 +6,7 @@ import argparse
 import json
 import sys
 
-from qrfield.arguments import add_side_argument, number
+from qrfield.arguments import add_side_argument, number, text
 from qrfield.camera import DEFAULT_CAMERA, add_camera_arguments
 
 HELP = "render a QR card at a known pose through a camera model (test images with exact corners)"
@@ -43,7 +43,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="brightness gradient across the image (0..1; 0.3 = +-30%%)",
     )
     parser.add_argument("--seed", type=int, default=None, help="noise seed (repeatable images)")
-    parser.add_argument("--text", default="qrfield", help="QR payload (default: qrfield)")
+    parser.add_argument(
+        "--text", type=text("--text"), default="qrfield", help="QR payload (default: qrfield)"
+    )
     parser.add_argument("--color", action="store_true", help="write a 3-channel colour image")
     parser.add_argument(
         "--out", required=True, metavar="FILE", help="image file to write (.png, .jpg, .bmp, ...)"

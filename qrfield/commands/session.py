@@ -42,7 +42,7 @@ def say(text: str) -> None:
 
 # ------------------------------------------------------------------------------------ new
 def _add_new(parser: argparse.ArgumentParser) -> None:
-    from qrfield.arguments import add_side_argument
+    from qrfield.arguments import add_side_argument, text
     from qrfield.camera import add_camera_arguments
     from qrfield.methods import METHODS
     from qrfield.runconfig import add_run_arguments
@@ -51,7 +51,11 @@ def _add_new(parser: argparse.ArgumentParser) -> None:
 
     parser.add_argument("root", metavar="ROOT", help="the folder that holds sessions (made if missing)")
     parser.add_argument(
-        "--name", required=True, metavar="N", help="the session's name (part of its folder's)"
+        "--name",
+        type=text("--name"),
+        required=True,
+        metavar="N",
+        help="the session's name (part of its folder's)",
     )
     add_camera_arguments(parser, default=None)
     add_side_argument(parser, configured="the run configuration's")
@@ -61,8 +65,8 @@ def _add_new(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="the solver whose results the rows average (default: the configured one; numerical for both)",
     )
-    parser.add_argument("--operator", default="", help="who measures")
-    parser.add_argument("--notes", default="", help="notes saved in session.json")
+    parser.add_argument("--operator", type=text("--operator"), default="", help="who measures")
+    parser.add_argument("--notes", type=text("--notes"), default="", help="notes saved in session.json")
     group = parser.add_argument_group(
         "rows and acceptance criteria (sections 'session', 'criteria' of app.json)"
     )
@@ -119,6 +123,7 @@ def _run_new(args: argparse.Namespace) -> int:
 
 # ------------------------------------------------------------------------------------ log
 def _add_log(parser: argparse.ArgumentParser) -> None:
+    from qrfield.arguments import text
     from qrfield.runconfig import add_run_arguments
 
     parser.add_argument("folder", metavar="FOLDER", help="the session folder")
@@ -128,8 +133,12 @@ def _add_log(parser: argparse.ArgumentParser) -> None:
         help="the pose measured by hand: x, y, z (mm) and alpha, beta, gamma (degrees); 'virtual' (or "
         "'bench') = the virtual bench's own pose; without --truth every field is asked for (interactive)",
     )
-    parser.add_argument("--combo", metavar="NAME", help="the rotation combination of the row")
-    parser.add_argument("--note", default="", metavar="T", help="a one-line note for the row")
+    parser.add_argument(
+        "--combo", type=text("--combo"), metavar="NAME", help="the rotation combination of the row"
+    )
+    parser.add_argument(
+        "--note", type=text("--note"), default="", metavar="T", help="a one-line note for the row"
+    )
     parser.add_argument(
         "--frames", type=int, default=None, metavar="N", help="frames averaged (default: the session's)"
     )

@@ -59,6 +59,7 @@ from qrfield.sessions.averaging import Measurement
 from qrfield.sessions.criteria import AcceptanceCriteria, SessionSettings
 from qrfield.sessions.files import FileOps, atomic_write, fsync_dir, unique_path
 from qrfield.settings import SettingError, from_dict, to_dict
+from qrfield.texts import TextError, check_text
 
 try:  # advisory lock: POSIX only
     import fcntl
@@ -511,6 +512,11 @@ class Session:
         Never overwrites: when the folder exists, the next free second is taken for the stamp.
         ``solver_settings``: the solver's settings dataclass or a dict (saved as a dict).
         """
+        try:  # session.json is UTF-8: a text that is not would be written as an escape no reader takes
+            for label, text in (("session name", name), ("operator", operator), ("notes", notes or "")):
+                check_text(text, label)
+        except TextError as exc:
+            raise SessionError(str(exc)) from None
         safe = sanitize_name(name)
         if not isinstance(camera, CameraModel):
             raise SessionError(f"camera must be a CameraModel, got {type(camera).__name__}")
@@ -616,7 +622,11 @@ class Session:
         return len(self.pending)
 
     def update_notes(self, notes: str, operator: str | None = None) -> None:
-        """Change the notes (and operator) in session.json, atomically. Raises OSError if it cannot."""
+        """Change the notes (and operator) in session.json, atomically. Raises OSError if it cannot,
+        TextError (a ValueError) for a text that is not UTF-8."""
+        check_text(notes or "", "notes")
+        if operator is not None:
+            check_text(operator, "operator")
         changes: dict[str, Any] = {"notes": notes or ""}
         if operator is not None:
             changes["operator"] = _one_line(operator)
@@ -639,9 +649,11 @@ class Session:
         """
         number = self.next_row
         values = measurement_values(measurement, number, time_text or _now_text())
-        try:  # refused before it is numbered: a field the csv module cannot read back
+        try:  # refused before it is numbered: a field the csv module cannot read back, or not UTF-8
             check_field_sizes(values, f"row {number}")
-        except FileFormatError as exc:
+            for column, text in values.items():
+                check_text(text, f"row {number}: {column}")
+        except (FileFormatError, TextError) as exc:
             raise SessionError(str(exc)) from None
         self.next_row += 1
         row = LoggedRow(number, values, confirmed=False)
