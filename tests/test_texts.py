@@ -214,3 +214,15 @@ def test_a_400_digit_integer_in_a_camera_profile_is_one_line(tmp_path, capsys):
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1, err
     assert f"camera file {path}: value fx: the number is an integer of 400 digits" in err
+
+
+def test_numbers_of_csv_files_and_typed_values_go_through_the_same_reader():
+    from qrfield.sessions.groundtruth import parse_number
+    from qrfield.simulation.combinations import CombinationError, parse_combinations
+
+    with pytest.raises(
+        CombinationError, match=r"c\.csv, line 2: field 'alpha': the multiplier must be a finite"
+    ):
+        parse_combinations("name,alpha,beta,gamma\na,1e400,0,0\n", "c.csv")
+    with pytest.raises(ValueError, match="must be a finite number in mm"):
+        parse_number(10**400, "mm")  # was OverflowError from float()
