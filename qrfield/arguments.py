@@ -22,8 +22,11 @@ from typing import Any, NoReturn
 
 from qrfield.limits import Limit, LimitError
 
-#: A word that is a value, not an option: '-' then a digit, or '-.' then a digit.
-_VALUE_WORD = re.compile(r"^-\.?\d")
+#: A word that is a value, not an option: '-' then a digit, or '-.' then a digit, or a negative
+#: infinity or NaN (refused as not finite by the option's type, not taken for an unknown option).
+_VALUE_WORD = re.compile(r"^-(\.?\d|(inf|infinity|nan)$)", re.IGNORECASE)
+#: How alike a mistyped word must be to a known one to be suggested (difflib's ratio).
+SUGGEST_CUTOFF = 0.6
 
 #: Separators of :func:`parse_numbers`: commas, semicolons, white space.
 _SEPARATORS = re.compile(r"[,;\s]+")
@@ -35,12 +38,65 @@ NEGATIVE_VALUES_HELP = (
 
 
 class ArgumentParser(argparse.ArgumentParser):
-    """argparse's parser that takes ``-10,5,300`` as a value and reports errors in one line."""
+    """argparse's parser that takes ``-10,5,300`` as a value, reports errors in one line, and
+    suggests the nearest option or choice for a mistyped one ("did you mean --side-mm?").
+
+    Python 3.14's ``suggest_on_error`` does the same, but qrfield runs on 3.11: every parser of
+    every subcommand is of this class (``add_subparsers`` makes its parsers with the parent's
+    class), so each one suggests among its own options.
+    """
 
     def _parse_optional(self, arg_string: str) -> Any:
         if _VALUE_WORD.match(arg_string):
             return None  # a value (a negative number or a list of them), never an option
         return super()._parse_optional(arg_string)
+
+    def parse_known_args(self, args: Any = None, namespace: Any = None) -> Any:
+        words = list(sys.argv[1:] if args is None else args)
+        self._refuse_unknown_options(words)  # before argparse says a required option is missing
+        return super().parse_known_args(words, namespace)
+
+    def _refuse_unknown_options(self, words: list[str]) -> None:
+        """Error, with the nearest known option, for the first word argparse would take for an
+        option this parser does not have; the words from a subcommand's name on are its own."""
+        commands = {
+            name
+            for action in self._actions
+            if isinstance(action, argparse._SubParsersAction)
+            for name in action.choices
+        }
+        for word in words:
+            if word == "--" or word in commands:
+                return
+            found = self._parse_optional(word)
+            if found is None:
+                continue
+            # (action, option, ...) on Python 3.11, a list of such on 3.12 and later
+            options = found if isinstance(found, list) else [found]
+            if all(option[0] is None for option in options):
+                name = word.partition("=")[0]
+                self.error(f"unrecognized option {name}{self._suggestion(name, self._option_words())}")
+
+    def _check_value(self, action: argparse.Action, value: Any) -> None:
+        if action.choices is not None and value not in action.choices:
+            choices = [str(c) for c in action.choices]
+            shown = ", ".join(map(repr, choices))
+            raise argparse.ArgumentError(
+                action, f"invalid choice: {value!r} (choose from {shown}){self._suggestion(value, choices)}"
+            )
+
+    def _option_words(self) -> list[str]:
+        return [word for action in self._actions for word in action.option_strings]
+
+    @staticmethod
+    def _suggestion(word: Any, known: Sequence[str]) -> str:
+        """``; did you mean X?`` for the known word nearest ``word``, "" when none is near."""
+        import difflib
+
+        if not isinstance(word, str):
+            return ""
+        matches = difflib.get_close_matches(word, known, n=1, cutoff=SUGGEST_CUTOFF)
+        return f"; did you mean {matches[0]}?" if matches else ""
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {one_line(message)} (see {self.prog} --help)\n")

@@ -9,6 +9,7 @@ No subcommand opens the bench app (``qrfield gui``).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import pkgutil
 import sys
@@ -55,6 +56,10 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the console script; returns the process exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
+    # A file name that is not UTF-8 (kept by Python as lone surrogates) is printed as the bytes it
+    # was given, as ls does, instead of failing after the file is written (a strict UTF-8 locale).
+    with contextlib.suppress(AttributeError, ValueError):
+        sys.stdout.reconfigure(errors="surrogateescape")  # type: ignore[union-attr]
     parser = build_parser()
     if not argv or (argv[0].startswith("-") and argv[0] not in ("-h", "--help", "--version")):
         argv = ["gui", *argv]  # no subcommand: the app, with any options given
