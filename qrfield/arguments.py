@@ -206,9 +206,12 @@ def whole_number(option: str, minimum: int | None = None, maximum: int | None = 
 
     def parse(text: str) -> int:
         try:
+            if len(text.strip()) > 64:  # int() of thousands of digits is slow, and none is meant
+                raise ValueError
             value = int(text.strip())
         except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+            shown = text if len(text) <= 40 else text[:40] + "..."
+            raise argparse.ArgumentTypeError(f"expected a whole number, got {shown!r}") from None
         if minimum is not None and value < minimum:
             raise argparse.ArgumentTypeError(f"{value} is below the smallest accepted, {minimum}")
         if maximum is not None and value > maximum:
@@ -217,6 +220,35 @@ def whole_number(option: str, minimum: int | None = None, maximum: int | None = 
 
     parse.__name__ = "whole_number"
     return parse
+
+
+def count(option: str, minimum: int = 0, maximum: int | None = None) -> Callable[[str], int]:
+    """An argparse ``type=`` for a count of frames, lines, rows (``minimum``..``maximum``, by
+    default :data:`qrfield.limits.MAX_COUNT`)."""
+    from qrfield.limits import MAX_COUNT
+
+    return whole_number(option, minimum, MAX_COUNT if maximum is None else maximum)
+
+
+def seconds(option: str, minimum: float = 0.0) -> Callable[[str], float]:
+    """An argparse ``type=`` for a duration in seconds up to :data:`qrfield.limits.DURATION_S`."""
+    from qrfield.limits import DURATION_S
+
+    return limited(Limit(DURATION_S.label, "s", minimum, DURATION_S.maximum), option)
+
+
+def rate(option: str, minimum: float = 0.0) -> Callable[[str], float]:
+    """An argparse ``type=`` for a rate in Hz up to :data:`qrfield.limits.RATE_HZ`."""
+    from qrfield.limits import RATE_HZ
+
+    return limited(Limit(RATE_HZ.label, "Hz", minimum, RATE_HZ.maximum), option)
+
+
+def seed(option: str = "--seed") -> Callable[[str], int]:
+    """An argparse ``type=`` for a noise seed, 0..:data:`qrfield.limits.MAX_SEED`."""
+    from qrfield.limits import MAX_SEED
+
+    return whole_number(option, 0, MAX_SEED)
 
 
 def _number(text: str) -> float:

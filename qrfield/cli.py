@@ -53,6 +53,16 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def describe_error(exc: BaseException) -> str:
+    """The message of an error for the user: an OS error the system raised (``[Errno 36] File
+    name too long: 'x'``) as ``x: file name too long``; any other as it is."""
+    text = str(exc)
+    if isinstance(exc, OSError) and exc.strerror and text.startswith("[Errno"):
+        where = exc.filename if exc.filename is not None else ""
+        return f"{where}: {exc.strerror.lower()}" if where != "" else exc.strerror.lower()
+    return text
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the console script; returns the process exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -89,7 +99,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 3
     except (CameraModelError, ValueError, OSError) as exc:
         # Bad input is the user's to fix: one clear line, no traceback.
-        print(f"qrfield {args.command}: error: {one_line(str(exc))}", file=sys.stderr)
+        print(f"qrfield {args.command}: error: {one_line(describe_error(exc))}", file=sys.stderr)
         return 2
     except Exception as exc:
         # OpenCV rejects bad arguments with cv2.error, not a ValueError (e.g. a QR text too long to

@@ -441,15 +441,46 @@ def check_target(path: str | os.PathLike[str], what: str = "") -> Path:
     """``path`` as a file to write: not a folder, in a folder that exists (which is never created)."""
     path = Path(path)
     label = f"{what} {path}" if what else str(path)
+    folder = path.parent
+    longest = name_max(folder if folder.is_dir() else ".")
+    size = max((len(os.fsencode(part)) for part in path.parts), default=0)
+    if size > longest:  # before is_dir(), which raises for such a name
+        raise OSError(
+            errno.ENAMETOOLONG,
+            f"cannot write {label}: a name in it is {size} bytes long, more than the {longest} the "
+            "file system allows; choose a shorter name",
+        )
     if path.is_dir():
         raise IsADirectoryError(f"{label} is a folder; give a file name")
-    folder = path.parent
     if not folder.is_dir():
         raise FileNotFoundError(
             f"cannot write {label}: folder {folder} does not exist (qrfield creates no folders you "
             "did not name; make it first)"
         )
     return path
+
+
+def name_max(folder: str | os.PathLike[str]) -> int:
+    """The longest file name (bytes) the file system of ``folder`` takes (255 where unknown)."""
+    try:
+        return int(os.pathconf(folder, "PC_NAME_MAX"))
+    except (OSError, ValueError, AttributeError):
+        return 255
+
+
+#: Bytes ``tempfile.mkstemp`` adds to a prefix and suffix: eight random characters.
+_TEMP_RANDOM = 8
+_TEMP_SUFFIX = ".tmp"
+
+
+def _temp_prefix(path: Path) -> str:
+    """``.NAME.`` for the temporary file beside ``path``, shortened so that the temporary name
+    fits the file system even when ``path``'s own name is as long as it allows."""
+    room = name_max(path.parent) - _TEMP_RANDOM - len(_TEMP_SUFFIX) - 2
+    name = path.name
+    while len(os.fsencode(name)) > room and name:
+        name = name[: max(0, min(len(name) - 1, room))]
+    return f".{name}."
 
 
 @contextlib.contextmanager
@@ -474,7 +505,7 @@ def atomic_file(
     path = check_target(path)
     if not overwrite and os.path.lexists(path):
         raise FileExistsError(errno.EEXIST, "file exists", str(path))
-    fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=_temp_prefix(path), suffix=_TEMP_SUFFIX)
     tmp = Path(tmp_name)
     try:
         with contextlib.suppress(OSError):  # e.g. FAT file systems have no modes

@@ -15,9 +15,27 @@ HELP = "time and peak memory of refusing a 32000x24000 PNG before decoding (targ
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--width", type=int, default=32000, help="width of the large PNG (default 32000)")
-    parser.add_argument("--height", type=int, default=24000, help="height of the large PNG (default 24000)")
-    parser.add_argument("--repeat", type=int, default=3, help="runs of each command; the best is shown")
+    from qrfield.arguments import count, whole_number
+    from qrfield.limits import MAX_BENCHMARK_COUNT
+
+    parser.add_argument(
+        "--width",
+        type=whole_number("--width", 8, 65535),
+        default=32000,
+        help="width of the large PNG (default 32000)",
+    )
+    parser.add_argument(
+        "--height",
+        type=whole_number("--height", 8, 65535),
+        default=24000,
+        help="height of the large PNG (default 24000)",
+    )
+    parser.add_argument(
+        "--repeat",
+        type=count("--repeat", 0, MAX_BENCHMARK_COUNT),
+        default=3,
+        help="runs of each command; the best is shown",
+    )
 
 
 def write_black_png(path: str, width: int, height: int) -> None:

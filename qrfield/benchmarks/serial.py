@@ -24,12 +24,25 @@ HELP = "frames per second encoded and written through the serial link, and publi
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--frames", type=int, default=20000, help="frames encoded (default 20000)")
-    parser.add_argument("--seconds", type=float, default=1.0, help="seconds per throughput run (default 1)")
+    from qrfield.arguments import count, seconds, seed
+    from qrfield.limits import MAX_BENCHMARK_COUNT
+
     parser.add_argument(
-        "--latency-frames", type=int, default=300, help="frames timed for latency (default 300)"
+        "--frames",
+        type=count("--frames", 0, MAX_BENCHMARK_COUNT),
+        default=20000,
+        help="frames encoded (default 20000)",
     )
-    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument(
+        "--seconds", type=seconds("--seconds"), default=1.0, help="seconds per throughput run (default 1)"
+    )
+    parser.add_argument(
+        "--latency-frames",
+        type=count("--latency-frames", 0, MAX_BENCHMARK_COUNT),
+        default=300,
+        help="frames timed for latency (default 300)",
+    )
+    parser.add_argument("--seed", type=seed("--seed"), default=1)
 
 
 class _PtyReader:

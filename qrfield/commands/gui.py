@@ -14,6 +14,7 @@ HELP = "open the bench app window (the default when no subcommand is given)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from qrfield.arguments import add_side_argument, seconds
     from qrfield.methods import METHOD_CHOICES
     from qrfield.runconfig import add_config_dir_argument
     from qrfield.sources import SOURCE_HELP
@@ -24,12 +25,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--camera", default=None, metavar="CAM", help="camera profile NAME[@WxH] or PATH.json"
     )
-    parser.add_argument("--side-mm", type=float, default=None, metavar="L", help="QR symbol side, mm")
+    add_side_argument(parser, configured="the last one used")
     parser.add_argument("--method", choices=METHOD_CHOICES, default=None, help="pose method(s)")
     add_config_dir_argument(parser)
     parser.add_argument(
         "--quit-after",
-        type=float,
+        type=seconds("--quit-after"),
         default=None,
         metavar="SECONDS",
         help="close the window after SECONDS (smoke tests)",

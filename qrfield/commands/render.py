@@ -6,7 +6,7 @@ import argparse
 import json
 import sys
 
-from qrfield.arguments import add_side_argument, number, text
+from qrfield.arguments import add_side_argument, number, seed, text
 from qrfield.camera import DEFAULT_CAMERA, add_camera_arguments
 
 HELP = "render a QR card at a known pose through a camera model (test images with exact corners)"
@@ -42,7 +42,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=0.0,
         help="brightness gradient across the image (0..1; 0.3 = +-30%%)",
     )
-    parser.add_argument("--seed", type=int, default=None, help="noise seed (repeatable images)")
+    parser.add_argument("--seed", type=seed(), default=None, help="noise seed (repeatable images)")
     parser.add_argument(
         "--text", type=text("--text"), default="qrfield", help="QR payload (default: qrfield)"
     )
@@ -62,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
 
     camera = camera_from_args(args)
     assert camera is not None
-    pose = Pose.parse(args.pose)
+    pose = Pose.parse(args.pose, "--pose")
     check_pixels(camera.width, camera.height, ImageSettings(), f"camera {camera.name}")
     out = check_target(args.out, "--out")
     view = render_view(

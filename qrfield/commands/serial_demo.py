@@ -23,17 +23,31 @@ HELP = "stream a synthetic moving pose to a serial port (test a controller witho
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from qrfield.arguments import rate, seconds
+
     parser.add_argument(
         "port", metavar="PORT", help="device path (/dev/ttyUSB0, COM3, a pty) or URL (loop://)"
     )
-    parser.add_argument("--fps", type=float, default=30.0, help="poses produced per second (default 30)")
-    parser.add_argument("--seconds", type=float, default=None, metavar="S", help="stop after S seconds")
     parser.add_argument(
-        "--noqr-every", type=float, default=10.0, metavar="S", help="1 s of NOQR every S s; 0 never"
+        "--fps", type=rate("--fps"), default=30.0, help="poses produced per second (default 30)"
+    )
+    parser.add_argument(
+        "--seconds", type=seconds("--seconds"), default=None, metavar="S", help="stop after S seconds"
+    )
+    parser.add_argument(
+        "--noqr-every",
+        type=seconds("--noqr-every"),
+        default=10.0,
+        metavar="S",
+        help="1 s of NOQR every S s; 0 never",
     )
     parser.add_argument("--baud", type=int, default=115200, help="baud rate, 8N1 (default 115200)")
     parser.add_argument(
-        "--max-rate", type=float, default=30.0, metavar="HZ", help="the link's rate cap (default 30)"
+        "--max-rate",
+        type=rate("--max-rate"),
+        default=30.0,
+        metavar="HZ",
+        help="the link's rate cap (default 30)",
     )
 
 

@@ -123,8 +123,9 @@ def _run_new(args: argparse.Namespace) -> int:
 
 # ------------------------------------------------------------------------------------ log
 def _add_log(parser: argparse.ArgumentParser) -> None:
-    from qrfield.arguments import text
+    from qrfield.arguments import count, text
     from qrfield.runconfig import add_run_arguments
+    from qrfield.sessions.criteria import MAX_FRAMES_PER_ROW
 
     parser.add_argument("folder", metavar="FOLDER", help="the session folder")
     parser.add_argument(
@@ -140,7 +141,11 @@ def _add_log(parser: argparse.ArgumentParser) -> None:
         "--note", type=text("--note"), default="", metavar="T", help="a one-line note for the row"
     )
     parser.add_argument(
-        "--frames", type=int, default=None, metavar="N", help="frames averaged (default: the session's)"
+        "--frames",
+        type=count("--frames", 1, MAX_FRAMES_PER_ROW),
+        default=None,
+        metavar="N",
+        help="frames averaged (default: the session's)",
     )
     # Camera, QR side and solver are the session's own: only the source and detection are chosen here.
     add_run_arguments(
@@ -304,9 +309,11 @@ def _log_interactive(session: Any, recorder: Any, args: Any, combinations: Any, 
 
 # ------------------------------------------------------------------------------------ undo
 def _add_undo(parser: argparse.ArgumentParser) -> None:
+    from qrfield.arguments import count
+
     parser.add_argument("folder", metavar="FOLDER", help="the session folder")
     parser.add_argument(
-        "--row", type=int, default=None, metavar="K", help="withdraw row K (default: the last)"
+        "--row", type=count("--row", 1), default=None, metavar="K", help="withdraw row K (default: the last)"
     )
 
 

@@ -33,6 +33,9 @@ def add_override_argument(parser: argparse.ArgumentParser, help_text: str) -> No
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from qrfield.arguments import whole_number
+    from qrfield.limits import MAX_WORKERS
+
     parser.add_argument(
         "study", nargs="?", metavar="STUDY.toml", help="study file (default: the shipped study)"
     )
@@ -58,7 +61,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-csv", action="store_true", help=argparse.SUPPRESS)  # the default now
     parser.add_argument(
         "--workers",
-        type=int,
+        type=whole_number("--workers", 1, MAX_WORKERS),
         metavar="N",
         help="processes to run the study on (default: every core for a large study; 1 = this process)",
     )
