@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import re
 import sys
 from collections.abc import Callable, Sequence
@@ -258,11 +259,16 @@ def _number(text: str) -> float:
         raise LimitError(f"expected a number, got {text!r}") from None
 
 
+def refuse_existing(path: str | os.PathLike[str], force: bool, what: str = "--out") -> None:
+    """The command-line rule for a named output file: one that exists is refused unless
+    ``--force`` (``force``); FileExistsError naming ``what`` and the file."""
+    if not force and os.path.lexists(path):
+        raise FileExistsError(f"{what} {path} exists; choose another name, or add --force to overwrite it")
+
+
 def stdout_closed() -> None:
     """After BrokenPipeError on stdout (``qrfield solve ... | head``): point stdout at /dev/null, so
     that Python's exit flush cannot fail again and print "Broken pipe"."""
-    import os
-
     try:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())

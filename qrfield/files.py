@@ -565,10 +565,11 @@ def atomic_write_json(path: str | os.PathLike[str], data: Any, **json_options: A
 
 
 def own_folders() -> tuple[Path, ...]:
-    """qrfield's own folders (config and data, :mod:`qrfield.paths`): created with their parents."""
+    """qrfield's own folders (config, data and sessions, :mod:`qrfield.paths`): created with their
+    parents."""
     from qrfield import paths
 
-    return (paths.config_dir(), paths.data_dir())
+    return (paths.config_dir(), paths.data_dir(), paths.sessions_dir())
 
 
 def _inside(path: Path, folder: Path) -> bool:

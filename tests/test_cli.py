@@ -244,3 +244,14 @@ def test_an_output_name_as_long_as_the_file_system_allows_is_written(tmp_path, c
     capsys.readouterr()
     line = _one_line_error([*argv[:-1], str(tmp_path / ("b" + name))], capsys)
     assert "a name in it is 256 bytes long, more than the 255 the file system allows" in line
+
+
+def test_render_never_overwrites_a_file_without_force(tmp_path, capsys):
+    """Issue 23: render --out replaced an existing file silently."""
+    out = tmp_path / "view.png"
+    out.write_bytes(b"my photo")
+    argv = ["render", "--side-mm", "30", "--pose", "0,0,300,0,0,0", "--out", str(out)]
+    assert main(argv) == 2
+    assert f"--out {out} exists; choose another name, or add --force" in capsys.readouterr().err
+    assert out.read_bytes() == b"my photo"
+    assert main([*argv, "--force"]) == 0 and cv2.imread(str(out)).shape == (480, 640, 3)

@@ -320,18 +320,57 @@ def test_pending_rows_are_written_before_the_next_row(tmp_path, camera_vga):
     session.close()
 
 
-def test_a_short_write_is_moved_aside_and_the_row_written_whole(tmp_path, camera_vga):
+def test_a_short_write_is_cut_back_at_once_and_the_row_written_whole(tmp_path, camera_vga):
+    """Issue 23: a failed append leaves no torn line, not even until the next open (it stayed at
+    the end of rows.csv, where another reader saw it)."""
     ops = FaultyOps()
     session = make(tmp_path, camera_vga, file_ops=ops)
+    header = session.rows_path.read_bytes()
     ops.short = True
     assert session.log(a_row(z=301.0)).status == "pending"
+    assert session.rows_path.read_bytes() == header  # half a line was written, and cut off
     ops.short = False
     assert session.retry().ok
-    assert any("unfinished line" in w for w in session.warnings)
     assert [line[0] for line in csv_rows(session.rows_path)[1:]] == ["1"]
-    assert len(list(session.path.glob("rows.csv.partial-*"))) == 1
+    assert not list(session.path.glob("rows.csv.partial-*"))  # nothing torn to move aside
     session.close()
     assert not Session.open(session.path).warnings
+
+
+def test_a_write_failing_midway_leaves_no_torn_line(tmp_path, camera_vga):
+    """A full disk after part of the line (write returns what fit, then ENOSPC)."""
+
+    class HalfThenFull(FileOps):
+        fail = False
+
+        def write(self, fd, data):
+            if self.fail:
+                super().write(fd, data[:7])
+                raise OSError(errno.ENOSPC, "No space left on device")
+            return super().write(fd, data)
+
+    ops = HalfThenFull()
+    session = make(tmp_path, camera_vga, file_ops=ops)
+    assert session.log(a_row(z=301.0)).ok
+    good = session.rows_path.read_bytes()
+    ops.fail = True
+    outcome = session.log(a_row(z=302.0))
+    assert outcome.status == "pending" and "disk full" in outcome.reason
+    assert session.rows_path.read_bytes() == good and good.endswith(b"\n")
+    session.close()
+
+
+def test_a_symlink_planted_at_rows_csv_is_refused(tmp_path, camera_vga):
+    """Issue 23: session log followed it and appended outside the session folder."""
+    session = make(tmp_path, camera_vga)
+    session.close()
+    outside = tmp_path / "outside.csv"
+    outside.write_bytes(session.rows_path.read_bytes())
+    session.rows_path.unlink()
+    session.rows_path.symlink_to(outside)
+    with pytest.raises(SessionError, match=r"rows\.csv is a symbolic link"):
+        Session.open(session.path)
+    assert outside.read_bytes().count(b"\n") == 1  # the header only: nothing appended
 
 
 def test_lost_permission_when_opening_keeps_rows_pending(tmp_path, camera_vga):

@@ -41,6 +41,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="FILE",
         help="with --quit-after: save the window as an image first",
     )
+    parser.add_argument("--force", action="store_true", help="overwrite --screenshot if it exists")
 
 
 def display_available() -> bool:
@@ -169,6 +170,11 @@ def check_arguments(args: argparse.Namespace) -> None:
         resolve_camera(args.camera)  # CameraModelError naming the preset or file
     if args.quit_after is not None and not args.quit_after > 0:
         raise ValueError(f"--quit-after must be a positive number of seconds, got {args.quit_after}")
+    if args.screenshot:
+        from qrfield.arguments import refuse_existing
+        from qrfield.files import check_target
+
+        refuse_existing(check_target(args.screenshot, "--screenshot"), args.force, "--screenshot")
 
 
 def run(args: argparse.Namespace) -> int:

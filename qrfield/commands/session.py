@@ -49,7 +49,13 @@ def _add_new(parser: argparse.ArgumentParser) -> None:
     from qrfield.sessions import AcceptanceCriteria, SessionSettings
     from qrfield.settings import add_arguments
 
-    parser.add_argument("root", metavar="ROOT", help="the folder that holds sessions (made if missing)")
+    parser.add_argument(
+        "root",
+        nargs="?",
+        metavar="ROOT",
+        help="the folder that holds sessions (made if missing; default: the app's sessions folder, "
+        "$QRFIELD_SESSIONS_DIR, else ~/.local/share/qrfield/sessions)",
+    )
     parser.add_argument(
         "--name",
         type=text("--name"),
@@ -80,6 +86,7 @@ def _run_new(args: argparse.Namespace) -> int:
     from qrfield.methods import METHODS, methods_from_choice
     from qrfield.runconfig import effective_settings
     from qrfield.sessions import AcceptanceCriteria, Session, SessionSettings
+    from qrfield.sessions.folders import configured_root
     from qrfield.settings import from_arguments
 
     effective = effective_settings(args)
@@ -98,8 +105,9 @@ def _run_new(args: argparse.Namespace) -> int:
     store = effective.store
     rows = from_arguments(SessionSettings, args, base=store.group("session", SessionSettings))
     criteria = from_arguments(AcceptanceCriteria, args, base=store.group("criteria", AcceptanceCriteria))
+    root = Path(args.root) if args.root else configured_root(store)
     session = Session.create(
-        args.root,
+        root,
         args.name,
         camera=effective.camera,
         side_mm=side,
@@ -139,6 +147,12 @@ def _add_log(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--note", type=text("--note"), default="", metavar="T", help="a one-line note for the row"
+    )
+    parser.add_argument(
+        "--force-combo",
+        action="store_true",
+        help="log a row whose --combo the signs of its angles contradict (refused otherwise, as the "
+        "app asks first)",
     )
     parser.add_argument(
         "--frames",
@@ -184,6 +198,9 @@ def _run_log(args: argparse.Namespace) -> int:
     truth = None
     if args.truth and not follow:
         truth = _parse_truth(args.truth, args.combo, combinations)
+        problem = combo_problem(truth, args.force_combo)  # before the frames: nothing measured in vain
+        if problem:
+            raise ValueError(problem)
     elif follow:
         _, message = validate_field("combo", args.combo or "", combinations)
         if message:
@@ -226,11 +243,30 @@ def _log_one(session: Any, recorder: Any, truth: Any, args: Any, follow: bool, e
     if measurement is None:
         say("stopped before the frames were in: nothing logged")
         return 1
-    return _log(session, measurement)
+    return _log(session, measurement, args.force_combo)
 
 
-def _log(session: Any, measurement: Any) -> int:
+def combo_problem(truth: Any, force: bool) -> str:
+    """Why a row's combination must not be logged as it is ("" when it may): the app's rule and
+    words (:func:`qrfield.sessions.combo_signs.combination_mismatch`), unless ``force``."""
+    from qrfield.sessions.combo_signs import combination_mismatch, sign_table
+
+    if force or not truth.combo:
+        return ""
+    mismatch = combination_mismatch(truth.combo, truth.angles_deg, sign_table())
+    return (
+        f"--combo: not logged: {mismatch}; fix --combo, or add --force-combo to log it as it is"
+        if mismatch
+        else ""
+    )
+
+
+def _log(session: Any, measurement: Any, force_combo: bool = False) -> int:
     """Append and fsync one row; 0 and "logged row K" only once it is on disk."""
+    problem = combo_problem(measurement.truth, force_combo)  # the bench's pose is known only now
+    if problem:
+        say(f"error: {problem}")
+        return 2
     outcome = session.log(measurement)
     if not outcome.ok:
         outcome = session.retry()
@@ -244,8 +280,13 @@ def _log(session: Any, measurement: Any) -> int:
             flush=True,
         )
         return 0
-    say(f"NOT logged: {outcome.message}")
-    for record in session.pending:  # the operator keeps these lines; the process is about to end
+    # This process ends now, so nothing is kept in memory for a retry: the line is printed for the
+    # operator to keep, and rows.csv holds no part of it (a failed append is cut back).
+    say(
+        f"NOT logged: {outcome.reason}; nothing of the row was left in {session.rows_path.name}. Free "
+        "space or fix permissions and log it again, or keep the line below"
+    )
+    for record in session.pending:
         say(f"unwritten line of {session.rows_path.name}: {record.line.decode('utf-8').rstrip()}")
     return 1
 
@@ -264,8 +305,10 @@ def _log_interactive(session: Any, recorder: Any, args: Any, combinations: Any, 
     from qrfield.sessions.groundtruth import UNITS
 
     last: dict[str, Any] = {}
-    if session.rows:
-        row = session.rows[-1].values
+    # The defaults offered are the last row still in force: a withdrawn row's values were wrong.
+    in_force = next((r for r in reversed(session.rows) if not r.withdrawn), None)
+    if in_force is not None:
+        row = in_force.values
         last = {name: row.get(f"gt_{name}", "") for name in FIELDS[:6]} | {"combo": row.get("combo", "")}
     code = 0
     print(
@@ -295,13 +338,18 @@ def _log_interactive(session: Any, recorder: Any, args: Any, combinations: Any, 
                     break
                 print(f"  {name}: {message}", flush=True)
         truth = GroundTruth(**{k: values[k] for k in FIELDS})
+        problem = combo_problem(truth, args.force_combo)
+        if problem:  # asked again, as the app asks before it logs
+            print(f"  combo: {problem.removeprefix('--combo: ')}", flush=True)
+            last.pop("combo", None)
+            continue
         frames = args.frames or session.info.frames_per_row
         print(f"measuring row {session.next_row}: {frames} frames…", flush=True)
         measurement = recorder.measure(truth, frames, note=values["note"], until=ended)
         if measurement is None:
             say("the source stopped before the frames were in: nothing logged")
             return 1
-        code = _log(session, measurement) or code
+        code = _log(session, measurement, args.force_combo) or code
         if _ask("Enter for the next row, q to quit: ") in (None, "q", "Q"):
             return code
     return code
@@ -331,7 +379,15 @@ def _run_undo(args: argparse.Namespace) -> int:
 
 # ------------------------------------------------------------------------------------ list / show
 def _add_list(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("root", metavar="ROOT", help="the folder that holds sessions")
+    from qrfield.runconfig import add_config_dir_argument
+
+    parser.add_argument(
+        "root",
+        nargs="?",
+        metavar="ROOT",
+        help="the folder that holds sessions (default: the app's sessions folder, as for 'new')",
+    )
+    add_config_dir_argument(parser)
 
 
 def _counts(content: Any) -> str:
@@ -342,9 +398,21 @@ def _counts(content: Any) -> str:
 
 
 def _run_list(args: argparse.Namespace) -> int:
+    from qrfield.runconfig import ConfigStore
     from qrfield.sessions import SessionError, read_session, session_folders
+    from qrfield.sessions.folders import configured_root
 
-    root = Path(args.root)
+    if args.root:
+        root = Path(args.root)
+    else:
+        store = ConfigStore()
+        for problem in store.problems:
+            say(f"settings: {problem}")
+        root = configured_root(store)
+        say(f"sessions in {root} (the app's sessions folder)")
+        if not root.is_dir():
+            say(f"no sessions in {root} yet")
+            return 0
     if not root.is_dir():
         raise ValueError(f"{root}: no such folder")
     folders = session_folders(root)
@@ -395,20 +463,25 @@ def _add_export(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("folder", metavar="FOLDER", help="the session folder")
     parser.add_argument(
         "--out",
-        required=True,
+        default=None,
         metavar="PATH",
-        help="the CSV to write (a folder: rows-clean.csv in it); only the rows still in force, "
-        "units in the column names (gt_x_mm, err_alpha_deg, ...)",
+        help="the CSV to write (a folder: rows-clean.csv in it; default: rows-clean.csv in the session's "
+        "folder, beside rows.csv, as the app exports); only the rows still in force, units in the "
+        "column names (gt_x_mm, err_alpha_deg, ...)",
     )
+    parser.add_argument("--force", action="store_true", help="overwrite the CSV if it exists")
 
 
 def _run_export(args: argparse.Namespace) -> int:
-    from qrfield.sessions.export import clean_table, export_path, export_session
+    from qrfield.arguments import refuse_existing
+    from qrfield.sessions.export import default_export_path, export_path, write_export
 
-    for warning in clean_table(args.folder).warnings:
+    target = export_path(args.folder, args.out) if args.out else default_export_path(args.folder)
+    refuse_existing(target, args.force, "--out" if args.out else "the export")
+    done = write_export(args.folder, target, overwrite=args.force)
+    for warning in done.warnings:
         say(f"warning: {warning}")
-    written = export_session(args.folder, args.out)
-    print(f"exported {written} rows to {export_path(args.folder, args.out)}")
+    print(f"exported {done.rows} rows to {done.path}")
     return 0
 
 

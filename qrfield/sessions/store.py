@@ -66,6 +66,9 @@ try:  # advisory lock: POSIX only
 except ImportError:  # pragma: no cover - Windows
     fcntl = None  # type: ignore[assignment]
 
+_NOFOLLOW = getattr(os, "O_NOFOLLOW", 0)
+_CLOEXEC = getattr(os, "O_CLOEXEC", 0)
+
 #: docs/conventions.md's required columns, in order.
 REQUIRED_COLUMNS = (
     "row",
@@ -253,7 +256,9 @@ class LogOutcome:
     status: "logged" (everything asked is on disk), "pending" (kept in memory, will be retried).
     row: the row number concerned (the new row; for undo the withdrawn row; None for retry).
     logged: rows and withdrawal records written by this call ("w7" = withdrawal of row 7).
-    pending: what still waits, in order. message: one line for the operator.
+    pending: what still waits, in order. message: one line for the operator of the app (which
+    keeps the records and retries them). reason: why the write failed, without advice ("" when
+    logged), for a front end that words its own advice (the command line, which is exiting).
     """
 
     status: str
@@ -261,6 +266,7 @@ class LogOutcome:
     logged: tuple[str, ...]
     pending: tuple[str, ...]
     message: str
+    reason: str = ""
 
     @property
     def ok(self) -> bool:
@@ -711,19 +717,28 @@ class Session:
                 else (f"logged {len(logged)} pending record(s)" if logged else "nothing pending")
             )
             return LogOutcome("logged", row, tuple(logged), waiting, message)
-        reason = _explain(error) if isinstance(error, OSError) else str(error)
+        explained = _explain(error) if isinstance(error, OSError) else str(error)
+        reason = f"cannot write {self.rows_path} ({explained})"
         message = (
-            f"NOT logged yet: cannot write {self.rows_path} ({reason}). "
+            f"NOT logged yet: {reason}. "
             f"{len(waiting)} record(s) kept in memory and retried before the next row; "
             "free space or fix permissions, then Retry. Do not close the app until they are written."
         )
-        return LogOutcome("pending", row, tuple(logged), waiting, message)
+        return LogOutcome("pending", row, tuple(logged), waiting, message, reason)
 
     def _connect(self) -> None:
         """Open rows.csv for appending and lock it (the end of the file is checked by each append)."""
         if self._fd is not None:
             return
-        fd = self._ops.open(str(self.rows_path), os.O_RDWR | os.O_APPEND)
+        try:  # never through a symbolic link planted at rows.csv (it would append elsewhere)
+            fd = self._ops.open(str(self.rows_path), os.O_RDWR | os.O_APPEND | _NOFOLLOW | _CLOEXEC)
+        except OSError as exc:
+            if exc.errno == errno.ELOOP or self.rows_path.is_symlink():
+                raise SessionError(
+                    f"{self.rows_path} is a symbolic link, not the session's own file; not writing "
+                    "through it (replace it with the file it points to)"
+                ) from None
+            raise
         try:
             if fcntl is not None:
                 try:
@@ -773,12 +788,26 @@ class Session:
     def _append(self, line: bytes) -> None:
         self._connect()
         assert self._fd is not None
-        if not self._repair_tail(expected=line):
-            written = self._ops.write(self._fd, line)
-            if written != len(line):
-                raise OSError(errno.ENOSPC, f"short write: {written} of {len(line)} bytes")
-        self._ops.fsync(self._fd)
+        try:
+            if not self._repair_tail(expected=line):
+                written = self._ops.write(self._fd, line)
+                if written != len(line):
+                    raise OSError(errno.ENOSPC, f"short write: {written} of {len(line)} bytes")
+            self._ops.fsync(self._fd)
+        except OSError:
+            self._cut_back()
+            raise
         self._good_size += len(line)
+
+    def _cut_back(self) -> None:
+        """After a failed append: cut rows.csv back to its last confirmed record, so that no torn
+        line stays at its end (best effort: a medium that fails this too is repaired on reopening)."""
+        if self._fd is None:
+            return
+        with contextlib.suppress(OSError):
+            if self._ops.size(self._fd) > self._good_size:
+                self._ops.truncate(self._fd, self._good_size)
+                self._ops.fsync(self._fd)
 
 
 def _checked_solver_settings(solver: str, settings: dict[str, Any]) -> dict[str, Any]:
