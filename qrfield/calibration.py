@@ -16,6 +16,7 @@ The square side S only scales the board poses; the intrinsics do not depend on i
 from __future__ import annotations
 
 import datetime as _dt
+import math
 import os
 from collections import Counter
 from collections.abc import Sequence
@@ -32,6 +33,11 @@ from qrfield.chessboard import Board
 #: Fewest usable views calibrate() accepts (with zero skew, two views fix the intrinsics in theory;
 #: three make a usable minimum, ten or more spread over the image give a good model).
 MIN_VIEWS = 3
+#: Largest image (megapixels) OpenCV's board detectors see: a larger photo is searched shrunk by a
+#: whole factor and its corners refined on the full image (``calibrate`` on a 49 MP photo then
+#: peaks under 600 MB: docs/calibration.md, ``qrfield benchmark memory``). 5 MP keeps the 3280 x
+#: 2464 photos of a Pi camera v2 at factor 2 and a 640 x 480 frame untouched.
+WORKING_MEGAPIXELS = 5.0
 #: Coverage grid used by default: (columns, rows) of image cells.
 COVERAGE_CELLS = (3, 3)
 _ROW_NAMES = ("top", "middle", "bottom")
@@ -210,12 +216,22 @@ def detect_board(
     size = (int(grey.shape[1]), int(grey.shape[0]))
     if min(size) < 16:
         return BoardDetection(label, None, size, f"image of {size[0]}x{size[1]} px is too small")
+    # OpenCV's detectors need tens of bytes per pixel (findChessboardCornersSB took 2.6 GB on a
+    # 49 MP photo): they run on a copy shrunk to the working resolution, and only the sub-pixel
+    # refinement, which reads a small window around each corner, runs on the full image.
+    factor = working_factor(size)
+    small = (
+        grey
+        if factor == 1
+        else cv2.resize(grey, (size[0] // factor, size[1] // factor), interpolation=cv2.INTER_AREA)
+    )
     flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE | cv2.CALIB_CB_FAST_CHECK
-    found, corners = cv2.findChessboardCorners(grey, board.pattern_size, flags=flags)
+    found, corners = cv2.findChessboardCorners(small, board.pattern_size, flags=flags)
     method = "classic"
     if not found and thorough:
-        found, corners = cv2.findChessboardCornersSB(grey, board.pattern_size, flags=cv2.CALIB_CB_EXHAUSTIVE)
+        found, corners = cv2.findChessboardCornersSB(small, board.pattern_size, flags=cv2.CALIB_CB_EXHAUSTIVE)
         method = "sb"
+    del small
     if not found or corners is None or len(corners) != board.corner_count:
         return BoardDetection(
             label,
@@ -224,11 +240,22 @@ def detect_board(
             f"board {board.label} (inner corners) not found; "
             "check --board and that the whole board is in view",
         )
-    corners = corners.reshape(-1, 1, 2).astype(np.float32)
-    half = _subpixel_half_window(corners.reshape(-1, 2), board)
+    # A shrunk pixel i covers full pixels factor*i .. factor*i + factor-1 (centre conventions of
+    # docs/conventions.md: a pixel's centre is its integer coordinate).
+    corners = (corners.reshape(-1, 1, 2).astype(np.float32) * factor + (factor - 1) / 2.0).astype(np.float32)
+    half = max(_subpixel_half_window(corners.reshape(-1, 2), board), min(2 * factor, 10))
     criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 50, 1e-3)
     corners = cv2.cornerSubPix(grey, corners, (half, half), (-1, -1), criteria)
     return BoardDetection(label, corners.reshape(-1, 2).astype(np.float64), size, "", method)
+
+
+def working_factor(size: tuple[int, int], megapixels: float | None = None) -> int:
+    """The whole number an image of ``size`` (width, height) is shrunk by for the board search, so
+    that the search sees at most ``megapixels`` (default :data:`WORKING_MEGAPIXELS`; 1 for an
+    image that is small enough)."""
+    limit = WORKING_MEGAPIXELS if megapixels is None else megapixels
+    pixels = float(size[0]) * float(size[1])
+    return max(1, math.ceil(math.sqrt(pixels / (limit * 1e6))))
 
 
 def read_image(path: str | os.PathLike[str]) -> np.ndarray | None:

@@ -76,13 +76,21 @@ def test_bumblebee_left_matches_boofcv(bumblebee_left: tuple[Path, list[Path]]) 
     assert cam.dist[0] < -0.2  # strong barrel distortion, as BoofCV's k1 = -0.363
 
 
-def test_bumblebee_corners_match_hand_labels(bumblebee_left: tuple[Path, list[Path]]) -> None:
+@pytest.mark.parametrize("shrunk", [False, True], ids=["full size", "searched at half size"])
+def test_bumblebee_corners_match_hand_labels(
+    bumblebee_left: tuple[Path, list[Path]], shrunk: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """Detected corners against the hand-selected points (leftNN.txt, in a snake order).
 
     The hand labels use pixel-edge coordinates (top-left corner of the image = (0, 0)): over all
     264 corners they sit (+0.50, +0.60) px from OpenCV's, so 0.5 px is taken off before comparing.
-    Measured after that: mean 0.24 px, largest 0.63 px.
+    Measured after that: mean 0.24 px, largest 0.63 px. Searched at half size (as a photo above
+    the working resolution is) and refined on the full frame, the same bounds hold.
     """
+    from qrfield import calibration
+
+    if shrunk:
+        monkeypatch.setattr(calibration, "WORKING_MEGAPIXELS", 0.1)  # 640x480: factor 2
     _, images = bumblebee_left
     board = Board(4, 6, 30.0)
     distances = []
@@ -181,6 +189,46 @@ def test_sector_detector_takes_over(synthetic_views: list, monkeypatch: pytest.M
     assert detection.found and detection.method == "sb"
     gaps = min(np.abs(c - view.corners_px).max() for c in (detection.corners_px, detection.corners_px[::-1]))
     assert gaps < 0.3
+
+
+@pytest.mark.parametrize(("megapixels", "expected"), [(0.08, 2), (0.035, 3)])
+def test_a_board_searched_at_the_working_resolution_is_refined_on_the_full_image(
+    synthetic_views: list, megapixels: float, expected: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Large photos are searched shrunk (OpenCV's detectors took 2.6 GB on 49 MP); the corners
+    must still be as exact as found at full size, against the rendered truth."""
+    from qrfield import calibration
+
+    monkeypatch.setattr(calibration, "WORKING_MEGAPIXELS", megapixels)
+    factor = calibration.working_factor(TRUE_CAMERA.size, megapixels)
+    assert factor == expected  # 640x480 shrunk by 2 and by 3
+    searched = []
+    real_find = cv2.findChessboardCorners
+    monkeypatch.setattr(
+        cv2,
+        "findChessboardCorners",
+        lambda image, *a, **k: searched.append(image.shape) or real_find(image, *a, **k),
+    )
+    for i, view in enumerate(synthetic_views[:6]):
+        detection = detect_board(view.image, SYNTH_BOARD, f"view {i}")
+        assert detection.found, detection.reason
+        assert searched[-1] == (480 // factor, 640 // factor)
+        assert detection.image_size == (640, 480)
+        gaps = min(
+            (
+                np.linalg.norm(c - view.corners_px, axis=1)
+                for c in (detection.corners_px, detection.corners_px[::-1])
+            ),
+            key=lambda g: g.mean(),
+        )
+        assert gaps.mean() < 0.15 and gaps.max() < 0.3, f"view {i}: corners off by {gaps.max():.3f} px"
+
+
+def test_the_working_factor_keeps_small_images_whole() -> None:
+    from qrfield.calibration import working_factor
+
+    assert working_factor((640, 480)) == 1 and working_factor((2560, 1920)) == 1  # 4.9 MP
+    assert working_factor((3280, 2464)) == 2 and working_factor((8100, 6050)) == 4  # 8.1 and 49 MP
 
 
 # ---------------------------------------------------------------------- skipped views and errors

@@ -391,10 +391,14 @@ def _add_list(parser: argparse.ArgumentParser) -> None:
 
 
 def _counts(content: Any) -> str:
-    active = [r for r in content.rows if not r.withdrawn]
-    passed = sum(1 for r in active if r.passed)
-    withdrawn = len(content.rows) - len(active)
-    return f"{len(active)} rows, {passed} pass, {withdrawn} withdrawn"
+    active = passed = withdrawn = 0
+    for row in content.rows:  # one at a time: rows.csv is never held whole
+        if row.withdrawn:
+            withdrawn += 1
+        else:
+            active += 1
+            passed += row.passed
+    return f"{active} rows, {passed} pass, {withdrawn} withdrawn"
 
 
 def _run_list(args: argparse.Namespace) -> int:

@@ -36,6 +36,8 @@ import json
 import math
 import os
 import re
+import stat
+from array import array
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -48,9 +50,7 @@ from qrfield.files import (
     FileFormatError,
     check_field_sizes,
     csv_text_reader,
-    decode_text,
     make_folder,
-    read_bytes,
     read_json,
 )
 from qrfield.limits import SIDE_MM, LimitError
@@ -341,33 +341,272 @@ def _now_text() -> str:
     return dt.datetime.now().astimezone().isoformat(timespec="seconds")
 
 
+#: Bytes read at a time when rows.csv is scanned or iterated.
+READ_CHUNK = 1 << 20
+#: Longest line read (bytes): every column at the csv module's field limit would be 39 x 128 KiB;
+#: a longer line is damaged and skipped with a warning, so that one line never fills the memory.
+MAX_LINE_BYTES = 8 << 20
+#: Most warnings kept about the lines of one rows.csv (the rest are counted in a last one).
+MAX_ROW_WARNINGS = 100
+#: Most bytes of an unfinished last line kept in :attr:`RowsContent.partial`.
+MAX_PARTIAL_KEPT = 1 << 20
+
+
+class _Source:
+    """Where rows.csv's bytes come from: a file read by position (never loaded whole), or bytes."""
+
+    def __init__(self, path: Path | None = None, data: bytes | None = None, follow: bool = True) -> None:
+        self.path, self.data, self.follow = path, data, follow
+
+    def size(self) -> int:
+        if self.data is not None:
+            return len(self.data)
+        with self._open() as fd:
+            return os.fstat(fd).st_size
+
+    @contextlib.contextmanager
+    def _open(self) -> Any:
+        assert self.path is not None
+        flags = os.O_RDONLY | _CLOEXEC | (0 if self.follow else _NOFOLLOW)
+        fd = os.open(self.path, flags)
+        try:
+            yield fd
+        finally:
+            os.close(fd)
+
+    def chunks(self, start: int, end: int) -> Any:
+        """The bytes start..end in chunks of :data:`READ_CHUNK` (what a reader holds at a time)."""
+        if self.data is not None:
+            for at in range(start, end, READ_CHUNK):
+                yield self.data[at : min(end, at + READ_CHUNK)]
+            return
+        with self._open() as fd:
+            at = start
+            while at < end:
+                chunk = os.pread(fd, min(READ_CHUNK, end - at), at)
+                if not chunk:
+                    raise SessionError(
+                        f"{self.path}: shorter than when it was read; changed by another program"
+                    )
+                yield chunk
+                at += len(chunk)
+
+    def read(self, offset: int, length: int) -> bytes:
+        if self.data is not None:
+            return self.data[offset : offset + length]
+        with self._open() as fd:
+            return os.pread(fd, length, offset)
+
+
+def _lines(source: _Source, end: int, where: str) -> Any:
+    """(offset, bytes without the newline) of every line of bytes 0..end (which ends with a
+    newline); a line longer than :data:`MAX_LINE_BYTES` comes as (offset, None)."""
+    pending = bytearray()
+    start = 0  # offset of pending's first byte
+    skipping = False
+    at = 0
+    for chunk in source.chunks(0, end):
+        pos = 0
+        while pos < len(chunk):
+            cut = chunk.find(b"\n", pos)
+            if cut < 0:
+                if not skipping:
+                    pending += chunk[pos:]
+                    if len(pending) > MAX_LINE_BYTES:
+                        pending.clear()
+                        skipping = True
+                break
+            if skipping:
+                yield start, None
+                skipping = False
+            else:
+                pending += chunk[pos:cut]
+                yield start, bytes(pending)
+                pending.clear()
+            start = at + cut + 1
+            pos = cut + 1
+        at += len(chunk)
+
+
+def _decode_line(data: bytes, offset: int, where: str) -> str:
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise SessionError(f"{where}: not UTF-8 text (byte {offset + exc.start})") from None
+
+
+def _row_values(header: list[str], line: str) -> tuple[dict[str, str], int]:
+    """The values of one record by column, and its field count; csv.Error if it is not CSV."""
+    fields = next(csv_text_reader(line), [])
+    return dict(zip(header, fields, strict=False)), len(fields)
+
+
+def _normal_pass(verdict: str) -> str | None:
+    return PASS_WORDS.get(verdict.strip().lower())
+
+
+class RowList(Sequence[LoggedRow]):
+    """The measurement rows of rows.csv, read from the file when asked for, never held whole.
+
+    The scan that opens a session keeps, per row, only where its line is (offset and length) and
+    its number (some 20 bytes a row: 800,000 rows are 16 MB instead of gigabytes of dicts);
+    ``rows[i]`` reads and parses that one line, iterating reads the file in order, a chunk at a
+    time. ``withdrawn`` is the set of withdrawn row numbers, shared with the session, so a row read
+    after its withdrawal says so. Rows logged by this process are appended (kept as objects: their
+    ``confirmed`` flag changes).
+    """
+
+    def __init__(self, source: _Source, header: list[str], where: str, withdrawn: set[int]) -> None:
+        self._source = source
+        self._header = header
+        self._where = where
+        self.withdrawn = withdrawn
+        self._offsets = array("q")
+        self._lengths = array("q")
+        self._numbers = array("q")
+        self._large: dict[int, int] = {}  # index -> row number beyond 64 bits (a hand-edited file)
+        self._added: list[LoggedRow] = []
+
+    # -------------------------------------------------------------- built by the scan
+    def _keep(self, offset: int, length: int, number: int) -> None:
+        if -(2**63) <= number < 2**63:
+            self._numbers.append(number)
+        else:
+            self._large[len(self._numbers)] = number
+            self._numbers.append(0)
+        self._offsets.append(offset)
+        self._lengths.append(length)
+
+    def _number(self, index: int) -> int:
+        return self._large.get(index, self._numbers[index])
+
+    # -------------------------------------------------------------- Sequence
+    def __len__(self) -> int:
+        return len(self._offsets) + len(self._added)
+
+    def __getitem__(self, index: Any) -> Any:
+        if isinstance(index, slice):
+            return [self[i] for i in range(*index.indices(len(self)))]
+        n = len(self)
+        if index < 0:
+            index += n
+        if not 0 <= index < n:
+            raise IndexError("row index out of range")
+        stored = len(self._offsets)
+        if index >= stored:
+            row = self._added[index - stored]
+            row.withdrawn = row.number in self.withdrawn
+            return row
+        offset, length = self._offsets[index], self._lengths[index]
+        return self._row(self._source.read(offset, length + 1)[:length], offset, index)
+
+    def __iter__(self) -> Any:
+        if self._offsets:
+            end = self._offsets[-1] + self._lengths[-1] + 1
+            index = 0
+            for offset, data in _lines(self._source, end, self._where):
+                if index < len(self._offsets) and offset == self._offsets[index]:
+                    assert data is not None
+                    yield self._row(data, offset, index)
+                    index += 1
+        for row in self._added:
+            row.withdrawn = row.number in self.withdrawn
+            yield row
+
+    def __reversed__(self) -> Any:
+        for index in range(len(self) - 1, -1, -1):
+            yield self[index]
+
+    def __eq__(self, other: object) -> bool:
+        if isinstance(other, (list, tuple, RowList)):
+            return len(self) == len(other) and all(a == b for a, b in zip(self, other, strict=True))
+        return NotImplemented
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def __repr__(self) -> str:
+        return f"<RowList of {len(self)} rows of {self._where}>"
+
+    # -------------------------------------------------------------- rows
+    def append(self, row: LoggedRow) -> None:
+        """A row logged by this process (kept as it is: its ``confirmed`` flag changes)."""
+        self._added.append(row)
+
+    def max_number(self) -> int:
+        """The largest row number (0 without rows), without reading a line."""
+        numbers = [r.number for r in self._added] + list(self._large.values())
+        if len(self._numbers):
+            numbers.append(max(self._numbers))
+        return max(numbers, default=0)
+
+    def by_number(self, number: int) -> LoggedRow | None:
+        """The (last) row of that number, reading only its line; None when there is none."""
+        for row in reversed(self._added):
+            if row.number == number:
+                row.withdrawn = row.number in self.withdrawn
+                return row
+        for index in range(len(self._numbers) - 1, -1, -1):
+            if self._number(index) == number:
+                return self[index]
+        return None
+
+    def _row(self, data: bytes, offset: int, index: int) -> LoggedRow:
+        text = _decode_line(data, offset, self._where)
+        if offset == 0 and text.startswith("\ufeff"):  # pragma: no cover - the header is line 1
+            text = text[1:]
+        values, _ = _row_values(self._header, text)
+        values["pass"] = _normal_pass(values.get("pass", "")) or "0"
+        number = self._number(index)
+        return LoggedRow(number, values, withdrawn=number in self.withdrawn)
+
+
 @dataclass
 class RowsContent:
-    """rows.csv as read: header, measurement rows (withdrawn flagged), warnings, the complete part's size."""
+    """rows.csv as read: header, measurement rows (withdrawn flagged), warnings, the complete part's size.
+
+    ``rows`` is a :class:`RowList` (read from the file row by row); ``partial`` holds the first
+    :data:`MAX_PARTIAL_KEPT` bytes of an unfinished last line, ``partial_size`` its length.
+    """
 
     columns: list[str]
-    rows: list[LoggedRow]
+    rows: RowList
     warnings: list[str]
     good_size: int
     partial: bytes = b""
     withdrawn: set[int] = field(default_factory=set)
+    partial_size: int = 0
 
 
 def parse_rows(data: bytes, where: str = ROWS_FILE) -> RowsContent:
     """Parse rows.csv bytes; an unfinished last line (no newline) is returned in ``partial``, not parsed."""
+    return _scan_rows(_Source(data=data), len(data), where)
+
+
+def _scan_rows(source: _Source, size: int, where: str) -> RowsContent:
+    """One pass over rows.csv (a chunk at a time): the header, where each row's line is, the
+    withdrawals, the warnings, and the size of the complete part (up to its last newline)."""
+    good_size = _complete_size(source, size)
     warnings: list[str] = []
-    end = data.rfind(b"\n") + 1
-    complete, partial = data[:end], data[end:]
-    try:
-        # A byte-order mark (a spreadsheet's "CSV UTF-8") is accepted; the sizes stay those of the bytes.
-        text = decode_text(complete, where)
-    except FileFormatError as exc:
-        raise SessionError(str(exc)) from None
-    lines = text.split("\n")[:-1]  # records end with "\n"; other line breaks may sit inside quoted notes
-    if not lines:
+    more = 0
+
+    def warn(text: str) -> None:
+        nonlocal more
+        if len(warnings) < MAX_ROW_WARNINGS:
+            warnings.append(text)
+        else:
+            more += 1
+
+    lines = _lines(source, good_size, where)
+    first = next(lines, None)
+    if first is None:
         raise SessionError(f"{where}: no header row")
+    offset, data = first
+    if data is None:
+        raise SessionError(f"{where}: the header row is longer than {MAX_LINE_BYTES} bytes")
+    head = _decode_line(data, offset, where)
+    head = head[1:] if head.startswith("\ufeff") else head  # a spreadsheet's "CSV UTF-8"
     try:
-        header = next(csv_text_reader(lines[0]), [])  # an empty first line has no fields
+        header = next(csv_text_reader(head), [])  # an empty first line has no fields
     except csv.Error as exc:
         raise SessionError(f"{where}: the header row is not CSV ({exc})") from None
     header = [name.strip() for name in header]
@@ -375,70 +614,119 @@ def parse_rows(data: bytes, where: str = ROWS_FILE) -> RowsContent:
         raise SessionError(
             f"{where}: the header does not start with the required columns {','.join(REQUIRED_COLUMNS)}"
         )
-    rows: list[LoggedRow] = []
-    by_number: dict[int, LoggedRow] = {}
     withdrawn: set[int] = set()
-    for lineno, line in enumerate(lines[1:], start=2):
+    rows = RowList(source, header, where, withdrawn)
+    seen: set[int] | None = None  # row numbers, built only if they stop increasing
+    highest: int | None = None
+    for lineno, (offset, data) in enumerate(lines, start=2):
+        if data is None:
+            warn(f"{where} line {lineno}: longer than {MAX_LINE_BYTES} bytes (damaged); ignored")
+            continue
+        line = _decode_line(data, offset, where)
         if not line.strip():
             continue
         if "\x00" in line:
-            warnings.append(f"{where} line {lineno}: contains NUL bytes (damaged); ignored")
+            warn(f"{where} line {lineno}: contains NUL bytes (damaged); ignored")
             continue
         try:
-            fields = next(csv_text_reader(line), [])
+            values, count = _row_values(header, line)
         except csv.Error as exc:  # e.g. a field over MAX_FIELD_CHARS written by another program
-            warnings.append(f"{where} line {lineno}: not a CSV record ({exc}); ignored")
+            warn(f"{where} line {lineno}: not a CSV record ({exc}); ignored")
             continue
-        values = dict(zip(header, fields, strict=False))
-        if len(fields) != len(header):
-            warnings.append(f"{where} line {lineno}: {len(fields)} fields, the header has {len(header)}")
+        if count != len(header):
+            warn(f"{where} line {lineno}: {count} fields, the header has {len(header)}")
         row_text = values.get("row", "").strip()
         target = values.get("withdraws", "").strip()
         if row_text:
             try:
                 number = int(row_text)
             except ValueError:
-                warnings.append(f"{where} line {lineno}: row {row_text!r} is not a number; ignored")
+                warn(f"{where} line {lineno}: row {row_text[:40]!r} is not a number; ignored")
                 continue
-            if number in by_number:
-                warnings.append(f"{where} line {lineno}: row {number} appears twice; both kept")
+            if highest is not None and number <= highest:
+                if seen is None:
+                    seen = {rows._number(i) for i in range(len(rows._numbers))}
+                if number in seen:
+                    warn(f"{where} line {lineno}: row {number} appears twice; both kept")
+            if seen is not None:
+                seen.add(number)
+            highest = number if highest is None else max(highest, number)
             verdict = values.get("pass", "")
-            normal = PASS_WORDS.get(verdict.strip().lower())
+            normal = _normal_pass(verdict)
             if normal is None:
-                warnings.append(
+                warn(
                     f"{where} line {lineno}: row {number} has pass {verdict!r}, not 1 or 0; counted as failed"
                 )
-                normal = "0"
             elif normal != verdict:
                 shown = "passed" if normal == "1" else "failed"
-                warnings.append(f"{where} line {lineno}: row {number} has pass {verdict!r}, read as {shown}")
-            values["pass"] = normal
-            row = LoggedRow(number, values)
-            rows.append(row)
-            by_number[number] = row
+                warn(f"{where} line {lineno}: row {number} has pass {verdict!r}, read as {shown}")
+            rows._keep(offset, len(data), number)
         elif target:
             try:
                 withdrawn.add(int(target))
             except ValueError:
-                warnings.append(f"{where} line {lineno}: withdraws {target!r} is not a row number; ignored")
+                warn(f"{where} line {lineno}: withdraws {target[:40]!r} is not a row number; ignored")
         else:
-            warnings.append(f"{where} line {lineno}: neither a row nor a withdrawal record; ignored")
-    for row in rows:
-        row.withdrawn = row.number in withdrawn
-    return RowsContent(header, rows, warnings, len(complete), partial, withdrawn)
+            warn(f"{where} line {lineno}: neither a row nor a withdrawal record; ignored")
+    if more:
+        warnings.append(
+            f"{where}: {more} more line(s) with problems (only the first {MAX_ROW_WARNINGS} are listed)"
+        )
+    partial = source.read(good_size, min(size - good_size, MAX_PARTIAL_KEPT)) if size > good_size else b""
+    return RowsContent(header, rows, warnings, good_size, partial, withdrawn, size - good_size)
 
 
-def _read_folder(folder: Path) -> tuple[SessionInfo, Path, RowsContent]:
-    """A session folder's info, the path of its rows.csv and its parsed rows; SessionError if unreadable."""
+def _complete_size(source: _Source, size: int) -> int:
+    """The size of rows.csv up to and including its last newline (0 when it has none)."""
+    end = size
+    while end > 0:
+        start = max(0, end - READ_CHUNK)
+        chunk = source.read(start, end - start)
+        cut = chunk.rfind(b"\n")
+        if cut >= 0:
+            return start + cut + 1
+        end = start
+    return 0
+
+
+def _read_folder(folder: Path, *, follow: bool = True) -> tuple[SessionInfo, Path, RowsContent]:
+    """A session folder's info, the path of its rows.csv and its rows (read a chunk at a time, never
+    whole); SessionError if unreadable. ``follow=False``: a symbolic link at rows.csv is refused."""
     info = _read_info(folder)
     rows_path = folder / ROWS_FILE
+    where = str(rows_path)
     try:
-        data = read_bytes(rows_path, "rows file", MAX_ROWS_BYTES)
-    except FileFormatError as exc:
-        if exc.kind == "missing":
-            raise SessionError(f"{folder}: no {ROWS_FILE}") from None
-        raise SessionError(str(exc)) from None
-    return info, rows_path, parse_rows(data, str(rows_path))
+        mode = os.stat(rows_path, follow_symlinks=follow).st_mode
+    except FileNotFoundError:
+        raise SessionError(f"{folder}: no {ROWS_FILE}") from None
+    except OSError as exc:
+        raise SessionError(f"rows file {rows_path}: cannot read ({exc.strerror or exc})") from None
+    if stat.S_ISLNK(mode):
+        raise SessionError(_symlink_refusal(rows_path))
+    if stat.S_ISDIR(mode):
+        raise SessionError(f"rows file {rows_path}: is a folder, not a file")
+    if not stat.S_ISREG(mode):  # a FIFO, a device: it may never end
+        raise SessionError(f"rows file {rows_path}: not a regular file")
+    source = _Source(path=rows_path, follow=follow)
+    try:
+        size = source.size()
+        if size > MAX_ROWS_BYTES:
+            raise SessionError(
+                f"rows file {rows_path}: larger than {MAX_ROWS_BYTES // (1024 * 1024)} MiB; "
+                "not a file qrfield wrote"
+            )
+        return info, rows_path, _scan_rows(source, size, where)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise SessionError(_symlink_refusal(rows_path)) from None
+        raise SessionError(f"rows file {rows_path}: cannot read ({exc.strerror or exc})") from None
+
+
+def _symlink_refusal(rows_path: Path) -> str:
+    return (
+        f"{rows_path} is a symbolic link, not the session's own file; not writing through it "
+        "(replace it with the file it points to)"
+    )
 
 
 def read_session(path: str | os.PathLike[str]) -> tuple[SessionInfo, RowsContent]:
@@ -448,9 +736,9 @@ def read_session(path: str | os.PathLike[str]) -> tuple[SessionInfo, RowsContent
     """
     folder = Path(path)
     info, rows_path, content = _read_folder(folder)
-    if content.partial:
+    if content.partial_size:
         content.warnings.append(
-            f"{rows_path}: ends with an unfinished line of {len(content.partial)} bytes "
+            f"{rows_path}: ends with an unfinished line of {content.partial_size} bytes "
             "(a crash while logging; never confirmed); ignored"
         )
     return info, content
@@ -481,14 +769,14 @@ class Session:
         self.path = path
         self.info = info
         self.columns = list(content.columns)
-        self.rows: list[LoggedRow] = content.rows
+        self.rows: RowList = content.rows  # read from rows.csv when asked for, never held whole
         self.warnings: list[str] = list(content.warnings)
         self.pending: list[_Record] = []
-        self.next_row = max((r.number for r in self.rows), default=0) + 1
+        self.next_row = self.rows.max_number() + 1
         self._ops = file_ops or FileOps()
         self._fd: int | None = None
         self._good_size = content.good_size
-        self._withdrawn = set(content.withdrawn)
+        self._withdrawn = content.withdrawn  # the same set the rows read their flag from
         dropped = [c for c in COLUMNS if c not in self.columns]
         if dropped:
             self.warnings.append(
@@ -587,7 +875,7 @@ class Session:
         Raises SessionError when the folder is not a readable session or another process logs to it.
         """
         folder = Path(path)
-        info, rows_path, content = _read_folder(folder)
+        info, rows_path, content = _read_folder(folder, follow=False)  # never through a planted link
         session = cls(folder, info, content, file_ops)
         try:
             session._connect()
@@ -676,7 +964,7 @@ class Session:
 
     def withdraw(self, number: int, reason: str = "undo") -> LogOutcome:
         """Append a record withdrawing row ``number``; the row's own line stays as it is."""
-        row = next((r for r in self.rows if r.number == number), None)
+        row = self.rows.by_number(number)
         if row is None:
             raise SessionError(f"no row {number} in this session")
         if row.withdrawn:
@@ -734,10 +1022,7 @@ class Session:
             fd = self._ops.open(str(self.rows_path), os.O_RDWR | os.O_APPEND | _NOFOLLOW | _CLOEXEC)
         except OSError as exc:
             if exc.errno == errno.ELOOP or self.rows_path.is_symlink():
-                raise SessionError(
-                    f"{self.rows_path} is a symbolic link, not the session's own file; not writing "
-                    "through it (replace it with the file it points to)"
-                ) from None
+                raise SessionError(_symlink_refusal(self.rows_path)) from None
             raise
         try:
             if fcntl is not None:
