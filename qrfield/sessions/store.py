@@ -46,6 +46,7 @@ from typing import Any
 import qrfield
 from qrfield.camera import CameraModel, CameraModelError
 from qrfield.files import (
+    MAX_FIELD_CHARS,
     Fields,
     FileFormatError,
     check_field_sizes,
@@ -435,9 +436,18 @@ def _decode_line(data: bytes, offset: int, where: str) -> str:
         raise SessionError(f"{where}: not UTF-8 text (byte {offset + exc.start})") from None
 
 
+def _fields(line: str) -> list[str]:
+    """The fields of one record (one line); csv.Error if it is not CSV. A line without quotes or
+    carriage returns, as qrfield writes nearly every one, is split on its commas (what the csv
+    module would return, several times faster); any other goes through the csv module."""
+    if '"' not in line and "\r" not in line and len(line) <= MAX_FIELD_CHARS:
+        return line.split(",")
+    return next(csv_text_reader(line), [])
+
+
 def _row_values(header: list[str], line: str) -> tuple[dict[str, str], int]:
     """The values of one record by column, and its field count; csv.Error if it is not CSV."""
-    fields = next(csv_text_reader(line), [])
+    fields = _fields(line)
     return dict(zip(header, fields, strict=False)), len(fields)
 
 
@@ -461,21 +471,23 @@ class RowList(Sequence[LoggedRow]):
         self._header = header
         self._where = where
         self.withdrawn = withdrawn
-        self._offsets = array("q")
-        self._lengths = array("q")
-        self._numbers = array("q")
-        self._large: dict[int, int] = {}  # index -> row number beyond 64 bits (a hand-edited file)
+        # 4 bytes each a row: rows.csv is at most MAX_ROWS_BYTES (< 4 GiB), row numbers are counted
+        # from 1 (a number beyond 32 bits, from a hand-edited file, is kept aside in _large).
+        self._offsets = array("I")
+        self._numbers = array("i")
+        self._large: dict[int, int] = {}
+        self._end = 0  # where the line of the last row ends (its newline included)
         self._added: list[LoggedRow] = []
 
     # -------------------------------------------------------------- built by the scan
     def _keep(self, offset: int, length: int, number: int) -> None:
-        if -(2**63) <= number < 2**63:
+        if -(2**31) <= number < 2**31:
             self._numbers.append(number)
         else:
             self._large[len(self._numbers)] = number
             self._numbers.append(0)
         self._offsets.append(offset)
-        self._lengths.append(length)
+        self._end = offset + length + 1
 
     def _number(self, index: int) -> int:
         return self._large.get(index, self._numbers[index])
@@ -497,14 +509,13 @@ class RowList(Sequence[LoggedRow]):
             row = self._added[index - stored]
             row.withdrawn = row.number in self.withdrawn
             return row
-        offset, length = self._offsets[index], self._lengths[index]
-        return self._row(self._source.read(offset, length + 1)[:length], offset, index)
+        offset = self._offsets[index]
+        return self._row(self._line_at(offset), offset, index)
 
     def __iter__(self) -> Any:
         if self._offsets:
-            end = self._offsets[-1] + self._lengths[-1] + 1
             index = 0
-            for offset, data in _lines(self._source, end, self._where):
+            for offset, data in _lines(self._source, self._end, self._where):
                 if index < len(self._offsets) and offset == self._offsets[index]:
                     assert data is not None
                     yield self._row(data, offset, index)
@@ -549,6 +560,18 @@ class RowList(Sequence[LoggedRow]):
             if self._number(index) == number:
                 return self[index]
         return None
+
+    def _line_at(self, offset: int) -> bytes:
+        """The line starting at ``offset``, without its newline (read in growing pieces)."""
+        length = 4096
+        while True:
+            data = self._source.read(offset, length)
+            cut = data.find(b"\n")
+            if cut >= 0:
+                return data[:cut]
+            if len(data) < length or length > MAX_LINE_BYTES:
+                raise SessionError(f"{self._where}: changed by another program since it was read")
+            length *= 4
 
     def _row(self, data: bytes, offset: int, index: int) -> LoggedRow:
         text = _decode_line(data, offset, self._where)
@@ -616,6 +639,11 @@ def _scan_rows(source: _Source, size: int, where: str) -> RowsContent:
         )
     withdrawn: set[int] = set()
     rows = RowList(source, header, where, withdrawn)
+    # Only these three columns matter to the scan (the first of equal names, as dict(zip()) keeps the
+    # last: none of them is repeated in a header qrfield wrote).
+    at_row = 0  # the header starts with REQUIRED_COLUMNS
+    at_pass = header.index("pass")
+    at_withdraws = len(header) - 1 - header[::-1].index("withdraws") if "withdraws" in header else -1
     seen: set[int] | None = None  # row numbers, built only if they stop increasing
     highest: int | None = None
     for lineno, (offset, data) in enumerate(lines, start=2):
@@ -629,14 +657,15 @@ def _scan_rows(source: _Source, size: int, where: str) -> RowsContent:
             warn(f"{where} line {lineno}: contains NUL bytes (damaged); ignored")
             continue
         try:
-            values, count = _row_values(header, line)
+            fields = _fields(line)
         except csv.Error as exc:  # e.g. a field over MAX_FIELD_CHARS written by another program
             warn(f"{where} line {lineno}: not a CSV record ({exc}); ignored")
             continue
+        count = len(fields)
         if count != len(header):
             warn(f"{where} line {lineno}: {count} fields, the header has {len(header)}")
-        row_text = values.get("row", "").strip()
-        target = values.get("withdraws", "").strip()
+        row_text = fields[at_row].strip() if count > at_row else ""
+        target = fields[at_withdraws].strip() if 0 <= at_withdraws < count else ""
         if row_text:
             try:
                 number = int(row_text)
@@ -651,7 +680,7 @@ def _scan_rows(source: _Source, size: int, where: str) -> RowsContent:
             if seen is not None:
                 seen.add(number)
             highest = number if highest is None else max(highest, number)
-            verdict = values.get("pass", "")
+            verdict = fields[at_pass] if count > at_pass else ""
             normal = _normal_pass(verdict)
             if normal is None:
                 warn(
