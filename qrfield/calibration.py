@@ -273,14 +273,14 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray | None:
 
 def detect_board_file(path: str | os.PathLike[str], board: Board) -> BoardDetection:
     """:func:`detect_board` on an image file; an unreadable file comes back with its reason."""
+    from qrfield.images import ImageError
+    from qrfield.images import read_image as read_checked
+
     label = str(path)
-    if not Path(path).is_file():
-        return BoardDetection(label, None, None, "no such file")
-    image = read_image(path)
-    if image is None:
-        return BoardDetection(
-            label, None, None, "cannot read it as an image (unreadable or not an image format)"
-        )
+    try:
+        image = read_checked(path, mode="grey")
+    except ImageError as exc:  # the reason: no such file, a FIFO, over the pixel limit, not an image
+        return BoardDetection(label, None, None, str(exc).removeprefix(f"{label}: "))
     return detect_board(image, board, label)
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import re
 from pathlib import Path
 
@@ -254,6 +255,19 @@ def test_unusable_views_are_skipped_with_reasons(synthetic_views: list, tmp_path
     assert "not found" in reasons["blank.png"]
     assert "cannot read" in reasons["notes.png"]
     assert "no such file" in reasons["missing.png"]
+
+
+def test_a_fifo_among_the_images_is_named_as_one(tmp_path: Path) -> None:
+    """Issue 23: a FIFO was skipped as "no such file"."""
+    os.mkfifo(tmp_path / "pipe.png")
+    (skipped,) = calibrate_images_skips([tmp_path / "pipe.png"])
+    assert skipped == "cannot read image: not a regular file"
+
+
+def calibrate_images_skips(paths: list[Path]) -> list[str]:
+    from qrfield.calibration import detect_images
+
+    return [d.reason for d in detect_images(paths, SYNTH_BOARD)]
 
 
 def test_too_few_views_raise_with_reasons() -> None:
