@@ -13,18 +13,21 @@ adding one is one entry.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import signal
 import sys
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-HELP = "make experiment sessions and log rows without the app (new, log, undo, list, show, export)"
+HELP = "make experiment sessions and log rows without the app (new, log, run-plan, undo, list, show, export)"
 DESCRIPTION = (
     "Experiment sessions on disk, as the app's Session tab makes them: 'new' creates one, 'log' "
-    "measures a row (averaged frames against a ground truth measured by hand), 'undo' withdraws the "
+    "measures a row (averaged frames against a ground truth measured by hand), 'run-plan' logs a plan's "
+    "targets one by one (the virtual bench is set to each; from a camera the terminal asks), 'undo' "
+    "withdraws the "
     "last row, 'list' and 'show' read them, 'export' writes the rows in force for a spreadsheet."
 )
 
@@ -78,11 +81,12 @@ def _add_new(parser: argparse.ArgumentParser) -> None:
     )
     add_arguments(group, SessionSettings)
     add_arguments(group, AcceptanceCriteria)
-    add_run_arguments(parser, only=METHODS)
+    add_run_arguments(parser, only=(*METHODS, "handeye"))
 
 
 def _run_new(args: argparse.Namespace) -> int:
     from qrfield.camera import camera_origin
+    from qrfield.handeye import PoseFrame
     from qrfield.methods import METHODS, methods_from_choice
     from qrfield.runconfig import effective_settings
     from qrfield.sessions import AcceptanceCriteria, Session, SessionSettings
@@ -106,6 +110,9 @@ def _run_new(args: argparse.Namespace) -> int:
     rows = from_arguments(SessionSettings, args, base=store.group("session", SessionSettings))
     criteria = from_arguments(AcceptanceCriteria, args, base=store.group("criteria", AcceptanceCriteria))
     root = Path(args.root) if args.root else configured_root(store)
+    pose_frame = PoseFrame.from_settings(effective.groups["handeye"], args.config_dir)
+    if not pose_frame.identity:
+        say(f"rows and their ground truth in the {pose_frame.frame} frame: {pose_frame.describe()}")
     session = Session.create(
         root,
         args.name,
@@ -117,6 +124,8 @@ def _run_new(args: argparse.Namespace) -> int:
         frames_per_row=rows.frames_per_row,
         operator=args.operator,
         notes=args.notes,
+        pose_frame=pose_frame.frame,
+        handeye=pose_frame.calibration.to_dict() if pose_frame.calibration is not None else None,
     )
     session.close()
     info = session.info
@@ -187,6 +196,7 @@ def _interrupt(signum: int, _frame: Any) -> None:
 
 def _run_log(args: argparse.Namespace) -> int:
     from qrfield.engine import FrameLoop
+    from qrfield.handeye import InFrameEvents, PoseFrame
     from qrfield.runconfig import effective_settings
     from qrfield.sessions import Session, known_combinations, validate_field
     from qrfield.sessions.recorder import RowRecorder, session_run_config
@@ -198,9 +208,6 @@ def _run_log(args: argparse.Namespace) -> int:
     truth = None
     if args.truth and not follow:
         truth = _parse_truth(args.truth, args.combo, combinations)
-        problem = combo_problem(truth, args.force_combo)  # before the frames: nothing measured in vain
-        if problem:
-            raise ValueError(problem)
     elif follow:
         _, message = validate_field("combo", args.combo or "", combinations)
         if message:
@@ -209,16 +216,18 @@ def _run_log(args: argparse.Namespace) -> int:
     try:
         for warning in session.warnings:
             say(f"warning: {warning}")
+        problem = combo_problem(truth, args.force_combo, session.info.pose_frame) if truth else ""
+        if problem:  # before the frames: nothing measured in vain
+            raise ValueError(problem)
         effective = effective_settings(args, resolve_camera=False)  # the session's camera is used
         for problem in effective.store.problems:
             say(f"settings: {problem}")
         config = session_run_config(effective.run_config(camera=session.info.camera), session.info)
         recorder = RowRecorder(session.info, say)
-        loop = FrameLoop(config, events=recorder)
-        thread = threading.Thread(target=loop.run, name="frame loop", daemon=True)
-        previous = signal.signal(signal.SIGTERM, _interrupt)
-        thread.start()
-        try:
+        pose_frame = PoseFrame.from_saved(session.info.pose_frame, session.info.handeye, session.info.name)
+        events = recorder if pose_frame.identity else InFrameEvents(recorder, pose_frame)
+        loop = FrameLoop(config, events=events)
+        with loop_thread(loop) as thread:
 
             def ended() -> bool:
                 return not thread.is_alive()
@@ -226,12 +235,23 @@ def _run_log(args: argparse.Namespace) -> int:
             if truth is not None or follow:
                 return _log_one(session, recorder, truth, args, follow, ended)
             return _log_interactive(session, recorder, args, combinations, ended)
-        finally:
-            loop.stop()
-            thread.join(5.0)
-            signal.signal(signal.SIGTERM, previous)
     finally:
         session.close()
+
+
+@contextlib.contextmanager
+def loop_thread(loop: Any) -> Iterator[threading.Thread]:
+    """Run a frame loop on a daemon thread for the block (SIGTERM ends the block as Ctrl-C does);
+    then stop the loop and join its thread (it closes the source)."""
+    thread = threading.Thread(target=loop.run, name="frame loop", daemon=True)
+    previous = signal.signal(signal.SIGTERM, _interrupt)
+    thread.start()
+    try:
+        yield thread
+    finally:
+        loop.stop()
+        thread.join(5.0)
+        signal.signal(signal.SIGTERM, previous)
 
 
 def _log_one(session: Any, recorder: Any, truth: Any, args: Any, follow: bool, ended: Any) -> int:
@@ -246,12 +266,14 @@ def _log_one(session: Any, recorder: Any, truth: Any, args: Any, follow: bool, e
     return _log(session, measurement, args.force_combo)
 
 
-def combo_problem(truth: Any, force: bool) -> str:
+def combo_problem(truth: Any, force: bool, pose_frame: str = "camera") -> str:
     """Why a row's combination must not be logged as it is ("" when it may): the app's rule and
-    words (:func:`qrfield.sessions.combo_signs.combination_mismatch`), unless ``force``."""
+    words (:func:`qrfield.sessions.combo_signs.combination_mismatch`), unless ``force``. The
+    combinations tilt the card in the camera frame: a session in the tool or base frame
+    (docs/handeye.md), whose angles are another frame's, is not checked."""
     from qrfield.sessions.combo_signs import combination_mismatch, sign_table
 
-    if force or not truth.combo:
+    if force or not truth.combo or pose_frame != "camera":
         return ""
     mismatch = combination_mismatch(truth.combo, truth.angles_deg, sign_table())
     return (
@@ -263,7 +285,8 @@ def combo_problem(truth: Any, force: bool) -> str:
 
 def _log(session: Any, measurement: Any, force_combo: bool = False) -> int:
     """Append and fsync one row; 0 and "logged row K" only once it is on disk."""
-    problem = combo_problem(measurement.truth, force_combo)  # the bench's pose is known only now
+    # The bench's own pose (--truth virtual) is known only now.
+    problem = combo_problem(measurement.truth, force_combo, session.info.pose_frame)
     if problem:
         say(f"error: {problem}")
         return 2
@@ -338,7 +361,7 @@ def _log_interactive(session: Any, recorder: Any, args: Any, combinations: Any, 
                     break
                 print(f"  {name}: {message}", flush=True)
         truth = GroundTruth(**{k: values[k] for k in FIELDS})
-        problem = combo_problem(truth, args.force_combo)
+        problem = combo_problem(truth, args.force_combo, session.info.pose_frame)
         if problem:  # asked again, as the app asks before it logs
             print(f"  combo: {problem.removeprefix('--combo: ')}", flush=True)
             last.pop("combo", None)
@@ -437,6 +460,7 @@ def _add_show(parser: argparse.ArgumentParser) -> None:
 
 
 def _run_show(args: argparse.Namespace) -> int:
+    from qrfield.handeye import PoseFrame
     from qrfield.sessions import read_session
 
     info, content = read_session(args.folder)
@@ -445,6 +469,14 @@ def _run_show(args: argparse.Namespace) -> int:
     print(f"  created {info.created}, operator {info.operator or '-'}, app {info.app_version}")
     print(f"  camera {cam.name} {cam.width}x{cam.height} (fx {cam.fx:.1f}), QR side {info.side_mm:g} mm")
     print(f"  solver {info.solver}, {info.frames_per_row} frames per row, criteria {info.criteria.label()}")
+    print(
+        f"  poses in the {info.pose_frame} frame"
+        + (
+            f" ({PoseFrame.from_saved(info.pose_frame, info.handeye, info.name).describe()})"
+            if info.handeye
+            else ""
+        )
+    )
     if info.notes:
         print(f"  notes: {' '.join(info.notes.split())}")
     print(f"  {_counts(content)}")
@@ -496,6 +528,11 @@ SUBCOMMANDS: dict[str, Subcommand] = {
     "log": Subcommand(
         "measure and log one row (or, without --truth, ask for each field)", _add_log, _run_log
     ),
+    "run-plan": Subcommand(
+        "log a plan's targets one by one: the virtual bench is set to each, a camera's operator is asked",
+        lambda parser: _run_plan().add_arguments(parser),
+        lambda args: _run_plan().run(args),
+    ),
     "undo": Subcommand("withdraw the last row (a withdrawal record is appended)", _add_undo, _run_undo),
     "list": Subcommand("list the sessions in a folder", _add_list, _run_list),
     "show": Subcommand("print a session's setup and rows", _add_show, _run_show),
@@ -503,6 +540,12 @@ SUBCOMMANDS: dict[str, Subcommand] = {
         "write the rows still in force as a clean CSV (units in the column names)", _add_export, _run_export
     ),
 }
+
+
+def _run_plan() -> Any:
+    from qrfield.commands import _run_plan as module
+
+    return module
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -515,9 +558,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from qrfield.sessions import GroundTruthError, SessionError
+    from qrfield.sessions.plan import PlanError
 
     try:
         return int(args._session_run(args) or 0)
+    except PlanError as exc:
+        for problem in exc.problems:
+            say(f"error: {problem}")
+        return 2
     except GroundTruthError as exc:
         for name, message in exc.errors.items():
             say(f"error: {name}: {message}")
