@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import re
 import sys
 from collections.abc import Callable, Sequence
@@ -22,8 +23,11 @@ from typing import Any, NoReturn
 
 from qrfield.limits import Limit, LimitError
 
-#: A word that is a value, not an option: '-' then a digit, or '-.' then a digit.
-_VALUE_WORD = re.compile(r"^-\.?\d")
+#: A word that is a value, not an option: '-' then a digit, or '-.' then a digit, or a negative
+#: infinity or NaN (refused as not finite by the option's type, not taken for an unknown option).
+_VALUE_WORD = re.compile(r"^-(\.?\d|(inf|infinity|nan)$)", re.IGNORECASE)
+#: How alike a mistyped word must be to a known one to be suggested (difflib's ratio).
+SUGGEST_CUTOFF = 0.6
 
 #: Separators of :func:`parse_numbers`: commas, semicolons, white space.
 _SEPARATORS = re.compile(r"[,;\s]+")
@@ -35,12 +39,65 @@ NEGATIVE_VALUES_HELP = (
 
 
 class ArgumentParser(argparse.ArgumentParser):
-    """argparse's parser that takes ``-10,5,300`` as a value and reports errors in one line."""
+    """argparse's parser that takes ``-10,5,300`` as a value, reports errors in one line, and
+    suggests the nearest option or choice for a mistyped one ("did you mean --side-mm?").
+
+    Python 3.14's ``suggest_on_error`` does the same, but qrfield runs on 3.11: every parser of
+    every subcommand is of this class (``add_subparsers`` makes its parsers with the parent's
+    class), so each one suggests among its own options.
+    """
 
     def _parse_optional(self, arg_string: str) -> Any:
         if _VALUE_WORD.match(arg_string):
             return None  # a value (a negative number or a list of them), never an option
         return super()._parse_optional(arg_string)
+
+    def parse_known_args(self, args: Any = None, namespace: Any = None) -> Any:
+        words = list(sys.argv[1:] if args is None else args)
+        self._refuse_unknown_options(words)  # before argparse says a required option is missing
+        return super().parse_known_args(words, namespace)
+
+    def _refuse_unknown_options(self, words: list[str]) -> None:
+        """Error, with the nearest known option, for the first word argparse would take for an
+        option this parser does not have; the words from a subcommand's name on are its own."""
+        commands = {
+            name
+            for action in self._actions
+            if isinstance(action, argparse._SubParsersAction)
+            for name in action.choices
+        }
+        for word in words:
+            if word == "--" or word in commands:
+                return
+            found = self._parse_optional(word)
+            if found is None:
+                continue
+            # (action, option, ...) on Python 3.11, a list of such on 3.12 and later
+            options = found if isinstance(found, list) else [found]
+            if all(option[0] is None for option in options):
+                name = word.partition("=")[0]
+                self.error(f"unrecognized option {name}{self._suggestion(name, self._option_words())}")
+
+    def _check_value(self, action: argparse.Action, value: Any) -> None:
+        if action.choices is not None and value not in action.choices:
+            choices = [str(c) for c in action.choices]
+            shown = ", ".join(map(repr, choices))
+            raise argparse.ArgumentError(
+                action, f"invalid choice: {value!r} (choose from {shown}){self._suggestion(value, choices)}"
+            )
+
+    def _option_words(self) -> list[str]:
+        return [word for action in self._actions for word in action.option_strings]
+
+    @staticmethod
+    def _suggestion(word: Any, known: Sequence[str]) -> str:
+        """``; did you mean X?`` for the known word nearest ``word``, "" when none is near."""
+        import difflib
+
+        if not isinstance(word, str):
+            return ""
+        matches = difflib.get_close_matches(word, known, n=1, cutoff=SUGGEST_CUTOFF)
+        return f"; did you mean {matches[0]}?" if matches else ""
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {one_line(message)} (see {self.prog} --help)\n")
@@ -103,6 +160,21 @@ def limited(limit: Limit, option: str) -> Callable[[str], float]:
     return parse
 
 
+def text(option: str) -> Callable[[str], str]:
+    """An argparse ``type=`` for a text option (a QR payload, a name, a note): refused in one line
+    when it is not UTF-8 (:func:`qrfield.texts.check_text`), before anything is done with it."""
+    from qrfield.texts import TextError, check_text
+
+    def parse(value: str) -> str:
+        try:
+            return check_text(value, option)
+        except TextError as exc:
+            raise argparse.ArgumentTypeError(str(exc).removeprefix(f"{option}: ")) from None
+
+    parse.__name__ = "text"
+    return parse
+
+
 def add_side_argument(parser: Any, default: float | None = None, *, configured: str = "") -> None:
     """``--side-mm L``: the QR symbol's side without its quiet zone (mm), checked against
     :data:`qrfield.limits.SIDE_MM`; required unless a ``default`` is given, or ``configured`` says
@@ -135,9 +207,12 @@ def whole_number(option: str, minimum: int | None = None, maximum: int | None = 
 
     def parse(text: str) -> int:
         try:
+            if len(text.strip()) > 64:  # int() of thousands of digits is slow, and none is meant
+                raise ValueError
             value = int(text.strip())
         except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+            shown = text if len(text) <= 40 else text[:40] + "..."
+            raise argparse.ArgumentTypeError(f"expected a whole number, got {shown!r}") from None
         if minimum is not None and value < minimum:
             raise argparse.ArgumentTypeError(f"{value} is below the smallest accepted, {minimum}")
         if maximum is not None and value > maximum:
@@ -148,6 +223,35 @@ def whole_number(option: str, minimum: int | None = None, maximum: int | None = 
     return parse
 
 
+def count(option: str, minimum: int = 0, maximum: int | None = None) -> Callable[[str], int]:
+    """An argparse ``type=`` for a count of frames, lines, rows (``minimum``..``maximum``, by
+    default :data:`qrfield.limits.MAX_COUNT`)."""
+    from qrfield.limits import MAX_COUNT
+
+    return whole_number(option, minimum, MAX_COUNT if maximum is None else maximum)
+
+
+def seconds(option: str, minimum: float = 0.0) -> Callable[[str], float]:
+    """An argparse ``type=`` for a duration in seconds up to :data:`qrfield.limits.DURATION_S`."""
+    from qrfield.limits import DURATION_S
+
+    return limited(Limit(DURATION_S.label, "s", minimum, DURATION_S.maximum), option)
+
+
+def rate(option: str, minimum: float = 0.0) -> Callable[[str], float]:
+    """An argparse ``type=`` for a rate in Hz up to :data:`qrfield.limits.RATE_HZ`."""
+    from qrfield.limits import RATE_HZ
+
+    return limited(Limit(RATE_HZ.label, "Hz", minimum, RATE_HZ.maximum), option)
+
+
+def seed(option: str = "--seed") -> Callable[[str], int]:
+    """An argparse ``type=`` for a noise seed, 0..:data:`qrfield.limits.MAX_SEED`."""
+    from qrfield.limits import MAX_SEED
+
+    return whole_number(option, 0, MAX_SEED)
+
+
 def _number(text: str) -> float:
     try:
         return float(text)
@@ -155,11 +259,16 @@ def _number(text: str) -> float:
         raise LimitError(f"expected a number, got {text!r}") from None
 
 
+def refuse_existing(path: str | os.PathLike[str], force: bool, what: str = "--out") -> None:
+    """The command-line rule for a named output file: one that exists is refused unless
+    ``--force`` (``force``); FileExistsError naming ``what`` and the file."""
+    if not force and os.path.lexists(path):
+        raise FileExistsError(f"{what} {path} exists; choose another name, or add --force to overwrite it")
+
+
 def stdout_closed() -> None:
     """After BrokenPipeError on stdout (``qrfield solve ... | head``): point stdout at /dev/null, so
     that Python's exit flush cannot fail again and print "Broken pipe"."""
-    import os
-
     try:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())

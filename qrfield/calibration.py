@@ -16,7 +16,9 @@ The square side S only scales the board poses; the intrinsics do not depend on i
 from __future__ import annotations
 
 import datetime as _dt
+import math
 import os
+import re
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -32,6 +34,11 @@ from qrfield.chessboard import Board
 #: Fewest usable views calibrate() accepts (with zero skew, two views fix the intrinsics in theory;
 #: three make a usable minimum, ten or more spread over the image give a good model).
 MIN_VIEWS = 3
+#: Largest image (megapixels) OpenCV's board detectors see: a larger photo is searched shrunk by a
+#: whole factor and its corners refined on the full image (``calibrate`` on a 49 MP photo then
+#: peaks under 600 MB: docs/calibration.md, ``qrfield benchmark memory``). 5 MP keeps the 3280 x
+#: 2464 photos of a Pi camera v2 at factor 2 and a 640 x 480 frame untouched.
+WORKING_MEGAPIXELS = 5.0
 #: Coverage grid used by default: (columns, rows) of image cells.
 COVERAGE_CELLS = (3, 3)
 _ROW_NAMES = ("top", "middle", "bottom")
@@ -210,12 +217,22 @@ def detect_board(
     size = (int(grey.shape[1]), int(grey.shape[0]))
     if min(size) < 16:
         return BoardDetection(label, None, size, f"image of {size[0]}x{size[1]} px is too small")
+    # OpenCV's detectors need tens of bytes per pixel (findChessboardCornersSB took 2.6 GB on a
+    # 49 MP photo): they run on a copy shrunk to the working resolution, and only the sub-pixel
+    # refinement, which reads a small window around each corner, runs on the full image.
+    factor = working_factor(size)
+    small = (
+        grey
+        if factor == 1
+        else cv2.resize(grey, (size[0] // factor, size[1] // factor), interpolation=cv2.INTER_AREA)
+    )
     flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE | cv2.CALIB_CB_FAST_CHECK
-    found, corners = cv2.findChessboardCorners(grey, board.pattern_size, flags=flags)
+    found, corners = cv2.findChessboardCorners(small, board.pattern_size, flags=flags)
     method = "classic"
     if not found and thorough:
-        found, corners = cv2.findChessboardCornersSB(grey, board.pattern_size, flags=cv2.CALIB_CB_EXHAUSTIVE)
+        found, corners = cv2.findChessboardCornersSB(small, board.pattern_size, flags=cv2.CALIB_CB_EXHAUSTIVE)
         method = "sb"
+    del small
     if not found or corners is None or len(corners) != board.corner_count:
         return BoardDetection(
             label,
@@ -224,11 +241,22 @@ def detect_board(
             f"board {board.label} (inner corners) not found; "
             "check --board and that the whole board is in view",
         )
-    corners = corners.reshape(-1, 1, 2).astype(np.float32)
-    half = _subpixel_half_window(corners.reshape(-1, 2), board)
+    # A shrunk pixel i covers full pixels factor*i .. factor*i + factor-1 (centre conventions of
+    # docs/conventions.md: a pixel's centre is its integer coordinate).
+    corners = (corners.reshape(-1, 1, 2).astype(np.float32) * factor + (factor - 1) / 2.0).astype(np.float32)
+    half = max(_subpixel_half_window(corners.reshape(-1, 2), board), min(2 * factor, 10))
     criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 50, 1e-3)
     corners = cv2.cornerSubPix(grey, corners, (half, half), (-1, -1), criteria)
     return BoardDetection(label, corners.reshape(-1, 2).astype(np.float64), size, "", method)
+
+
+def working_factor(size: tuple[int, int], megapixels: float | None = None) -> int:
+    """The whole number an image of ``size`` (width, height) is shrunk by for the board search, so
+    that the search sees at most ``megapixels`` (default :data:`WORKING_MEGAPIXELS`; 1 for an
+    image that is small enough)."""
+    limit = WORKING_MEGAPIXELS if megapixels is None else megapixels
+    pixels = float(size[0]) * float(size[1])
+    return max(1, math.ceil(math.sqrt(pixels / (limit * 1e6))))
 
 
 def read_image(path: str | os.PathLike[str]) -> np.ndarray | None:
@@ -245,14 +273,14 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray | None:
 
 def detect_board_file(path: str | os.PathLike[str], board: Board) -> BoardDetection:
     """:func:`detect_board` on an image file; an unreadable file comes back with its reason."""
+    from qrfield.images import ImageError
+    from qrfield.images import read_image as read_checked
+
     label = str(path)
-    if not Path(path).is_file():
-        return BoardDetection(label, None, None, "no such file")
-    image = read_image(path)
-    if image is None:
-        return BoardDetection(
-            label, None, None, "cannot read it as an image (unreadable or not an image format)"
-        )
+    try:
+        image = read_checked(path, mode="grey")
+    except ImageError as exc:  # the reason: no such file, a FIFO, over the pixel limit, not an image
+        return BoardDetection(label, None, None, str(exc).removeprefix(f"{label}: "))
     return detect_board(image, board, label)
 
 
@@ -504,6 +532,17 @@ def calibrate_images(
     ``labels`` names array images in messages (default ``view 1``, ``view 2``, ...); paths name
     themselves. Other keyword arguments go to :func:`calibrate`.
     """
+    return calibrate(detect_images(images, board, labels=labels), board, **kwargs)
+
+
+def detect_images(
+    images: Sequence[str | os.PathLike[str] | np.ndarray],
+    board: Board,
+    *,
+    labels: Sequence[str] | None = None,
+) -> list[BoardDetection]:
+    """:func:`detect_board` on each image (file path or uint8 array), in order (see
+    :func:`calibrate_images` for ``labels``)."""
     if labels is not None and len(labels) != len(images):
         raise ValueError(f"{len(labels)} labels for {len(images)} images")
     detections = []
@@ -518,4 +557,158 @@ def calibrate_images(
                     label, detection.corners_px, detection.image_size, detection.reason, detection.method
                 )
             detections.append(detection)
-    return calibrate(detections, board, **kwargs)
+    return detections
+
+
+# ---------------------------------------------------------------------- one camera?
+
+#: Words of a file or folder name that say which camera of a stereo pair took a view.
+SIDE_WORDS = {"left": "left", "right": "right", "l": "left", "r": "right"}
+_CAMERA_NUMBER = re.compile(r"(?:^|[^a-z])(?:cam|camera)[-_ ]?(\d+)")
+#: A view fits a calibration far worse than the others when its RMS reprojection error is above
+#: CLUSTER_FACTOR times the median and above CLUSTER_MIN_PX; CLUSTER_MIN_VIEWS such views, and at
+#: least CLUSTER_MIN_SHARE of all, are a cluster: another camera, or another focus or zoom (a
+#: single one is a bad view, which :meth:`CalibrationResult.advice` names).
+CLUSTER_FACTOR = 3.0
+CLUSTER_MIN_PX = 0.3
+CLUSTER_MIN_VIEWS = 2
+CLUSTER_MIN_SHARE = 0.2
+#: When the calibration's RMS is above CLUSTER_MIN_PX, one model may be the compromise of two
+#: cameras, which spreads the error over every view instead of leaving a cluster: then models of
+#: CLUSTER_SAMPLE_VIEWS views drawn at random (CLUSTER_TRIALS draws, seeded) are tried, and of
+#: those that fit their own views within CLUSTER_MIN_PX the one most views agree with (missed by
+#: less than CLUSTER_INLIER_PX, or CLUSTER_FACTOR times its own RMS) is refitted on them: when
+#: they are at least half the views, fit within CLUSTER_MIN_PX, and miss the others by
+#: CLUSTER_FACTOR times that, the others are a cluster.
+CLUSTER_SAMPLE_VIEWS = 4
+CLUSTER_TRIALS = 40
+CLUSTER_INLIER_PX = 0.5
+
+
+def camera_from_name(label: str) -> str | None:
+    """Which camera a view's name says took it: ``left``/``right`` (a word of the file's name, or
+    else of its folder's: ``left03.jpg``, ``img_R_03.png``, ``right/03.png``), ``cam1``
+    (``cam1_03.png``, ``camera-1/...``), or None when the name says nothing."""
+    path = Path(label)
+    for part in (path.stem, path.parent.name):
+        text = part.lower()
+        number = _CAMERA_NUMBER.search(text)
+        if number:
+            return f"cam{int(number.group(1))}"
+        sides = {SIDE_WORDS[word] for word in re.split(r"[^a-z]+", text) if word in SIDE_WORDS}
+        if len(sides) == 1:
+            return sides.pop()
+    return None
+
+
+def _examples(labels: Sequence[str]) -> str:
+    names = [Path(label).name for label in labels]
+    return ", ".join(names[:2]) + (", ..." if len(names) > 2 else "")
+
+
+def mixed_cameras(detections: Sequence[BoardDetection], result: CalibrationResult | None = None) -> list[str]:
+    """Why the views seem not all to come from one camera ([] when nothing says so): one model
+    from two cameras fits neither. Three signs are looked for:
+
+    - the images have different sizes (a camera delivers one size);
+    - their names name two cameras (``left*`` and ``right*``, ``cam0*`` and ``cam1*``: a stereo
+      pair, whose two cameras are alike enough to calibrate together with a small error);
+    - with ``result``, a cluster of views fits the calibration far worse than the rest
+      (:data:`CLUSTER_FACTOR` times the median error and more, at least :data:`CLUSTER_MIN_VIEWS`
+      views and :data:`CLUSTER_MIN_SHARE` of them).
+    """
+    problems = []
+    sizes = Counter(d.image_size for d in detections if d.image_size is not None)
+    if len(sizes) > 1:
+        shown = ", ".join(f"{w}x{h} ({n})" for (w, h), n in sizes.most_common())
+        problems.append(f"the images have {len(sizes)} sizes: {shown}")
+    groups: dict[str, list[str]] = {}
+    for d in detections:
+        if d.found:
+            name = camera_from_name(d.label)
+            if name is not None:
+                groups.setdefault(name, []).append(d.label)
+    if len(groups) > 1:
+        shown = "; ".join(
+            f"{name} ({len(labels)}: {_examples(labels)})" for name, labels in sorted(groups.items())
+        )
+        problems.append(f"their names say {len(groups)} cameras: {shown}")
+    if result is not None and result.views:
+        median = float(np.median([v.rms_px for v in result.views]))
+        far = [v for v in result.views if v.rms_px > max(CLUSTER_FACTOR * median, CLUSTER_MIN_PX)]
+        if len(far) >= CLUSTER_MIN_VIEWS and len(far) >= CLUSTER_MIN_SHARE * len(result.views):
+            low, high = min(v.rms_px for v in far), max(v.rms_px for v in far)
+            problems.append(
+                f"{len(far)} of {len(result.views)} views fit the model far worse than the rest "
+                f"(RMS {low:.2f}-{high:.2f} px against a median of {median:.2f} px: "
+                f"{_examples([v.label for v in far])}): another camera, or another focus or zoom"
+            )
+        else:
+            split = two_camera_split(result)
+            if split is not None:
+                rms, misses = split
+                low, high = min(misses.values()), max(misses.values())
+                problems.append(
+                    f"{len(misses)} of {len(result.views)} views do not fit the model of the others "
+                    f"(which fits them within {rms:.2f} px, against {result.rms_px:.2f} px for all "
+                    f"together, and misses these by {low:.2f}-{high:.2f} px: "
+                    f"{_examples(list(misses))}): another camera, or another focus or zoom"
+                )
+    return problems
+
+
+def _fit(views: Sequence[BoardDetection], board: Board, size: tuple[int, int]) -> tuple[float, Any, Any]:
+    """(RMS px, K, dist) of cv2.calibrateCamera on ``views``."""
+    objects = [board.object_points() for _ in views]
+    images = [d.corners_px.reshape(-1, 1, 2).astype(np.float32) for d in views]
+    criteria = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 50, 1e-9)
+    rms, K, dist, _rvecs, _tvecs = cv2.calibrateCamera(objects, images, size, None, None, criteria=criteria)
+    return float(rms), K, dist
+
+
+def _miss(view: BoardDetection, board: Board, K: Any, dist: Any) -> float:
+    """RMS px by which the model (K, dist) misses ``view`` at the view's best pose."""
+    obj = board.object_points().astype(np.float64)
+    corners = view.corners_px.astype(np.float64)
+    ok, rvec, tvec = cv2.solvePnP(obj, corners, K, dist)
+    if not ok:
+        return math.inf
+    projected, _ = cv2.projectPoints(obj, rvec, tvec, K, dist)
+    return float(np.sqrt(np.mean(np.sum((projected.reshape(-1, 2) - corners) ** 2, axis=1))))
+
+
+def two_camera_split(result: CalibrationResult, seed: int = 0) -> tuple[float, dict[str, float]] | None:
+    """The views of ``result`` that another camera seems to have taken (see
+    :data:`CLUSTER_SAMPLE_VIEWS`): (the RMS of the others' own model, {label: px it misses it by}),
+    or None."""
+    views = list(result.detections)
+    total = len(views)
+    if result.rms_px <= CLUSTER_MIN_PX or total < 2 * CLUSTER_SAMPLE_VIEWS:
+        return None
+    size, board = result.camera.size, result.board
+    rng = np.random.default_rng(seed)
+    best: list[int] = []
+    for _ in range(CLUSTER_TRIALS):
+        sample = sorted(rng.choice(total, CLUSTER_SAMPLE_VIEWS, replace=False).tolist())
+        try:
+            rms, K, dist = _fit([views[i] for i in sample], board, size)
+            if rms > CLUSTER_MIN_PX:  # the draw mixes the cameras too: its model fits nothing well
+                continue
+            limit = max(CLUSTER_INLIER_PX, CLUSTER_FACTOR * rms)
+            agree = [i for i in range(total) if _miss(views[i], board, K, dist) < limit]
+        except cv2.error:  # four views too alike to calibrate from: the next draw
+            continue
+        if len(agree) > len(best):
+            best = agree
+    try:
+        if len(best) < total / 2 or total - len(best) < max(CLUSTER_MIN_VIEWS, CLUSTER_MIN_SHARE * total):
+            return None
+        rms, K, dist = _fit([views[i] for i in best], board, size)
+        if rms > CLUSTER_MIN_PX:
+            return None
+        misses = {views[i].label: _miss(views[i], board, K, dist) for i in range(total) if i not in best}
+    except cv2.error:
+        return None
+    if float(np.median(list(misses.values()))) < max(CLUSTER_FACTOR * rms, CLUSTER_MIN_PX):
+        return None
+    return rms, misses

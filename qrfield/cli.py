@@ -9,6 +9,7 @@ No subcommand opens the bench app (``qrfield gui``).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import pkgutil
 import sys
@@ -52,9 +53,23 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def describe_error(exc: BaseException) -> str:
+    """The message of an error for the user: an OS error the system raised (``[Errno 36] File
+    name too long: 'x'``) as ``x: file name too long``; any other as it is."""
+    text = str(exc)
+    if isinstance(exc, OSError) and exc.strerror and text.startswith("[Errno"):
+        where = exc.filename if exc.filename is not None else ""
+        return f"{where}: {exc.strerror.lower()}" if where != "" else exc.strerror.lower()
+    return text
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the console script; returns the process exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
+    # A file name that is not UTF-8 (kept by Python as lone surrogates) is printed as the bytes it
+    # was given, as ls does, instead of failing after the file is written (a strict UTF-8 locale).
+    with contextlib.suppress(AttributeError, ValueError):
+        sys.stdout.reconfigure(errors="surrogateescape")  # type: ignore[union-attr]
     parser = build_parser()
     if not argv or (argv[0].startswith("-") and argv[0] not in ("-h", "--help", "--version")):
         argv = ["gui", *argv]  # no subcommand: the app, with any options given
@@ -84,7 +99,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 3
     except (CameraModelError, ValueError, OSError) as exc:
         # Bad input is the user's to fix: one clear line, no traceback.
-        print(f"qrfield {args.command}: error: {one_line(str(exc))}", file=sys.stderr)
+        print(f"qrfield {args.command}: error: {one_line(describe_error(exc))}", file=sys.stderr)
         return 2
     except Exception as exc:
         # OpenCV rejects bad arguments with cv2.error, not a ValueError (e.g. a QR text too long to

@@ -237,8 +237,10 @@ class FrameLoop:
             timer.cancel()
             again = "still " if self._failed else ""
             self._failed = True
-            self._mark_down(f"cannot open source: {exc}")
-            self.events.failed(f"{again}cannot open source {config.source!r}: {exc}", False)
+            # One line, and the source named once (a SourceError names it already).
+            detail = " ".join(str(exc).split()).removeprefix(f"source {config.source!r}: ")
+            self._mark_down(f"cannot open source: {detail}")
+            self.events.failed(f"{again}cannot open source {config.source!r}: {detail}", False)
             self._after_failure()
             return
         finally:

@@ -32,7 +32,6 @@ import errno
 import io
 import itertools
 import json
-import math
 import os
 import re
 import stat
@@ -43,6 +42,9 @@ from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
+
+from qrfield.limits import LimitError, as_number
+from qrfield.texts import TextError, check_text
 
 #: Largest file a reader reads unless it says otherwise (bytes): far above any profile, session or
 #: study file, far below what would hurt a Raspberry Pi.
@@ -109,15 +111,16 @@ class Fields:
         return default
 
     def number(self, key: str, default: Any = None) -> float:
-        """A finite number (JSON number; not true/false, not text)."""
+        """A finite number (JSON number; not true/false, not text, not too large for a float)."""
         value = self._get(key, _MISSING if default is None else default)
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise FileFormatError(
                 f"{self.where}: field '{key}' must be a number, got {describe_value(value)}"
             )
-        if not math.isfinite(value):
-            raise FileFormatError(f"{self.where}: field '{key}' must be finite, got {value!r}")
-        return float(value)
+        try:
+            return as_number(value, f"{self.where}: field '{key}'", "the value")
+        except LimitError as exc:
+            raise FileFormatError(str(exc)) from None
 
     def integer(self, key: str, default: Any = None) -> int:
         """A whole number (3 or 3.0)."""
@@ -227,16 +230,31 @@ def nesting_depth(text: str, language: str = "json") -> int:
 
 
 def _check_values(value: Any, where: str, max_chars: int, path: str = "") -> None:
-    """Refuse any text (key or value) longer than ``max_chars``; depth is already bounded."""
+    """Refuse any text (key or value) longer than ``max_chars`` or not UTF-8 (a ``"\\ud800"``
+    escape), and any number that is not a finite float (:func:`qrfield.limits.as_number`: a
+    400-digit integer, ``1e400``), naming the key; depth is already bounded."""
     if isinstance(value, str):
         if len(value) > max_chars:
             raise FileFormatError(
                 f"{where}: value {path or '(top)'} is {len(value)} characters long, more than {max_chars}"
             )
+        try:
+            check_text(value, f"{where}: value {path or '(top)'}")
+        except TextError as exc:
+            raise FileFormatError(str(exc)) from None
+    elif isinstance(value, (int, float)) and not isinstance(value, bool):
+        try:
+            as_number(value, f"{where}: value {path or '(top)'}", "the number")
+        except LimitError as exc:
+            raise FileFormatError(str(exc)) from None
     elif isinstance(value, dict):
         for key, item in value.items():
             if isinstance(key, str) and len(key) > max_chars:
                 raise FileFormatError(f"{where}: a key is {len(key)} characters long, more than {max_chars}")
+            try:
+                check_text(key, f"{where}: a key in {path or '(top)'}")
+            except TextError as exc:
+                raise FileFormatError(str(exc)) from None
             _check_values(item, where, max_chars, f"{path}.{key}" if path else str(key))
     elif isinstance(value, list):
         for i, item in enumerate(value):
@@ -423,15 +441,46 @@ def check_target(path: str | os.PathLike[str], what: str = "") -> Path:
     """``path`` as a file to write: not a folder, in a folder that exists (which is never created)."""
     path = Path(path)
     label = f"{what} {path}" if what else str(path)
+    folder = path.parent
+    longest = name_max(folder if folder.is_dir() else ".")
+    size = max((len(os.fsencode(part)) for part in path.parts), default=0)
+    if size > longest:  # before is_dir(), which raises for such a name
+        raise OSError(
+            errno.ENAMETOOLONG,
+            f"cannot write {label}: a name in it is {size} bytes long, more than the {longest} the "
+            "file system allows; choose a shorter name",
+        )
     if path.is_dir():
         raise IsADirectoryError(f"{label} is a folder; give a file name")
-    folder = path.parent
     if not folder.is_dir():
         raise FileNotFoundError(
             f"cannot write {label}: folder {folder} does not exist (qrfield creates no folders you "
             "did not name; make it first)"
         )
     return path
+
+
+def name_max(folder: str | os.PathLike[str]) -> int:
+    """The longest file name (bytes) the file system of ``folder`` takes (255 where unknown)."""
+    try:
+        return int(os.pathconf(folder, "PC_NAME_MAX"))
+    except (OSError, ValueError, AttributeError):
+        return 255
+
+
+#: Bytes ``tempfile.mkstemp`` adds to a prefix and suffix: eight random characters.
+_TEMP_RANDOM = 8
+_TEMP_SUFFIX = ".tmp"
+
+
+def _temp_prefix(path: Path) -> str:
+    """``.NAME.`` for the temporary file beside ``path``, shortened so that the temporary name
+    fits the file system even when ``path``'s own name is as long as it allows."""
+    room = name_max(path.parent) - _TEMP_RANDOM - len(_TEMP_SUFFIX) - 2
+    name = path.name
+    while len(os.fsencode(name)) > room and name:
+        name = name[: max(0, min(len(name) - 1, room))]
+    return f".{name}."
 
 
 @contextlib.contextmanager
@@ -456,7 +505,7 @@ def atomic_file(
     path = check_target(path)
     if not overwrite and os.path.lexists(path):
         raise FileExistsError(errno.EEXIST, "file exists", str(path))
-    fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=_temp_prefix(path), suffix=_TEMP_SUFFIX)
     tmp = Path(tmp_name)
     try:
         with contextlib.suppress(OSError):  # e.g. FAT file systems have no modes
@@ -516,10 +565,11 @@ def atomic_write_json(path: str | os.PathLike[str], data: Any, **json_options: A
 
 
 def own_folders() -> tuple[Path, ...]:
-    """qrfield's own folders (config and data, :mod:`qrfield.paths`): created with their parents."""
+    """qrfield's own folders (config, data and sessions, :mod:`qrfield.paths`): created with their
+    parents."""
     from qrfield import paths
 
-    return (paths.config_dir(), paths.data_dir())
+    return (paths.config_dir(), paths.data_dir(), paths.sessions_dir())
 
 
 def _inside(path: Path, folder: Path) -> bool:

@@ -190,11 +190,17 @@ class Pose:
         return cls(np.asarray(position_mm, dtype=float), angles_from_rotation(rotation))
 
     @classmethod
-    def parse(cls, text: str) -> Pose:
-        """Parse ``X,Y,Z,ALPHA,BETA,GAMMA`` (mm and degrees; commas, semicolons or spaces)."""
+    def parse(cls, text: str, where: str = "pose") -> Pose:
+        """Parse ``X,Y,Z,ALPHA,BETA,GAMMA`` (mm and degrees; commas, semicolons or spaces), each
+        inside its limit (:data:`qrfield.limits.POSITION_MM`, :data:`qrfield.limits.ANGLE_DEG`);
+        ValueError naming ``where`` and the value otherwise."""
         from qrfield.arguments import parse_numbers
+        from qrfield.limits import ANGLE_DEG, POSITION_MM
 
-        values = parse_numbers(text, "pose", names=("X", "Y", "Z", "ALPHA", "BETA", "GAMMA"))
+        names = ("X", "Y", "Z", "ALPHA", "BETA", "GAMMA")
+        values = parse_numbers(text, where, names=names)
+        for name, value in zip(names, values, strict=True):
+            (POSITION_MM if name in "XYZ" else ANGLE_DEG).check(value, f"{where}: {name}")
         return cls(values[:3], values[3:])
 
     def vertices_mm(self, side_mm: float) -> np.ndarray:

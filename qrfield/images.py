@@ -24,6 +24,7 @@ from typing import Any
 
 from qrfield.limits import DEFAULT_MAX_MEGAPIXELS
 from qrfield.settings import setting
+from qrfield.texts import check_path_for_library
 
 #: File name endings taken as images when a folder is given.
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".pgm", ".ppm", ".pbm", ".pnm")
@@ -92,6 +93,11 @@ def probe_size(path: str | os.PathLike[str]) -> tuple[int, int] | None:
         except (struct.error, ValueError, OverflowError):
             return None
     return _header_size(head)
+
+
+def _is_png(path: Path) -> bool:
+    with open(path, "rb") as handle:
+        return handle.read(8) == b"\x89PNG\r\n\x1a\n"
 
 
 def _header_size(head: bytes) -> tuple[int, int] | None:
@@ -221,6 +227,80 @@ def _pnm_size(head: bytes) -> tuple[int, int] | None:
     return None
 
 
+#: Channels per PNG colour type (grey, RGB, palette, grey + alpha, RGBA).
+_PNG_CHANNELS = {0: 1, 2: 3, 3: 1, 4: 2, 6: 4}
+#: Adam7 interlacing: (x0, y0, dx, dy) of each of the seven passes.
+_ADAM7 = ((0, 0, 8, 8), (4, 0, 8, 8), (0, 4, 4, 8), (2, 0, 4, 4), (0, 2, 2, 4), (1, 0, 2, 2), (0, 1, 1, 2))
+#: Bytes of compressed PNG data inflated at a time by :func:`check_png_data`.
+_INFLATE_STEP = 1 << 22
+
+
+def png_data_size(width: int, height: int, depth: int, colour: int, interlace: int) -> int:
+    """Bytes the PNG's image data inflates to (filter bytes included), from its IHDR fields."""
+    bits = _PNG_CHANNELS[colour] * depth
+
+    def rows(w: int, h: int) -> int:
+        return h * (1 + (w * bits + 7) // 8) if w > 0 and h > 0 else 0
+
+    if not interlace:
+        return rows(width, height)
+    return sum(rows((width - x0 + dx - 1) // dx, (height - y0 + dy - 1) // dy) for x0, y0, dx, dy in _ADAM7)
+
+
+def check_png_data(path: str | os.PathLike[str], where: str) -> None:
+    """ImageError when a PNG's compressed data inflates to more than its header's pixels need.
+
+    The pixel limit bounds what the header declares, not what its IDAT chunks inflate to: a 50 MP
+    PNG whose stream goes on to 900 MB of zeros kept libpng inflating for 23 s (and it warns "Too
+    much image data" on stderr). So the stream is inflated here first, a few MB at a time and
+    discarded, and stopped one byte beyond what the header allows: the CPU spent is at most that
+    of decoding a legitimate image of that size. Chunks are read by their headers, the data
+    never held whole.
+    """
+    import zlib
+
+    with open(path, "rb") as handle:
+        head = handle.read(33)
+        if len(head) < 33 or head[12:16] != b"IHDR":
+            return  # not a PNG with a header where it belongs: OpenCV says it cannot decode it
+        width, height, depth, colour, _method, _filter, interlace = struct.unpack(">IIBBBBB", head[16:29])
+        if colour not in _PNG_CHANNELS or depth not in (1, 2, 4, 8, 16):
+            return  # a damaged header: OpenCV says it cannot decode it
+        allowed = png_data_size(width, height, depth, colour, interlace)
+        inflater = zlib.decompressobj()
+        produced = 0
+        handle.seek(33)
+        while True:
+            header = handle.read(8)
+            if len(header) < 8:
+                return  # truncated: OpenCV reports it
+            length, kind = struct.unpack(">I4s", header)
+            if kind == b"IEND":
+                return
+            if kind != b"IDAT":
+                handle.seek(length + 4, os.SEEK_CUR)  # skip the chunk and its CRC
+                continue
+            left = length
+            while left > 0:
+                data = handle.read(min(left, _INFLATE_STEP))
+                if not data:
+                    return
+                left -= len(data)
+                try:
+                    while data:
+                        produced += len(inflater.decompress(data, _INFLATE_STEP))
+                        data = inflater.unconsumed_tail
+                        if produced > allowed:
+                            raise ImageError(
+                                f"{where}: cannot read image: its compressed data inflates to more "
+                                f"than the {allowed} bytes its {width}x{height} pixels need (a damaged "
+                                "or crafted PNG); refused before decoding"
+                            )
+                except zlib.error:
+                    return  # damaged data: OpenCV reports it
+            handle.seek(4, os.SEEK_CUR)  # the CRC
+
+
 def check_pixels(width: int, height: int, settings: ImageSettings, where: str) -> None:
     """ImageError naming ``where`` when width x height is above ``settings.max_megapixels``."""
     megapixels = width * height / 1e6
@@ -269,6 +349,11 @@ def read_image(
     if width <= 0 or height <= 0:
         raise ImageError(f"{text}: cannot read image: its header says {width}x{height} pixels")
     check_pixels(width, height, settings, text)
+    try:
+        if _is_png(file):
+            check_png_data(file, text)  # the pixel limit caps the CPU too
+    except OSError as exc:
+        raise ImageError(f"{text}: cannot read image: {exc.strerror or exc}") from None
     # The whole file is read only now; it cannot be much larger than its pixels uncompressed.
     limit = int(settings.max_megapixels * 1e6 * 4) + (16 << 20)
     try:
@@ -307,6 +392,7 @@ def write_image(path: str | os.PathLike[str], image: Any, *, overwrite: bool = T
     suffix = target.suffix.lower()
     if not suffix:
         raise OSError(f"cannot write {target}: no file extension to tell the image format (.png, .jpg, ...)")
+    check_path_for_library(suffix, f"cannot write {target}: its extension")
     try:
         ok, encoded = cv2.imencode(suffix, image)
     except cv2.error as exc:

@@ -18,6 +18,45 @@ class LimitError(ValueError):
     """A number outside its physical limits, or not a finite number; the message names it."""
 
 
+#: Longest number text read (characters): a float has 17 significant digits and an exponent, so
+#: this is far beyond any real value, and short enough that int() and float() stay instant.
+MAX_NUMBER_CHARS = 64
+
+
+def as_number(value: Any, where: str, label: str = "value") -> float:
+    """The one reader of a number from a user or a file: ``value`` (an int, a float, or a number's
+    text) as a finite float, else LimitError naming ``where`` (the option, or the file and key).
+
+    Refused: true/false, what is not a number, a text longer than :data:`MAX_NUMBER_CHARS`, an
+    integer too large for a float (a 400-digit integer in a JSON file: float() would raise
+    OverflowError), and infinities and NaN (``1e400`` in a file reads as infinity).
+    """
+    if isinstance(value, bool):
+        raise LimitError(f"{where}: {label} must be a number, got {value!r}")
+    if isinstance(value, str):
+        text = value.strip()
+        if len(text) > MAX_NUMBER_CHARS:
+            raise LimitError(
+                f"{where}: {label} must be a number, got a text of {len(text)} characters "
+                f"(more than {MAX_NUMBER_CHARS})"
+            )
+        value = text
+    elif isinstance(value, int) and value.bit_length() > 1024:  # beyond the largest float
+        digits = math.floor(math.log10(abs(value))) + 1  # not len(str()): it refuses over 4300 digits
+        digits -= 10 ** (digits - 1) > abs(value)  # log10 rounds 99...9 up to the next power
+        raise LimitError(f"{where}: {label} is an integer of {digits} digits, too large for a number")
+    try:
+        number = float(value)
+    except OverflowError:  # an integer just under 2**1024 but above the largest float
+        raise LimitError(f"{where}: {label} is an integer too large for a number") from None
+    except (TypeError, ValueError):
+        shown = repr(value) if len(repr(value)) <= 40 else repr(value)[:40] + "..."
+        raise LimitError(f"{where}: {label} must be a number, got {shown}") from None
+    if not math.isfinite(number):
+        raise LimitError(f"{where}: {label} must be a finite number, got {value!r}")
+    return number
+
+
 @dataclass(frozen=True)
 class Limit:
     """A closed range ``minimum..maximum`` of a quantity in ``unit``, with why it is what it is."""
@@ -34,15 +73,8 @@ class Limit:
 
     def check(self, value: Any, where: str) -> float:
         """``value`` as a float inside the limits, else LimitError: ``WHERE: LABEL V UNIT is ...``."""
-        if isinstance(value, bool):
-            raise LimitError(f"{where}: {self.label} must be a number, got {value!r}")
-        try:
-            number = float(value)
-        except (TypeError, ValueError, OverflowError):
-            raise LimitError(f"{where}: {self.label} must be a number, got {value!r}") from None
         unit = f" {self.unit}" if self.unit else ""
-        if not math.isfinite(number):
-            raise LimitError(f"{where}: {self.label} must be a finite number{unit}, got {value!r}")
+        number = as_number(value, where, self.label)
         if number < self.minimum:
             raise LimitError(
                 f"{where}: {self.label} {number:g}{unit} is below the smallest accepted, "
@@ -75,6 +107,29 @@ DISTORTION_ROUND_TRIP_PX = 0.01
 #: radius, on the ellipse inscribed in the image): a strong real barrel lens is about 0.6, a strong
 #: pincushion 1.5; k1 = 1e6 is 24, which no lens the 5-coefficient model describes can be.
 DISTORTION_SCALE = Limit("distortion scale at the image's edge", "", 1.0 / 3.0, 3.0)
+#: A position given by hand (``--pose``, mm in the camera frame): a kilometre each way; 1e308 mm
+#: overflowed the visibility test's norm into numpy warnings and a wrong "faces away".
+POSITION_MM = Limit("position", "mm", -1_000_000.0, 1_000_000.0, "a kilometre from the camera")
+#: An angle given by hand (degrees): one turn each way.
+ANGLE_DEG = Limit("angle", "deg", -360.0, 360.0, "one turn each way")
+#: How long a command runs when told to stop after S seconds: a week, far beyond any bench run,
+#: and finite (``serial-demo --seconds 1e308`` ran forever).
+DURATION_S = Limit("duration", "s", 0.0, 7 * 24 * 3600.0, "a week")
+#: Frames, poses or lines per second a command produces or paces itself at.
+RATE_HZ = Limit("rate", "Hz", 0.0, 1000.0, "faster than any camera or serial line qrfield drives")
+#: Largest count of frames, lines, rows or samples a command is asked for: a week at 1000 per
+#: second is 6e8.
+MAX_COUNT = 1_000_000_000
+#: Largest count of poses, views or rounds a benchmark is asked for (each figure takes seconds to
+#: minutes at the defaults, a few hundred to 100,000).
+MAX_BENCHMARK_COUNT = 10_000_000
+#: Largest noise seed (numpy's generators take any non-negative integer; a 64-bit one is plenty).
+MAX_SEED = 2**63 - 1
+#: Largest USB camera index (``usb:N``): Linux numbers video devices 0..255
+#: (``/dev/video255``); usb:99999999999999999999 gave seven lines of OpenCV's overload errors.
+MAX_USB_INDEX = 255
+#: Most worker processes a command starts.
+MAX_WORKERS = 1024
 #: Default pixel limit of an image to decode (megapixels): a 50 MP grey image is 50 MB, a colour
 #: one 150 MB, which a Raspberry Pi can hold; 32000 x 24000 (768 MP, 2.3 GB) it cannot.
 DEFAULT_MAX_MEGAPIXELS = 50.0

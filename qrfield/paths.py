@@ -3,8 +3,11 @@
 - config folder: ``$QRFIELD_CONFIG_DIR``, else ``$XDG_CONFIG_HOME/qrfield``, else
   ``~/.config/qrfield``: settings (``app.json``) and the user's camera profiles (``calib/``);
 - data folder: ``$QRFIELD_DATA_DIR``, else ``$XDG_DATA_HOME/qrfield``, else
-  ``~/.local/share/qrfield``: results the app and the commands write when the user names no folder
-  (``simulations/``, ``sessions/``).
+  ``~/.local/share/qrfield``: results the app writes when the user names no folder
+  (``simulations/``);
+- sessions folder: ``$QRFIELD_SESSIONS_DIR``, else ``<data folder>/sessions``: the one folder of
+  experiment sessions the app and ``qrfield session`` share (``session new`` and ``session list``
+  use it when no folder is named).
 
 Nothing here creates a folder: the writer creates the one it writes into, when it writes.
 """
@@ -60,5 +63,7 @@ def simulations_dir() -> Path:
 
 
 def sessions_dir() -> Path:
-    """Default parent folder of experiment sessions (``<data folder>/sessions``)."""
-    return data_dir() / "sessions"
+    """The folder of experiment sessions the app and the command line share:
+    ``$QRFIELD_SESSIONS_DIR``, else ``<data folder>/sessions``."""
+    env = _from_env("QRFIELD_SESSIONS_DIR")
+    return env if env is not None else data_dir() / "sessions"

@@ -25,6 +25,7 @@ import numpy as np
 from qrfield.camera import CameraModel
 from qrfield.geometry import Pose, project_points, transform_points
 from qrfield.lens import undistort_points
+from qrfield.texts import check_text
 from qrfield.visibility import view_problem
 
 #: Quiet zone around the symbol, in modules (ISO/IEC 18004 asks for 4).
@@ -72,6 +73,7 @@ def qr_symbol(text: str) -> np.ndarray:
     """
     if not text:
         raise ValueError("QR text must not be empty")
+    check_text(text, "QR text")  # OpenCV's binding crashes on a text that is not UTF-8
     try:
         image = cv2.QRCodeEncoder.create().encode(text)
     except cv2.error as exc:

@@ -19,10 +19,12 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import math
 import typing
 from dataclasses import dataclass
 from typing import Any, TypeVar
+
+from qrfield.limits import LimitError, as_number
+from qrfield.texts import TextError, check_text
 
 T = TypeVar("T")
 
@@ -84,6 +86,10 @@ class SettingSpec:
         if self.type is str:
             if not isinstance(value, str):
                 raise SettingError(f"setting {name}: expected text, got {value!r}")
+            try:
+                check_text(value, f"setting {name}")
+            except TextError as exc:
+                raise SettingError(str(exc)) from None
             if self.choices and value not in self.choices:
                 raise SettingError(f"setting {name}: {value!r} is not one of {', '.join(self.choices)}")
             if self.check is not None:
@@ -94,14 +100,10 @@ class SettingSpec:
                     raise kind(f"setting {name}: {exc}") from None
             return value
         if self.type in (int, float):
-            if isinstance(value, bool):
-                raise SettingError(f"setting {name}: expected a number, got {value!r}")
             try:
-                number = float(value)
-            except (TypeError, ValueError):
-                raise SettingError(f"setting {name}: expected a number, got {value!r}") from None
-            if not math.isfinite(number):
-                raise SettingError(f"setting {name}: must be finite, got {value!r}")
+                number = as_number(value, f"setting {name}", "the value")
+            except LimitError as exc:
+                raise SettingError(str(exc)) from None
             if self.type is int:
                 if number != int(number):
                     raise SettingError(f"setting {name}: expected a whole number, got {value!r}")

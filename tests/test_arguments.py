@@ -110,3 +110,64 @@ def test_control_characters_in_what_was_typed_keep_the_error_on_one_line(argv, c
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.endswith("\n") and "\r" not in err
+
+
+def _swap(option: str) -> str:
+    """A typo: the two letters after the dashes swapped (``--side-mm`` -> ``--isde-mm``)."""
+    return option[:2] + option[3] + option[2] + option[4:]
+
+
+def _commands(parser):
+    """(name, parser) of every leaf command, subcommands of subcommands included."""
+    for action in parser._actions:
+        if action.__class__.__name__ == "_SubParsersAction":
+            for name, sub in action.choices.items():
+                if any(a.__class__.__name__ == "_SubParsersAction" for a in sub._actions):
+                    yield from ((f"{name} {n}", p) for n, p in _commands(sub))
+                else:
+                    yield name, sub
+
+
+def test_every_command_suggests_the_option_it_was_mistyped_for(capsys):
+    """One implementation for all subcommands: a swapped pair of letters in a long option of each
+    command gets "did you mean" with that option, in one line, exit 2 (before this, "unrecognized
+    arguments" with no suggestion, or "the following arguments are required" first)."""
+    checked = 0
+    for name, sub in _commands(build_parser()):
+        options = [o for a in sub._actions for o in a.option_strings if o.startswith("--") and len(o) > 6]
+        option = next((o for o in options if o != "--help" and _swap(o) not in options), None)
+        if option is None:
+            continue
+        assert main([*name.split(), _swap(option), "1"]) == 2, name
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and f"unrecognized option {_swap(option)}; did you mean" in err, (
+            name,
+            err,
+        )
+        checked += 1
+    assert checked >= 15
+
+
+@pytest.mark.parametrize(
+    ("argv", "words"),
+    [
+        (["rendr"], "invalid choice: 'rendr' (choose from"),
+        (["session", "lst"], "did you mean list?"),
+        (["solve", "--method", "ipe", "x.png"], "did you mean ippe?"),
+        (["render", "--sied-mm", "30", "--out", "x.png"], "did you mean --side-mm?"),
+    ],
+)
+def test_a_mistyped_command_choice_or_option_gets_the_nearest(argv, words, capsys):
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert words in err and err.count("\n") == 1
+    if argv[0] == "rendr":
+        assert "did you mean render?" in err
+
+
+@pytest.mark.parametrize("value", ["-inf", "-Infinity", "-nan"])
+def test_a_negative_infinity_is_a_value_refused_as_not_finite(value, capsys):
+    """Was "argument --side-mm: expected one argument": argparse took -inf for an option."""
+    assert main(["render", "--side-mm", value, "--pose", "0,0,300,0,0,0", "--out", "x.png"]) == 2
+    err = capsys.readouterr().err
+    assert "argument --side-mm: QR side must be a finite number" in err and err.count("\n") == 1

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import re
 from pathlib import Path
 
@@ -76,13 +77,21 @@ def test_bumblebee_left_matches_boofcv(bumblebee_left: tuple[Path, list[Path]]) 
     assert cam.dist[0] < -0.2  # strong barrel distortion, as BoofCV's k1 = -0.363
 
 
-def test_bumblebee_corners_match_hand_labels(bumblebee_left: tuple[Path, list[Path]]) -> None:
+@pytest.mark.parametrize("shrunk", [False, True], ids=["full size", "searched at half size"])
+def test_bumblebee_corners_match_hand_labels(
+    bumblebee_left: tuple[Path, list[Path]], shrunk: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """Detected corners against the hand-selected points (leftNN.txt, in a snake order).
 
     The hand labels use pixel-edge coordinates (top-left corner of the image = (0, 0)): over all
     264 corners they sit (+0.50, +0.60) px from OpenCV's, so 0.5 px is taken off before comparing.
-    Measured after that: mean 0.24 px, largest 0.63 px.
+    Measured after that: mean 0.24 px, largest 0.63 px. Searched at half size (as a photo above
+    the working resolution is) and refined on the full frame, the same bounds hold.
     """
+    from qrfield import calibration
+
+    if shrunk:
+        monkeypatch.setattr(calibration, "WORKING_MEGAPIXELS", 0.1)  # 640x480: factor 2
     _, images = bumblebee_left
     board = Board(4, 6, 30.0)
     distances = []
@@ -185,6 +194,46 @@ def test_sector_detector_takes_over(synthetic_views: list, monkeypatch: pytest.M
     assert gaps < 0.3
 
 
+@pytest.mark.parametrize(("megapixels", "expected"), [(0.08, 2), (0.035, 3)])
+def test_a_board_searched_at_the_working_resolution_is_refined_on_the_full_image(
+    synthetic_views: list, megapixels: float, expected: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Large photos are searched shrunk (OpenCV's detectors took 2.6 GB on 49 MP); the corners
+    must still be as exact as found at full size, against the rendered truth."""
+    from qrfield import calibration
+
+    monkeypatch.setattr(calibration, "WORKING_MEGAPIXELS", megapixels)
+    factor = calibration.working_factor(TRUE_CAMERA.size, megapixels)
+    assert factor == expected  # 640x480 shrunk by 2 and by 3
+    searched = []
+    real_find = cv2.findChessboardCorners
+    monkeypatch.setattr(
+        cv2,
+        "findChessboardCorners",
+        lambda image, *a, **k: searched.append(image.shape) or real_find(image, *a, **k),
+    )
+    for i, view in enumerate(synthetic_views[:6]):
+        detection = detect_board(view.image, SYNTH_BOARD, f"view {i}")
+        assert detection.found, detection.reason
+        assert searched[-1] == (480 // factor, 640 // factor)
+        assert detection.image_size == (640, 480)
+        gaps = min(
+            (
+                np.linalg.norm(c - view.corners_px, axis=1)
+                for c in (detection.corners_px, detection.corners_px[::-1])
+            ),
+            key=lambda g: g.mean(),
+        )
+        assert gaps.mean() < 0.15 and gaps.max() < 0.3, f"view {i}: corners off by {gaps.max():.3f} px"
+
+
+def test_the_working_factor_keeps_small_images_whole() -> None:
+    from qrfield.calibration import working_factor
+
+    assert working_factor((640, 480)) == 1 and working_factor((2560, 1920)) == 1  # 4.9 MP
+    assert working_factor((3280, 2464)) == 2 and working_factor((8100, 6050)) == 4  # 8.1 and 49 MP
+
+
 # ---------------------------------------------------------------------- skipped views and errors
 
 
@@ -209,6 +258,19 @@ def test_unusable_views_are_skipped_with_reasons(synthetic_views: list, tmp_path
     assert "not found" in reasons["blank.png"]
     assert "cannot read" in reasons["notes.png"]
     assert "no such file" in reasons["missing.png"]
+
+
+def test_a_fifo_among_the_images_is_named_as_one(tmp_path: Path) -> None:
+    """Issue 23: a FIFO was skipped as "no such file"."""
+    os.mkfifo(tmp_path / "pipe.png")
+    (skipped,) = calibrate_images_skips([tmp_path / "pipe.png"])
+    assert skipped == "cannot read image: not a regular file"
+
+
+def calibrate_images_skips(paths: list[Path]) -> list[str]:
+    from qrfield.calibration import detect_images
+
+    return [d.reason for d in detect_images(paths, SYNTH_BOARD)]
 
 
 def test_too_few_views_raise_with_reasons() -> None:
@@ -437,3 +499,101 @@ def test_cli_records_the_sensor_crop_and_lens_position(
     bad = [*image_files[:3], "--board", "9x6", "--square-mm", "25", "--out", str(tmp_path / "x.json")]
     assert main(["calibrate", *bad, "--sensor-crop", "0,2,3280"]) == 2
     assert "'sensor_crop' must be a list of 4 whole numbers" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------------- one camera or several
+
+
+def test_calibrate_refuses_the_shared_stereo_frames_unless_allowed(
+    shared_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    """Issue 23: the shared folder holds the left and the right camera of a Bumblebee2; all 22
+    views were used for one model without a word. The two are alike (their joint RMS is 0.08 px,
+    as each alone), so their names are what tells them apart."""
+    folder = shared_data / BUMBLEBEE
+    if not folder.is_dir():
+        pytest.skip(f"{folder} is absent")
+    argv = [
+        "calibrate",
+        str(folder),
+        "--board",
+        "4x6",
+        "--square-mm",
+        "30",
+        "--out",
+        str(tmp_path / "b.json"),
+    ]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "do not all seem to come from one camera" in err
+    assert "left (11: left01.jpg, left02.jpg, ...); right (11: right01.jpg, right02.jpg, ...)" in err
+    assert not (tmp_path / "b.json").exists()
+    assert main([*argv, "--allow-mixed", "--json"]) == 0
+    captured = capsys.readouterr()
+    assert "warning: the views may come from more than one camera" in captured.err
+    data = json.loads(captured.out)
+    assert len(data["used"]) == 22 and "left (11" in data["mixed"][0]
+    assert "--allow-mixed" in json.loads((tmp_path / "b.json").read_text())["notes"]
+    left = [str(p) for p in sorted(folder.glob("left*.jpg"))]
+    assert (
+        main(["calibrate", *left, "--board", "4x6", "--square-mm", "30", "--out", str(tmp_path / "l.json")])
+        == 0
+    )
+
+
+@pytest.mark.parametrize(
+    ("name", "camera"),
+    [
+        ("shots/left01.jpg", "left"),
+        ("img_R_03.png", "right"),
+        ("right/0003.png", "right"),
+        ("cam1_03.png", "cam1"),
+        ("camera-0/x.png", "cam0"),
+        ("board_near01.png", None),
+        ("lr03.png", None),
+        ("l_and_r.png", None),
+    ],
+)
+def test_the_camera_a_name_names(name: str, camera: str | None) -> None:
+    from qrfield.calibration import camera_from_name
+
+    assert camera_from_name(name) == camera
+
+
+def _views(camera: CameraModel, count: int, seed: int, prefix: str) -> list:
+    """Board detections at seeded poses through ``camera``, corners with 0.1 px of noise."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for i, pose in enumerate(_board_poses(camera, SYNTH_BOARD, count, seed)):
+        exact = project_points(
+            transform_points(pose.rotation, pose.position_mm, SYNTH_BOARD.centred_points()), camera
+        )
+        out.append(
+            detection_from_corners(
+                exact + rng.normal(0.0, 0.1, exact.shape), camera.size, SYNTH_BOARD, f"{prefix}{i:02d}.png"
+            )
+        )
+    return out
+
+
+def test_views_of_two_sizes_or_two_cameras_are_named(synthetic_views: list) -> None:
+    from qrfield.calibration import mixed_cameras
+
+    plain = CameraModel(fx=600.0, fy=606.0, cx=327.0, cy=231.0, width=640, height=480)
+    one = _views(plain, 14, 3, "view")
+    assert mixed_cameras(one, calibrate(one, SYNTH_BOARD)) == []
+    rendered = [detect_board(v.image, SYNTH_BOARD, f"view {i}") for i, v in enumerate(synthetic_views)]
+    assert mixed_cameras(rendered, calibrate(rendered, SYNTH_BOARD)) == []  # real detections: no false alarm
+    wide = CameraModel.from_focal(700.0, 1280, 720)
+    other = detection_from_corners(one[0].corners_px, wide.size, SYNTH_BOARD, "wide.png")
+    assert mixed_cameras([*one, other]) == ["the images have 2 sizes: 640x480 (14), 1280x720 (1)"]
+    # Four views through a lens of twice the focal length on a camera of the same size: one model
+    # of both spreads the error over every view (RMS 1.2 px, no view 3 times the median), but the
+    # model of the fourteen fits them within 0.14 px and misses the four by 1.4-7 px.
+    tele = CameraModel(fx=1200.0, fy=1200.0, cx=320.0, cy=240.0, width=640, height=480)
+    both = [*one, *_views(tele, 4, 11, "tele")]
+    (problem,) = mixed_cameras(both, calibrate(both, SYNTH_BOARD))
+    assert re.match(
+        r"4 of 18 views do not fit the model of the others \(which fits them within 0\.1\d px", problem
+    )
+    assert "tele00.png, tele01.png, ..." in problem

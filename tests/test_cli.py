@@ -141,7 +141,7 @@ def test_qr_text_too_long_to_encode_is_one_clear_line(tmp_path, command):
 @pytest.mark.parametrize(
     ("option", "value", "named"),
     [
-        ("--side-mm", "-1", "side_mm"),
+        ("--side-mm", "-1", "--side-mm"),
         ("--camera", "nosuch", "nosuch"),
         ("--quit-after", "-1", "--quit-after"),
     ],
@@ -213,3 +213,53 @@ def test_simulate_checks_its_output_folder_before_running_the_study(tmp_path, ca
     assert main(["simulate", "--quiet", "--out", str(blocker / "out")]) == 2
     err = capsys.readouterr().err
     assert "cannot create the folder" in err and len(err.strip().splitlines()) == 1
+
+
+def _one_line_error(argv, capsys, code=2):
+    assert main(argv) == code
+    err = [line for line in capsys.readouterr().err.splitlines() if "error" in line or "cannot" in line]
+    assert len(err) == 1, err
+    return err[0]
+
+
+def test_errors_of_the_prober_are_one_line_with_their_cause(tmp_path, capsys, monkeypatch):
+    """Each was several lines or the wrong cause: seven lines of OpenCV's overloads, numpy's
+    overflow warnings then "faces away", "no such file" for a FIFO, a week-long limit missing."""
+    monkeypatch.chdir(tmp_path)
+    run = ["run", "--camera", "picam-v2@640x480", "--side-mm", "50", "--frames", "1", "--retry-s", "0"]
+    main([*run, "--source", "usb:99999999999999999999"])
+    err = capsys.readouterr().err
+    assert "USB camera index 999999999999... is above the largest, 255" in err
+    assert "Overload" not in err and err.count("usb:9999") == 1
+    os.mkfifo(tmp_path / "pipe")
+    main([*run, "--source", "pipe"])
+    err = capsys.readouterr().err
+    assert "source 'pipe': a FIFO (named pipe), not a regular file" in err and "no such file" not in err
+    line = _one_line_error(
+        ["render", "--side-mm", "30", "--pose", "0,0,1e308,0,0,0", "--out", "x.png"], capsys
+    )
+    assert "--pose: Z: position 1e+308 mm is above the largest accepted" in line
+    line = _one_line_error(["serial-demo", "loop://", "--seconds", "1e308"], capsys)
+    assert "--seconds: duration 1e+308 s is above the largest accepted, 604800 s" in line
+
+
+def test_an_output_name_as_long_as_the_file_system_allows_is_written(tmp_path, capsys):
+    """A 255-byte name failed with the error of the temporary file's longer name."""
+    name = "a" * 251 + ".png"
+    argv = ["render", "--side-mm", "30", "--pose", "0,0,300,0,0,0", "--out", str(tmp_path / name)]
+    assert main(argv) == 0 and (tmp_path / name).is_file()
+    assert sorted(p.name for p in tmp_path.iterdir()) == [name]  # no temporary file left
+    capsys.readouterr()
+    line = _one_line_error([*argv[:-1], str(tmp_path / ("b" + name))], capsys)
+    assert "a name in it is 256 bytes long, more than the 255 the file system allows" in line
+
+
+def test_render_never_overwrites_a_file_without_force(tmp_path, capsys):
+    """Issue 23: render --out replaced an existing file silently."""
+    out = tmp_path / "view.png"
+    out.write_bytes(b"my photo")
+    argv = ["render", "--side-mm", "30", "--pose", "0,0,300,0,0,0", "--out", str(out)]
+    assert main(argv) == 2
+    assert f"--out {out} exists; choose another name, or add --force" in capsys.readouterr().err
+    assert out.read_bytes() == b"my photo"
+    assert main([*argv, "--force"]) == 0 and cv2.imread(str(out)).shape == (480, 640, 3)

@@ -154,3 +154,71 @@ def test_solve_folder_focal_only_each_image_at_its_own_size(tmp_path, capsys):
 def test_focal_only_without_images_still_needs_a_size(capsys):
     assert main(["solve", "--corners", "1,2 3,4 5,6 7,8", "--focal-px", "500", "--side-mm", "50"]) == 2
     assert "--focal-px and --size go together" in capsys.readouterr().err
+
+
+def _png(path: Path, header: bytes, stream: bytes, idat_pieces: int = 1) -> Path:
+    def chunk(kind: bytes, body: bytes) -> bytes:
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
+
+    step = -(-len(stream) // idat_pieces)
+    idats = b"".join(chunk(b"IDAT", stream[i : i + step]) for i in range(0, len(stream), step))
+    path.write_bytes(
+        b"\x89PNG\r\n\x1a\n"
+        + chunk(b"IHDR", header)
+        + chunk(b"tEXt", b"a\x00b")
+        + idats
+        + chunk(b"IEND", b"")
+    )
+    return path
+
+
+def _idat_size(path: Path) -> int:
+    """Bytes the IDAT chunks of a PNG inflate to (the independent truth: zlib on their data)."""
+    data, at, stream = path.read_bytes(), 8, b""
+    while at < len(data):
+        length, kind = struct.unpack(">I4s", data[at : at + 8])
+        if kind == b"IDAT":
+            stream += data[at + 8 : at + 8 + length]
+        at += 12 + length
+    return len(zlib.decompress(stream))
+
+
+@pytest.mark.parametrize(
+    ("shape", "dtype"),
+    [((37, 19), np.uint8), ((37, 19, 3), np.uint8), ((37, 19, 4), np.uint8), ((5, 3), np.uint16)],
+)
+def test_png_data_size_is_what_opencvs_encoder_writes(tmp_path, shape, dtype):
+    from qrfield.images import png_data_size
+
+    path = tmp_path / "x.png"
+    assert cv2.imwrite(str(path), np.arange(np.prod(shape), dtype=dtype).reshape(shape))
+    width, height, depth, colour, _, _, interlace = struct.unpack(">IIBBBBB", path.read_bytes()[16:29])
+    assert png_data_size(width, height, depth, colour, interlace) == _idat_size(path)
+
+
+def test_png_data_size_of_an_interlaced_image_by_hand():
+    from qrfield.images import png_data_size
+
+    # Adam7 on 3x3 grey: passes 1, 4, 5, 6, 7 hold 1, 1, 2, 1+1, 3 pixels in 1, 1, 1, 2, 1 rows:
+    # 9 pixel bytes + 6 filter bytes.
+    assert png_data_size(3, 3, 8, 0, 1) == 15
+    assert png_data_size(3, 3, 8, 0, 0) == 3 * (1 + 3)
+    assert png_data_size(10, 1, 1, 0, 0) == 1 + 2  # 10 one-bit pixels fill two bytes
+
+
+def test_a_png_whose_data_inflates_beyond_its_pixels_is_refused_before_decoding(tmp_path, monkeypatch):
+    """Issue 23: a 50 MP PNG whose stream went on to 900 MB cost 23 s of libpng's CPU (and printed
+    "libpng warning: IDAT: Too much image data"). Its pixels are within the limit; its data is
+    not. Here 100 x 100 grey pixels (10,100 bytes with filter bytes) and 50 MB of zeros more."""
+    width = height = 100
+    compressor = zlib.compressobj(9)
+    stream = compressor.compress(b"\x00" * (height * (width + 1)))
+    stream += b"".join(compressor.compress(b"\x00" * (1 << 20)) for _ in range(50)) + compressor.flush()
+    header = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
+    bomb = _png(tmp_path / "bomb.png", header, stream, idat_pieces=3)
+    assert bomb.stat().st_size < 100_000
+    fine = _png(tmp_path / "fine.png", header, zlib.compress(b"\x00" * (height * (width + 1))), idat_pieces=2)
+    assert read_image(fine, mode="grey").shape == (height, width)
+    monkeypatch.setattr(cv2, "imdecode", lambda *a: pytest.fail("decoded the bomb"))
+    with pytest.raises(ImageError, match=r"inflates to more than the 10100 bytes its 100x100 pixels need"):
+        read_image(bomb)

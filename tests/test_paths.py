@@ -12,10 +12,14 @@ def test_environment_overrides(monkeypatch, tmp_path):
     assert paths.user_calib_dir() == tmp_path / "cfg" / "calib"
     assert paths.simulations_dir() == tmp_path / "data" / "simulations"
     assert paths.config_dir(tmp_path / "other") == tmp_path / "other"  # --config-dir wins
+    monkeypatch.delenv("QRFIELD_SESSIONS_DIR", raising=False)
+    assert paths.sessions_dir() == tmp_path / "data" / "sessions"
+    monkeypatch.setenv("QRFIELD_SESSIONS_DIR", str(tmp_path / "bench"))
+    assert paths.sessions_dir() == tmp_path / "bench"  # the app's and the command line's
 
 
 def test_xdg_then_home(monkeypatch, tmp_path):
-    for name in ("QRFIELD_CONFIG_DIR", "QRFIELD_DATA_DIR"):
+    for name in ("QRFIELD_CONFIG_DIR", "QRFIELD_DATA_DIR", "QRFIELD_SESSIONS_DIR"):
         monkeypatch.delenv(name, raising=False)
     monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "xc"))
     monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "xd"))

@@ -66,11 +66,18 @@ def test_new_then_log_measures_the_bench_with_the_sessions_setup(tmp_path: Path,
     assert (meta["side_mm"], meta["solver"]["method"], meta["frames_per_row"]) == (50.0, "ippe", 4)
     assert meta["criteria"]["max_angle_error_deg"] == 1.5 and meta["camera"]["width"] == 640
     truth = "--truth=10,-5,300,15,-20,10"
-    assert main(log_args(folder, tmp_path, truth, "--combo", "alpha", "--note", "first card")) == 0
+    assert (
+        main(log_args(folder, tmp_path, truth, "--combo", "alpha+beta-gamma+", "--note", "first card")) == 0
+    )
     out = capsys.readouterr()
     assert out.out.startswith("logged row 1: pass")
     (row,) = rows_of(folder)
-    assert (row["row"], row["combo"], row["note"], row["method"]) == ("1", "alpha", "first card", "ippe")
+    assert (row["row"], row["combo"], row["note"], row["method"]) == (
+        "1",
+        "alpha+beta-gamma+",
+        "first card",
+        "ippe",
+    )
     assert (row["n_frames"], row["n_converged"], row["pass"]) == ("4", "4", "1")
     for name, value in BENCH.items():
         assert float(row[f"gt_{name}"]) == value
@@ -82,7 +89,14 @@ def test_new_then_log_measures_the_bench_with_the_sessions_setup(tmp_path: Path,
         main(log_args(folder, tmp_path, "--truth=-10,5,300,0,0,0", "--combo", "beta", "--frames", "2")) == 0
     )
     assert capsys.readouterr().out.startswith("logged row 2: fail")  # the bench is not at that pose
-    assert main(log_args(folder, tmp_path, "--truth", "bench", "--combo", "gamma", "--frames", "3")) == 0
+    assert (
+        main(
+            log_args(
+                folder, tmp_path, "--truth", "bench", "--combo", "gamma", "--frames", "3", "--force-combo"
+            )
+        )
+        == 0
+    )
     assert capsys.readouterr().out.startswith("logged row 3: pass")
     rows = rows_of(folder)
     assert (rows[1]["gt_x"], rows[1]["n_frames"], rows[1]["pass"]) == ("-10.000", "2", "0")
@@ -111,20 +125,28 @@ def test_a_row_is_logged_only_once_it_is_on_disk(tmp_path: Path, capsys, monkeyp
 
     monkeypatch.setattr(FileOps, "fsync", full_disk)
     code = main(
-        log_args(folder, tmp_path, "--truth=10,-5,300,15,-20,10", "--combo", "alpha", "--frames", "2")
+        log_args(
+            folder, tmp_path, "--truth=10,-5,300,15,-20,10", "--combo", "alpha+beta-gamma+", "--frames", "2"
+        )
     )
     out = capsys.readouterr()
     assert code == 1 and "logged row" not in out.out
     assert "NOT logged" in out.err and "disk full" in out.err
+    # Words for a process that is ending, not the app's "kept in memory ... Retry. Do not close the app".
+    assert "Retry" not in out.err and "close the app" not in out.err and "kept in memory" not in out.err
+    assert "nothing of the row was left in rows.csv" in out.err
     assert "unwritten line of rows.csv: 1," in out.err  # the row is not lost: the operator has it
 
 
 def test_undo_list_and_show(tmp_path: Path, capsys) -> None:
     folder = new_session(tmp_path, capsys)
     # `--truth virtual` names the virtual bench's pose; `bench`, its older spelling, still works.
-    for combo, truth in (("alpha", "virtual"), ("beta", "bench")):
-        assert main(log_args(folder, tmp_path, "--truth", truth, "--combo", combo, "--frames", "2")) == 0
-        assert capsys.readouterr().out.startswith(f"logged row {1 if combo == 'alpha' else 2}: pass")
+    for row, (combo, truth) in enumerate((("alpha+beta-gamma+", "virtual"), ("beta", "bench")), start=1):
+        force = ["--force-combo"] if combo == "beta" else []
+        assert (
+            main(log_args(folder, tmp_path, "--truth", truth, "--combo", combo, "--frames", "2", *force)) == 0
+        )
+        assert capsys.readouterr().out.startswith(f"logged row {row}: pass")
     capsys.readouterr()
     assert main(["session", "undo", str(folder)]) == 0
     assert capsys.readouterr().out.startswith("withdrew row 2")
@@ -138,7 +160,7 @@ def test_undo_list_and_show(tmp_path: Path, capsys) -> None:
     assert main(["session", "show", str(folder)]) == 0
     out = capsys.readouterr().out
     assert "solver numerical, 10 frames per row, criteria 2°/5 mm" in out
-    assert "withdrawn" in out.splitlines()[-1] and "   1 alpha" in out
+    assert "withdrawn" in out.splitlines()[-1] and "   1 alpha+beta-gamma+" in out
     assert main(["session", "undo", str(folder)]) == 0 and main(["session", "undo", str(folder)]) == 2
     assert "nothing to undo" in capsys.readouterr().err
 
@@ -147,7 +169,7 @@ def test_interactive_log_asks_each_field_with_the_forms_checks(tmp_path: Path, c
     folder = new_session(tmp_path, capsys)
     # Row 1: z and combo typed wrong once each; then Enter for the next row, Enter x 8 (keep
     # every value) for row 2, and q.
-    first = ["10", "-5", "3o0", "300", "15", "-20", "10", "nope", "alpha", "typed by hand"]
+    first = ["10", "-5", "3o0", "300", "15", "-20", "10", "nope", "alpha+beta-gamma+", "typed by hand"]
     answers = [*first, "", *[""] * 8, "q"]
     env = dict(os.environ, PYTHONPATH=str(REPO))
     done = subprocess.run(
@@ -165,5 +187,89 @@ def test_interactive_log_asks_each_field_with_the_forms_checks(tmp_path: Path, c
     )
     assert done.stdout.count("logged row") == 2  # the second row kept every value (Enter), then q
     rows = rows_of(folder)
-    assert [r["combo"] for r in rows] == ["alpha", "alpha"] and rows[0]["note"] == "typed by hand"
+    assert [r["combo"] for r in rows] == ["alpha+beta-gamma+"] * 2 and rows[0]["note"] == "typed by hand"
     assert [float(rows[1][f"gt_{k}"]) for k in BENCH] == list(BENCH.values())
+
+
+def test_new_and_list_use_the_apps_sessions_folder(tmp_path: Path, capsys, monkeypatch) -> None:
+    """Issue 23: both needed a ROOT folder; the app's folder is $QRFIELD_SESSIONS_DIR, else the one
+    chosen in the app (app.json), else ~/.local/share/qrfield/sessions."""
+    monkeypatch.setenv("QRFIELD_SESSIONS_DIR", str(tmp_path / "shared"))
+    config = ["--config-dir", str(tmp_path / "cfg")]
+    assert main(["session", "new", "--name", "by default", *config]) == 0
+    folder = Path(capsys.readouterr().out.strip())
+    assert folder.parent == tmp_path / "shared"
+    assert main(["session", "list", *config]) == 0
+    out = capsys.readouterr()
+    assert folder.name in out.out and str(tmp_path / "shared") in out.err
+    # A folder chosen in the app (its Session tab saves it in app.json) is used the same way.
+    (tmp_path / "cfg").mkdir(exist_ok=True)
+    (tmp_path / "cfg" / "app.json").write_text(
+        json.dumps({"session_folder": {"root": str(tmp_path / "chosen")}})
+    )
+    assert main(["session", "new", "--name", "chosen", *config]) == 0
+    assert Path(capsys.readouterr().out.strip()).parent == tmp_path / "chosen"
+
+
+def test_export_without_out_writes_beside_rows_csv_and_never_overwrites(tmp_path: Path, capsys) -> None:
+    folder = new_session(tmp_path, capsys)
+    assert (
+        main(
+            log_args(folder, tmp_path, "--truth", "virtual", "--combo", "alpha+beta-gamma+", "--frames", "1")
+        )
+        == 0
+    )
+    capsys.readouterr()
+    assert main(["session", "export", str(folder)]) == 0
+    assert capsys.readouterr().out.strip() == f"exported 1 rows to {folder / 'rows-clean.csv'}"
+    with open(folder / "rows-clean.csv", newline="", encoding="utf-8") as f:
+        (row,) = list(csv.DictReader(f))
+    assert row["combo"] == "alpha+beta-gamma+" and float(row["gt_z_mm"]) == 300.0
+    before = (folder / "rows-clean.csv").read_bytes()
+    assert main(["session", "export", str(folder)]) == 2
+    assert "exists; choose another name, or add --force" in capsys.readouterr().err
+    assert main(["session", "export", str(folder), "--force"]) == 0
+    assert (folder / "rows-clean.csv").read_bytes() == before
+
+
+def test_a_combination_its_angles_contradict_is_refused_unless_forced(tmp_path: Path, capsys) -> None:
+    """Issue 23: `--combo alpha` with beta 30 was logged without a word; the app asks first. The
+    rule and its words are the core's (qrfield.sessions.combo_signs), which the app shows too."""
+    from qrfield.sessions.combo_signs import combination_mismatch, sign_table
+
+    folder = new_session(tmp_path, capsys)
+    argv = log_args(folder, tmp_path, "--truth=10,-5,300,0,30,0", "--combo", "alpha", "--frames", "1")
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    words = combination_mismatch("alpha", (0.0, 30.0, 0.0), sign_table())
+    assert (
+        words
+        == "the angles (0, 30, 0) deg have the signs α0 β+ γ0, but 'alpha' means α+ β0 γ0; they fit 'beta'"
+    )
+    assert f"not logged: {words}" in err and "--force-combo" in err and err.count("\n") == 1
+    assert rows_of(folder) == []
+    assert main([*argv, "--force-combo"]) == 0
+    assert [r["combo"] for r in rows_of(folder)] == ["alpha"]
+    # The bench's own pose (15, -20, 10 deg) is known only once measured: checked before it is logged.
+    assert main(log_args(folder, tmp_path, "--truth", "virtual", "--combo", "gamma", "--frames", "1")) == 2
+    assert "they fit 'alpha+beta-gamma+'" in capsys.readouterr().err and len(rows_of(folder)) == 1
+
+
+def test_interactive_log_never_offers_a_withdrawn_rows_values(tmp_path: Path, capsys) -> None:
+    folder = new_session(tmp_path, capsys)
+    for truth in ("--truth=10,-5,300,15,-20,10", "--truth=20,-5,300,15,-20,10"):
+        assert main(log_args(folder, tmp_path, truth, "--combo", "alpha+beta-gamma+", "--frames", "1")) == 0
+    assert main(["session", "undo", str(folder)]) == 0  # row 2 (x = 20) was wrong
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    done = subprocess.run(
+        [sys.executable, "-m", "qrfield", *log_args(folder, tmp_path, "--frames", "1")],
+        input="\n" * 8 + "q\n",
+        capture_output=True,
+        text=True,
+        timeout=90,
+        env=env,
+    )
+    assert done.returncode == 0, done.stderr
+    assert "x (mm) [10.000]" in done.stdout and "[20.000]" not in done.stdout
+    rows = [r for r in rows_of(folder) if r["row"]]
+    assert [r["gt_x"] for r in rows] == ["10.000", "20.000", "10.000"]

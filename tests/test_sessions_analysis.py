@@ -213,3 +213,16 @@ def test_a_row_with_damaged_ground_truth_is_left_out_of_the_resemblance_not_fata
     assert isinstance(res["per_row"][0]["match"], bool) and res["per_row"][1]["match"] is None
     assert "ground truth is incomplete" in res["per_row"][1]["simulation_reason"]
     assert "1 row(s) without a complete ground truth not compared" in format_report(result)
+
+
+def test_analyze_never_overwrites_its_plots_without_force(session_dir, tmp_path, capsys):
+    out = tmp_path / "plots"
+    out.mkdir()
+    (out / "errors_vs_tilt.png").write_bytes(b"mine")
+    assert main(["analyze", str(session_dir), "--no-simulation", "--out", str(out)]) == 2
+    assert "errors_vs_tilt.png exists; choose another name, or add --force" in capsys.readouterr().err
+    assert (out / "errors_vs_tilt.png").read_bytes() == b"mine" and not (
+        out / "measured_vs_truth.png"
+    ).exists()
+    assert main(["analyze", str(session_dir), "--no-simulation", "--out", str(out), "--force"]) == 0
+    assert (out / "errors_vs_tilt.png").read_bytes().startswith(b"\x89PNG")

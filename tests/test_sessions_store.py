@@ -14,6 +14,8 @@ import tempfile
 from pathlib import Path
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import qrfield
 from qrfield.sessions import (
@@ -320,18 +322,57 @@ def test_pending_rows_are_written_before_the_next_row(tmp_path, camera_vga):
     session.close()
 
 
-def test_a_short_write_is_moved_aside_and_the_row_written_whole(tmp_path, camera_vga):
+def test_a_short_write_is_cut_back_at_once_and_the_row_written_whole(tmp_path, camera_vga):
+    """Issue 23: a failed append leaves no torn line, not even until the next open (it stayed at
+    the end of rows.csv, where another reader saw it)."""
     ops = FaultyOps()
     session = make(tmp_path, camera_vga, file_ops=ops)
+    header = session.rows_path.read_bytes()
     ops.short = True
     assert session.log(a_row(z=301.0)).status == "pending"
+    assert session.rows_path.read_bytes() == header  # half a line was written, and cut off
     ops.short = False
     assert session.retry().ok
-    assert any("unfinished line" in w for w in session.warnings)
     assert [line[0] for line in csv_rows(session.rows_path)[1:]] == ["1"]
-    assert len(list(session.path.glob("rows.csv.partial-*"))) == 1
+    assert not list(session.path.glob("rows.csv.partial-*"))  # nothing torn to move aside
     session.close()
     assert not Session.open(session.path).warnings
+
+
+def test_a_write_failing_midway_leaves_no_torn_line(tmp_path, camera_vga):
+    """A full disk after part of the line (write returns what fit, then ENOSPC)."""
+
+    class HalfThenFull(FileOps):
+        fail = False
+
+        def write(self, fd, data):
+            if self.fail:
+                super().write(fd, data[:7])
+                raise OSError(errno.ENOSPC, "No space left on device")
+            return super().write(fd, data)
+
+    ops = HalfThenFull()
+    session = make(tmp_path, camera_vga, file_ops=ops)
+    assert session.log(a_row(z=301.0)).ok
+    good = session.rows_path.read_bytes()
+    ops.fail = True
+    outcome = session.log(a_row(z=302.0))
+    assert outcome.status == "pending" and "disk full" in outcome.reason
+    assert session.rows_path.read_bytes() == good and good.endswith(b"\n")
+    session.close()
+
+
+def test_a_symlink_planted_at_rows_csv_is_refused(tmp_path, camera_vga):
+    """Issue 23: session log followed it and appended outside the session folder."""
+    session = make(tmp_path, camera_vga)
+    session.close()
+    outside = tmp_path / "outside.csv"
+    outside.write_bytes(session.rows_path.read_bytes())
+    session.rows_path.unlink()
+    session.rows_path.symlink_to(outside)
+    with pytest.raises(SessionError, match=r"rows\.csv is a symbolic link"):
+        Session.open(session.path)
+    assert outside.read_bytes().count(b"\n") == 1  # the header only: nothing appended
 
 
 def test_lost_permission_when_opening_keeps_rows_pending(tmp_path, camera_vga):
@@ -441,3 +482,77 @@ def test_solver_settings_are_checked(tmp_path, camera_vga):
         Session.create(
             tmp_path, "x", camera=camera_vga, side_mm=60, solver="numerical", solver_settings={"n_max": 0}
         )
+
+
+# ------------------------------------------------------------------------------ streamed reading
+@settings(max_examples=60, deadline=None, derandomize=True, database=None)
+@given(
+    st.lists(st.text(st.characters(exclude_characters='"\r\n\x00', exclude_categories=("Cs",))), min_size=1)
+)
+def test_the_fast_split_of_a_line_is_what_the_csv_module_reads(fields):
+    from qrfield.sessions.store import _fields
+
+    line = ",".join(fields)
+    if line:
+        assert _fields(line) == next(csv.reader([line]))
+
+
+def _log_lines(session, count):
+    """``count`` rows appended as qrfield writes them (the line of a real logged row, renumbered)."""
+    assert session.log(a_row(note="a note, with a comma")).ok  # quoted: the csv module's path
+    assert session.log(a_row()).ok
+    lines = session.rows_path.read_bytes().splitlines(keepends=True)
+    template = lines[-1].decode()
+    with open(session.rows_path, "ab") as handle:
+        for number in range(3, count + 1):
+            handle.write(template.replace("2,", f"{number},", 1).encode())
+
+
+def test_rows_read_one_by_one_are_what_csv_reads_from_the_file(tmp_path, camera_vga):
+    """Truth: csv.DictReader over the whole file. The scan keeps where each row is; a row read by
+    index, by number, in order or in reverse must be that line's values."""
+    session = make(tmp_path, camera_vga)
+    _log_lines(session, 40)
+    session.close()
+    with open(session.rows_path, "ab") as handle:
+        handle.write(b"not,a,row\n")  # a damaged line between rows: skipped, with a warning
+    reopened = Session.open(session.path)
+    assert reopened.withdraw(7).ok and reopened.log(a_row(z=400.0)).ok
+    with open(session.rows_path, newline="", encoding="utf-8") as f:
+        truth = [r for r in csv.DictReader(f) if r["row"].strip().isdigit()]
+    rows = reopened.rows
+    assert len(rows) == len(truth) == 41 and reopened.next_row == 42
+    assert any("row 'not' is not a number; ignored" in w for w in reopened.warnings)
+    for row, expected in zip(rows, truth, strict=True):
+        assert row.values == {k: v for k, v in expected.items() if k in row.values}
+        assert row.withdrawn == (row.number == 7)
+    assert [r.number for r in reversed(rows)] == [int(t["row"]) for t in reversed(truth)]
+    assert rows[6] == rows.by_number(7) and rows[6].withdrawn and rows[-1].values["z"] == "400.000"
+    assert rows[2:4] == [rows[2], rows[3]] and rows.by_number(99) is None
+    assert reopened.undo().row == 41  # the last row in force: the one logged now
+    reopened.close()
+    _, content = read_session(session.path)
+    assert sum(r.withdrawn for r in content.rows) == 2 and content.rows == list(content.rows)
+
+
+def test_reading_a_large_session_holds_a_few_bytes_a_row_not_the_file(tmp_path, camera_vga):
+    """Issue 23: a 50 MB rows.csv made every session command peak at 858 MB (17 times the file):
+    each row was a dict of 39 texts. Now a row is a line's offset and its number."""
+    import tracemalloc
+
+    session = make(tmp_path, camera_vga)
+    _log_lines(session, 40_000)  # 8 MB of rows.csv
+    session.close()
+    size = session.rows_path.stat().st_size
+    tracemalloc.start()
+    try:
+        _, content = read_session(session.path)
+        active = sum(1 for row in content.rows if not row.withdrawn)
+        with Session.open(session.path) as again:
+            last = again.rows[-1].number
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert active == 40_000 and last == 40_000
+    # Measured: 2.7 MB (1 MiB read chunks and 8 bytes a row); a dict a row was some 140 MB.
+    assert peak < 4e6, f"peak {peak / 1e6:.1f} MB for a {size / 1e6:.1f} MB file"

@@ -113,16 +113,18 @@ SMALL_STUDY = [
 ]
 
 
-def test_without_out_the_run_goes_to_a_new_folder_in_the_data_folder(tmp_path, monkeypatch, capsys):
+def test_without_out_the_run_goes_to_a_new_folder_in_the_current_folder(tmp_path, monkeypatch, capsys):
+    """Issue 23: a command writes in the current folder or the folder named, never elsewhere
+    (it wrote under ~/.local/share/qrfield/simulations)."""
     data, work = tmp_path / "data", tmp_path / "work"
     work.mkdir()
     monkeypatch.setenv("QRFIELD_DATA_DIR", str(data))
     monkeypatch.chdir(work)
     assert main(["simulate", "--quiet", "--no-heatmaps", *SMALL_STUDY]) == 0
     assert main(["simulate", "--quiet", "--no-heatmaps", *SMALL_STUDY]) == 0  # the same second, maybe
-    runs = sorted((data / "simulations").iterdir())
-    assert len(runs) == 2 and all(re.fullmatch(r"\d{8}-\d{6}(-\d+)?", r.name) for r in runs)
-    assert list(work.iterdir()) == []  # nothing in the current folder
+    runs = sorted(work.iterdir())
+    assert len(runs) == 2 and all(re.fullmatch(r"simulation-\d{8}-\d{6}(-\d+)?", r.name) for r in runs)
+    assert not data.exists()  # nothing outside the current folder
     err = capsys.readouterr().err
     assert str(runs[0].resolve()) in err and str(runs[1].resolve()) in err
     # Samples are stored compactly by default: npz (poses as float32), no CSV.

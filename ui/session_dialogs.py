@@ -10,41 +10,21 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from PySide6 import QtCore, QtWidgets
 
-from qrfield import paths
 from qrfield.methods import METHODS
 from qrfield.sessions import AcceptanceCriteria, SessionSettings, session_folders
-from qrfield.settings import setting
+from qrfield.sessions.folders import ENV_ROOT as ENV_ROOT  # the core's rule, named here for the panel
+from qrfield.sessions.folders import SessionFolderSettings, sessions_root
 from ui.groundtruth_form import WrappedLabel
 from ui.settings_form import SettingsForm
 from ui.text import short_path
 
-ENV_ROOT = "QRFIELD_SESSIONS_DIR"
 #: Height of the buttons of a session's actions (px): a finger on a touch screen.
 TOUCH_PX = 40
-
-
-@dataclass(frozen=True)
-class SessionFolderSettings:
-    """Where the app makes new sessions."""
-
-    root: str = setting(
-        "",
-        label="sessions folder",
-        help=f"new sessions are made in this folder (empty = ${ENV_ROOT}, else the data folder's sessions/)",
-    )
-
-
-def sessions_root(settings: SessionFolderSettings) -> Path:
-    """The folder of new sessions: the setting, else $QRFIELD_SESSIONS_DIR, else
-    :func:`qrfield.paths.sessions_dir` (``~/.local/share/qrfield/sessions``)."""
-    text = settings.root.strip() or os.environ.get(ENV_ROOT, "").strip()
-    return Path(text).expanduser() if text else paths.sessions_dir()
 
 
 def touch_button(text: str, name: str = "") -> QtWidgets.QPushButton:

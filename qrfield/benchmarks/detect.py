@@ -40,28 +40,48 @@ HELP = (
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from qrfield.arguments import count, limited, seed
+    from qrfield.limits import MAX_BENCHMARK_COUNT, SIDE_MM
+
     parser.add_argument(
-        "--views", type=int, default=200, help="rendered views for accuracy and rate (default 200)"
+        "--views",
+        type=count("--views", 0, MAX_BENCHMARK_COUNT),
+        default=200,
+        help="rendered views for accuracy and rate (default 200)",
     )
     parser.add_argument(
-        "--frames", type=int, default=60, help="frames of the moving sequence per resolution (default 60)"
+        "--frames",
+        type=count("--frames", 0, MAX_BENCHMARK_COUNT),
+        default=60,
+        help="frames of the moving sequence per resolution (default 60)",
     )
     parser.add_argument(
-        "--side-mm", type=float, default=100.0, help="QR side of the rendered code, mm (default 100)"
+        "--side-mm",
+        type=limited(SIDE_MM, "--side-mm"),
+        default=100.0,
+        help="QR side of the rendered code, mm (default 100)",
     )
-    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--seed", type=seed("--seed"), default=1)
     parser.add_argument(
-        "--hard-views", type=int, default=400, help="views of the hard set (default 400; 0 skips it)"
+        "--hard-views",
+        type=count("--hard-views", 0, MAX_BENCHMARK_COUNT),
+        default=400,
+        help="views of the hard set (default 400; 0 skips it)",
     )
-    parser.add_argument("--hard-seed", type=int, default=2024, help="seed of the hard set (default 2024)")
+    parser.add_argument(
+        "--hard-seed", type=seed("--hard-seed"), default=2024, help="seed of the hard set (default 2024)"
+    )
     parser.add_argument(
         "--hard-sequences",
-        type=int,
+        type=count("--hard-sequences", 0, MAX_BENCHMARK_COUNT),
         default=4,
         help="tracked moving sequences of 60 frames drawn like the hard set (default 4: two a lens; 0 skips)",
     )
     parser.add_argument(
-        "--repeats", type=int, default=REPEATS, help=f"timing rounds per resolution (default {REPEATS})"
+        "--repeats",
+        type=count("--repeats", 0, MAX_BENCHMARK_COUNT),
+        default=REPEATS,
+        help=f"timing rounds per resolution (default {REPEATS})",
     )
     parser.add_argument("--data", type=Path, default=None, help="shared data folder (default ../shared/data)")
 

@@ -30,22 +30,37 @@ HELP = "hand-eye calibration: accuracy against the known transform and honesty o
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--sets", type=int, default=5, help="cells per set-up (default 5)")
-    parser.add_argument("--views", type=int, default=15, help="robot poses per cell (default 15)")
-    parser.add_argument("--seed", type=int, default=28, help="seed of the first cell (default 28)")
+    from qrfield.arguments import count, limited, number, seed
+    from qrfield.limits import MAX_BENCHMARK_COUNT, SIDE_MM
+
+    parser.add_argument(
+        "--sets", type=count("--sets", 1, MAX_BENCHMARK_COUNT), default=5, help="cells per set-up (default 5)"
+    )
+    parser.add_argument(
+        "--views",
+        type=count("--views", 1, MAX_BENCHMARK_COUNT),
+        default=15,
+        help="robot poses per cell (default 15)",
+    )
+    parser.add_argument("--seed", type=seed("--seed"), default=28, help="seed of the first cell (default 28)")
     parser.add_argument(
         "--camera", default="picam-v2@640x480", help="camera profile (default picam-v2@640x480)"
     )
-    parser.add_argument("--side-mm", type=float, default=50.0, help="QR side, mm (default 50)")
+    parser.add_argument(
+        "--side-mm", type=limited(SIDE_MM, "--side-mm"), default=50.0, help="QR side, mm (default 50)"
+    )
     parser.add_argument("--method", default="numerical", help="pose method (default numerical)")
     parser.add_argument(
         "--tool-std-mm",
-        type=float,
+        type=number("--tool-std-mm", 0.0, 100.0, "mm"),
         default=0.0,
         help="noise on the robot's reported positions, mm (default 0)",
     )
     parser.add_argument(
-        "--tool-std-deg", type=float, default=0.0, help="noise on its reported orientations, deg (default 0)"
+        "--tool-std-deg",
+        type=number("--tool-std-deg", 0.0, 10.0, "deg"),
+        default=0.0,
+        help="noise on its reported orientations, deg (default 0)",
     )
 
 

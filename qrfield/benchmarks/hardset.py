@@ -13,8 +13,16 @@ HELP = (
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("--views", type=int, default=200, help="views to describe (default 200)")
-    parser.add_argument("--seed", type=int, default=2024)
+    from qrfield.arguments import count, seed
+    from qrfield.limits import MAX_BENCHMARK_COUNT
+
+    parser.add_argument(
+        "--views",
+        type=count("--views", 0, MAX_BENCHMARK_COUNT),
+        default=200,
+        help="views to describe (default 200)",
+    )
+    parser.add_argument("--seed", type=seed("--seed"), default=2024)
 
 
 def run(args) -> int:

@@ -10,14 +10,33 @@ run: the refusal should cost no more than an ordinary solve.
 from __future__ import annotations
 
 import argparse
+from dataclasses import dataclass
 
 HELP = "time and peak memory of refusing a 32000x24000 PNG before decoding (target < 2 s, < 300 MB)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--width", type=int, default=32000, help="width of the large PNG (default 32000)")
-    parser.add_argument("--height", type=int, default=24000, help="height of the large PNG (default 24000)")
-    parser.add_argument("--repeat", type=int, default=3, help="runs of each command; the best is shown")
+    from qrfield.arguments import count, whole_number
+    from qrfield.limits import MAX_BENCHMARK_COUNT
+
+    parser.add_argument(
+        "--width",
+        type=whole_number("--width", 8, 65535),
+        default=32000,
+        help="width of the large PNG (default 32000)",
+    )
+    parser.add_argument(
+        "--height",
+        type=whole_number("--height", 8, 65535),
+        default=24000,
+        help="height of the large PNG (default 24000)",
+    )
+    parser.add_argument(
+        "--repeat",
+        type=count("--repeat", 0, MAX_BENCHMARK_COUNT),
+        default=3,
+        help="runs of each command; the best is shown",
+    )
 
 
 def write_black_png(path: str, width: int, height: int) -> None:
@@ -38,23 +57,43 @@ def write_black_png(path: str, width: int, height: int) -> None:
         )
 
 
-def _measure(argv: list[str]) -> tuple[float, float, int, str]:
-    """(wall seconds, peak RSS MB, exit code, last line of stdout) of one child process; the peak is
-    that child's own ru_maxrss, from os.wait4 (as /usr/bin/time -v reports it)."""
+@dataclass(frozen=True)
+class ChildRun:
+    """One command run in a fresh process: wall and CPU seconds, peak resident memory (MB, that
+    process's own ``ru_maxrss`` from ``os.wait4``, as ``/usr/bin/time -v`` reports it), exit code
+    and the last line of its stdout."""
+
+    seconds: float
+    peak_mb: float
+    cpu_s: float
+    code: int
+    last: str
+
+
+def measure_child(argv: list[str], cwd: str | None = None) -> ChildRun:
+    """Run ``argv`` in a child process (stdout read, stderr dropped) and measure it."""
     import os
     import subprocess
     import time
 
     t0 = time.perf_counter()
-    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, cwd=cwd)
     assert proc.stdout is not None
-    out = proc.stdout.read()
+    last = b""
+    for line in proc.stdout:  # kept line by line: `session show` of a large session prints a lot
+        if line.strip():
+            last = line
     proc.stdout.close()
     _, status, usage = os.wait4(proc.pid, 0)
     proc.returncode = os.waitstatus_to_exitcode(status)
     seconds = time.perf_counter() - t0
-    lines = out.decode("utf-8", "replace").strip().splitlines()
-    return seconds, usage.ru_maxrss / 1024.0, proc.returncode, lines[-1] if lines else ""
+    return ChildRun(
+        seconds,
+        usage.ru_maxrss / 1024.0,
+        usage.ru_utime + usage.ru_stime,
+        proc.returncode,
+        last.decode("utf-8", "replace").strip(),
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -83,10 +122,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"{'image':<28}{'wall s':>9}{'peak MB':>10}{'exit':>6}  result")
         rows = {}
         for label, path in ((f"{args.width}x{args.height} (refused)", big), ("640x480 (baseline)", small)):
-            runs = [_measure([*base, path]) for _ in range(max(1, args.repeat))]
-            seconds = min(r[0] for r in runs)
-            peak = min(r[1] for r in runs)
-            code, last = runs[-1][2], runs[-1][3]
+            runs = [measure_child([*base, path]) for _ in range(max(1, args.repeat))]
+            seconds = min(r.seconds for r in runs)
+            peak = min(r.peak_mb for r in runs)
+            code, last = runs[-1].code, runs[-1].last
             rows[label] = (seconds, peak)
             status = last[:60].replace("\n", " ")
             print(f"{label:<28}{seconds:>9.2f}{peak:>10.0f}{code:>6}  {status}")

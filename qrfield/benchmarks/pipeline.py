@@ -23,7 +23,11 @@ CAMERAS = ("picam-v2@640x480", "webcam-60@1280x720")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--seconds", type=float, default=3.0, help="measuring time per figure (default 3)")
+    from qrfield.arguments import seconds
+
+    parser.add_argument(
+        "--seconds", type=seconds("--seconds"), default=3.0, help="measuring time per figure (default 3)"
+    )
     parser.add_argument("--method", choices=METHOD_CHOICES, default=BOTH)
     parser.add_argument("--no-gui", action="store_true", help="skip the GUI figures")
 

@@ -45,10 +45,22 @@ COMPONENTS = ("x", "y", "z", "alpha", "beta", "gamma")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from qrfield.arguments import count, seed
+    from qrfield.limits import MAX_BENCHMARK_COUNT
     from qrfield.testing.pose_views import VIEW_SETS
 
-    parser.add_argument("--poses", type=int, default=3000, help="corner-level views for 1-2 (default 3000)")
-    parser.add_argument("--views", type=int, default=400, help="pictures for 3 (default 400)")
+    parser.add_argument(
+        "--poses",
+        type=count("--poses", 0, MAX_BENCHMARK_COUNT),
+        default=3000,
+        help="corner-level views for 1-2 (default 3000)",
+    )
+    parser.add_argument(
+        "--views",
+        type=count("--views", 0, MAX_BENCHMARK_COUNT),
+        default=400,
+        help="pictures for 3 (default 400)",
+    )
     parser.add_argument(
         "--view-set",
         choices=sorted(VIEW_SETS),
@@ -57,12 +69,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--view-seed",
-        type=int,
+        type=seed("--view-seed"),
         default=2024,
         help="seed of the picture set (default 2024, as benchmark detect)",
     )
-    parser.add_argument("--cost-views", type=int, default=400, help="views timed for 5 (default 400)")
-    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument(
+        "--cost-views",
+        type=count("--cost-views", 0, MAX_BENCHMARK_COUNT),
+        default=400,
+        help="views timed for 5 (default 400)",
+    )
+    parser.add_argument("--seed", type=seed("--seed"), default=1)
     parser.add_argument("--data", type=Path, default=None, help="shared data folder (default ../shared/data)")
 
 

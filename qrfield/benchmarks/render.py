@@ -13,8 +13,16 @@ HELP = "time the virtual bench renderer at 640x480 and 1280x720"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--views", type=int, default=200, help="views per resolution (default 200)")
-    parser.add_argument("--seed", type=int, default=1)
+    from qrfield.arguments import count, seed
+    from qrfield.limits import MAX_BENCHMARK_COUNT
+
+    parser.add_argument(
+        "--views",
+        type=count("--views", 0, MAX_BENCHMARK_COUNT),
+        default=200,
+        help="views per resolution (default 200)",
+    )
+    parser.add_argument("--seed", type=seed("--seed"), default=1)
 
 
 def run(args: argparse.Namespace) -> int:

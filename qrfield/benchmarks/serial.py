@@ -29,19 +29,40 @@ HELP = "serial line format cost, link throughput, and pose lag and PING answers 
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--frames", type=int, default=20000, help="lines encoded (default 20000)")
-    parser.add_argument("--seconds", type=float, default=1.0, help="seconds per throughput run (default 1)")
+    from qrfield.arguments import count, rate, seconds, seed
+    from qrfield.limits import MAX_BENCHMARK_COUNT
+
     parser.add_argument(
-        "--latency-frames", type=int, default=300, help="lines timed for latency (default 300)"
+        "--frames",
+        type=count("--frames", 0, MAX_BENCHMARK_COUNT),
+        default=20000,
+        help="lines encoded (default 20000)",
     )
-    parser.add_argument("--relay-seconds", type=float, default=30.0, help="seconds per UART run (default 30)")
     parser.add_argument(
-        "--baseline-seconds", type=float, default=10.0, help="seconds of the baseline (default 10)"
+        "--seconds", type=seconds("--seconds"), default=1.0, help="seconds per throughput run (default 1)"
     )
     parser.add_argument(
-        "--relay-fps", type=float, default=60.0, help="poses published per second (default 60)"
+        "--latency-frames",
+        type=count("--latency-frames", 0, MAX_BENCHMARK_COUNT),
+        default=300,
+        help="lines timed for latency (default 300)",
     )
-    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument(
+        "--relay-seconds",
+        type=seconds("--relay-seconds"),
+        default=30.0,
+        help="seconds per UART run (default 30)",
+    )
+    parser.add_argument(
+        "--baseline-seconds",
+        type=seconds("--baseline-seconds"),
+        default=10.0,
+        help="seconds of the baseline (default 10)",
+    )
+    parser.add_argument(
+        "--relay-fps", type=rate("--relay-fps"), default=60.0, help="poses published per second (default 60)"
+    )
+    parser.add_argument("--seed", type=seed("--seed"), default=1)
 
 
 class _PtyReader:

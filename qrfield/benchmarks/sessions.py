@@ -14,8 +14,18 @@ HELP = "time logging one session row (with fsync) against a raw write + fsync"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--rows", type=int, default=200, help="rows to log (default 200)")
-    parser.add_argument("--frames", type=int, default=10, help="frames averaged per row (default 10)")
+    from qrfield.arguments import count
+    from qrfield.limits import MAX_BENCHMARK_COUNT
+
+    parser.add_argument(
+        "--rows", type=count("--rows", 0, MAX_BENCHMARK_COUNT), default=200, help="rows to log (default 200)"
+    )
+    parser.add_argument(
+        "--frames",
+        type=count("--frames", 0, MAX_BENCHMARK_COUNT),
+        default=10,
+        help="frames averaged per row (default 10)",
+    )
     parser.add_argument("--dir", default=None, help="folder to log in (default: a temporary folder)")
 
 

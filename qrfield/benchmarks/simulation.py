@@ -33,13 +33,25 @@ OLD_CHUNK_POSES = 2048
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from qrfield.arguments import count, number, seed
     from qrfield.commands.simulate import add_override_argument
+    from qrfield.limits import MAX_BENCHMARK_COUNT
 
     add_override_argument(parser, "override a field of the default study (e.g. degradation=round)")
     parser.add_argument("--no-old", action="store_true", help="skip the old path (it takes 30-70 s)")
-    parser.add_argument("--poses", type=int, default=3000, help="seeded poses for the IPPE comparison")
-    parser.add_argument("--noise-px", type=float, default=0.5, help="corner noise of the IPPE comparison")
-    parser.add_argument("--seed", type=int, default=7)
+    parser.add_argument(
+        "--poses",
+        type=count("--poses", 0, MAX_BENCHMARK_COUNT),
+        default=3000,
+        help="seeded poses for the IPPE comparison",
+    )
+    parser.add_argument(
+        "--noise-px",
+        type=number("--noise-px", 0.0, 100.0, "px"),
+        default=0.5,
+        help="corner noise of the IPPE comparison",
+    )
+    parser.add_argument("--seed", type=seed("--seed"), default=7)
 
 
 def old_solve(spec: Any, corners: Any, camera: Any, side_mm: float) -> Any:

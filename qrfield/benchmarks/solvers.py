@@ -20,13 +20,26 @@ HELP = "time the numerical and IPPE solvers (single and batch) against a raw cv2
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from qrfield.arguments import count, limited, seed
+    from qrfield.limits import MAX_BENCHMARK_COUNT, SIDE_MM
+
     parser.add_argument(
-        "--poses", type=int, default=2000, help="seeded poses for single solves (default 2000)"
+        "--poses",
+        type=count("--poses", 0, MAX_BENCHMARK_COUNT),
+        default=2000,
+        help="seeded poses for single solves (default 2000)",
     )
-    parser.add_argument("--batch", type=int, default=100_000, help="poses in the batch (default 100000)")
-    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument(
+        "--batch",
+        type=count("--batch", 0, MAX_BENCHMARK_COUNT),
+        default=100_000,
+        help="poses in the batch (default 100000)",
+    )
+    parser.add_argument("--seed", type=seed("--seed"), default=1)
     parser.add_argument("--camera", default=DEFAULT_CAMERA, help=f"camera profile (default {DEFAULT_CAMERA})")
-    parser.add_argument("--side-mm", type=float, default=50.0, help="QR side, mm (default 50)")
+    parser.add_argument(
+        "--side-mm", type=limited(SIDE_MM, "--side-mm"), default=50.0, help="QR side, mm (default 50)"
+    )
 
 
 def _per_call_us(fn, items) -> float:  # type: ignore[no-untyped-def]

@@ -60,14 +60,29 @@ COMPONENTS = ("x", "y", "z", "alpha", "beta", "gamma")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from qrfield.arguments import count
+    from qrfield.limits import MAX_BENCHMARK_COUNT as MAX
+
     parser.add_argument("--seeds", default="11,12,13", help="sequence seeds (default 11,12,13; tuned on 1,2)")
-    parser.add_argument("--frames", type=int, default=150, help="frames per sequence (default 150, 5 s)")
+    parser.add_argument(
+        "--frames", type=count("--frames", 1, MAX), default=150, help="frames per sequence (default 150, 5 s)"
+    )
     parser.add_argument("--only", default="", help="comma list of sequence names to run (default all)")
     parser.add_argument(
         "--still-seeds", default="111", help="seeds of section 2 (default 111; measured on 101,102)"
     )
-    parser.add_argument("--still-views", type=int, default=40, help="still cards per seed in section 2")
-    parser.add_argument("--still-frames", type=int, default=30, help="frames per still card in section 2")
+    parser.add_argument(
+        "--still-views",
+        type=count("--still-views", 1, MAX),
+        default=40,
+        help="still cards per seed in section 2",
+    )
+    parser.add_argument(
+        "--still-frames",
+        type=count("--still-frames", 1, MAX),
+        default=30,
+        help="frames per still card in section 2",
+    )
     parser.add_argument("--sections", default="1,2", help="sections to run (default 1,2)")
 
 

@@ -55,7 +55,8 @@ def solve_images(
     for path in expand_image_paths(args.images):
         cam, status = None, ""
         try:
-            image = read_image(path, image_settings)
+            # A grey file stays grey (a third of the memory; the detector's grey of it is the same).
+            image = read_image(path, image_settings, mode="any")
         except ImageError as exc:
             image, status = None, str(exc).removeprefix(f"{path}: ")
         if image is not None:

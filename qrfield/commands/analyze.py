@@ -30,14 +30,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--out", metavar="DIR", help="write errors_vs_tilt.png and measured_vs_truth.png into DIR"
     )
+    parser.add_argument("--force", action="store_true", help="overwrite the plots in --out if they exist")
     parser.add_argument(
         "--no-simulation", action="store_true", help="skip the comparison with the simulation"
     )
 
 
 def run(args: argparse.Namespace) -> int:
-    from qrfield.sessions.analysis import analyze, format_report
+    from pathlib import Path
 
+    from qrfield.arguments import refuse_existing
+    from qrfield.sessions.analysis import analyze, format_report
+    from qrfield.sessions.plots import PLOT_FILES
+
+    if args.out:
+        for name in PLOT_FILES:
+            refuse_existing(Path(args.out) / name, args.force, "--out:")
     result = analyze(args.session, out_dir=args.out, compare=not args.no_simulation)
     if args.json:
         json.dump(result, sys.stdout, indent=2)

@@ -7,7 +7,8 @@
      "width", "height": px, "per_image": [{"image", "rms_px", "max_px"}, ...],
      "std_px": {"fx", "fy", "cx", "cy"}, "board": "COLSxROWS", "square_mm": mm,
      "coverage": [[views per cell], ...] (3 rows x 3 columns of the image),
-     "advice": [hint, ...], "out": path written}
+     "advice": [hint, ...], "mixed": [why the views may be of two cameras (with --allow-mixed)],
+     "out": path written}
 """
 
 from __future__ import annotations
@@ -60,6 +61,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "or calib/NAME.json (its folder must exist)",
     )
     parser.add_argument("--force", action="store_true", help="overwrite --out if it exists")
+    parser.add_argument(
+        "--allow-mixed",
+        action="store_true",
+        help="calibrate even when the views seem to come from more than one camera (sizes, left/right "
+        "or cam0/cam1 names, a cluster of views the model fits far worse): refused otherwise, since one "
+        "model of two cameras fits neither",
+    )
     parser.add_argument("--fix-k3", action="store_true", help="keep k3 = 0 (few views, or a mild lens)")
     parser.add_argument(
         "--sensor-crop",
@@ -119,10 +127,18 @@ def _sensor_geometry(args: argparse.Namespace) -> dict[str, Any]:
     return sensor_fields(changes, "calibrate")
 
 
+def _mixed_refusal(problems: list[str]) -> str:
+    return (
+        f"the views do not all seem to come from one camera: {'; '.join(problems)}; one model of two "
+        "cameras fits neither: calibrate each camera on its own (e.g. 'left*.jpg'), or add "
+        "--allow-mixed to use them together"
+    )
+
+
 def run(args: argparse.Namespace) -> int:
     import dataclasses
 
-    from qrfield.calibration import calibrate_images
+    from qrfield.calibration import CalibrationError, calibrate, detect_images, mixed_cameras
     from qrfield.camera import distortion_note, user_profile_dirs
     from qrfield.chessboard import Board
     from qrfield.files import check_target, make_folder
@@ -140,14 +156,29 @@ def run(args: argparse.Namespace) -> int:
         make_folder(out.parent, "profile folder")  # qrfield's own folder: made when needed
     check_target(out, "--out")  # before hours of work: the folder must exist
     images = expand_images(args.images)
-    result = calibrate_images(images, board, fix_k3=args.fix_k3, name=out.stem)
+    detections = detect_images(images, board)
+    mixed = mixed_cameras(detections)  # before the calibration: sizes and names are known now
+    if mixed and not args.allow_mixed:
+        raise CalibrationError(_mixed_refusal(mixed))
+    result = calibrate(detections, board, fix_k3=args.fix_k3, name=out.stem)
+    cluster = [p for p in mixed_cameras([], result) if p not in mixed]
+    if cluster and not args.allow_mixed:
+        raise CalibrationError(_mixed_refusal(cluster))
+    for problem in [*mixed, *cluster]:  # allowed: said, and kept in the profile's notes
+        print(
+            f"qrfield calibrate: warning: the views may come from more than one camera: {problem}",
+            file=sys.stderr,
+        )
+    if mixed or cluster:
+        notes = f"{result.camera.notes}; --allow-mixed: {'; '.join([*mixed, *cluster])}"
+        result = dataclasses.replace(result, camera=dataclasses.replace(result.camera, notes=notes))
     if geometry:
         result = dataclasses.replace(result, camera=dataclasses.replace(result.camera, **geometry))
     result.camera.save(out, overwrite=args.force)
     note = distortion_note(result.camera)
 
     if args.json:
-        data = result.to_json()
+        data = {**result.to_json(), "mixed": [*mixed, *cluster]}
         if note:
             data["advice"] = [*data.get("advice", []), note]
         json.dump({**data, "out": str(out)}, sys.stdout)

@@ -22,6 +22,7 @@ DESCRIPTION = (
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from qrfield.arguments import count
     from qrfield.camera import add_camera_arguments
     from qrfield.settings import add_arguments as add_setting_arguments
     from qrfield.sources import Picamera2Settings, UsbCameraSettings
@@ -41,7 +42,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="picamera2 (default), picamera2-sim[:imx219|imx708|imx477] (SIMULATED) or usb:N",
     )
     add_camera_arguments(check, default=None)
-    check.add_argument("--frames", type=int, default=3, metavar="N", help="frames to read (default 3)")
+    check.add_argument(
+        "--frames", type=count("--frames", 1), default=3, metavar="N", help="frames to read (default 3)"
+    )
     group = check.add_argument_group("Raspberry Pi camera (as qrfield run's --picamera-* options)")
     add_setting_arguments(group, Picamera2Settings, prefix="picamera_")
     group = check.add_argument_group("USB camera (as qrfield run's --usb-* options)")

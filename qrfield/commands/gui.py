@@ -14,6 +14,7 @@ HELP = "open the bench app window (the default when no subcommand is given)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from qrfield.arguments import add_side_argument, seconds
     from qrfield.methods import METHOD_CHOICES
     from qrfield.runconfig import add_config_dir_argument
     from qrfield.sources import SOURCE_HELP
@@ -24,12 +25,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--camera", default=None, metavar="CAM", help="camera profile NAME[@WxH] or PATH.json"
     )
-    parser.add_argument("--side-mm", type=float, default=None, metavar="L", help="QR symbol side, mm")
+    add_side_argument(parser, configured="the last one used")
     parser.add_argument("--method", choices=METHOD_CHOICES, default=None, help="pose method(s)")
     add_config_dir_argument(parser)
     parser.add_argument(
         "--quit-after",
-        type=float,
+        type=seconds("--quit-after"),
         default=None,
         metavar="SECONDS",
         help="close the window after SECONDS (smoke tests)",
@@ -40,6 +41,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="FILE",
         help="with --quit-after: save the window as an image first",
     )
+    parser.add_argument("--force", action="store_true", help="overwrite --screenshot if it exists")
 
 
 def display_available() -> bool:
@@ -168,6 +170,11 @@ def check_arguments(args: argparse.Namespace) -> None:
         resolve_camera(args.camera)  # CameraModelError naming the preset or file
     if args.quit_after is not None and not args.quit_after > 0:
         raise ValueError(f"--quit-after must be a positive number of seconds, got {args.quit_after}")
+    if args.screenshot:
+        from qrfield.arguments import refuse_existing
+        from qrfield.files import check_target
+
+        refuse_existing(check_target(args.screenshot, "--screenshot"), args.force, "--screenshot")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from qrfield.arguments import add_side_argument, number
+from qrfield.arguments import add_side_argument, number, text
 
 HELP = "write a printable QR marker of exact size (SVG, PDF or PNG)"
 DESCRIPTION = (
@@ -16,7 +16,9 @@ DESCRIPTION = (
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--text", required=True, metavar="T", help="the QR payload, e.g. qrfield")
+    parser.add_argument(
+        "--text", type=text("--text"), required=True, metavar="T", help="the QR payload, e.g. qrfield"
+    )
     add_side_argument(parser)
     parser.add_argument(
         "--out",

@@ -6,7 +6,7 @@ import argparse
 import json
 import sys
 
-from qrfield.arguments import add_side_argument, number
+from qrfield.arguments import add_side_argument, number, refuse_existing, seed, text
 from qrfield.camera import DEFAULT_CAMERA, add_camera_arguments
 
 HELP = "render a QR card at a known pose through a camera model (test images with exact corners)"
@@ -42,12 +42,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=0.0,
         help="brightness gradient across the image (0..1; 0.3 = +-30%%)",
     )
-    parser.add_argument("--seed", type=int, default=None, help="noise seed (repeatable images)")
-    parser.add_argument("--text", default="qrfield", help="QR payload (default: qrfield)")
+    parser.add_argument("--seed", type=seed(), default=None, help="noise seed (repeatable images)")
+    parser.add_argument(
+        "--text", type=text("--text"), default="qrfield", help="QR payload (default: qrfield)"
+    )
     parser.add_argument("--color", action="store_true", help="write a 3-channel colour image")
     parser.add_argument(
         "--out", required=True, metavar="FILE", help="image file to write (.png, .jpg, .bmp, ...)"
     )
+    parser.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     parser.add_argument("--json", action="store_true", help='print {"corners": [[u,v],...], ...} as JSON')
 
 
@@ -60,9 +63,10 @@ def run(args: argparse.Namespace) -> int:
 
     camera = camera_from_args(args)
     assert camera is not None
-    pose = Pose.parse(args.pose)
+    pose = Pose.parse(args.pose, "--pose")
     check_pixels(camera.width, camera.height, ImageSettings(), f"camera {camera.name}")
     out = check_target(args.out, "--out")
+    refuse_existing(out, args.force)
     view = render_view(
         camera,
         args.side_mm,
@@ -74,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
         seed=args.seed,
         color=args.color,
     )
-    write_image(out, view.image)
+    write_image(out, view.image, overwrite=args.force)
     say_camera(camera, "render")
     corners = [[round(float(u), 4), round(float(v), 4)] for u, v in view.corners_px]
     if args.json:

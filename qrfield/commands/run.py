@@ -49,13 +49,18 @@ HELP = "measure poses from a camera source without a window (headless; JSON line
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from qrfield.arguments import count
     from qrfield.runconfig import add_run_arguments
 
     parser.add_argument(
         "--headless", action="store_true", help="no window (always true for run; accepted for clarity)"
     )
     parser.add_argument(
-        "--frames", type=int, default=0, metavar="N", help="stop after N frames (0 = until stopped)"
+        "--frames",
+        type=count("--frames"),
+        default=0,
+        metavar="N",
+        help="stop after N frames (0 = until stopped)",
     )
     parser.add_argument("--json-lines", action="store_true", help="one JSON object per frame on stdout")
     parser.add_argument(

@@ -30,7 +30,7 @@ HELP = "stream a synthetic moving pose to a serial port (test a controller witho
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from qrfield.arguments import whole_number
+    from qrfield.arguments import add_side_argument, rate, seconds, seed, whole_number
     from qrfield.handeye.setups import SETUPS
 
     parser.add_argument(
@@ -54,22 +54,34 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=15,
         help="tool poses visited (5..100, default 15)",
     )
-    robot.add_argument("--seed", type=int, default=0, help="the tool poses' seed (default 0)")
+    robot.add_argument("--seed", type=seed("--seed"), default=0, help="the tool poses' seed (default 0)")
     robot.add_argument(
         "--out-dir",
         metavar="DIR",
         help="keep the calibration in DIR (default: a temporary folder, removed at the end)",
     )
-    parser.add_argument("--fps", type=float, default=30.0, help="poses produced per second (default 30)")
-    parser.add_argument("--seconds", type=float, default=None, metavar="S", help="stop after S seconds")
     parser.add_argument(
-        "--noqr-every", type=float, default=10.0, metavar="S", help="1 s of NOQR every S s; 0 never"
+        "--fps", type=rate("--fps"), default=30.0, help="poses produced per second (default 30)"
+    )
+    parser.add_argument(
+        "--seconds", type=seconds("--seconds"), default=None, metavar="S", help="stop after S seconds"
+    )
+    parser.add_argument(
+        "--noqr-every",
+        type=seconds("--noqr-every"),
+        default=10.0,
+        metavar="S",
+        help="1 s of NOQR every S s; 0 never",
     )
     parser.add_argument("--baud", type=int, default=115200, help="baud rate, 8N1 (default 115200)")
     parser.add_argument(
-        "--max-rate", type=float, default=30.0, metavar="HZ", help="the link's rate cap (0 = none)"
+        "--max-rate",
+        type=rate("--max-rate"),
+        default=30.0,
+        metavar="HZ",
+        help="the link's rate cap (0 = none)",
     )
-    parser.add_argument("--side-mm", type=float, default=50.0, help="the QR side HELLO reports (default 50)")
+    add_side_argument(parser, 50.0)  # the QR side HELLO reports
 
 
 def demo_pose(t_s: float) -> tuple[tuple[float, float, float], tuple[float, float, float]]:

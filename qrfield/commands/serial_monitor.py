@@ -28,10 +28,16 @@ HELP = "print decoded pose frames arriving on a serial port and count bad checks
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from qrfield.arguments import count, seconds
+
     parser.add_argument("port", metavar="PORT", help="device path (/dev/ttyUSB0, COM3, a pty) or URL")
     parser.add_argument("--baud", type=int, default=115200, help="baud rate, 8N1 (default 115200)")
-    parser.add_argument("--count", type=int, default=None, metavar="N", help="stop after N decoded lines")
-    parser.add_argument("--seconds", type=float, default=None, metavar="S", help="stop after S seconds")
+    parser.add_argument(
+        "--count", type=count("--count"), default=None, metavar="N", help="stop after N decoded lines"
+    )
+    parser.add_argument(
+        "--seconds", type=seconds("--seconds"), default=None, metavar="S", help="stop after S seconds"
+    )
     parser.add_argument("--json", action="store_true", help="one JSON object per line instead of text")
     parser.add_argument(
         "--send",

@@ -45,16 +45,26 @@ def say(text: str) -> None:
 
 # ------------------------------------------------------------------------------------ new
 def _add_new(parser: argparse.ArgumentParser) -> None:
-    from qrfield.arguments import add_side_argument
+    from qrfield.arguments import add_side_argument, text
     from qrfield.camera import add_camera_arguments
     from qrfield.methods import METHODS
     from qrfield.runconfig import add_run_arguments
     from qrfield.sessions import AcceptanceCriteria, SessionSettings
     from qrfield.settings import add_arguments
 
-    parser.add_argument("root", metavar="ROOT", help="the folder that holds sessions (made if missing)")
     parser.add_argument(
-        "--name", required=True, metavar="N", help="the session's name (part of its folder's)"
+        "root",
+        nargs="?",
+        metavar="ROOT",
+        help="the folder that holds sessions (made if missing; default: the app's sessions folder, "
+        "$QRFIELD_SESSIONS_DIR, else ~/.local/share/qrfield/sessions)",
+    )
+    parser.add_argument(
+        "--name",
+        type=text("--name"),
+        required=True,
+        metavar="N",
+        help="the session's name (part of its folder's)",
     )
     add_camera_arguments(parser, default=None)
     add_side_argument(parser, configured="the run configuration's")
@@ -64,8 +74,8 @@ def _add_new(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="the solver whose results the rows average (default: the configured one; numerical for both)",
     )
-    parser.add_argument("--operator", default="", help="who measures")
-    parser.add_argument("--notes", default="", help="notes saved in session.json")
+    parser.add_argument("--operator", type=text("--operator"), default="", help="who measures")
+    parser.add_argument("--notes", type=text("--notes"), default="", help="notes saved in session.json")
     group = parser.add_argument_group(
         "rows and acceptance criteria (sections 'session', 'criteria' of app.json)"
     )
@@ -80,6 +90,7 @@ def _run_new(args: argparse.Namespace) -> int:
     from qrfield.methods import METHODS, methods_from_choice
     from qrfield.runconfig import effective_settings
     from qrfield.sessions import AcceptanceCriteria, Session, SessionSettings
+    from qrfield.sessions.folders import configured_root
     from qrfield.settings import from_arguments
 
     effective = effective_settings(args)
@@ -98,11 +109,12 @@ def _run_new(args: argparse.Namespace) -> int:
     store = effective.store
     rows = from_arguments(SessionSettings, args, base=store.group("session", SessionSettings))
     criteria = from_arguments(AcceptanceCriteria, args, base=store.group("criteria", AcceptanceCriteria))
+    root = Path(args.root) if args.root else configured_root(store)
     pose_frame = PoseFrame.from_settings(effective.groups["handeye"], args.config_dir)
     if not pose_frame.identity:
         say(f"rows and their ground truth in the {pose_frame.frame} frame: {pose_frame.describe()}")
     session = Session.create(
-        args.root,
+        root,
         args.name,
         camera=effective.camera,
         side_mm=side,
@@ -128,7 +140,9 @@ def _run_new(args: argparse.Namespace) -> int:
 
 # ------------------------------------------------------------------------------------ log
 def _add_log(parser: argparse.ArgumentParser) -> None:
+    from qrfield.arguments import count, text
     from qrfield.runconfig import add_run_arguments
+    from qrfield.sessions.criteria import MAX_FRAMES_PER_ROW
 
     parser.add_argument("folder", metavar="FOLDER", help="the session folder")
     parser.add_argument(
@@ -137,10 +151,24 @@ def _add_log(parser: argparse.ArgumentParser) -> None:
         help="the pose measured by hand: x, y, z (mm) and alpha, beta, gamma (degrees); 'virtual' (or "
         "'bench') = the virtual bench's own pose; without --truth every field is asked for (interactive)",
     )
-    parser.add_argument("--combo", metavar="NAME", help="the rotation combination of the row")
-    parser.add_argument("--note", default="", metavar="T", help="a one-line note for the row")
     parser.add_argument(
-        "--frames", type=int, default=None, metavar="N", help="frames averaged (default: the session's)"
+        "--combo", type=text("--combo"), metavar="NAME", help="the rotation combination of the row"
+    )
+    parser.add_argument(
+        "--note", type=text("--note"), default="", metavar="T", help="a one-line note for the row"
+    )
+    parser.add_argument(
+        "--force-combo",
+        action="store_true",
+        help="log a row whose --combo the signs of its angles contradict (refused otherwise, as the "
+        "app asks first)",
+    )
+    parser.add_argument(
+        "--frames",
+        type=count("--frames", 1, MAX_FRAMES_PER_ROW),
+        default=None,
+        metavar="N",
+        help="frames averaged (default: the session's)",
     )
     # Camera, QR side and solver are the session's own: only the source and detection are chosen here.
     add_run_arguments(
@@ -189,6 +217,9 @@ def _run_log(args: argparse.Namespace) -> int:
     try:
         for warning in session.warnings:
             say(f"warning: {warning}")
+        problem = combo_problem(truth, args.force_combo, session.info.pose_frame) if truth else ""
+        if problem:  # before the frames: nothing measured in vain
+            raise ValueError(problem)
         effective = effective_settings(args, resolve_camera=False)  # the session's camera is used
         for problem in effective.store.problems:
             say(f"settings: {problem}")
@@ -234,11 +265,33 @@ def _log_one(session: Any, recorder: Any, truth: Any, args: Any, follow: bool, e
     if measurement is None:
         say("stopped before the frames were in: nothing logged")
         return 1
-    return _log(session, measurement)
+    return _log(session, measurement, args.force_combo)
 
 
-def _log(session: Any, measurement: Any) -> int:
+def combo_problem(truth: Any, force: bool, pose_frame: str = "camera") -> str:
+    """Why a row's combination must not be logged as it is ("" when it may): the app's rule and
+    words (:func:`qrfield.sessions.combo_signs.combination_mismatch`), unless ``force``. The
+    combinations tilt the card in the camera frame: a session in the tool or base frame
+    (docs/handeye.md), whose angles are another frame's, is not checked."""
+    from qrfield.sessions.combo_signs import combination_mismatch, sign_table
+
+    if force or not truth.combo or pose_frame != "camera":
+        return ""
+    mismatch = combination_mismatch(truth.combo, truth.angles_deg, sign_table())
+    return (
+        f"--combo: not logged: {mismatch}; fix --combo, or add --force-combo to log it as it is"
+        if mismatch
+        else ""
+    )
+
+
+def _log(session: Any, measurement: Any, force_combo: bool = False) -> int:
     """Append and fsync one row; 0 and "logged row K" only once it is on disk."""
+    # The bench's own pose (--truth virtual) is known only now.
+    problem = combo_problem(measurement.truth, force_combo, session.info.pose_frame)
+    if problem:
+        say(f"error: {problem}")
+        return 2
     outcome = session.log(measurement)
     if not outcome.ok:
         outcome = session.retry()
@@ -252,8 +305,13 @@ def _log(session: Any, measurement: Any) -> int:
             flush=True,
         )
         return 0
-    say(f"NOT logged: {outcome.message}")
-    for record in session.pending:  # the operator keeps these lines; the process is about to end
+    # This process ends now, so nothing is kept in memory for a retry: the line is printed for the
+    # operator to keep, and rows.csv holds no part of it (a failed append is cut back).
+    say(
+        f"NOT logged: {outcome.reason}; nothing of the row was left in {session.rows_path.name}. Free "
+        "space or fix permissions and log it again, or keep the line below"
+    )
+    for record in session.pending:
         say(f"unwritten line of {session.rows_path.name}: {record.line.decode('utf-8').rstrip()}")
     return 1
 
@@ -272,8 +330,10 @@ def _log_interactive(session: Any, recorder: Any, args: Any, combinations: Any, 
     from qrfield.sessions.groundtruth import UNITS
 
     last: dict[str, Any] = {}
-    if session.rows:
-        row = session.rows[-1].values
+    # The defaults offered are the last row still in force: a withdrawn row's values were wrong.
+    in_force = next((r for r in reversed(session.rows) if not r.withdrawn), None)
+    if in_force is not None:
+        row = in_force.values
         last = {name: row.get(f"gt_{name}", "") for name in FIELDS[:6]} | {"combo": row.get("combo", "")}
     code = 0
     print(
@@ -303,13 +363,18 @@ def _log_interactive(session: Any, recorder: Any, args: Any, combinations: Any, 
                     break
                 print(f"  {name}: {message}", flush=True)
         truth = GroundTruth(**{k: values[k] for k in FIELDS})
+        problem = combo_problem(truth, args.force_combo, session.info.pose_frame)
+        if problem:  # asked again, as the app asks before it logs
+            print(f"  combo: {problem.removeprefix('--combo: ')}", flush=True)
+            last.pop("combo", None)
+            continue
         frames = args.frames or session.info.frames_per_row
         print(f"measuring row {session.next_row}: {frames} frames…", flush=True)
         measurement = recorder.measure(truth, frames, note=values["note"], until=ended)
         if measurement is None:
             say("the source stopped before the frames were in: nothing logged")
             return 1
-        code = _log(session, measurement) or code
+        code = _log(session, measurement, args.force_combo) or code
         if _ask("Enter for the next row, q to quit: ") in (None, "q", "Q"):
             return code
     return code
@@ -317,9 +382,11 @@ def _log_interactive(session: Any, recorder: Any, args: Any, combinations: Any, 
 
 # ------------------------------------------------------------------------------------ undo
 def _add_undo(parser: argparse.ArgumentParser) -> None:
+    from qrfield.arguments import count
+
     parser.add_argument("folder", metavar="FOLDER", help="the session folder")
     parser.add_argument(
-        "--row", type=int, default=None, metavar="K", help="withdraw row K (default: the last)"
+        "--row", type=count("--row", 1), default=None, metavar="K", help="withdraw row K (default: the last)"
     )
 
 
@@ -337,20 +404,44 @@ def _run_undo(args: argparse.Namespace) -> int:
 
 # ------------------------------------------------------------------------------------ list / show
 def _add_list(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("root", metavar="ROOT", help="the folder that holds sessions")
+    from qrfield.runconfig import add_config_dir_argument
+
+    parser.add_argument(
+        "root",
+        nargs="?",
+        metavar="ROOT",
+        help="the folder that holds sessions (default: the app's sessions folder, as for 'new')",
+    )
+    add_config_dir_argument(parser)
 
 
 def _counts(content: Any) -> str:
-    active = [r for r in content.rows if not r.withdrawn]
-    passed = sum(1 for r in active if r.passed)
-    withdrawn = len(content.rows) - len(active)
-    return f"{len(active)} rows, {passed} pass, {withdrawn} withdrawn"
+    active = passed = withdrawn = 0
+    for row in content.rows:  # one at a time: rows.csv is never held whole
+        if row.withdrawn:
+            withdrawn += 1
+        else:
+            active += 1
+            passed += row.passed
+    return f"{active} rows, {passed} pass, {withdrawn} withdrawn"
 
 
 def _run_list(args: argparse.Namespace) -> int:
+    from qrfield.runconfig import ConfigStore
     from qrfield.sessions import SessionError, read_session, session_folders
+    from qrfield.sessions.folders import configured_root
 
-    root = Path(args.root)
+    if args.root:
+        root = Path(args.root)
+    else:
+        store = ConfigStore()
+        for problem in store.problems:
+            say(f"settings: {problem}")
+        root = configured_root(store)
+        say(f"sessions in {root} (the app's sessions folder)")
+        if not root.is_dir():
+            say(f"no sessions in {root} yet")
+            return 0
     if not root.is_dir():
         raise ValueError(f"{root}: no such folder")
     folders = session_folders(root)
@@ -410,20 +501,25 @@ def _add_export(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("folder", metavar="FOLDER", help="the session folder")
     parser.add_argument(
         "--out",
-        required=True,
+        default=None,
         metavar="PATH",
-        help="the CSV to write (a folder: rows-clean.csv in it); only the rows still in force, "
-        "units in the column names (gt_x_mm, err_alpha_deg, ...)",
+        help="the CSV to write (a folder: rows-clean.csv in it; default: rows-clean.csv in the session's "
+        "folder, beside rows.csv, as the app exports); only the rows still in force, units in the "
+        "column names (gt_x_mm, err_alpha_deg, ...)",
     )
+    parser.add_argument("--force", action="store_true", help="overwrite the CSV if it exists")
 
 
 def _run_export(args: argparse.Namespace) -> int:
-    from qrfield.sessions.export import clean_table, export_path, export_session
+    from qrfield.arguments import refuse_existing
+    from qrfield.sessions.export import default_export_path, export_path, write_export
 
-    for warning in clean_table(args.folder).warnings:
+    target = export_path(args.folder, args.out) if args.out else default_export_path(args.folder)
+    refuse_existing(target, args.force, "--out" if args.out else "the export")
+    done = write_export(args.folder, target, overwrite=args.force)
+    for warning in done.warnings:
         say(f"warning: {warning}")
-    written = export_session(args.folder, args.out)
-    print(f"exported {written} rows to {export_path(args.folder, args.out)}")
+    print(f"exported {done.rows} rows to {done.path}")
     return 0
 
 

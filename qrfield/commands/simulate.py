@@ -14,10 +14,14 @@ DESCRIPTION = (
     "--set solver.numerical.tf=0.8 --set solvers=numerical,ippe). Coverage is printed in two readings: "
     "within criteria, and converged and within criteria (the solver's own flag holds too). The study "
     "runs on every core (--workers); Ctrl-C stops after the tasks in progress and writes what is "
-    "done (partial: true in summary.json). Outputs go to a new folder under the data folder "
-    "(qrfield.paths.simulations_dir(): $QRFIELD_DATA_DIR/simulations, or "
-    "~/.local/share/qrfield/simulations) unless --out names one."
+    "done (partial: true in summary.json). Outputs go to a new folder simulation-YYYYmmdd-HHMMSS in "
+    "the current folder unless --out names one (the app's Simulation tab writes under the data "
+    "folder's simulations/)."
 )
+
+
+#: The name of a run's folder made in the current folder: simulation-YYYYmmdd-HHMMSS.
+RUN_PREFIX = "simulation-"
 
 
 def add_override_argument(parser: argparse.ArgumentParser, help_text: str) -> None:
@@ -33,6 +37,9 @@ def add_override_argument(parser: argparse.ArgumentParser, help_text: str) -> No
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from qrfield.arguments import whole_number
+    from qrfield.limits import MAX_WORKERS
+
     parser.add_argument(
         "study", nargs="?", metavar="STUDY.toml", help="study file (default: the shipped study)"
     )
@@ -40,8 +47,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--out",
         metavar="DIR",
-        help="output folder, relative to the current folder (default: a new YYYYmmdd-HHMMSS folder "
-        "under the data folder's simulations/)",
+        help="output folder, relative to the current folder (default: a new folder "
+        "simulation-YYYYmmdd-HHMMSS in the current folder)",
     )
     parser.add_argument(
         "--force", action="store_true", help="write into an existing, non-empty output folder"
@@ -58,7 +65,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-csv", action="store_true", help=argparse.SUPPRESS)  # the default now
     parser.add_argument(
         "--workers",
-        type=int,
+        type=whole_number("--workers", 1, MAX_WORKERS),
         metavar="N",
         help="processes to run the study on (default: every core for a large study; 1 = this process)",
     )
@@ -99,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
         created = not out.exists()
         make_folder(out, "--out folder")  # the folder named, never the folders above it
     else:
-        out = new_run_folder()
+        out = new_run_folder(Path.cwd(), prefix=RUN_PREFIX)  # never outside the current folder
         created = True
     if not os.access(out, os.W_OK):
         raise OSError(f"--out {out}: the folder is not writable")

@@ -239,12 +239,17 @@ def analyze(
         result["resemblance"], result["resemblance_reason"] = resemblance(active, info)
     if out_dir is not None:
         from qrfield.files import make_folder
-        from qrfield.sessions.plots import plot_errors_vs_tilt, plot_measured_vs_truth
+        from qrfield.sessions.plots import (
+            ERRORS_VS_TILT,
+            MEASURED_VS_TRUTH,
+            plot_errors_vs_tilt,
+            plot_measured_vs_truth,
+        )
 
         out = make_folder(Path(out_dir), "--out folder")  # never the folders above it
         result["plots"] = [
-            str(plot_errors_vs_tilt(active, info, out / "errors_vs_tilt.png")),
-            str(plot_measured_vs_truth(active, info, out / "measured_vs_truth.png")),
+            str(plot_errors_vs_tilt(active, info, out / ERRORS_VS_TILT)),
+            str(plot_measured_vs_truth(active, info, out / MEASURED_VS_TRUTH)),
         ]
     return result
 

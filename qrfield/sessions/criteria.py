@@ -162,6 +162,10 @@ class AcceptanceCriteria:
         return f"{self.max_angle_error_deg:g}°/{self.max_position_error_mm:g} mm"
 
 
+#: Most frames averaged into one row (the setting's maximum; ``session log --frames`` too).
+MAX_FRAMES_PER_ROW = 1000
+
+
 @dataclass(frozen=True)
 class SessionSettings:
     """How the app logs one row, and how long it waits for frames."""
@@ -171,7 +175,7 @@ class SessionSettings:
         label="frames per row",
         unit="frames",
         minimum=1,
-        maximum=1000,
+        maximum=MAX_FRAMES_PER_ROW,
         help="'Log row' averages this many consecutive frames into one row",
     )
     frame_timeout_s: float = setting(

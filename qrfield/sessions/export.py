@@ -24,13 +24,13 @@ over), so a failed export leaves no half file.
 from __future__ import annotations
 
 import csv
+import errno
 import io
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from qrfield.files import make_folder
-from qrfield.sessions.files import atomic_write
+from qrfield.files import atomic_file, make_folder
 from qrfield.sessions.store import ROWS_FILE, SESSION_FILE, SessionError, read_session
 
 #: The unit of each quantity a column name ends with (docs/conventions.md: mm and degrees).
@@ -109,18 +109,56 @@ def export_path(folder: str | os.PathLike[str], out_path: str | os.PathLike[str]
     return target
 
 
-def export_session(folder: str | os.PathLike[str], out_path: str | os.PathLike[str]) -> int:
+def default_export_path(folder: str | os.PathLike[str]) -> Path:
+    """Where an export goes when no file is named: ``rows-clean.csv`` in the session's folder,
+    beside ``rows.csv`` (where the app's Export offers to put it)."""
+    return Path(folder).expanduser() / DEFAULT_NAME
+
+
+@dataclass(frozen=True)
+class ExportDone:
+    """What :func:`write_export` wrote: the file, its rows, the withdrawn rows left out, and what
+    reading rows.csv reported."""
+
+    path: Path
+    rows: int
+    withdrawn: int
+    warnings: tuple[str, ...]
+
+
+def write_export(
+    folder: str | os.PathLike[str], out_path: str | os.PathLike[str], *, overwrite: bool = True
+) -> ExportDone:
     """Write the rows still in force of the session in ``folder`` to ``out_path`` (see the module
-    doc); returns how many rows were written.
+    doc), one row at a time (a session of any size in little memory).
 
     ``out_path`` may be a file (its folder is created when missing and its parent exists: the
     folder rule of :func:`qrfield.files.make_folder`) or an existing folder (the file is then
-    ``rows-clean.csv`` in it, see :func:`export_path`). Raises SessionError when
-    ``folder`` is not a readable session or ``out_path`` is one of its own files, OSError when the
-    file cannot be written (nothing is left half-written).
+    ``rows-clean.csv`` in it, see :func:`export_path`). ``overwrite=False``: FileExistsError when
+    the file exists. Raises SessionError when ``folder`` is not a readable session or ``out_path``
+    is one of its own files, OSError when the file cannot be written (nothing is left half-written).
     """
-    table = clean_table(folder)
+    _info, content = read_session(folder)
     target = export_path(folder, out_path)
+    if not overwrite and os.path.lexists(target):
+        raise FileExistsError(errno.EEXIST, "exists; not overwritten", str(target))
     make_folder(target.parent, "export folder")
-    atomic_write(target, table_bytes(table))
-    return len(table.rows)
+    columns = [c for c in content.columns if c not in LOG_ONLY_COLUMNS]
+    written = withdrawn = 0
+    with atomic_file(target, "w", overwrite=overwrite, newline="") as handle:
+        writer = csv.writer(handle, lineterminator="\n")
+        writer.writerow([column_with_unit(c) for c in columns])
+        for row in content.rows:
+            if row.withdrawn:
+                withdrawn += 1
+                continue
+            writer.writerow([row.values.get(c, "") for c in columns])
+            written += 1
+    return ExportDone(target, written, withdrawn, tuple(content.warnings))
+
+
+def export_session(
+    folder: str | os.PathLike[str], out_path: str | os.PathLike[str], *, overwrite: bool = True
+) -> int:
+    """:func:`write_export`, returning how many rows were written."""
+    return write_export(folder, out_path, overwrite=overwrite).rows

@@ -26,6 +26,9 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from qrfield.files import describe_value
+from qrfield.limits import LimitError, as_number
+
 #: Field names in form order, with their unit.
 POSITION_FIELDS = ("x", "y", "z")
 ANGLE_FIELDS = ("alpha", "beta", "gamma")
@@ -125,7 +128,10 @@ def parse_number(text: Any, unit: str) -> float:
     if isinstance(text, bool):
         raise ValueError(f"expected a number in {unit}, got {text!r}")
     if isinstance(text, (int, float)):
-        value = float(text)
+        try:
+            value = as_number(text, "the value", unit)  # a huge int would overflow float()
+        except LimitError:
+            raise ValueError(f"must be a finite number in {unit}, got {describe_value(text)}") from None
     else:
         if not isinstance(text, str):
             raise ValueError(f"expected a number in {unit}, got {text!r}")

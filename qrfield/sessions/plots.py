@@ -30,6 +30,11 @@ from qrfield.sessions.plotting import (
 )
 from qrfield.sessions.store import LoggedRow, SessionInfo
 
+#: The files ``analyze --out DIR`` writes into DIR, in order.
+ERRORS_VS_TILT = "errors_vs_tilt.png"
+MEASURED_VS_TRUTH = "measured_vs_truth.png"
+PLOT_FILES = (ERRORS_VS_TILT, MEASURED_VS_TRUTH)
+
 
 def _write(path: Path, img: np.ndarray) -> Path:
     from qrfield.images import write_image

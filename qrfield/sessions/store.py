@@ -38,6 +38,8 @@ import json
 import math
 import os
 import re
+import stat
+from array import array
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -46,13 +48,12 @@ from typing import Any
 import qrfield
 from qrfield.camera import CameraModel, CameraModelError
 from qrfield.files import (
+    MAX_FIELD_CHARS,
     Fields,
     FileFormatError,
     check_field_sizes,
     csv_text_reader,
-    decode_text,
     make_folder,
-    read_bytes,
     read_json,
 )
 from qrfield.handeye.setups import FRAMES
@@ -62,11 +63,15 @@ from qrfield.sessions.averaging import Measurement
 from qrfield.sessions.criteria import AcceptanceCriteria, SessionSettings
 from qrfield.sessions.files import FileOps, atomic_write, fsync_dir, unique_path
 from qrfield.settings import SettingError, from_dict, to_dict
+from qrfield.texts import TextError, check_text
 
 try:  # advisory lock: POSIX only
     import fcntl
 except ImportError:  # pragma: no cover - Windows
     fcntl = None  # type: ignore[assignment]
+
+_NOFOLLOW = getattr(os, "O_NOFOLLOW", 0)
+_CLOEXEC = getattr(os, "O_CLOEXEC", 0)
 
 #: docs/conventions.md's required columns, in order.
 REQUIRED_COLUMNS = (
@@ -283,7 +288,9 @@ class LogOutcome:
     status: "logged" (everything asked is on disk), "pending" (kept in memory, will be retried).
     row: the row number concerned (the new row; for undo the withdrawn row; None for retry).
     logged: rows and withdrawal records written by this call ("w7" = withdrawal of row 7).
-    pending: what still waits, in order. message: one line for the operator.
+    pending: what still waits, in order. message: one line for the operator of the app (which
+    keeps the records and retries them). reason: why the write failed, without advice ("" when
+    logged), for a front end that words its own advice (the command line, which is exiting).
     """
 
     status: str
@@ -291,6 +298,7 @@ class LogOutcome:
     logged: tuple[str, ...]
     pending: tuple[str, ...]
     message: str
+    reason: str = ""
 
     @property
     def ok(self) -> bool:
@@ -369,33 +377,294 @@ def _now_text() -> str:
     return dt.datetime.now().astimezone().isoformat(timespec="seconds")
 
 
+#: Bytes read at a time when rows.csv is scanned or iterated.
+READ_CHUNK = 1 << 20
+#: Longest line read (bytes): every column at the csv module's field limit would be 39 x 128 KiB;
+#: a longer line is damaged and skipped with a warning, so that one line never fills the memory.
+MAX_LINE_BYTES = 8 << 20
+#: Most warnings kept about the lines of one rows.csv (the rest are counted in a last one).
+MAX_ROW_WARNINGS = 100
+#: Most bytes of an unfinished last line kept in :attr:`RowsContent.partial`.
+MAX_PARTIAL_KEPT = 1 << 20
+
+
+class _Source:
+    """Where rows.csv's bytes come from: a file read by position (never loaded whole), or bytes."""
+
+    def __init__(self, path: Path | None = None, data: bytes | None = None, follow: bool = True) -> None:
+        self.path, self.data, self.follow = path, data, follow
+
+    def size(self) -> int:
+        if self.data is not None:
+            return len(self.data)
+        with self._open() as fd:
+            return os.fstat(fd).st_size
+
+    @contextlib.contextmanager
+    def _open(self) -> Any:
+        assert self.path is not None
+        flags = os.O_RDONLY | _CLOEXEC | (0 if self.follow else _NOFOLLOW)
+        fd = os.open(self.path, flags)
+        try:
+            yield fd
+        finally:
+            os.close(fd)
+
+    def chunks(self, start: int, end: int) -> Any:
+        """The bytes start..end in chunks of :data:`READ_CHUNK` (what a reader holds at a time)."""
+        if self.data is not None:
+            for at in range(start, end, READ_CHUNK):
+                yield self.data[at : min(end, at + READ_CHUNK)]
+            return
+        with self._open() as fd:
+            at = start
+            while at < end:
+                chunk = os.pread(fd, min(READ_CHUNK, end - at), at)
+                if not chunk:
+                    raise SessionError(
+                        f"{self.path}: shorter than when it was read; changed by another program"
+                    )
+                yield chunk
+                at += len(chunk)
+
+    def read(self, offset: int, length: int) -> bytes:
+        if self.data is not None:
+            return self.data[offset : offset + length]
+        with self._open() as fd:
+            return os.pread(fd, length, offset)
+
+
+def _lines(source: _Source, end: int, where: str) -> Any:
+    """(offset, bytes without the newline) of every line of bytes 0..end (which ends with a
+    newline); a line longer than :data:`MAX_LINE_BYTES` comes as (offset, None)."""
+    pending = bytearray()
+    start = 0  # offset of pending's first byte
+    skipping = False
+    at = 0
+    for chunk in source.chunks(0, end):
+        pos = 0
+        while pos < len(chunk):
+            cut = chunk.find(b"\n", pos)
+            if cut < 0:
+                if not skipping:
+                    pending += chunk[pos:]
+                    if len(pending) > MAX_LINE_BYTES:
+                        pending.clear()
+                        skipping = True
+                break
+            if skipping:
+                yield start, None
+                skipping = False
+            else:
+                pending += chunk[pos:cut]
+                yield start, bytes(pending)
+                pending.clear()
+            start = at + cut + 1
+            pos = cut + 1
+        at += len(chunk)
+
+
+def _decode_line(data: bytes, offset: int, where: str) -> str:
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise SessionError(f"{where}: not UTF-8 text (byte {offset + exc.start})") from None
+
+
+def _fields(line: str) -> list[str]:
+    """The fields of one record (one line); csv.Error if it is not CSV. A line without quotes or
+    carriage returns, as qrfield writes nearly every one, is split on its commas (what the csv
+    module would return, several times faster); any other goes through the csv module."""
+    if '"' not in line and "\r" not in line and len(line) <= MAX_FIELD_CHARS:
+        return line.split(",")
+    return next(csv_text_reader(line), [])
+
+
+def _row_values(header: list[str], line: str) -> tuple[dict[str, str], int]:
+    """The values of one record by column, and its field count; csv.Error if it is not CSV."""
+    fields = _fields(line)
+    return dict(zip(header, fields, strict=False)), len(fields)
+
+
+def _normal_pass(verdict: str) -> str | None:
+    return PASS_WORDS.get(verdict.strip().lower())
+
+
+class RowList(Sequence[LoggedRow]):
+    """The measurement rows of rows.csv, read from the file when asked for, never held whole.
+
+    The scan that opens a session keeps, per row, only where its line is (offset and length) and
+    its number (some 20 bytes a row: 800,000 rows are 16 MB instead of gigabytes of dicts);
+    ``rows[i]`` reads and parses that one line, iterating reads the file in order, a chunk at a
+    time. ``withdrawn`` is the set of withdrawn row numbers, shared with the session, so a row read
+    after its withdrawal says so. Rows logged by this process are appended (kept as objects: their
+    ``confirmed`` flag changes).
+    """
+
+    def __init__(self, source: _Source, header: list[str], where: str, withdrawn: set[int]) -> None:
+        self._source = source
+        self._header = header
+        self._where = where
+        self.withdrawn = withdrawn
+        # 4 bytes each a row: rows.csv is at most MAX_ROWS_BYTES (< 4 GiB), row numbers are counted
+        # from 1 (a number beyond 32 bits, from a hand-edited file, is kept aside in _large).
+        self._offsets = array("I")
+        self._numbers = array("i")
+        self._large: dict[int, int] = {}
+        self._end = 0  # where the line of the last row ends (its newline included)
+        self._added: list[LoggedRow] = []
+
+    # -------------------------------------------------------------- built by the scan
+    def _keep(self, offset: int, length: int, number: int) -> None:
+        if -(2**31) <= number < 2**31:
+            self._numbers.append(number)
+        else:
+            self._large[len(self._numbers)] = number
+            self._numbers.append(0)
+        self._offsets.append(offset)
+        self._end = offset + length + 1
+
+    def _number(self, index: int) -> int:
+        return self._large.get(index, self._numbers[index])
+
+    # -------------------------------------------------------------- Sequence
+    def __len__(self) -> int:
+        return len(self._offsets) + len(self._added)
+
+    def __getitem__(self, index: Any) -> Any:
+        if isinstance(index, slice):
+            return [self[i] for i in range(*index.indices(len(self)))]
+        n = len(self)
+        if index < 0:
+            index += n
+        if not 0 <= index < n:
+            raise IndexError("row index out of range")
+        stored = len(self._offsets)
+        if index >= stored:
+            row = self._added[index - stored]
+            row.withdrawn = row.number in self.withdrawn
+            return row
+        offset = self._offsets[index]
+        return self._row(self._line_at(offset), offset, index)
+
+    def __iter__(self) -> Any:
+        if self._offsets:
+            index = 0
+            for offset, data in _lines(self._source, self._end, self._where):
+                if index < len(self._offsets) and offset == self._offsets[index]:
+                    assert data is not None
+                    yield self._row(data, offset, index)
+                    index += 1
+        for row in self._added:
+            row.withdrawn = row.number in self.withdrawn
+            yield row
+
+    def __reversed__(self) -> Any:
+        for index in range(len(self) - 1, -1, -1):
+            yield self[index]
+
+    def __eq__(self, other: object) -> bool:
+        if isinstance(other, (list, tuple, RowList)):
+            return len(self) == len(other) and all(a == b for a, b in zip(self, other, strict=True))
+        return NotImplemented
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def __repr__(self) -> str:
+        return f"<RowList of {len(self)} rows of {self._where}>"
+
+    # -------------------------------------------------------------- rows
+    def append(self, row: LoggedRow) -> None:
+        """A row logged by this process (kept as it is: its ``confirmed`` flag changes)."""
+        self._added.append(row)
+
+    def max_number(self) -> int:
+        """The largest row number (0 without rows), without reading a line."""
+        numbers = [r.number for r in self._added] + list(self._large.values())
+        if len(self._numbers):
+            numbers.append(max(self._numbers))
+        return max(numbers, default=0)
+
+    def by_number(self, number: int) -> LoggedRow | None:
+        """The (last) row of that number, reading only its line; None when there is none."""
+        for row in reversed(self._added):
+            if row.number == number:
+                row.withdrawn = row.number in self.withdrawn
+                return row
+        for index in range(len(self._numbers) - 1, -1, -1):
+            if self._number(index) == number:
+                return self[index]
+        return None
+
+    def _line_at(self, offset: int) -> bytes:
+        """The line starting at ``offset``, without its newline (read in growing pieces)."""
+        length = 4096
+        while True:
+            data = self._source.read(offset, length)
+            cut = data.find(b"\n")
+            if cut >= 0:
+                return data[:cut]
+            if len(data) < length or length > MAX_LINE_BYTES:
+                raise SessionError(f"{self._where}: changed by another program since it was read")
+            length *= 4
+
+    def _row(self, data: bytes, offset: int, index: int) -> LoggedRow:
+        text = _decode_line(data, offset, self._where)
+        if offset == 0 and text.startswith("\ufeff"):  # pragma: no cover - the header is line 1
+            text = text[1:]
+        values, _ = _row_values(self._header, text)
+        values["pass"] = _normal_pass(values.get("pass", "")) or "0"
+        number = self._number(index)
+        return LoggedRow(number, values, withdrawn=number in self.withdrawn)
+
+
 @dataclass
 class RowsContent:
-    """rows.csv as read: header, measurement rows (withdrawn flagged), warnings, the complete part's size."""
+    """rows.csv as read: header, measurement rows (withdrawn flagged), warnings, the complete part's size.
+
+    ``rows`` is a :class:`RowList` (read from the file row by row); ``partial`` holds the first
+    :data:`MAX_PARTIAL_KEPT` bytes of an unfinished last line, ``partial_size`` its length.
+    """
 
     columns: list[str]
-    rows: list[LoggedRow]
+    rows: RowList
     warnings: list[str]
     good_size: int
     partial: bytes = b""
     withdrawn: set[int] = field(default_factory=set)
+    partial_size: int = 0
 
 
 def parse_rows(data: bytes, where: str = ROWS_FILE) -> RowsContent:
     """Parse rows.csv bytes; an unfinished last line (no newline) is returned in ``partial``, not parsed."""
+    return _scan_rows(_Source(data=data), len(data), where)
+
+
+def _scan_rows(source: _Source, size: int, where: str) -> RowsContent:
+    """One pass over rows.csv (a chunk at a time): the header, where each row's line is, the
+    withdrawals, the warnings, and the size of the complete part (up to its last newline)."""
+    good_size = _complete_size(source, size)
     warnings: list[str] = []
-    end = data.rfind(b"\n") + 1
-    complete, partial = data[:end], data[end:]
-    try:
-        # A byte-order mark (a spreadsheet's "CSV UTF-8") is accepted; the sizes stay those of the bytes.
-        text = decode_text(complete, where)
-    except FileFormatError as exc:
-        raise SessionError(str(exc)) from None
-    lines = text.split("\n")[:-1]  # records end with "\n"; other line breaks may sit inside quoted notes
-    if not lines:
+    more = 0
+
+    def warn(text: str) -> None:
+        nonlocal more
+        if len(warnings) < MAX_ROW_WARNINGS:
+            warnings.append(text)
+        else:
+            more += 1
+
+    lines = _lines(source, good_size, where)
+    first = next(lines, None)
+    if first is None:
         raise SessionError(f"{where}: no header row")
+    offset, data = first
+    if data is None:
+        raise SessionError(f"{where}: the header row is longer than {MAX_LINE_BYTES} bytes")
+    head = _decode_line(data, offset, where)
+    head = head[1:] if head.startswith("\ufeff") else head  # a spreadsheet's "CSV UTF-8"
     try:
-        header = next(csv_text_reader(lines[0]), [])  # an empty first line has no fields
+        header = next(csv_text_reader(head), [])  # an empty first line has no fields
     except csv.Error as exc:
         raise SessionError(f"{where}: the header row is not CSV ({exc})") from None
     header = [name.strip() for name in header]
@@ -403,70 +672,125 @@ def parse_rows(data: bytes, where: str = ROWS_FILE) -> RowsContent:
         raise SessionError(
             f"{where}: the header does not start with the required columns {','.join(REQUIRED_COLUMNS)}"
         )
-    rows: list[LoggedRow] = []
-    by_number: dict[int, LoggedRow] = {}
     withdrawn: set[int] = set()
-    for lineno, line in enumerate(lines[1:], start=2):
+    rows = RowList(source, header, where, withdrawn)
+    # Only these three columns matter to the scan (the first of equal names, as dict(zip()) keeps the
+    # last: none of them is repeated in a header qrfield wrote).
+    at_row = 0  # the header starts with REQUIRED_COLUMNS
+    at_pass = header.index("pass")
+    at_withdraws = len(header) - 1 - header[::-1].index("withdraws") if "withdraws" in header else -1
+    seen: set[int] | None = None  # row numbers, built only if they stop increasing
+    highest: int | None = None
+    for lineno, (offset, data) in enumerate(lines, start=2):
+        if data is None:
+            warn(f"{where} line {lineno}: longer than {MAX_LINE_BYTES} bytes (damaged); ignored")
+            continue
+        line = _decode_line(data, offset, where)
         if not line.strip():
             continue
         if "\x00" in line:
-            warnings.append(f"{where} line {lineno}: contains NUL bytes (damaged); ignored")
+            warn(f"{where} line {lineno}: contains NUL bytes (damaged); ignored")
             continue
         try:
-            fields = next(csv_text_reader(line), [])
+            fields = _fields(line)
         except csv.Error as exc:  # e.g. a field over MAX_FIELD_CHARS written by another program
-            warnings.append(f"{where} line {lineno}: not a CSV record ({exc}); ignored")
+            warn(f"{where} line {lineno}: not a CSV record ({exc}); ignored")
             continue
-        values = dict(zip(header, fields, strict=False))
-        if len(fields) != len(header):
-            warnings.append(f"{where} line {lineno}: {len(fields)} fields, the header has {len(header)}")
-        row_text = values.get("row", "").strip()
-        target = values.get("withdraws", "").strip()
+        count = len(fields)
+        if count != len(header):
+            warn(f"{where} line {lineno}: {count} fields, the header has {len(header)}")
+        row_text = fields[at_row].strip() if count > at_row else ""
+        target = fields[at_withdraws].strip() if 0 <= at_withdraws < count else ""
         if row_text:
             try:
                 number = int(row_text)
             except ValueError:
-                warnings.append(f"{where} line {lineno}: row {row_text!r} is not a number; ignored")
+                warn(f"{where} line {lineno}: row {row_text[:40]!r} is not a number; ignored")
                 continue
-            if number in by_number:
-                warnings.append(f"{where} line {lineno}: row {number} appears twice; both kept")
-            verdict = values.get("pass", "")
-            normal = PASS_WORDS.get(verdict.strip().lower())
+            if highest is not None and number <= highest:
+                if seen is None:
+                    seen = {rows._number(i) for i in range(len(rows._numbers))}
+                if number in seen:
+                    warn(f"{where} line {lineno}: row {number} appears twice; both kept")
+            if seen is not None:
+                seen.add(number)
+            highest = number if highest is None else max(highest, number)
+            verdict = fields[at_pass] if count > at_pass else ""
+            normal = _normal_pass(verdict)
             if normal is None:
-                warnings.append(
+                warn(
                     f"{where} line {lineno}: row {number} has pass {verdict!r}, not 1 or 0; counted as failed"
                 )
-                normal = "0"
             elif normal != verdict:
                 shown = "passed" if normal == "1" else "failed"
-                warnings.append(f"{where} line {lineno}: row {number} has pass {verdict!r}, read as {shown}")
-            values["pass"] = normal
-            row = LoggedRow(number, values)
-            rows.append(row)
-            by_number[number] = row
+                warn(f"{where} line {lineno}: row {number} has pass {verdict!r}, read as {shown}")
+            rows._keep(offset, len(data), number)
         elif target:
             try:
                 withdrawn.add(int(target))
             except ValueError:
-                warnings.append(f"{where} line {lineno}: withdraws {target!r} is not a row number; ignored")
+                warn(f"{where} line {lineno}: withdraws {target[:40]!r} is not a row number; ignored")
         else:
-            warnings.append(f"{where} line {lineno}: neither a row nor a withdrawal record; ignored")
-    for row in rows:
-        row.withdrawn = row.number in withdrawn
-    return RowsContent(header, rows, warnings, len(complete), partial, withdrawn)
+            warn(f"{where} line {lineno}: neither a row nor a withdrawal record; ignored")
+    if more:
+        warnings.append(
+            f"{where}: {more} more line(s) with problems (only the first {MAX_ROW_WARNINGS} are listed)"
+        )
+    partial = source.read(good_size, min(size - good_size, MAX_PARTIAL_KEPT)) if size > good_size else b""
+    return RowsContent(header, rows, warnings, good_size, partial, withdrawn, size - good_size)
 
 
-def _read_folder(folder: Path) -> tuple[SessionInfo, Path, RowsContent]:
-    """A session folder's info, the path of its rows.csv and its parsed rows; SessionError if unreadable."""
+def _complete_size(source: _Source, size: int) -> int:
+    """The size of rows.csv up to and including its last newline (0 when it has none)."""
+    end = size
+    while end > 0:
+        start = max(0, end - READ_CHUNK)
+        chunk = source.read(start, end - start)
+        cut = chunk.rfind(b"\n")
+        if cut >= 0:
+            return start + cut + 1
+        end = start
+    return 0
+
+
+def _read_folder(folder: Path, *, follow: bool = True) -> tuple[SessionInfo, Path, RowsContent]:
+    """A session folder's info, the path of its rows.csv and its rows (read a chunk at a time, never
+    whole); SessionError if unreadable. ``follow=False``: a symbolic link at rows.csv is refused."""
     info = _read_info(folder)
     rows_path = folder / ROWS_FILE
+    where = str(rows_path)
     try:
-        data = read_bytes(rows_path, "rows file", MAX_ROWS_BYTES)
-    except FileFormatError as exc:
-        if exc.kind == "missing":
-            raise SessionError(f"{folder}: no {ROWS_FILE}") from None
-        raise SessionError(str(exc)) from None
-    return info, rows_path, parse_rows(data, str(rows_path))
+        mode = os.stat(rows_path, follow_symlinks=follow).st_mode
+    except FileNotFoundError:
+        raise SessionError(f"{folder}: no {ROWS_FILE}") from None
+    except OSError as exc:
+        raise SessionError(f"rows file {rows_path}: cannot read ({exc.strerror or exc})") from None
+    if stat.S_ISLNK(mode):
+        raise SessionError(_symlink_refusal(rows_path))
+    if stat.S_ISDIR(mode):
+        raise SessionError(f"rows file {rows_path}: is a folder, not a file")
+    if not stat.S_ISREG(mode):  # a FIFO, a device: it may never end
+        raise SessionError(f"rows file {rows_path}: not a regular file")
+    source = _Source(path=rows_path, follow=follow)
+    try:
+        size = source.size()
+        if size > MAX_ROWS_BYTES:
+            raise SessionError(
+                f"rows file {rows_path}: larger than {MAX_ROWS_BYTES // (1024 * 1024)} MiB; "
+                "not a file qrfield wrote"
+            )
+        return info, rows_path, _scan_rows(source, size, where)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise SessionError(_symlink_refusal(rows_path)) from None
+        raise SessionError(f"rows file {rows_path}: cannot read ({exc.strerror or exc})") from None
+
+
+def _symlink_refusal(rows_path: Path) -> str:
+    return (
+        f"{rows_path} is a symbolic link, not the session's own file; not writing through it "
+        "(replace it with the file it points to)"
+    )
 
 
 def read_session(path: str | os.PathLike[str]) -> tuple[SessionInfo, RowsContent]:
@@ -476,9 +800,9 @@ def read_session(path: str | os.PathLike[str]) -> tuple[SessionInfo, RowsContent
     """
     folder = Path(path)
     info, rows_path, content = _read_folder(folder)
-    if content.partial:
+    if content.partial_size:
         content.warnings.append(
-            f"{rows_path}: ends with an unfinished line of {len(content.partial)} bytes "
+            f"{rows_path}: ends with an unfinished line of {content.partial_size} bytes "
             "(a crash while logging; never confirmed); ignored"
         )
     return info, content
@@ -509,14 +833,14 @@ class Session:
         self.path = path
         self.info = info
         self.columns = list(content.columns)
-        self.rows: list[LoggedRow] = content.rows
+        self.rows: RowList = content.rows  # read from rows.csv when asked for, never held whole
         self.warnings: list[str] = list(content.warnings)
         self.pending: list[_Record] = []
-        self.next_row = max((r.number for r in self.rows), default=0) + 1
+        self.next_row = self.rows.max_number() + 1
         self._ops = file_ops or FileOps()
         self._fd: int | None = None
         self._good_size = content.good_size
-        self._withdrawn = set(content.withdrawn)
+        self._withdrawn = content.withdrawn  # the same set the rows read their flag from
         dropped = [c for c in COLUMNS if c not in self.columns]
         if dropped:
             self.warnings.append(
@@ -550,6 +874,11 @@ class Session:
         ``pose_frame``, ``handeye``: the frame the rows are measured in and the hand-eye file's
         contents that take poses there (``qrfield.handeye.HandEyeCalibration.to_dict``).
         """
+        try:  # session.json is UTF-8: a text that is not would be written as an escape no reader takes
+            for label, text in (("session name", name), ("operator", operator), ("notes", notes or "")):
+                check_text(text, label)
+        except TextError as exc:
+            raise SessionError(str(exc)) from None
         if pose_frame not in FRAMES:
             raise SessionError(f"pose frame {pose_frame!r} is not one of {', '.join(FRAMES)}")
         if (pose_frame == "camera") != (not handeye):
@@ -622,7 +951,7 @@ class Session:
         Raises SessionError when the folder is not a readable session or another process logs to it.
         """
         folder = Path(path)
-        info, rows_path, content = _read_folder(folder)
+        info, rows_path, content = _read_folder(folder, follow=False)  # never through a planted link
         session = cls(folder, info, content, file_ops)
         try:
             session._connect()
@@ -663,7 +992,11 @@ class Session:
         return len(self.pending)
 
     def update_notes(self, notes: str, operator: str | None = None) -> None:
-        """Change the notes (and operator) in session.json, atomically. Raises OSError if it cannot."""
+        """Change the notes (and operator) in session.json, atomically. Raises OSError if it cannot,
+        TextError (a ValueError) for a text that is not UTF-8."""
+        check_text(notes or "", "notes")
+        if operator is not None:
+            check_text(operator, "operator")
         changes: dict[str, Any] = {"notes": notes or ""}
         if operator is not None:
             changes["operator"] = _one_line(operator)
@@ -686,9 +1019,11 @@ class Session:
         """
         number = self.next_row
         values = measurement_values(measurement, number, time_text or _now_text())
-        try:  # refused before it is numbered: a field the csv module cannot read back
+        try:  # refused before it is numbered: a field the csv module cannot read back, or not UTF-8
             check_field_sizes(values, f"row {number}")
-        except FileFormatError as exc:
+            for column, text in values.items():
+                check_text(text, f"row {number}: {column}")
+        except (FileFormatError, TextError) as exc:
             raise SessionError(str(exc)) from None
         self.next_row += 1
         row = LoggedRow(number, values, confirmed=False)
@@ -705,7 +1040,7 @@ class Session:
 
     def withdraw(self, number: int, reason: str = "undo") -> LogOutcome:
         """Append a record withdrawing row ``number``; the row's own line stays as it is."""
-        row = next((r for r in self.rows if r.number == number), None)
+        row = self.rows.by_number(number)
         if row is None:
             raise SessionError(f"no row {number} in this session")
         if row.withdrawn:
@@ -746,19 +1081,25 @@ class Session:
                 else (f"logged {len(logged)} pending record(s)" if logged else "nothing pending")
             )
             return LogOutcome("logged", row, tuple(logged), waiting, message)
-        reason = _explain(error) if isinstance(error, OSError) else str(error)
+        explained = _explain(error) if isinstance(error, OSError) else str(error)
+        reason = f"cannot write {self.rows_path} ({explained})"
         message = (
-            f"NOT logged yet: cannot write {self.rows_path} ({reason}). "
+            f"NOT logged yet: {reason}. "
             f"{len(waiting)} record(s) kept in memory and retried before the next row; "
             "free space or fix permissions, then Retry. Do not close the app until they are written."
         )
-        return LogOutcome("pending", row, tuple(logged), waiting, message)
+        return LogOutcome("pending", row, tuple(logged), waiting, message, reason)
 
     def _connect(self) -> None:
         """Open rows.csv for appending and lock it (the end of the file is checked by each append)."""
         if self._fd is not None:
             return
-        fd = self._ops.open(str(self.rows_path), os.O_RDWR | os.O_APPEND)
+        try:  # never through a symbolic link planted at rows.csv (it would append elsewhere)
+            fd = self._ops.open(str(self.rows_path), os.O_RDWR | os.O_APPEND | _NOFOLLOW | _CLOEXEC)
+        except OSError as exc:
+            if exc.errno == errno.ELOOP or self.rows_path.is_symlink():
+                raise SessionError(_symlink_refusal(self.rows_path)) from None
+            raise
         try:
             if fcntl is not None:
                 try:
@@ -808,12 +1149,26 @@ class Session:
     def _append(self, line: bytes) -> None:
         self._connect()
         assert self._fd is not None
-        if not self._repair_tail(expected=line):
-            written = self._ops.write(self._fd, line)
-            if written != len(line):
-                raise OSError(errno.ENOSPC, f"short write: {written} of {len(line)} bytes")
-        self._ops.fsync(self._fd)
+        try:
+            if not self._repair_tail(expected=line):
+                written = self._ops.write(self._fd, line)
+                if written != len(line):
+                    raise OSError(errno.ENOSPC, f"short write: {written} of {len(line)} bytes")
+            self._ops.fsync(self._fd)
+        except OSError:
+            self._cut_back()
+            raise
         self._good_size += len(line)
+
+    def _cut_back(self) -> None:
+        """After a failed append: cut rows.csv back to its last confirmed record, so that no torn
+        line stays at its end (best effort: a medium that fails this too is repaired on reopening)."""
+        if self._fd is None:
+            return
+        with contextlib.suppress(OSError):
+            if self._ops.size(self._fd) > self._good_size:
+                self._ops.truncate(self._fd, self._good_size)
+                self._ops.fsync(self._fd)
 
 
 def _checked_solver_settings(solver: str, settings: dict[str, Any]) -> dict[str, Any]:

@@ -13,7 +13,6 @@ then one combination per line, e.g. ``alpha+beta-,1,-1,0``.
 from __future__ import annotations
 
 import csv
-import math
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -21,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from qrfield.files import FileFormatError, csv_text_reader, read_text
+from qrfield.limits import LimitError, as_number
 
 #: The ``combinations`` study value that names the shipped default set.
 DEFAULT_NAME = "default"
@@ -102,14 +102,16 @@ def parse_combinations(text: str, where: str = "combinations") -> list[Combinati
         values = []
         for field, cell in zip(HEADER[1:], row[1:], strict=True):
             try:
-                value = float(cell)
+                float(cell)
             except ValueError:
                 raise CombinationError(
                     f"{where}, line {lineno}: field '{field}' must be a number (+1, -1, 0), "
-                    f"got {cell.strip()!r}"
+                    f"got {cell.strip()[:40]!r}"
                 ) from None
-            if not math.isfinite(value):
-                raise CombinationError(f"{where}, line {lineno}: field '{field}' must be finite")
+            try:
+                value = as_number(cell, f"{where}, line {lineno}: field '{field}'", "the multiplier")
+            except LimitError as exc:
+                raise CombinationError(str(exc)) from None
             values.append(value + 0.0)  # no negative zero
         if not any(values):
             raise CombinationError(f"{where}, line {lineno}: combination {name!r} rotates about no axis")

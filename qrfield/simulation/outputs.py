@@ -98,8 +98,8 @@ def write_outputs(
     return written
 
 
-def new_run_folder(base: str | Path | None = None) -> Path:
-    """Create and return a new, empty folder ``<base>/<YYYYmmdd-HHMMSS>`` for one run's outputs.
+def new_run_folder(base: str | Path | None = None, prefix: str = "") -> Path:
+    """Create and return a new, empty folder ``<base>/<prefix><YYYYmmdd-HHMMSS>`` for one run's outputs.
 
     ``base`` defaults to :func:`qrfield.paths.simulations_dir` (created with its parents); a base
     the user named is created only if its own parent exists (:func:`qrfield.files.make_folder`). A
@@ -109,7 +109,7 @@ def new_run_folder(base: str | Path | None = None) -> Path:
     from qrfield.paths import simulations_dir
 
     parent = make_folder(Path(base).expanduser() if base is not None else simulations_dir(), "output folder")
-    stamp = time.strftime("%Y%m%d-%H%M%S")
+    stamp = prefix + time.strftime("%Y%m%d-%H%M%S")
     for n in range(1, 1000):
         folder = parent / (stamp if n == 1 else f"{stamp}-{n}")
         try:

@@ -8,9 +8,12 @@ Plain Python, no Qt: the headless runner and the app's worker thread both use it
 
 from __future__ import annotations
 
+import os
+import stat
 from pathlib import Path
 
 from qrfield.camera import DEFAULT_CAMERA, CameraModel, resolve_camera
+from qrfield.limits import MAX_USB_INDEX
 from qrfield.sources.base import EndOfStream, Frame, FrameSource, Pacer, SourceError
 from qrfield.sources.folder import ImageFolderSource
 from qrfield.sources.kinds import (
@@ -107,8 +110,14 @@ def make_source(
         return SimulatedPicamera2Source(picamera, profile=camera, sensor=sensor, scene=scene, side_mm=side_mm)
     if kind == "usb":
         index_text = spec[4:] if spec.startswith("usb:") else "0"
-        if not index_text.isdigit():
+        if not (index_text.isascii() and index_text.isdigit()):
             raise SourceError(f"source {spec!r}: the USB camera index must be a whole number, e.g. usb:0")
+        if len(index_text) > 4 or int(index_text) > MAX_USB_INDEX:
+            raise SourceError(
+                f"source {spec!r}: USB camera index {index_text[:12]}{'...' if len(index_text) > 12 else ''} "
+                f"is above the largest, {MAX_USB_INDEX} (/dev/video{MAX_USB_INDEX}); "
+                "qrfield camera list shows the cameras present"
+            )
         size = (camera.width, camera.height) if camera else (None, None)
         return UsbCameraSource(int(index_text), *size, camera=camera, settings=usb)
     if kind == "auto":
@@ -118,9 +127,29 @@ def make_source(
         return ImageFolderSource(path, loop=loop, fps=2.0 if pace else 0.0)
     if path.is_file():
         return VideoFileSource(path, loop=loop, pace=pace)
+    if os.path.lexists(path):  # a FIFO, a device, a broken link: there, but nothing to play
+        what = "a broken symbolic link" if not path.exists() else f"{_file_kind(path)}, not a regular file"
+        raise SourceError(
+            f"source {spec!r}: {what}; give a video file, a folder of images, or one of auto, virtual, "
+            "picamera2, usb:N"
+        )
     raise SourceError(
         f"source {spec!r}: no such file or folder, and not one of auto, virtual, picamera2, usb:N"
     )
+
+
+def _file_kind(path: Path) -> str:
+    """``a FIFO``, ``a character device``... for a path that is no regular file or folder."""
+    mode = path.stat().st_mode
+    for test, name in (
+        (stat.S_ISFIFO, "a FIFO (named pipe)"),
+        (stat.S_ISCHR, "a character device"),
+        (stat.S_ISBLK, "a block device"),
+        (stat.S_ISSOCK, "a socket"),
+    ):
+        if test(mode):
+            return name
+    return "a special file"
 
 
 def open_source(spec: str, *, allow_virtual: bool = True, **kwargs: object) -> FrameSource:

@@ -13,6 +13,7 @@ import numpy as np
 from qrfield.camera import CameraModel
 from qrfield.settings import setting, validated
 from qrfield.sources.base import SETTLE_FRAMES, EndOfStream, Frame, FrameSource, Pacer, SourceError
+from qrfield.texts import TextError, check_path_for_library
 
 #: Consecutive failed grabs after which a USB camera counts as gone.
 USB_MAX_FAILED_READS = 5
@@ -268,7 +269,11 @@ class VideoFileSource(FrameSource):
     def _open_impl(self) -> None:
         if not self.path.is_file():
             raise SourceError(f"video file {self.path}: no such file")
-        cap = cv2.VideoCapture(str(self.path))
+        try:
+            name = check_path_for_library(self.path, f"video file {self.path}")
+        except TextError as exc:
+            raise SourceError(str(exc)) from None
+        cap = cv2.VideoCapture(name)
         if not cap.isOpened():
             cap.release()
             raise SourceError(f"video file {self.path}: OpenCV cannot decode it (unknown format or codec)")

@@ -103,6 +103,7 @@ def test_cli_rows_are_the_apps_rows_column_by_column(make_window, qtbot, tmp_pat
         truth,
         "--combo",
         "alpha",
+        "--force-combo",  # the app's "keep" when it asks about the contradicting label
         "--note",
         "same note",
         "--source",
