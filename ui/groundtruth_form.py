@@ -12,7 +12,8 @@ The combination follows the angles' signs (:mod:`qrfield.sessions.combo_signs`):
 change and the combination shown disagrees with them (or none is chosen), the combination that
 fits is chosen and the line beside it says so; a combination the operator picks is kept while it
 agrees. :meth:`mismatch` says why the label disagrees with the angles (the panel asks first).
-Enter anywhere in the form emits ``submitted``. The form keeps its values after a row is logged.
+Enter anywhere in the form emits ``submitted``. The form keeps its pose and combination after a row
+is logged (the panel clears the note: it belongs to its row).
 
 On the virtual bench the pose fields follow the bench's true pose (:meth:`follow`) while the
 "follow the bench" box is ticked; typing into a pose field unticks it (the operator's value wins).

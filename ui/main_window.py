@@ -232,8 +232,10 @@ class MainWindow(QtWidgets.QMainWindow):
         self.worker.sourceFailed.connect(self._on_source_failed)
         self.worker.sourceNote.connect(self._on_note)
         self.worker.sourceDown.connect(self._on_source_down)
-        # Every result, on the worker thread: the serial link, and the guide of a planned experiment.
-        self.worker.result_sinks = (self.serial_panel.publisher, self.session_panel.guide)
+        # Every result, on the worker thread: the serial link, the session's row recorder and the
+        # guide of a planned experiment.
+        panel = self.session_panel
+        self.worker.result_sinks = (self.serial_panel.publisher, panel.recorder, panel.guide)
         self.thread = start_worker(self.worker)
         self._closed = False
 

@@ -1,15 +1,16 @@
 """The Session tab: the session bar (New, Resume, Export, the open session's name, folder and rows),
 the ground-truth form, "Log row" / Cancel / Undo, and the rows table, laid out to fit 800x480.
 
-A thin layer over :mod:`qrfield.sessions`. "Log row" collects the next N results the window draws
-(:meth:`SessionPanel.on_processed`, fed from the main window's redraw: the same results the
-preview shows, no second camera path; only frames captured after the press count), averages
-them with a :class:`~qrfield.sessions.FrameCollector` for the session's solver and calls
-:meth:`Session.log` on the GUI thread (one append and fsync per row). When the form follows the
-virtual bench, the row's ground truth is the bench's mean true pose over the frames collected
-(a wobbling bench moves while the row is measured). The status says "logged row K" only when
-``log`` returned "logged"; a row that could not be written stays in the session's pending queue
-and a red banner offers Retry and "Save pending elsewhere…".
+A thin layer over :mod:`qrfield.sessions`. "Log row" arms the core's one row recorder
+(:class:`qrfield.sessions.recorder.RowRecorder`, which ``qrfield session log`` and the guide use
+too): a sink of the worker's frame loop, it collects the next N frames the loop processes (every
+one, not only those the window draws; only frames captured after the press count), averages and
+judges them for the session's solver and criteria. The panel shows its progress on its timer and
+on each redraw, and logs the finished row with :meth:`Session.log` on the GUI thread (one append
+and fsync per row). When the form follows the virtual bench, the row's ground truth is the bench's
+mean true pose over the frames collected (a wobbling bench moves while the row is measured). The
+status says "logged row K" only when ``log`` returned "logged"; a row that could not be written
+stays in the session's pending queue and a red banner offers Retry and "Save pending elsewhere…".
 
 Frames must be arriving: "Log row" is disabled, with the reason, while no frame has come for
 ``frame_timeout_s`` (no source, a source that failed or stalled), and a row being collected is
@@ -46,8 +47,6 @@ from PySide6 import QtCore, QtWidgets
 
 from qrfield.camera import CameraModel
 from qrfield.sessions import (
-    FrameCollector,
-    GroundTruth,
     LogOutcome,
     Session,
     SessionError,
@@ -60,7 +59,7 @@ from qrfield.sessions.export import DEFAULT_NAME, export_session
 from qrfield.sessions.guide import Guide, GuideSettings
 from qrfield.sessions.plan import PlanError, PlanTarget, read_plan
 from qrfield.sessions.progress import DONE, PlanProgress, attach_plan
-from qrfield.sessions.recorder import bench_mean_truth
+from qrfield.sessions.recorder import RecordedRow, RowRecorder
 from qrfield.sessions.stillness import StillnessSettings
 from qrfield.settings import SettingError
 from ui.groundtruth_form import FIELD_NAMES, GroundTruthForm, WrappedLabel
@@ -112,11 +111,8 @@ class SessionPanel(QtWidgets.QWidget):
         super().__init__(parent)
         self.context = context
         self.session: Session | None = None
-        self._collector: FrameCollector | None = None
-        self._truth: GroundTruth | None = None
-        self._note = ""
-        self._following = False
-        self._t_press = 0.0
+        #: The one row recorder (a sink the window adds to the worker's frame loop: every frame).
+        self.recorder = RowRecorder()
         self._last_frame_t: float | None = None  # monotonic time of the last frame drawn
         self._last_pose_t: float | None = None  # ... of the last one with a pose of the session's solver
         self._source_problem = ""  # why the source gave no frames (it failed), "" while it runs
@@ -644,6 +640,7 @@ class SessionPanel(QtWidgets.QWidget):
                 self._say(f"row NOT logged: {exc}", "error")
                 continue
             self.progress.setValue(0)
+            self.form.note.clear()  # the next target brings its own note
             j = row.measurement.judgement
             verdict = "pass" if j.passed else f"fail ({j.reason})"
             where = f" (target {target.number})" if target is not None else ""
@@ -663,8 +660,9 @@ class SessionPanel(QtWidgets.QWidget):
         """The window's source failed: no frames until it is reopened; a row being collected ends."""
         self._source_problem = message
         self.form.bench_gone()
-        if self._collector is not None:
-            self._give_up(f"the source failed while collecting ({message})")
+        ended = self.recorder.give_up(f"the source failed while collecting ({message})")
+        if ended is not None:
+            self._given_up(ended)
         self._update_state()
 
     def live_reason(self, now: float | None = None) -> str:
@@ -684,19 +682,14 @@ class SessionPanel(QtWidgets.QWidget):
         may be logged."""
         if self.guided:
             self._take_guided_rows()
-        now = time.monotonic()
-        collector = self._collector
-        if collector is not None:
-            last = max(self._t_press, self._last_frame_t or 0.0)
-            if now - last > self.frame_timeout_s():
-                self._give_up(f"no frame for {now - last:.1f} s")
-                return
+        self._poll_row()
         if (self.blocked_reason(), self.context_notes()) != self._shown_state:
             self._update_state()
 
     def on_processed(self, item: Any) -> None:
-        """One result the window drew (ui.worker.Processed): follow the bench's truth, or collect it.
-        With a plan, the guide (fed every result by the frame loop) is shown and its rows logged."""
+        """One result the window drew (ui.worker.Processed): the bench's truth followed in the form
+        and whether frames arrive; the row recorder's and the guide's progress (both fed every
+        result by the frame loop) shown, and their finished rows logged."""
         result = item.result
         self._last_frame_t = time.monotonic()
         pose = result.poses.get(self.session.info.solver) if self.session is not None else None
@@ -706,20 +699,15 @@ class SessionPanel(QtWidgets.QWidget):
             self._take_guided_rows()
             self.guide_panel.show_view(self.guide.view())
             return
-        collector = self._collector
-        if collector is None:
-            truth = getattr(result, "truth", None)
-            if truth is not None:
-                self.form.follow(truth.position_mm, truth.angles_deg)
-            else:
-                self.form.bench_gone()
+        if self.recorder.collecting:
+            self._poll_row()
             return
-        if item.frame.t_capture < self._t_press:
-            return  # captured before "Log row" was pressed
-        done = collector.add(result)
-        self.progress.setValue(collector.progress[0])
-        if done:
-            self._finish_row(collector)
+        truth = getattr(result, "truth", None)
+        if truth is not None:
+            self.form.follow(truth.position_mm, truth.angles_deg)
+        else:
+            self.form.bench_gone()
+        self._poll_row()  # a row that ended since the last redraw
 
     # ---------------------------------------------------------------- logging
     def blocked_reason(self) -> str:
@@ -775,17 +763,26 @@ class SessionPanel(QtWidgets.QWidget):
             if self.session is not None and not self.form.valid:
                 self.form.reveal_errors()
                 reason = self.blocked_reason()
-            self._say(f"cannot log: {reason}", "error" if self._collector is None else "info")
+            self._say(f"cannot log: {reason}", "info" if self.recorder.collecting else "error")
             return False
         assert self.session is not None
         if not self._combination_confirmed():
             return False
-        self._truth = self.form.truth()
-        self._note = self.form.note.text()
-        self._following = self.form.following
-        self._collector = FrameCollector(self.session.info.frames_per_row, method=self.session.info.solver)
-        self._t_press = time.monotonic()
-        return self._collecting(self._collector.frames_wanted, f"row {self.session.next_row}")
+        info = self.session.info
+        truth = self.form.truth()
+        assert truth is not None  # the form is valid (blocked_reason)
+        if not self.recorder.arm(
+            truth,
+            info.frames_per_row,
+            method=info.solver,
+            criteria=info.criteria,
+            note=self.form.note.text(),
+            follow_bench=self.form.following,
+            frame_timeout_s=self.frame_timeout_s(),
+        ):
+            self._say("a row is being collected already", "info")
+            return False
+        return self._collecting(info.frames_per_row, f"row {self.session.next_row}")
 
     def _collecting(self, frames: int, what: str) -> bool:
         """A row is being collected: the progress bar at 0 of ``frames``, the status says so."""
@@ -812,45 +809,49 @@ class SessionPanel(QtWidgets.QWidget):
         return False
 
     def cancel_row(self) -> None:
-        if self.guide.cancel() and self._collector is None:
-            self.progress.setValue(0)
-            self._say("row cancelled: nothing logged", "info")
-            self._update_state()
+        guided, plain = self.guide.cancel(), self.recorder.cancel()
+        if not (guided or plain):
             return
-        if self._collector is None:
-            return
-        self._collector = None
         self.progress.setValue(0)
         self._say("row cancelled: nothing logged", "info")
         self._update_state()
 
-    def _give_up(self, why: str) -> None:
-        """Frames stopped while collecting: end the row, log nothing, say so."""
-        collector, self._collector = self._collector, None
-        got = collector.progress[0] if collector is not None else 0
-        wanted = collector.frames_wanted if collector is not None else 0
+    def _given_up(self, row: RecordedRow) -> None:
+        """The recorder ended a row without a measurement (frames stopped, the source failed, no
+        bench truth): log nothing, say why."""
         self.progress.setValue(0)
-        row = self.session.next_row if self.session is not None else "?"
-        self._say(
-            f"row {row} not logged: {why} ({got} of {wanted} frames came); press Log row again", "error"
-        )
+        number = self.session.next_row if self.session is not None else "?"
+        why = row.problem
+        if row.stopped:
+            why += f" ({row.frames_in} of {row.frames_wanted} frames came); press Log row again"
+        self._say(f"row {number} not logged: {why}", "error")
         self._update_state()
 
     @property
     def collecting(self) -> bool:
         """A row is being collected (by "Log row", or by the guide for a target)."""
-        if self._collector is not None:
+        if self.recorder.collecting:
             return True
         view = self.guide.view() if self.guided else None
         return view is not None and (view.collecting is not None or view.waiting)
 
-    def _finish_row(self, collector: FrameCollector) -> None:
-        assert self.session is not None and self._truth is not None
-        self._collector = None
-        truth = self._truth
-        if self._following:
-            truth = bench_mean_truth(collector.frames, truth.combo, collector.method) or truth
-        measurement = collector.measurement(truth, self.session.info.criteria, note=self._note)
+    def _poll_row(self) -> None:
+        """The recorder's row (GUI thread): its progress on the bar, a finished row logged, a row
+        whose frames stopped for the frame timeout given up."""
+        ended = self.recorder.expire()
+        if ended is not None:
+            self._given_up(ended)
+        progress = self.recorder.progress
+        if progress is not None:
+            self.progress.setValue(progress[0])
+        for row in self.recorder.take():
+            if row.measurement is None:
+                self._given_up(row)
+            else:
+                self._finish_row(row.measurement)
+
+    def _finish_row(self, measurement: Any) -> None:
+        assert self.session is not None
         try:
             outcome = self.session.log(measurement)
         except SessionError as exc:  # refused before anything is written (e.g. a note too long)
@@ -858,6 +859,7 @@ class SessionPanel(QtWidgets.QWidget):
             self._update_state()
             return
         self.progress.setValue(0)
+        self.form.note.clear()  # a note belongs to its row: the next one starts without it
         passed = measurement.judgement.passed
         verdict = "pass" if passed else f"fail ({measurement.judgement.reason})"
         self._after(outcome, f"logged row {outcome.row}: {verdict}", "ok" if passed else "fail")
@@ -867,7 +869,7 @@ class SessionPanel(QtWidgets.QWidget):
     def undo_row(self) -> None:
         """Withdraw the last row (after confirmation): a withdrawal record is appended, nothing deleted."""
         session = self.session
-        if session is None or self._collector is not None:
+        if session is None or self.recorder.collecting:
             return
         last = next((r for r in reversed(session.rows) if not r.withdrawn), None)
         if last is None:
@@ -968,7 +970,7 @@ class SessionPanel(QtWidgets.QWidget):
 
     def shutdown(self) -> None:
         self.timer.stop()
-        self._collector = None
+        self.recorder.cancel()
         self.guide.cancel()
         if self.session is not None:
             self.session.close()

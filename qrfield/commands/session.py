@@ -161,7 +161,7 @@ def _interrupt(signum: int, _frame: Any) -> None:
 
 
 def _run_log(args: argparse.Namespace) -> int:
-    from qrfield.engine import FrameLoop
+    from qrfield.engine import FrameLoop, SayEvents
     from qrfield.runconfig import effective_settings
     from qrfield.sessions import Session, known_combinations, validate_field
     from qrfield.sessions.recorder import RowRecorder, session_run_config
@@ -185,8 +185,8 @@ def _run_log(args: argparse.Namespace) -> int:
         for problem in effective.store.problems:
             say(f"settings: {problem}")
         config = session_run_config(effective.run_config(camera=session.info.camera), session.info)
-        recorder = RowRecorder(session.info, say)
-        loop = FrameLoop(config, events=recorder)
+        recorder = RowRecorder(session.info)  # the one row recorder, a sink fed every frame
+        loop = FrameLoop(config, events=SayEvents(say), sinks=(recorder,))
         with loop_thread(loop) as thread:
 
             def ended() -> bool:
