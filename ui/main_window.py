@@ -90,9 +90,15 @@ class MainWindow(QtWidgets.QMainWindow):
         install_wheel_guard()  # before any control is polished (see ui/wheel_guard.py)
         self.setWindowTitle("qrfield — bench")
         self.store = store
+        stored: RunSettings = store.group("run", RunSettings)
         self.app_settings: RunSettings = dataclasses.replace(
-            store.group("run", RunSettings), **{k: v for k, v in (overrides or {}).items() if v is not None}
+            stored, **{k: v for k, v in (overrides or {}).items() if v is not None}
         )
+        #: What app.json gets for the source and the camera: the last ones that worked (a source
+        #: that opened, a camera model that was found), else what it held; a source that failed to
+        #: open never becomes the default that `qrfield run` then fails on.
+        self.worked = {"source": stored.source, "camera": stored.camera}
+        self._source_requests: dict[int, str] = {0: self.app_settings.source}  # request -> source
         self.view_settings: ViewSettings = store.group("view", ViewSettings)
         self.camera_model: CameraModel | None = None
         self.notes: list[str] = []  # every status note, in full (the status bar may shorten them)
@@ -165,7 +171,9 @@ class MainWindow(QtWidgets.QMainWindow):
         self.session_panel = SessionPanel(store, self._session_context)
         self.analysis_tab = AnalysisTab(self.session_panel.root)
         self.session_panel.set_default_solver(self.methods())
-        self.simulation_tab = SimulationTab(app.camera, app.side_mm, store.value(SIMULATION_KEY))
+        self.simulation_tab = SimulationTab(
+            self._camera_that_works(), app.side_mm, store.value(SIMULATION_KEY)
+        )
         work = QtWidgets.QTabWidget()
         work.setObjectName("work_tabs")
         work.addTab(self.session_panel, "Session")
@@ -303,6 +311,7 @@ class MainWindow(QtWidgets.QMainWindow):
         app = self.app_settings
         try:
             self.camera_model = resolve_camera(app.camera)
+            self.worked["camera"] = app.camera
             self.camera_controls.camera_info.setText(
                 f"{self.camera_model.width}x{self.camera_model.height} px, fx {self.camera_model.fx:.1f}, "
                 f"fy {self.camera_model.fy:.1f}, cx {self.camera_model.cx:.1f}, cy {self.camera_model.cy:.1f}"
@@ -326,6 +335,14 @@ class MainWindow(QtWidgets.QMainWindow):
             retry_s=app.retry_s,
         )
 
+    def _camera_that_works(self) -> str:
+        """The app's camera if its model is found, else the last one that was (saved with the study)."""
+        try:
+            resolve_camera(self.app_settings.camera)
+        except CameraModelError:
+            return self.worked["camera"]
+        return self.app_settings.camera
+
     def _apply(self, *_: object) -> None:
         """Controls changed: new settings for the worker, plots and panel."""
         self._reconfigure(reopen=False)
@@ -338,10 +355,11 @@ class MainWindow(QtWidgets.QMainWindow):
         )
         self.view_settings = view_settings_from(self.camera_controls)
         self.plots.set_window(self.view_settings.plot_window_s)
-        self.simulation_tab.set_app_camera(self.app_settings.camera, self.app_settings.side_mm)
         config = self._run_config()
+        self.simulation_tab.set_app_camera(self.worked["camera"], self.app_settings.side_mm)
         self.serial_panel.set_context(config.side_mm, config.camera.name)  # what HELLO reports
         request = self.worker.configure(config, reopen=reopen)
+        self._source_requests[request] = config.source
         self.session_panel.refresh_state()
         return request
 
@@ -398,7 +416,22 @@ class MainWindow(QtWidgets.QMainWindow):
         return self.worker.source_camera or self.camera_model
 
     # ---------------------------------------------------------------- worker signals
+    def _source_that_opened(self) -> str | None:
+        """The source of the worker's open source (by the request it was opened for), else None."""
+        loop = self.worker.loop
+        if loop.source is None:
+            return None
+        generation = loop.source_generation
+        numbers = [n for n in self._source_requests if n <= generation]
+        return self._source_requests[max(numbers)] if numbers else None
+
     def _on_source_opened(self, description: str) -> None:
+        spec = self._source_that_opened()
+        if spec is not None:
+            self.worked["source"] = spec
+            generation = self.worker.loop.source_generation
+            newest = max(n for n in self._source_requests if n <= generation)
+            self._source_requests = {n: v for n, v in self._source_requests.items() if n >= newest}
         self.camera_controls.report.show_stream(self.worker.stream_report)
         self.banner_row.hide()
         self.status_source.setText(f"source: {short_source(self.app_settings.source)}")
@@ -503,7 +536,10 @@ class MainWindow(QtWidgets.QMainWindow):
 
     # ---------------------------------------------------------------- shutdown
     def save_settings(self) -> None:
-        self.store.set_group("run", self.app_settings)
+        opened = self._source_that_opened()  # open now, its signal perhaps not handled yet
+        if opened is not None:
+            self.worked["source"] = opened
+        self.store.set_group("run", dataclasses.replace(self.app_settings, **self.worked))
         self.store.set_group("view", self.view_settings)
         self.store.set_group("virtual", self.virtual_form.value())
         self.store.set_group("picamera", self.source_controls.picamera.value())

@@ -183,6 +183,44 @@ def test_settings_persist_across_two_app_instances(make_window, qtbot, tmp_path:
     assert second.last.result.truth.position_mm[2] == pytest.approx(420.0)
 
 
+def test_only_a_source_and_camera_that_worked_are_saved(make_window, qtbot, tmp_path: Path) -> None:
+    """A source that failed to open (the issue's `gui --source usb:0`) and a camera profile that does
+    not exist are not written to app.json, which `qrfield run` reads: the last ones that worked are."""
+    import json
+
+    from qrfield.runconfig import ConfigStore, RunSettings
+
+    def saved_run() -> RunSettings:
+        return ConfigStore(tmp_path / "config").group("run", RunSettings)
+
+    first = make_window({"source": "virtual", "camera": "picam-v2@640x480"})
+    qtbot.waitUntil(lambda: first.last is not None, timeout=WAIT_MS)
+    first.shutdown()
+    assert (saved_run().source, saved_run().camera) == ("virtual", "picam-v2@640x480")
+    missing = str(tmp_path / "no-such-video.avi")
+    second = make_window({"source": missing, "camera": "no-such-camera"})
+    qtbot.waitUntil(lambda: second.banner_row.isVisible(), timeout=WAIT_MS)
+    second.camera_controls.side_mm.setValue(41.0)  # a setting that works is saved as ever
+    second.shutdown()
+    run = json.loads((tmp_path / "config" / "app.json").read_text(encoding="utf-8"))
+    assert missing not in json.dumps(run) and "no-such-camera" not in json.dumps(run)
+    assert (saved_run().source, saved_run().camera, saved_run().side_mm) == (
+        "virtual",
+        "picam-v2@640x480",
+        41.0,
+    )
+    # A source that failed and then one that opened: the one that opened is saved.
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    cv2.imwrite(str(folder / "a.png"), np.full((480, 640), 128, np.uint8))
+    third = make_window({"source": missing})
+    qtbot.waitUntil(lambda: third.banner_row.isVisible(), timeout=WAIT_MS)
+    third.set_source(str(folder))
+    qtbot.waitUntil(lambda: not third.banner_row.isVisible() and third.last is not None, timeout=WAIT_MS)
+    third.shutdown()
+    assert saved_run().source == str(folder)
+
+
 def test_close_stops_the_worker_and_closes_the_source(make_window, qtbot) -> None:
     window = make_window({"source": "virtual"})
     qtbot.waitUntil(lambda: window.worker.source is not None, timeout=WAIT_MS)
