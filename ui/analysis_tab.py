@@ -28,8 +28,8 @@ from qrfield.sessions import read_session, session_folders
 from qrfield.sessions.files import atomic_write
 from ui.background import BackgroundJob
 from ui.groundtruth_form import WrappedLabel
-from ui.session_dialogs import touch_button
 from ui.text import fixed, short_path
+from ui.touch import FOLDER, ask_path, touch_button
 
 #: The folder, inside a session, that its analysis is written to.
 ANALYSIS_FOLDER = "analysis"
@@ -261,7 +261,7 @@ class AnalysisTab(QtWidgets.QWidget):
             self.choice.setCurrentIndex(self.choice.findData(self.current))
 
     def _browse(self) -> None:
-        path = QtWidgets.QFileDialog.getExistingDirectory(self, "Session folder", str(self.root()))
+        path = ask_path(self, "Session folder", self.root(), mode=FOLDER)
         if path:
             self.choice.addItem(Path(path).name, path)
             self.choice.setCurrentIndex(self.choice.count() - 1)
@@ -350,7 +350,7 @@ class AnalysisTab(QtWidgets.QWidget):
     # ---------------------------------------------------------------- saving
     def ask_save_folder(self) -> str:
         """The folder to copy the results to ("" = cancelled); tests replace this."""
-        return QtWidgets.QFileDialog.getExistingDirectory(self, "Save the analysis in", str(Path.home()))
+        return ask_path(self, "Save the analysis in", Path.home(), mode=FOLDER)
 
     def save_as(self) -> list[Path]:
         """Copy the last analysis' files to a folder the operator chooses; the copies' paths."""

@@ -43,11 +43,11 @@ from ui.plots import PosePlots
 from ui.pose_panel import PosePanel, simulated_source_name
 from ui.preview import PreviewPane, PreviewView
 from ui.serial_panel import SerialPanel
-from ui.session_dialogs import touch_button
 from ui.sessions_panel import BenchContext, SessionPanel
 from ui.settings_form import SettingsForm
 from ui.simulation_tab import CONFIG_KEY as SIMULATION_KEY
 from ui.simulation_tab import SimulationTab
+from ui.touch import install_touch_style, touch_button
 from ui.wheel_guard import install_wheel_guard
 from ui.worker import PipelineWorker, Processed, start_worker, stop_worker
 
@@ -88,6 +88,7 @@ class MainWindow(QtWidgets.QMainWindow):
     ) -> None:
         super().__init__()
         install_wheel_guard()  # before any control is polished (see ui/wheel_guard.py)
+        install_touch_style()  # every touch target 44 px high (ui/touch.py)
         self.setWindowTitle("qrfield — bench")
         self.store = store
         stored: RunSettings = store.group("run", RunSettings)

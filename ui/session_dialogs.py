@@ -23,10 +23,19 @@ from qrfield.settings import setting
 from ui.groundtruth_form import WrappedLabel
 from ui.settings_form import SettingsForm
 from ui.text import short_path
+from ui.touch import FOLDER, TOUCH_PX, ask_path, touch_button
+
+__all__ = [
+    "ENV_ROOT",
+    "TOUCH_PX",
+    "NewSessionDialog",
+    "ResumeDialog",
+    "SessionFolderSettings",
+    "sessions_root",
+    "touch_button",
+]
 
 ENV_ROOT = "QRFIELD_SESSIONS_DIR"
-#: Height of the buttons of a session's actions (px): a finger on a touch screen.
-TOUCH_PX = 40
 
 
 @dataclass(frozen=True)
@@ -45,15 +54,6 @@ def sessions_root(settings: SessionFolderSettings) -> Path:
     :func:`qrfield.paths.sessions_dir` (``~/.local/share/qrfield/sessions``)."""
     text = settings.root.strip() or os.environ.get(ENV_ROOT, "").strip()
     return Path(text).expanduser() if text else paths.sessions_dir()
-
-
-def touch_button(text: str, name: str = "") -> QtWidgets.QPushButton:
-    """A push button a finger can hit (:data:`TOUCH_PX` high)."""
-    button = QtWidgets.QPushButton(text)
-    button.setMinimumHeight(TOUCH_PX)
-    if name:
-        button.setObjectName(name)
-    return button
 
 
 def _message_label() -> WrappedLabel:
@@ -99,7 +99,7 @@ class NewSessionDialog(QtWidgets.QDialog):
         root = self.folder_form.widgets["root"]
         assert isinstance(root, QtWidgets.QLineEdit)
         root.setPlaceholderText(short_path(sessions_root(SessionFolderSettings())))
-        browse = QtWidgets.QPushButton("Folder…")
+        browse = touch_button("Folder…", "sessions_folder")
         browse.clicked.connect(self._choose_root)
         folder_row = QtWidgets.QHBoxLayout()
         folder_row.addWidget(self.folder_form, 1)
@@ -136,7 +136,7 @@ class NewSessionDialog(QtWidgets.QDialog):
         self.message.setVisible(bool(text))
 
     def _choose_root(self) -> None:
-        path = QtWidgets.QFileDialog.getExistingDirectory(self, "Sessions folder", str(self.root()))
+        path = ask_path(self, "Sessions folder", self.root(), mode=FOLDER)
         if path:
             widget = self.folder_form.widgets["root"]
             assert isinstance(widget, QtWidgets.QLineEdit)

@@ -62,7 +62,7 @@ from qrfield.sessions.progress import DONE, PlanProgress, attach_plan
 from qrfield.sessions.recorder import RecordedRow, RowRecorder
 from qrfield.sessions.stillness import StillnessSettings
 from qrfield.settings import SettingError
-from ui.groundtruth_form import FIELD_NAMES, GroundTruthForm, WrappedLabel
+from ui.groundtruth_form import FIELD_NAMES, ElidedLabel, GroundTruthForm, WrappedLabel
 from ui.guide_panel import GuidePanel
 from ui.rows_table import RowsTable
 from ui.session_dialogs import (
@@ -74,6 +74,7 @@ from ui.session_dialogs import (
     touch_button,
 )
 from ui.text import short_path
+from ui.touch import FOLDER, SAVE, answer, ask_path, message_box, yes_no
 
 __all__ = ["ENV_ROOT", "BenchContext", "SessionFolderSettings", "SessionPanel", "sessions_root"]
 
@@ -145,25 +146,26 @@ class SessionPanel(QtWidgets.QWidget):
 
     # ---------------------------------------------------------------- builders
     def _build_layout(self) -> None:
-        """Top to bottom: the session bar and its lines, the banners, the form, the actions with
-        why they are blocked, the status line, and the rows table (the part that scrolls)."""
+        """Top to bottom: the session bar and its two one-line labels, the guide strip, the form
+        and the actions; then, in one place below every button but the banners', the banners and
+        the messages (status, why Log row is blocked, the form's, the guide's, the session's
+        warnings), whose coming and going moves only the rows table (the part that scrolls)."""
         layout = QtWidgets.QVBoxLayout(self)
         layout.setContentsMargins(4, 4, 4, 4)
-        layout.setSpacing(3)
+        layout.setSpacing(2)
         layout.addLayout(self.session_bar)
-        for widget in (
-            self.title,
-            self.count,
-            self.reopen_banner,
-            self.warnings,
-            self.banner,
-            self.guide_panel,
-            self.form,
-        ):
+        for widget in (self.title, self.count, self.guide_panel, self.form):
             layout.addWidget(widget)
         layout.addLayout(self.actions)
-        layout.addWidget(self.why)
-        layout.addWidget(self.status)
+        self.messages = (
+            self.status,
+            self.why,
+            *self.form.messages,
+            self.guide_panel.note,
+            self.warnings,
+        )
+        for widget in (self.reopen_banner, self.banner, *self.messages):
+            layout.addWidget(widget)
         layout.addWidget(self.table, 1)
 
     def _build_session_bar(self) -> None:
@@ -183,10 +185,10 @@ class SessionPanel(QtWidgets.QWidget):
         self.session_bar.addStretch(1)
         self.session_bar.addWidget(self.plan_button)
         self.session_bar.addWidget(self.export_button)
-        self.title = WrappedLabel("")
+        self.title = ElidedLabel("")
         self.title.setObjectName("session_title")
         self.title.setStyleSheet("font-weight: bold;")
-        self.count = WrappedLabel("")
+        self.count = ElidedLabel("")
         self.count.setObjectName("session_count")
         self.count.setStyleSheet("color: #444;")
 
@@ -301,59 +303,52 @@ class SessionPanel(QtWidgets.QWidget):
 
     # ---------------------------------------------------------------- dialogs (tests replace these)
     def ask_confirm(self, title: str, text: str) -> bool:
-        answer = QtWidgets.QMessageBox.question(self, title, text)
-        return answer == QtWidgets.QMessageBox.StandardButton.Yes
+        return answer(*yes_no(self, title, text), "no") == "yes"
+
+    def pending_choice_box(self, message: str) -> tuple[QtWidgets.QMessageBox, dict[str, Any]]:
+        """The question of :meth:`ask_pending_choice`, not run (tests measure it)."""
+        role = QtWidgets.QMessageBox.ButtonRole
+        buttons = [
+            ("retry", "Retry", role.AcceptRole),
+            ("save", "Save elsewhere…", role.ActionRole),
+            ("discard", "Discard them", role.DestructiveRole),
+            ("cancel", "Keep the app open", role.RejectRole),
+        ]
+        return message_box(self, "Rows not written", message, buttons, QtWidgets.QMessageBox.Icon.Warning)
 
     def ask_pending_choice(self, message: str) -> str:
         """'retry', 'save', 'discard' or 'cancel' (keep the app open)."""
-        box = QtWidgets.QMessageBox(self)
-        box.setIcon(QtWidgets.QMessageBox.Icon.Warning)
-        box.setWindowTitle("Rows not written")
-        box.setText(message)
-        buttons = {
-            "retry": box.addButton("Retry", QtWidgets.QMessageBox.ButtonRole.AcceptRole),
-            "save": box.addButton("Save elsewhere…", QtWidgets.QMessageBox.ButtonRole.ActionRole),
-            "discard": box.addButton("Discard them", QtWidgets.QMessageBox.ButtonRole.DestructiveRole),
-            "cancel": box.addButton("Keep the app open", QtWidgets.QMessageBox.ButtonRole.RejectRole),
-        }
-        box.exec()
-        clicked = box.clickedButton()
-        return next((name for name, button in buttons.items() if button is clicked), "cancel")
+        return answer(*self.pending_choice_box(message), "cancel")
+
+    def combo_choice_box(
+        self, message: str, suggestion: str | None
+    ) -> tuple[QtWidgets.QMessageBox, dict[str, Any]]:
+        """The question of :meth:`ask_combo_choice`, not run (tests measure it)."""
+        role = QtWidgets.QMessageBox.ButtonRole
+        buttons = [("keep", "Log as labelled", role.AcceptRole)]
+        if suggestion:
+            buttons.append(("use", f"Use '{suggestion}'", role.ActionRole))
+        buttons.append(("cancel", "Cancel", role.RejectRole))
+        text = f"{message[0].upper()}{message[1:]}.\n\nLog the row anyway?"
+        return message_box(self, "Combination and angles disagree", text, buttons)
 
     def ask_combo_choice(self, message: str, suggestion: str | None) -> str:
         """'keep' (log as labelled), 'use' (relabel with ``suggestion``) or 'cancel'."""
-        box = QtWidgets.QMessageBox(self)
-        box.setIcon(QtWidgets.QMessageBox.Icon.Question)
-        box.setWindowTitle("Combination and angles disagree")
-        box.setText(f"{message[0].upper()}{message[1:]}.\n\nLog the row anyway?")
-        buttons = {"keep": box.addButton("Log as labelled", QtWidgets.QMessageBox.ButtonRole.AcceptRole)}
-        if suggestion:
-            buttons["use"] = box.addButton(f"Use '{suggestion}'", QtWidgets.QMessageBox.ButtonRole.ActionRole)
-        buttons["cancel"] = box.addButton("Cancel", QtWidgets.QMessageBox.ButtonRole.RejectRole)
-        box.exec()
-        clicked = box.clickedButton()
-        return next((name for name, button in buttons.items() if button is clicked), "cancel")
+        return answer(*self.combo_choice_box(message, suggestion), "cancel")
 
     def ask_save_path(self) -> str:
-        path, _ = QtWidgets.QFileDialog.getSaveFileName(
-            self, "Save pending rows elsewhere", str(Path.home() / "qrfield-pending-rows.csv"), "CSV (*.csv)"
-        )
-        return path
+        default = Path.home() / "qrfield-pending-rows.csv"
+        return ask_path(self, "Save pending rows elsewhere", default, mode=SAVE, name_filter="CSV (*.csv)")
 
     def ask_export_path(self, default: Path) -> str:
-        path, _ = QtWidgets.QFileDialog.getSaveFileName(
-            self, "Export the rows in force", str(default), "CSV (*.csv)"
-        )
-        return path
+        return ask_path(self, "Export the rows in force", default, mode=SAVE, name_filter="CSV (*.csv)")
 
     def ask_folder(self) -> str:
-        return QtWidgets.QFileDialog.getExistingDirectory(self, "Open a session folder", str(self.root()))
+        return ask_path(self, "Open a session folder", self.root(), mode=FOLDER)
 
     def ask_plan_path(self) -> str:
-        path, _ = QtWidgets.QFileDialog.getOpenFileName(
-            self, "Follow an experiment plan", str(self.root()), "Plans (*.csv);;All files (*)"
-        )
-        return path
+        plans = "Plans (*.csv);;All files (*)"
+        return ask_path(self, "Follow an experiment plan", self.root(), name_filter=plans)
 
     # ---------------------------------------------------------------- open / create
     def show_new_dialog(self) -> NewSessionDialog:
@@ -1010,25 +1005,25 @@ class SessionPanel(QtWidgets.QWidget):
             self.progress.setFormat("no session")
         if session is None:
             self.title.setText("No session open: start one with New session…, or Resume… one")
-            self.count.setText("")
-            self.count.hide()
+            self.title.setToolTip("")
+            self.count.setText("")  # its line stays: nothing below it moves when a session opens
+            self.count.setToolTip("")
             self.window_title_changed("")
             return
         info = session.info
         withdrawn = sum(1 for r in session.rows if r.withdrawn)
         active = [r for r in session.rows if not r.withdrawn]
         passed = sum(1 for r in active if r.passed)
-        self.title.setText(
+        title = (
             f"{info.name}: {len(active)} rows ({passed} pass), {withdrawn} withdrawn, "
             f"next row {session.next_row}"
             + (f"; {len(session.pending)} NOT WRITTEN" if session.pending else "")
         )
-        self.title.setToolTip(
-            f"solver {info.solver}, {info.frames_per_row} frames per row, QR side {info.side_mm:g} mm"
-        )
+        self.title.setText(title)
+        details = f"solver {info.solver}, {info.frames_per_row} frames per row, QR side {info.side_mm:g} mm"
+        self.title.setToolTip(f"{title}\n{details}")
         self.count.setText(f"{short_path(session.path)} · {info.solver}, QR {info.side_mm:g} mm")
         self.count.setToolTip(str(session.path))
-        self.count.show()
         self.window_title_changed(f"{info.name} ({len(active)} rows)")
 
     def window_title_changed(self, text: str) -> None:

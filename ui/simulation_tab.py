@@ -46,6 +46,7 @@ from qrfield.simulation.outputs import (
 from qrfield.simulation.study import SMALL_STUDY, field_specs, parse_override
 from ui.background import BackgroundJob, JobControl
 from ui.settings_form import set_widget_value, widget_for, widget_value
+from ui.touch import FOLDER, TouchCheckBox, ask_path
 
 RANGE_FIELDS = ("x_range", "y_range", "z_range")
 #: Fields edited as text and read with the study's override parser.
@@ -229,7 +230,7 @@ class SimulationTab(QtWidgets.QWidget):
         presets.addStretch(1)
         form = QtWidgets.QFormLayout()
         form.setFieldGrowthPolicy(QtWidgets.QFormLayout.FieldGrowthPolicy.AllNonFixedFieldsGrow)
-        self.follow_app = QtWidgets.QCheckBox("use the app's camera model and QR side")
+        self.follow_app = TouchCheckBox("use the app's camera model and QR side")
         self.follow_app.setChecked(True)
         form.addRow(self.follow_app)
         self.widgets: dict[str, QtWidgets.QWidget] = {}
@@ -359,7 +360,7 @@ class SimulationTab(QtWidgets.QWidget):
         self.run_button.setToolTip("run the study and save its outputs in a new folder")
         self.stop_button = QtWidgets.QPushButton("Stop")
         self.stop_button.setEnabled(False)
-        self.auto_run = QtWidgets.QCheckBox("re-run on change")
+        self.auto_run = TouchCheckBox("re-run on change")
         self.auto_run.setChecked(True)
         self.auto_run.setToolTip(
             "once a study has been run, run it again shortly after each change of a field "
@@ -537,7 +538,7 @@ class SimulationTab(QtWidgets.QWidget):
             button.setEnabled(not running)
 
     def _browse_output(self) -> None:
-        folder = QtWidgets.QFileDialog.getExistingDirectory(self, "Output folder", self.output_dir.text())
+        folder = ask_path(self, "Output folder", self.output_dir.text(), mode=FOLDER)
         if folder:
             self.output_dir.setText(folder)
 
