@@ -33,7 +33,7 @@ from PySide6 import QtCore, QtGui, QtWidgets
 
 from qrfield.sessions import GroundTruth, check_ground_truth, truth_fields, validate_field
 from qrfield.sessions.combo_signs import combination_mismatch, suggest_combination
-from ui.touch import TouchCheckBox
+from ui.touch import TOUCH_PX, TouchCheckBox
 
 #: Pose fields in form (and Tab) order: name, label, unit; three per line.
 POSE_FIELDS = (
@@ -50,7 +50,12 @@ FIELD_NAMES = {name: name for name, _, _ in POSE_FIELDS} | {"combo": "combinatio
 #: The narrowest a pose field gets (px): on one line of six, "-123.45" and its frame; on two lines.
 ONE_ROW_EDIT_PX = 54
 TWO_ROW_EDIT_PX = 64
-BAD_STYLE = "border: 2px solid #c0392b; background: #fdecea;"
+#: A bad field: a red border 2 px wide, its content 4 px lower, so that it stays TOUCH_PX high and
+#: marking it never moves anything.
+BAD_STYLE = (
+    "border: 2px solid #c0392b; background: #fdecea; "
+    f"min-height: {TOUCH_PX - 4}px; max-height: {TOUCH_PX - 4}px;"
+)
 ERROR_COLOUR = "#c0392b"
 HELP = {
     "x": "x of the QR centre in the camera frame (+X right), mm; a number, optionally with 'mm'",
@@ -158,7 +163,7 @@ class GroundTruthForm(QtWidgets.QWidget):
         self.grid = QtWidgets.QGridLayout(self)
         self.grid.setContentsMargins(0, 0, 0, 0)
         self.grid.setHorizontalSpacing(6)
-        self.grid.setVerticalSpacing(3)
+        self.grid.setVerticalSpacing(2)
         self._build_pose_fields()
         self._build_combo()
         self._build_note_row()

@@ -59,10 +59,25 @@ PLOT_PERIOD_S = 0.2
 DESKTOP_SIZE = (1300, 820)
 #: The smallest window (px): the Raspberry Pi Touch Display, the smallest size the layout is tested at.
 MINIMUM_SIZE = (800, 480)
+#: Config key of the screen's free area (px) the saved window geometry belongs to.
+SCREEN_KEY = "window_screen"
 #: Below this window height (px) the pose panel uses its compact type (800x480, 1024x600).
 COMPACT_BELOW_PX = 700
 #: The left column's (preview and pose) share of the window's width.
 LEFT_SHARE = 0.44
+#: The keys of the frequent actions: name -> (key sequence, what it does); their buttons' and the
+#: tabs' tooltips name them (docs/app.md, "Keys").
+SHORTCUTS = {
+    "log_row": ("Ctrl+L", "log a row (the target's, with a plan)"),
+    "cancel_row": ("Esc", "stop collecting the row (nothing logged)"),
+    "undo_row": ("Ctrl+Z", "withdraw the last row (asks first)"),
+    "new_session": ("Ctrl+N", "start a new session"),
+    "resume": ("Ctrl+O", "resume a session"),
+    "export_rows": ("Ctrl+E", "export the rows in force"),
+    "next_tab": ("Ctrl+Tab", "the next tab"),
+    "previous_tab": ("Ctrl+Shift+Tab", "the previous tab"),
+    "full_screen": ("F11", "full screen and back"),
+}
 #: How many notes the window keeps (the status bar's tooltip shows the last few).
 NOTES_KEPT = 50
 
@@ -212,8 +227,49 @@ class MainWindow(QtWidgets.QMainWindow):
         # 800x480 screen. That everything fits is checked by tests/ui/test_app_layout.py.
         self.layout().setSizeConstraint(QtWidgets.QLayout.SizeConstraint.SetNoConstraint)
         self._build_status_bar()
-        QtGui.QShortcut(QtGui.QKeySequence(QtCore.Qt.Key.Key_F11), self, self.toggle_full_screen)
+        self._build_shortcuts()
         self._restore_geometry()
+
+    def _build_shortcuts(self) -> None:
+        """The keys of the frequent actions (:data:`SHORTCUTS`), for the whole window, each named in
+        its button's (or tab's) tooltip."""
+        panel = self.session_panel
+        tabs = self.work_tabs
+        actions = {
+            "log_row": panel.log_row,
+            "cancel_row": panel.cancel_row,
+            "undo_row": panel.undo_row,
+            "new_session": panel.show_new_dialog,
+            "resume": panel.show_resume_dialog,
+            "export_rows": panel.export_rows,
+            "next_tab": lambda: tabs.setCurrentIndex((tabs.currentIndex() + 1) % tabs.count()),
+            "previous_tab": lambda: tabs.setCurrentIndex((tabs.currentIndex() - 1) % tabs.count()),
+            "full_screen": self.toggle_full_screen,
+        }
+        self.shortcuts: dict[str, QtGui.QShortcut] = {}
+        for name, (keys, _what) in SHORTCUTS.items():
+            shortcut = QtGui.QShortcut(QtGui.QKeySequence(keys), self)
+            shortcut.setContext(QtCore.Qt.ShortcutContext.WindowShortcut)
+            shortcut.activated.connect(actions[name])
+            self.shortcuts[name] = shortcut
+        buttons = {
+            "log_row": panel.log_button,
+            "cancel_row": panel.cancel_button,
+            "undo_row": panel.undo_button,
+            "new_session": panel.new_button,
+            "resume": panel.resume_button,
+            "export_rows": panel.export_button,
+        }
+        for name, button in buttons.items():
+            keys, what = SHORTCUTS[name]
+            shown = key_text(keys) + (" anywhere, Enter in the form" if name == "log_row" else "")
+            button.setToolTip(f"{button.toolTip() or what} ({shown})")
+        tip = (
+            f"{key_text(SHORTCUTS['next_tab'][0])}: next tab, "
+            f"{key_text(SHORTCUTS['previous_tab'][0])}: previous tab"
+        )
+        for k in range(tabs.count()):
+            tabs.setTabToolTip(k, f"{tabs.tabText(k).replace('&&', '&')} ({tip})")
 
     def _build_status_bar(self) -> None:
         """The source on the left, the rates on the right; notes show between them for a while."""
@@ -225,13 +281,56 @@ class MainWindow(QtWidgets.QMainWindow):
         self.statusBar().addPermanentWidget(self.status_rate)
 
     def _restore_geometry(self) -> None:
-        """The size and place of the last session, else the desktop size; never beyond the screen."""
+        """The size and place of the last session on the same screen size, else the desktop size;
+        never beyond the screen. A screen of another size since (a 1024x600 display where the app
+        ran at 800x480) gets the window fitted to it, not the old size."""
         geometry = self.store.value("window")
-        if isinstance(geometry, str):
+        saved_screen = self.store.value(SCREEN_KEY)
+        free = self._free_area()
+        same_screen = free is not None and saved_screen == [free.width(), free.height()]
+        if isinstance(geometry, str) and same_screen:
             self.restoreGeometry(QtCore.QByteArray.fromBase64(geometry.encode()))
+        elif free is not None:
+            self.fit_new_screen(free)
         else:
             self.resize(*DESKTOP_SIZE)
         self.fit_screen()
+
+    def _free_area(self) -> QtCore.QRect | None:
+        screen = self.screen() or QtWidgets.QApplication.primaryScreen()
+        return screen.availableGeometry() if screen is not None else None
+
+    def fit_new_screen(self, free: QtCore.QRect) -> None:
+        """A screen of another size (a new resolution, another monitor): the window takes the
+        desktop size, or all of the screen's free area ``free`` when that is smaller."""
+        if self.windowState() & (
+            QtCore.Qt.WindowState.WindowFullScreen | QtCore.Qt.WindowState.WindowMaximized
+        ):
+            return  # the window system sizes it
+        self.setMinimumSize(min(MINIMUM_SIZE[0], free.width()), min(MINIMUM_SIZE[1], free.height()))
+        self.resize(min(DESKTOP_SIZE[0], free.width()), min(DESKTOP_SIZE[1], free.height()))
+
+    def _watch_screen(self) -> None:
+        """Follow the screen the window is on: its free area changing size refits the window."""
+        handle = self.windowHandle()
+        if handle is None or getattr(self, "_watched_handle", None) is handle:
+            return
+        self._watched_handle = handle
+        handle.screenChanged.connect(self._screen_changed)
+        self._screen_changed(handle.screen())
+
+    def _screen_changed(self, screen: QtGui.QScreen | None) -> None:
+        previous = getattr(self, "_watched_screen", None)
+        if previous is not None and previous is not screen:
+            previous.availableGeometryChanged.disconnect(self._free_area_changed)
+            if screen is not None:
+                self.fit_new_screen(screen.availableGeometry())
+        self._watched_screen = screen
+        if screen is not None and previous is not screen:
+            screen.availableGeometryChanged.connect(self._free_area_changed)
+
+    def _free_area_changed(self, free: QtCore.QRect) -> None:
+        self.fit_new_screen(free)
 
     def _start_worker(self, source_factory: Any) -> None:
         config = self._run_config()
@@ -553,6 +652,9 @@ class MainWindow(QtWidgets.QMainWindow):
         self.session_panel.save_settings(self.store)
         self.store.set_value(SIMULATION_KEY, self.simulation_tab.settings())
         self.store.set_value("window", bytes(self.saveGeometry().toBase64()).decode())
+        free = self._free_area()
+        if free is not None:
+            self.store.set_value(SCREEN_KEY, [free.width(), free.height()])
         try:
             self.store.save()
         except OSError as exc:
@@ -577,6 +679,7 @@ class MainWindow(QtWidgets.QMainWindow):
     def showEvent(self, event: QtGui.QShowEvent) -> None:
         super().showEvent(event)
         self.fit_screen()  # the screen is known for sure once shown
+        self._watch_screen()
 
     def closeEvent(self, event: QtGui.QCloseEvent) -> None:
         if not self._closed and not self.session_panel.confirm_close():
@@ -584,6 +687,11 @@ class MainWindow(QtWidgets.QMainWindow):
             return
         self.shutdown()
         super().closeEvent(event)
+
+
+def key_text(keys: str) -> str:
+    """A key sequence as the platform writes it ("Ctrl+L")."""
+    return QtGui.QKeySequence(keys).toString(QtGui.QKeySequence.SequenceFormat.NativeText)
 
 
 def short_source(spec: str) -> str:

@@ -136,7 +136,9 @@ class SessionPanel(QtWidgets.QWidget):
         self.guide_panel = GuidePanel()
         self.guide_panel.hide()
         self.table = RowsTable()
-        self.table.setMinimumHeight(60)
+        # The part that gives way: at 800x480 with a plan and the pending-rows banner, the banner and
+        # every button stay whole and the table shrinks to a few pixels (it scrolls inside itself).
+        self.table.setMinimumHeight(16)
         self._build_layout()
         self._wire()
         self.timer = QtCore.QTimer(self)  # frames still arriving? (tick)
@@ -216,7 +218,7 @@ class SessionPanel(QtWidgets.QWidget):
         table = sign_table()
         self.form = GroundTruthForm(known_combinations(), signs=table)
         self.log_button = touch_button("Log row", "log_row")
-        self.log_button.setToolTip("collect the session's frames per row and log their mean (Enter)")
+        self.log_button.setToolTip("collect the session's frames per row and log their mean")
         self.cancel_button = touch_button("Cancel", "cancel_row")
         self.undo_button = touch_button("Undo…", "undo_row")
         self.undo_button.setToolTip("withdraw the last row (its line stays in rows.csv, marked withdrawn)")
@@ -1045,7 +1047,7 @@ def _banner(
     frame.setObjectName(name)
     frame.setStyleSheet(f"QFrame#{name} {{ background: {background}; border-radius: 3px; }}")
     layout = QtWidgets.QHBoxLayout(frame)
-    layout.setContentsMargins(6, 2, 6, 2)
+    layout.setContentsMargins(6, 0, 0, 0)  # its buttons are as high as the strip (800x480: every px)
     layout.addWidget(text, 1)
     for button in buttons:
         layout.addWidget(button)

@@ -45,8 +45,9 @@ from qrfield.simulation.outputs import (
 )
 from qrfield.simulation.study import SMALL_STUDY, field_specs, parse_override
 from ui.background import BackgroundJob, JobControl
+from ui.full_size import full_size_window
 from ui.settings_form import set_widget_value, widget_for, widget_value
-from ui.touch import FOLDER, TouchCheckBox, ask_path
+from ui.touch import FOLDER, TOUCH_PX, TouchCheckBox, ask_path, touch_button
 
 RANGE_FIELDS = ("x_range", "y_range", "z_range")
 #: Fields edited as text and read with the study's override parser.
@@ -289,10 +290,10 @@ class SimulationTab(QtWidgets.QWidget):
         self.output_dir.setToolTip(
             "each run started by Run writes its outputs into a new <YYYYmmdd-HHMMSS> folder inside this one"
         )
-        browse = QtWidgets.QPushButton("…")
+        browse = touch_button("…")
+        browse.setFixedWidth(TOUCH_PX)
         browse.setObjectName("browse_output")
         browse.setToolTip("choose the output folder")
-        browse.setFixedWidth(32)
         browse.clicked.connect(self._browse_output)
         row = QtWidgets.QHBoxLayout()
         row.addWidget(self.output_dir, 1)
@@ -327,7 +328,7 @@ class SimulationTab(QtWidgets.QWidget):
         self.z_choice.setObjectName("heatmap_z")
         self.heatmap = ImageView()
         self.heatmap_path = _selectable_label("")
-        self.full_size_button = QtWidgets.QPushButton("Full size…")
+        self.full_size_button = touch_button("Full size…", "heatmap_full_size_button")
         self.full_size_button.setToolTip("the heatmap at its own size, in a window of its own")
         self.full_size_button.setEnabled(False)
         choose = QtWidgets.QHBoxLayout()
@@ -757,17 +758,7 @@ class SimulationTab(QtWidgets.QWidget):
         """The heatmap shown, at its own size in a scrollable window of its own."""
         if self.heatmap.pixmap.isNull():
             return
-        dialog = QtWidgets.QDialog(self)
-        dialog.setWindowTitle(f"qrfield — {self.heatmap_path.text()}")
-        dialog.setAttribute(QtCore.Qt.WidgetAttribute.WA_DeleteOnClose)
-        label = QtWidgets.QLabel()
-        label.setPixmap(self.heatmap.pixmap)
-        area = QtWidgets.QScrollArea()
-        area.setWidget(label)
-        QtWidgets.QVBoxLayout(dialog).addWidget(area)
-        size = self.heatmap.pixmap.size()
-        dialog.resize(min(size.width() + 40, 1400), min(size.height() + 40, 900))
-        dialog.show()
+        full_size_window(self, self.heatmap.pixmap, self.heatmap_path.text(), "heatmap_full_size")
 
     def _open_output(self) -> bool:
         """Open the last saved run's folder in the desktop's file manager (Open folder button).

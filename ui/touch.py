@@ -12,7 +12,7 @@ Check boxes are :class:`TouchCheckBox`: 44 px high and toggled by a tap anywhere
 QCheckBox answers only on its indicator and text, 17 px). Message boxes and file dialogs are made by
 :func:`message_box` and :func:`file_dialog` (Qt's own dialog, not the desktop's, which no style
 sheet reaches), sized to the screen; the ``ask_*`` methods of the tabs run them, and tests measure
-them unrun. ``tests/ui/test_touch_targets.py`` measures every one at 800x480.
+them unrun. ``tests/ui/test_app_layout.py`` measures every one at 800x480.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from PySide6 import QtCore, QtGui, QtWidgets
 TOUCH_PX = 44
 
 #: The app's style sheet. Heights are the content's, so that with Fusion's 1 px borders and
-#: paddings each control comes out at exactly TOUCH_PX (tests/ui/test_touch_targets.py measures
+#: paddings each control comes out at exactly TOUCH_PX (tests/ui/test_app_layout.py measures
 #: them): no higher, so that the Session tab keeps room for its rows at 800x480.
 TOUCH_STYLE = f"""
 QPushButton, QToolButton, QComboBox, QLineEdit {{
