@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from PySide6 import QtCore, QtWidgets
+from PySide6 import QtCore, QtGui, QtWidgets
 
 from qrfield import paths
 from qrfield.methods import METHODS
@@ -23,7 +23,7 @@ from qrfield.settings import setting
 from ui.groundtruth_form import WrappedLabel
 from ui.settings_form import SettingsForm
 from ui.text import short_path
-from ui.touch import FOLDER, TOUCH_PX, ask_path, touch_button
+from ui.touch import FOLDER, TOUCH_PX, ask_path, fit_to_screen, touch_button
 
 __all__ = [
     "ENV_ROOT",
@@ -75,10 +75,27 @@ class NewSessionDialog(QtWidgets.QDialog):
         self.setMinimumWidth(440)
         self._build_fields(store)
         self._build_buttons()
+        # The fields scroll (ten rows of 44 px are more than an 800x480 screen holds with the title
+        # bar); the message and Create / Cancel stay in view under them.
+        fields = QtWidgets.QWidget()
+        fields.setLayout(self.form)
+        self.fields_area = QtWidgets.QScrollArea()
+        self.fields_area.setObjectName("new_session_fields")
+        self.fields_area.setWidget(fields)
+        self.fields_area.setWidgetResizable(True)
+        self.fields_area.setFrameShape(QtWidgets.QFrame.Shape.NoFrame)
+        self.fields_area.setHorizontalScrollBarPolicy(QtCore.Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
         layout = QtWidgets.QVBoxLayout(self)
-        layout.addLayout(self.form)
+        layout.setContentsMargins(6, 6, 6, 6)
+        layout.addWidget(self.fields_area, 1)
         layout.addWidget(self.message)
         layout.addLayout(self.buttons)
+
+    def showEvent(self, event: QtGui.QShowEvent) -> None:
+        super().showEvent(event)
+        fields = self.fields_area.widget().sizeHint()
+        wanted = QtCore.QSize(max(self.width(), fields.width() + 40), fields.height() + 2 * TOUCH_PX + 40)
+        fit_to_screen(self, self.parentWidget(), wanted)  # all of it on a desktop, the screen at 800x480
 
     def _build_fields(self, store: Any) -> None:
         self.name_edit = QtWidgets.QLineEdit()

@@ -52,17 +52,36 @@ QMenu::item {{ padding: 13px 24px 13px 24px; }}
 
 
 class TouchPolish(QtCore.QObject):
-    """Gives each combo box, as it is polished, a delegate that draws its list rows as the style
-    sheet says (TOUCH_PX high); install it once with :func:`install_touch_style`."""
+    """As each widget is polished: a combo box gets a delegate that draws its list rows as the
+    style sheet says (TOUCH_PX high); a form's label gets the height of its 44 px field, its text
+    centred beside it (a QFormLayout puts it at the top). Install it once with
+    :func:`install_touch_style`."""
 
     def eventFilter(self, watched: QtCore.QObject, event: QtCore.QEvent) -> bool:
-        if (
-            event.type() == QtCore.QEvent.Type.Polish
-            and isinstance(watched, QtWidgets.QComboBox)
-            and not isinstance(watched.itemDelegate(), QtWidgets.QStyledItemDelegate)
-        ):
-            watched.setItemDelegate(QtWidgets.QStyledItemDelegate(watched))
+        if event.type() != QtCore.QEvent.Type.Polish:
+            return False
+        if isinstance(watched, QtWidgets.QComboBox):
+            if not isinstance(watched.itemDelegate(), QtWidgets.QStyledItemDelegate):
+                watched.setItemDelegate(QtWidgets.QStyledItemDelegate(watched))
+        elif isinstance(watched, QtWidgets.QLabel) and _form_label(watched):
+            watched.setMinimumHeight(max(watched.minimumHeight(), TOUCH_PX))
+            align = QtCore.Qt.AlignmentFlag
+            horizontal = watched.alignment() & align.AlignHorizontal_Mask
+            watched.setAlignment(horizontal | align.AlignVCenter)
         return False
+
+
+def _form_label(label: QtWidgets.QLabel) -> bool:
+    """``label`` is the label of a row of a QFormLayout."""
+    parent = label.parentWidget()
+    layout = parent.layout() if parent is not None else None
+    forms = [layout, *(layout.findChildren(QtWidgets.QFormLayout) if layout is not None else [])]
+    for form in forms:
+        if isinstance(form, QtWidgets.QFormLayout):
+            _row, role = form.getWidgetPosition(label)
+            if role == QtWidgets.QFormLayout.ItemRole.LabelRole:
+                return True
+    return False
 
 
 def install_touch_style(app: QtWidgets.QApplication | None = None) -> None:
@@ -106,7 +125,9 @@ def fit_to_screen(dialog: QtWidgets.QWidget, parent: QtWidgets.QWidget | None, w
         dialog.resize(wanted)
         return
     free = screen.availableGeometry()
-    dialog.resize(min(wanted.width(), free.width()), min(wanted.height(), free.height()))
+    frame = dialog.frameGeometry().size() - dialog.geometry().size()  # the title bar, once shown
+    room = QtCore.QSize(free.width() - max(0, frame.width()), free.height() - max(0, frame.height()))
+    dialog.resize(min(wanted.width(), room.width()), min(wanted.height(), room.height()))
 
 
 def message_box(

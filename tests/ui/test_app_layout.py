@@ -37,6 +37,8 @@ def text_width(label: QtWidgets.QLabel, text: str) -> float:
         doc.setDocumentMargin(0)
         doc.setHtml(text)
         return doc.idealWidth()
+    if label.buddy() is not None:  # "&type" is drawn "type", its letter underlined
+        text = text.replace("&&", "\0").replace("&", "").replace("\0", "&")
     metrics = label.fontMetrics()
     return max(metrics.horizontalAdvance(line) for line in text.split("\n"))
 
@@ -435,12 +437,14 @@ def test_every_dialog_and_message_box_is_finger_sized_at_800x480(
     problems: dict[str, list[str]] = {}
 
     def measure(title: str, dialog: QtWidgets.QWidget) -> None:
+        """On an 800x480 screen (the offscreen one is larger: the dialog is held to 800x480)."""
         dialog.show()
         settle(qtbot)
-        screen = dialog.screen().availableGeometry()
-        if dialog.width() > screen.width() or dialog.height() > screen.height():
-            problems.setdefault(title, []).append(f"{dialog.width()}x{dialog.height()} beyond the screen")
-        if found := touch_problems(dialog):
+        dialog.resize(min(dialog.width(), 800), min(dialog.height(), 480))
+        settle(qtbot)
+        if dialog.width() > 800 or dialog.height() > 480:
+            problems.setdefault(title, []).append(f"{dialog.width()}x{dialog.height()}: larger than 800x480")
+        if found := touch_problems(dialog) + cut_labels(dialog):
             problems.setdefault(title, []).extend(found)
 
     measure("New session", panel.show_new_dialog())
