@@ -207,12 +207,7 @@ def chosen_path(dialog: QtWidgets.QFileDialog) -> str:
 
 
 def ask_path(
-    parent: QtWidgets.QWidget | None,
-    caption: str,
-    directory: str | Path = "",
-    *,
-    mode: str = OPEN,
-    name_filter: str = "",
+    parent: QtWidgets.QWidget | None, caption: str, directory: str | Path = "", **options: str
 ) -> str:
-    """:func:`file_dialog` run: the path chosen, "" when cancelled."""
-    return chosen_path(file_dialog(parent, caption, directory, mode=mode, name_filter=name_filter))
+    """:func:`file_dialog` (``mode``, ``name_filter``) run: the path chosen, "" when cancelled."""
+    return chosen_path(file_dialog(parent, caption, directory, **options))

@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from qrfield.mailbox import Handoff
 from qrfield.seams import BaseSink
 from qrfield.sessions.averaging import Measurement
 from qrfield.sessions.criteria import AcceptanceCriteria, Grades
@@ -122,7 +123,6 @@ class Guide(BaseSink):
         settings: GuideSettings | None = None,
     ) -> None:
         self._lock = threading.Lock()
-        self._ready_event = threading.Event()
         self.method = method
         self.criteria = criteria or AcceptanceCriteria()
         self.frames_per_row = int(frames_per_row)
@@ -135,7 +135,7 @@ class Guide(BaseSink):
         self._moves_mark = 0  # the detector's moves when the target was set or the last row was taken
         self._request: _Request | None = None
         self._recorder = RowRecorder()  # the one row recorder; fed the frames this guide gets
-        self._ready: list[GuidedRow] = []
+        self._ready: Handoff[GuidedRow] = Handoff()  # finished rows, for the owner to log
         self._frames_seen = 0
         self._problem = ""
 
@@ -221,14 +221,11 @@ class Guide(BaseSink):
 
     def take(self) -> list[GuidedRow]:
         """The rows finished since the last call, in order (the owner logs them)."""
-        with self._lock:
-            rows, self._ready = self._ready, []
-            self._ready_event.clear()
-            return rows
+        return self._ready.take()
 
     def wait(self, timeout_s: float) -> bool:
         """Block until a row is finished or ``timeout_s`` passed; True when one is ready."""
-        return self._ready_event.wait(timeout_s)
+        return self._ready.wait(timeout_s)
 
     def view(self) -> GuideView:
         with self._lock:
@@ -288,9 +285,8 @@ class Guide(BaseSink):
             if row.measurement is None:
                 self._problem = self._given_up(row)
                 continue
-            self._ready.append(GuidedRow(row.request.tag, row.measurement))
+            self._ready.put(GuidedRow(row.request.tag, row.measurement))
             self._moves_mark = self._detector.moves  # the next automatic row needs another move
-            self._ready_event.set()
 
     @staticmethod
     def _given_up(row: RecordedRow) -> str:

@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from qrfield.mailbox import Handoff
 from qrfield.runconfig import RunConfig
 from qrfield.seams import BaseSink
 from qrfield.sessions.averaging import FrameCollector, Measurement, circular_mean_deg
@@ -137,12 +138,11 @@ class RowRecorder(BaseSink):
     def __init__(self, info: SessionInfo | None = None) -> None:
         self.info = info
         self._lock = threading.Lock()
-        self._ready_event = threading.Event()
+        self._ended: Handoff[RecordedRow] = Handoff()  # rows that ended by themselves
         self._request: RowRequest | None = None
         self._collector: FrameCollector | None = None
         self._t_armed = 0.0
         self._last_frame_at = 0.0  # monotonic time of the last frame seen (any frame)
-        self._ready: list[RecordedRow] = []
         self.frames_seen = 0
 
     # ---------------------------------------------------------------- the owner's thread
@@ -229,14 +229,11 @@ class RowRecorder(BaseSink):
     def take(self) -> list[RecordedRow]:
         """The rows that ended by themselves since the last call (measured, or given up when the
         source went down), in order."""
-        with self._lock:
-            rows, self._ready = self._ready, []
-            self._ready_event.clear()
-            return rows
+        return self._ended.take()
 
     def wait(self, timeout_s: float) -> bool:
         """Block until a row ended by itself or ``timeout_s`` passed; True when one is ready."""
-        return self._ready_event.wait(timeout_s)
+        return self._ended.wait(timeout_s)
 
     def measure(
         self,
@@ -289,7 +286,7 @@ class RowRecorder(BaseSink):
             if self._request is not None and self._request.frame_timeout_s is None:
                 row = self._end(None, f"no frames ({reason})")
                 if row is not None:
-                    self._queue(row)
+                    self._ended.put(row)
 
     # ---------------------------------------------------------------- internals (under the lock)
     def _finish(self, request: RowRequest, collector: FrameCollector) -> None:
@@ -303,7 +300,7 @@ class RowRecorder(BaseSink):
             measurement = collector.measurement(truth, request.criteria, note=request.note)
             row = self._end(measurement, "")
         assert row is not None
-        self._queue(row)
+        self._ended.put(row)
 
     def _end(
         self, measurement: Measurement | None, problem: str, *, stopped: bool = True
@@ -314,7 +311,3 @@ class RowRecorder(BaseSink):
             return None
         got = collector.progress[0] if collector is not None else 0
         return RecordedRow(request, measurement, got, problem, stopped=stopped and measurement is None)
-
-    def _queue(self, row: RecordedRow) -> None:
-        self._ready.append(row)
-        self._ready_event.set()

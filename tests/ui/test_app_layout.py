@@ -385,20 +385,27 @@ def show_plots(window, tmp_path) -> None:
     )
 
 
-def test_every_control_of_every_tab_is_finger_sized_at_800x480(
-    make_window, qtbot, tmp_path, monkeypatch
-) -> None:
-    from qrfield.sessions.plan import generate_plan, write_plan
-
+def window_with_a_session(make_window, qtbot, tmp_path, monkeypatch, size=(800, 480)):
+    """A window of ``size`` on the virtual bench with a session open, frames coming."""
     monkeypatch.setenv("QRFIELD_SESSIONS_DIR", str(tmp_path / "sessions"))
     window = make_window({"source": "virtual", "method": "both"})
-    window.resize(800, 480)
+    window.resize(*size)
     panel = window.session_panel
     panel.name_edit.setText("touch")
     assert panel.create_from_form() is not None
     qtbot.waitUntil(
         lambda: panel.log_button.isEnabled() and panel.form.follow_box.isVisible(), timeout=WAIT_MS
     )
+    return window
+
+
+def test_every_control_of_every_tab_is_finger_sized_at_800x480(
+    make_window, qtbot, tmp_path, monkeypatch
+) -> None:
+    from qrfield.sessions.plan import generate_plan, write_plan
+
+    window = window_with_a_session(make_window, qtbot, tmp_path, monkeypatch)
+    panel = window.session_panel
     panel.banner.show()  # the pending-rows banner's buttons too
     show_plots(window, tmp_path)
     problems: dict[str, list[str]] = {}
@@ -502,15 +509,8 @@ def test_messages_come_and_go_in_one_place_and_never_move_a_button(
     """The issue's trap: a validation message pushed Log row down 17 px as the finger landed. Every
     message of the Session tab (the field's error, the combination's note, the status, why Log row
     is blocked, the session's warnings) now comes and goes below the buttons."""
-    monkeypatch.setenv("QRFIELD_SESSIONS_DIR", str(tmp_path / "sessions"))
-    window = make_window({"source": "virtual", "method": "both"})
-    window.resize(width, height)
+    window = window_with_a_session(make_window, qtbot, tmp_path, monkeypatch, (width, height))
     panel = window.session_panel
-    panel.name_edit.setText("messages")
-    assert panel.create_from_form() is not None
-    qtbot.waitUntil(
-        lambda: panel.log_button.isEnabled() and panel.form.follow_box.isVisible(), timeout=WAIT_MS
-    )
     panel.form.follow_box.setChecked(False)
     panel.form.set_fields({"x": "10", "y": "-5", "z": "300", "alpha": "15", "beta": "0", "gamma": "0"})
     combo = panel.form.combo
