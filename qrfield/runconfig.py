@@ -16,6 +16,7 @@ virtual     VirtualBenchSettings         ``--virtual-NAME``
 picamera    Picamera2Settings            ``--picamera-NAME``
 usb         UsbCameraSettings            ``--usb-NAME``
 serial      SerialLinkSettings           ``--serial-NAME`` (``--serial [PORT]`` turns the link on)
+handeye     HandEyeSettings              ``--frame --handeye-file`` (poses in the tool or base frame)
 =========== ============================ ======================================================
 
 The app writes the file when it closes (with sections of its own: window, simulation, session
@@ -105,6 +106,7 @@ class Section:
 def sections() -> dict[str, Section]:
     """The run configuration's sections, in file order (imports the settings' modules)."""
     from qrfield.detect import DetectorSettings
+    from qrfield.handeye.settings import HandEyeSettings
     from qrfield.serial.link import SerialLinkSettings
     from qrfield.solvers import settings_classes
     from qrfield.sources import Picamera2Settings, UsbCameraSettings, VirtualBenchSettings
@@ -119,6 +121,7 @@ def sections() -> dict[str, Section]:
         Section("picamera", Picamera2Settings, "picamera_", "Raspberry Pi camera (--source picamera2)"),
         Section("usb", UsbCameraSettings, "usb_", "USB camera (--source usb:N)"),
         Section("serial", SerialLinkSettings, "serial_", "serial link to the gripper controller"),
+        Section("handeye", HandEyeSettings, "", "the frame poses are reported in (docs/handeye.md)"),
     ]
     return {s.name: s for s in table}
 

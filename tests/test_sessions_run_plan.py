@@ -177,3 +177,23 @@ def test_a_bad_plan_is_refused_before_anything_changes(tmp_path: Path, config_di
     assert sorted(p.name for p in session.iterdir()) == ["rows.csv", "session.json"]
     none = qrfield("session", "run-plan", str(session), "--source", "virtual")
     assert none.returncode == 2 and "has no plan yet" in none.stderr
+
+
+def test_a_session_in_the_tool_frame_is_refused_for_a_plan_of_camera_poses(
+    tmp_path: Path, config_dir
+) -> None:
+    from qrfield.handeye import HandEyeCalibration
+
+    config_dir.mkdir(parents=True, exist_ok=True)
+    HandEyeCalibration("eye-in-hand", np.eye(4), 0.1, 0.02, 15, "test").save(config_dir / "handeye.json")
+    done = qrfield(
+        "session", "new", str(tmp_path / "sessions"), "--name", "tool", "--camera", CAMERA,
+        "--side-mm", str(SIDE), "--method", "numerical", "--frame", "tool",
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    session = Path(done.stdout.strip())
+    plan = tmp_path / "plan.csv"
+    plan.write_text("x,y,z,alpha,beta,gamma,combo\n0,0,300,10,0,0,alpha\n", encoding="utf-8")
+    refused = qrfield("session", "run-plan", str(session), "--plan", str(plan), "--source", "virtual")
+    assert refused.returncode == 2 and "reports poses in the tool frame" in refused.stderr
+    assert rows_of(session) == []

@@ -22,6 +22,7 @@ import numpy as np
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from qrfield.camera import DEFAULT_CAMERA, CameraModel, CameraModelError, resolve_camera
+from qrfield.handeye import HandEyeSettings
 from qrfield.methods import methods_from_choice
 from qrfield.runconfig import ConfigStore, RunConfig, RunSettings
 from qrfield.serial.link import SerialLinkSettings
@@ -164,7 +165,11 @@ class MainWindow(QtWidgets.QMainWindow):
         self.virtual_form = SettingsForm(VirtualBenchSettings, store.group("virtual", VirtualBenchSettings))
         show_app_settings(self.app_settings, self.source_controls, self.solver_controls, self.camera_controls)
         show_view_settings(self.view_settings, self.camera_controls)
-        self.serial_panel = SerialPanel(store.group("serial", SerialLinkSettings))
+        self.serial_panel = SerialPanel(
+            store.group("serial", SerialLinkSettings),
+            handeye=store.group("handeye", HandEyeSettings),
+            config_dir=store.path.parent,
+        )
         self.calibration_dialog: CalibrationDialog | None = None
         self.calibrate_button = QtWidgets.QPushButton("Calibrate camera…")
         self.calibrate_button.setObjectName("calibrate")
@@ -334,7 +339,7 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def _start_worker(self, source_factory: Any) -> None:
         config = self._run_config()
-        self.serial_panel.set_context(config.side_mm, config.camera.name)
+        self.serial_panel.set_context(config.side_mm, config.camera.name, config.source)
         self.worker = PipelineWorker(config, source_factory=source_factory)
         self.worker.sourceOpened.connect(self._on_source_opened)
         self.worker.sourceFailed.connect(self._on_source_failed)
@@ -457,7 +462,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.plots.set_window(self.view_settings.plot_window_s)
         config = self._run_config()
         self.simulation_tab.set_app_camera(self.worked["camera"], self.app_settings.side_mm)
-        self.serial_panel.set_context(config.side_mm, config.camera.name)  # what HELLO reports
+        self.serial_panel.set_context(config.side_mm, config.camera.name, config.source)  # what HELLO reports
         request = self.worker.configure(config, reopen=reopen)
         self._source_requests[request] = config.source
         self.session_panel.refresh_state()
@@ -647,6 +652,7 @@ class MainWindow(QtWidgets.QMainWindow):
             self.store.set_group(name, value)
         self.store.set_group("detector", self.solver_controls.detector.value())
         self.store.set_group("serial", self.serial_panel.saved_settings())
+        self.store.set_group("handeye", self.serial_panel.handeye_settings())
         if self.calibration_dialog is not None:
             self.store.set_group("calibration", self.calibration_dialog.settings())
         self.session_panel.save_settings(self.store)

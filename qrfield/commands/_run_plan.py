@@ -63,6 +63,7 @@ def say(text: str) -> None:
 def run(args: argparse.Namespace) -> int:
     from qrfield.commands.session import loop_thread
     from qrfield.engine import FrameLoop, SayEvents
+    from qrfield.handeye.setups import CAMERA
     from qrfield.runconfig import effective_settings
     from qrfield.sessions import Session
     from qrfield.sessions.guide import Guide, GuideSettings
@@ -79,6 +80,11 @@ def run(args: argparse.Namespace) -> int:
     try:
         for warning in session.warnings:
             say(f"warning: {warning}")
+        if session.info.pose_frame != CAMERA:  # plan targets are poses of the code in the camera frame
+            raise ValueError(
+                f"{session.path.name} reports poses in the {session.info.pose_frame} frame; a plan's targets "
+                "are in the camera frame: run the plan in a session made without --frame"
+            )
         if plan is not None:
             progress = attach_plan(
                 session.path, plan, session.rows, source=str(args.plan), combinations=args.combinations

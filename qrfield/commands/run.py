@@ -17,6 +17,15 @@ bench unless ``--allow-virtual`` is given. The port is opened exclusively: a por
 No silent states: an unknown backend, method or setting value, on the command line or in app.json
 (the message names the file and the key), stops the run at start with exit code 2.
 
+With ``--frame tool`` or ``--frame base`` (and a hand-eye file, docs/handeye.md) the poses on stdout
+and in the serial link's $QRF and $QRM lines are in the gripper's tool frame or the robot's base
+frame, their uncertainty with the calibration's added; each JSON line says which in ``pose_frame``
+and HELLO reports it. The controller may calibrate over the link: ``$QRC,TOOL`` records pairs,
+``$QRC,HANDEYE`` solves for ``--handeye-setup`` (auto: the frame's) and saves the hand-eye file (the
+previous one kept); in a ``--frame tool|base`` run both streams take the new calibration at once
+(:mod:`qrfield.serial.handeye`). A hand-eye file made from simulated frames is refused with a live
+camera.
+
 stdout is best effort: lines are written by a thread of their own, so a reader that stops reading
 never holds up the frame loop, the serial line or shutdown (lines it did not take are counted on
 stderr). SIGINT (Ctrl-C) and SIGTERM stop the run cleanly after the current frame. Exit codes: 0
@@ -117,7 +126,7 @@ class _StdoutSink(BaseSink):
         self.writer.write(line)
 
 
-def _gripper_link(settings: Any, say: _Stderr, config: Any) -> Any:
+def _gripper_link(settings: Any, say: _Stderr, config: Any, pose_frame: Any, handeye: Any) -> Any:
     from qrfield.serial.controller import GripperLink
 
     shown = {"state": "", "error": ""}
@@ -132,22 +141,49 @@ def _gripper_link(settings: Any, say: _Stderr, config: Any) -> Any:
             shown["error"] = status.last_error
             say(f"serial {status.port}: {status.last_error}")
 
-    link = GripperLink(settings, on_status=on_status)
+    link = GripperLink(settings, on_status=on_status, pose_frame=pose_frame)
     link.set_context(side_mm=config.side_mm, camera=config.camera.name)
+    link.add_handeye(handeye)
     link.start(open_first=True)  # a busy port refuses here, with one line naming the other process
     rate = f"at most {settings.max_rate_hz:g}/s" if settings.max_rate_hz > 0 else "as fast as the port allows"
     say(
         f"serial: $QRF lines (protocol 2) to {settings.port} at {settings.baud} baud, {rate}, newest pose "
-        "first; answering $QRC commands (PING, HELLO, STREAM, RATE, MEAS)"
+        f"first, in the {pose_frame.frame} frame; answering $QRC commands (PING, HELLO, STREAM, RATE, "
+        "MEAS, TOOL, HANDEYE)"
     )
+    if handeye.setup is None:
+        say("serial: HANDEYE has no set-up to solve for (--handeye-setup eye-in-hand|eye-to-hand)")
+    else:
+        say(f"serial: HANDEYE solves {handeye.setup} and saves {handeye.save_to}")
     return link
+
+
+def _handeye_commands(effective: Any, args: argparse.Namespace, config: Any, say: _Stderr) -> Any:
+    """$QRC,TOOL and $QRC,HANDEYE for the link; HandEyeError when the set-up does not fit the frame."""
+    from qrfield.serial.handeye import HandEyeCommands
+
+    info = {"camera": config.camera.name, "side_mm": float(config.side_mm), "pose_method": config.methods[0]}
+    handeye = HandEyeCommands.from_settings(effective.groups["handeye"], args.config_dir, info=info)
+
+    def calibrated(done: Any) -> None:
+        c = done.calibration
+        kept = f" (the one before kept as {done.previous})" if done.previous else ""
+        kind = " from simulated frames" if done.simulated else ""
+        say(
+            f"serial: HANDEYE: {c.setup} calibration{kind} from {c.n_pairs} pairs, residuals "
+            f"{c.residual_mm:.3f} mm, {c.residual_deg:.3f} deg; saved to {done.path}{kept}"
+        )
+
+    handeye.calibrated.append(calibrated)
+    return handeye
 
 
 def run(args: argparse.Namespace) -> int:
     from qrfield.camera import camera_origin
     from qrfield.engine import FAILED, STOPPED, FrameLoop
+    from qrfield.handeye import InFrame, PoseFrame
     from qrfield.runconfig import effective_settings
-    from qrfield.sources import source_kind
+    from qrfield.sources import may_be_live_camera, source_kind
     from qrfield.stdout_lines import LineWriter
 
     if args.frames < 0:
@@ -161,15 +197,25 @@ def run(args: argparse.Namespace) -> int:
     if source_kind(config.source) != "virtual":
         for note in effective.assumed():
             say(note)
+    pose_frame = PoseFrame.from_settings(effective.groups["handeye"], args.config_dir)
+    pose_frame.check_source(may_be_live_camera(config.source))
+    handeye = _handeye_commands(effective, args, config, say) if serial else None
+    if not pose_frame.identity:
+        say(pose_frame.describe())
     config.make_pipeline()  # every detector, solver and camera setting is checked now, not per frame
-    link = _gripper_link(effective.serial_settings(), say, config) if serial else None
+    link = _gripper_link(effective.serial_settings(), say, config, pose_frame, handeye) if serial else None
     writer = LineWriter(sys.stdout)
     stop_signal = {"name": ""}
     camera = config.camera
     events = _Events(
         say, writer, link, f"camera {camera.name} from {camera_origin(camera)}" if camera.path else ""
     )
-    sinks: list[Any] = [_StdoutSink(writer, args.json_lines)] + ([link] if link is not None else [])
+    stdout_sink: Any = _StdoutSink(writer, args.json_lines)
+    if not pose_frame.identity:
+        stdout_sink = InFrame(stdout_sink, pose_frame)
+        if link is not None:  # after a HANDEYE, stdout follows the link's new calibration
+            link.handeye.calibrated.append(lambda _done: setattr(stdout_sink, "pose_frame", link.pose_frame))
+    sinks: list[Any] = [stdout_sink] + ([link] if link is not None else [])
     loop = FrameLoop(config, events=events, sinks=sinks, max_frames=args.frames)
     events.loop = loop
 
@@ -214,8 +260,16 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _json_line(result: Any, simulated: bool) -> str:
-    return json.dumps(result.to_json_dict(simulated))
+    from qrfield.handeye.frames import frame_of
+
+    out = result.to_json_dict(simulated)
+    out["pose_frame"] = frame_of(result)  # camera, tool or base (docs/handeye.md)
+    return json.dumps(out)
 
 
 def _human_line(result: Any, simulated: bool) -> str:
-    return result.summary(simulated)
+    from qrfield.handeye.frames import frame_of
+    from qrfield.handeye.setups import CAMERA
+
+    frame = frame_of(result)
+    return result.summary(simulated) + ("" if frame == CAMERA else f"  [{frame} frame]")

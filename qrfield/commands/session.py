@@ -71,11 +71,12 @@ def _add_new(parser: argparse.ArgumentParser) -> None:
     )
     add_arguments(group, SessionSettings)
     add_arguments(group, AcceptanceCriteria)
-    add_run_arguments(parser, only=METHODS)
+    add_run_arguments(parser, only=(*METHODS, "handeye"))
 
 
 def _run_new(args: argparse.Namespace) -> int:
     from qrfield.camera import camera_origin
+    from qrfield.handeye import PoseFrame
     from qrfield.methods import METHODS, methods_from_choice
     from qrfield.runconfig import effective_settings
     from qrfield.sessions import AcceptanceCriteria, Session, SessionSettings
@@ -97,6 +98,9 @@ def _run_new(args: argparse.Namespace) -> int:
     store = effective.store
     rows = from_arguments(SessionSettings, args, base=store.group("session", SessionSettings))
     criteria = from_arguments(AcceptanceCriteria, args, base=store.group("criteria", AcceptanceCriteria))
+    pose_frame = PoseFrame.from_settings(effective.groups["handeye"], args.config_dir)
+    if not pose_frame.identity:
+        say(f"rows and their ground truth in the {pose_frame.frame} frame: {pose_frame.describe()}")
     session = Session.create(
         args.root,
         args.name,
@@ -108,6 +112,8 @@ def _run_new(args: argparse.Namespace) -> int:
         frames_per_row=rows.frames_per_row,
         operator=args.operator,
         notes=args.notes,
+        pose_frame=pose_frame.frame,
+        handeye=pose_frame.calibration.to_dict() if pose_frame.calibration is not None else None,
     )
     session.close()
     info = session.info
@@ -162,9 +168,11 @@ def _interrupt(signum: int, _frame: Any) -> None:
 
 def _run_log(args: argparse.Namespace) -> int:
     from qrfield.engine import FrameLoop, SayEvents
+    from qrfield.handeye import InFrame, PoseFrame
     from qrfield.runconfig import effective_settings
     from qrfield.sessions import Session, known_combinations, validate_field
     from qrfield.sessions.recorder import RowRecorder, session_run_config
+    from qrfield.sources import may_be_live_camera
 
     if args.frames is not None and args.frames < 1:
         raise ValueError(f"--frames must be at least 1, got {args.frames}")
@@ -186,7 +194,11 @@ def _run_log(args: argparse.Namespace) -> int:
             say(f"settings: {problem}")
         config = session_run_config(effective.run_config(camera=session.info.camera), session.info)
         recorder = RowRecorder(session.info)  # the one row recorder, a sink fed every frame
-        loop = FrameLoop(config, events=SayEvents(say), sinks=(recorder,))
+        pose_frame = PoseFrame.from_saved(session.info.pose_frame, session.info.handeye, session.info.name)
+        pose_frame.check_source(may_be_live_camera(config.source))
+        # The rows are in the session's frame: the recorder sees each result through it.
+        sink = recorder if pose_frame.identity else InFrame(recorder, pose_frame)
+        loop = FrameLoop(config, events=SayEvents(say), sinks=(sink,))
         with loop_thread(loop) as thread:
 
             def ended() -> bool:
@@ -360,6 +372,7 @@ def _add_show(parser: argparse.ArgumentParser) -> None:
 
 
 def _run_show(args: argparse.Namespace) -> int:
+    from qrfield.handeye import PoseFrame
     from qrfield.sessions import read_session
 
     info, content = read_session(args.folder)
@@ -368,6 +381,14 @@ def _run_show(args: argparse.Namespace) -> int:
     print(f"  created {info.created}, operator {info.operator or '-'}, app {info.app_version}")
     print(f"  camera {cam.name} {cam.width}x{cam.height} (fx {cam.fx:.1f}), QR side {info.side_mm:g} mm")
     print(f"  solver {info.solver}, {info.frames_per_row} frames per row, criteria {info.criteria.label()}")
+    print(
+        f"  poses in the {info.pose_frame} frame"
+        + (
+            f" ({PoseFrame.from_saved(info.pose_frame, info.handeye, info.name).describe()})"
+            if info.handeye
+            else ""
+        )
+    )
     if info.notes:
         print(f"  notes: {' '.join(info.notes.split())}")
     print(f"  {_counts(content)}")
