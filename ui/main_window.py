@@ -28,6 +28,7 @@ from qrfield.runconfig import ConfigStore, RunConfig, RunSettings
 from qrfield.serial.link import SerialLinkSettings
 from qrfield.solvers import settings_classes
 from qrfield.sources import Picamera2Settings, VirtualBenchSettings
+from qrfield.stream import StreamSettings
 from ui.analysis_tab import AnalysisTab
 from ui.calibration_dialog import CalibrationDialog, CalibrationDialogSettings
 from ui.controls import (
@@ -160,6 +161,7 @@ class MainWindow(QtWidgets.QMainWindow):
             classes,
             {n: store.group(n, c) for n, c in classes.items()},
             detector=(detector_cls, store.group("detector", detector_cls)),
+            stream=(StreamSettings, store.group("stream", StreamSettings)),
         )
         self.camera_controls = CameraControls()
         self.virtual_form = SettingsForm(VirtualBenchSettings, store.group("virtual", VirtualBenchSettings))
@@ -438,6 +440,7 @@ class MainWindow(QtWidgets.QMainWindow):
             picamera=self.source_controls.picamera.value(),
             pace=True,  # the preview plays a video at its own rate
             retry_s=app.retry_s,
+            stream=self.solver_controls.stream.value(),
         )
 
     def _camera_that_works(self) -> str:
@@ -651,6 +654,7 @@ class MainWindow(QtWidgets.QMainWindow):
         for name, value in self.solver_controls.settings().items():
             self.store.set_group(name, value)
         self.store.set_group("detector", self.solver_controls.detector.value())
+        self.store.set_group("stream", self.solver_controls.stream.value())
         self.store.set_group("serial", self.serial_panel.saved_settings())
         self.store.set_group("handeye", self.serial_panel.handeye_settings())
         if self.calibration_dialog is not None:

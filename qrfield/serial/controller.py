@@ -322,7 +322,9 @@ class CommandHandler:
             except ValueError:
                 meas.last_status = WireStatus.NOCONV
             if status == ResultStatus.OK and usable_pose(pose):
-                meas.frames.append(pose)
+                # A pipeline FrameResult itself, so that the mean knows which frames the stream
+                # filter made (their sigma is then the mean's: qrfield.sessions.averaging).
+                meas.frames.append(result if hasattr(result, "poses") else pose)
                 meas.simulated = meas.simulated or simulated
                 meas.ambiguous = meas.ambiguous or bool(getattr(result, "ambiguous", False))
             if len(meas.frames) >= meas.n:
