@@ -356,6 +356,23 @@ class FrameLoop:
                 self.events.note(f"closing the source failed: {exc}")
 
 
+class SayEvents(LoopEventsBase):
+    """The loop's messages as lines for a human (``say(text)``: a command's stderr): the source
+    opened or reopened, failed or ended, and each note. Nothing else is heard."""
+
+    def __init__(self, say: Callable[[str], object]) -> None:
+        self.say = say
+
+    def opened(self, description: str, again: bool) -> None:
+        self.say(f"source {'reopened' if again else 'opened'}: {description}")
+
+    def failed(self, message: str, ended: bool) -> None:
+        self.say(message)
+
+    def note(self, message: str) -> None:
+        self.say(message)
+
+
 def _missing_methods(obj: object, protocol: type) -> list[str]:
     """The methods of ``protocol`` that ``obj`` does not have (a clear error at construction beats a
     missing method found mid-stream)."""

@@ -1,4 +1,5 @@
-"""A one-slot mailbox where the newest item replaces an unread older one: :class:`Mailbox`.
+"""Hand-overs between threads: a one-slot mailbox where the newest item replaces an unread older
+one (:class:`Mailbox`), and a hand-off of every item in order (:class:`Handoff`).
 
 The project's one "newest replaces older" hand-over between threads: the newest camera frame
 (:class:`qrfield.sources.LatestFrameReader`), the newest pose waiting for the serial port
@@ -21,7 +22,7 @@ from typing import Generic, TypeVar
 
 T = TypeVar("T")
 
-__all__ = ["Mailbox"]
+__all__ = ["Handoff", "Mailbox"]
 
 
 class Mailbox(Generic[T]):
@@ -122,3 +123,31 @@ class Mailbox(Generic[T]):
     def _wait_for(self, ready: Callable[[], bool], timeout: float | None) -> bool:
         """Wait (the lock held) until ``ready()``; False when ``timeout`` s passed first."""
         return bool(self._cond.wait_for(ready, timeout))
+
+
+class Handoff(Generic[T]):
+    """Every item, in order, from the thread that makes them to the one that takes them (the rows
+    the session's recorder and the guide finish on the frame loop's thread, logged on the owner's):
+    :meth:`put` adds one, :meth:`take` returns all waiting, :meth:`wait` waits for the first.
+    Nothing is dropped. Thread-safe."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._items: list[T] = []
+        self._ready = threading.Event()
+
+    def put(self, item: T) -> None:
+        with self._lock:
+            self._items.append(item)
+            self._ready.set()
+
+    def take(self) -> list[T]:
+        """The items put since the last call, oldest first ([] when none)."""
+        with self._lock:
+            items, self._items = self._items, []
+            self._ready.clear()
+            return items
+
+    def wait(self, timeout_s: float) -> bool:
+        """Block until an item is waiting or ``timeout_s`` passed; True when one is."""
+        return self._ready.wait(timeout_s)

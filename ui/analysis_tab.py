@@ -1,6 +1,7 @@
 """The Analysis tab: choose a session, run :func:`qrfield.sessions.analysis.analyze` in the
 background (it solves one pose per row for the resemblance to the simulation), then show the
-report, the per-combination table and the two plots.
+report, the per-combination table and the two plots (each opens at its own size in a window of its
+own: Full size…, or a tap on the plot; an 800x480 screen shows them scaled down).
 
 Results belong to their session: each analysis writes ``<session>/analysis/`` (``report.txt``,
 ``analysis.json``, ``errors_vs_tilt.png``, ``measured_vs_truth.png``; a new analysis replaces the
@@ -27,10 +28,13 @@ from PySide6 import QtCore, QtGui, QtWidgets
 from qrfield.sessions import read_session, session_folders
 from qrfield.sessions.files import atomic_write
 from ui.background import BackgroundJob
+from ui.full_size import full_size_window
 from ui.groundtruth_form import WrappedLabel
-from ui.session_dialogs import touch_button
 from ui.text import fixed, short_path
+from ui.touch import FOLDER, ask_path, touch_button
 
+#: The analysis' plots, in the order analyze writes them (errors_vs_tilt.png, measured_vs_truth.png).
+PLOT_NAMES = ("errors against tilt", "measured against truth")
 #: The folder, inside a session, that its analysis is written to.
 ANALYSIS_FOLDER = "analysis"
 REPORT_FILE = "report.txt"
@@ -107,7 +111,10 @@ def result_files(result: dict[str, Any]) -> list[Path]:
 
 
 class ScaledImage(QtWidgets.QLabel):
-    """Shows a picture scaled to the label's width (aspect kept); ``image`` is the full-size one."""
+    """Shows a picture scaled to the label's width (aspect kept); ``image`` is the full-size one.
+    ``clicked`` when tapped (the tab opens it full size)."""
+
+    clicked = QtCore.Signal()
 
     def __init__(self, text: str = "") -> None:
         super().__init__(text)
@@ -124,6 +131,13 @@ class ScaledImage(QtWidgets.QLabel):
     def resizeEvent(self, event: QtGui.QResizeEvent) -> None:
         super().resizeEvent(event)
         self._fit()
+
+    def mouseReleaseEvent(self, event: QtGui.QMouseEvent) -> None:
+        super().mouseReleaseEvent(event)
+        if event.button() == QtCore.Qt.MouseButton.LeftButton and self.rect().contains(
+            event.position().toPoint()
+        ):
+            self.clicked.emit()
 
     def _fit(self) -> None:
         if self.image is None or self.image.isNull():
@@ -220,12 +234,23 @@ class AnalysisTab(QtWidgets.QWidget):
         self.table.verticalHeader().hide()
         self.table.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
         self.plots: list[ScaledImage] = []
+        self.full_size_buttons: list[QtWidgets.QPushButton] = []
         plots_page = QtWidgets.QWidget()
         plots_layout = QtWidgets.QVBoxLayout(plots_page)
-        for name in ("errors against tilt", "measured against truth"):
+        for k, name in enumerate(PLOT_NAMES):
             label = ScaledImage(f"({name}: not drawn yet)")
             label.setObjectName(name.replace(" ", "_"))
+            label.clicked.connect(lambda k=k: self.show_full_size(k))
+            button = touch_button("Full size…", f"{name.replace(' ', '_')}_full_size")
+            button.setToolTip(f"the plot of {name} at its own size, in a window of its own (or tap the plot)")
+            button.setEnabled(False)
+            button.clicked.connect(lambda _checked=False, k=k: self.show_full_size(k))
+            header = QtWidgets.QHBoxLayout()
+            header.addWidget(QtWidgets.QLabel(name), 1)
+            header.addWidget(button)
             self.plots.append(label)
+            self.full_size_buttons.append(button)
+            plots_layout.addLayout(header)
             plots_layout.addWidget(label)
         plots_layout.addStretch(1)
         plots_area = QtWidgets.QScrollArea()
@@ -261,7 +286,7 @@ class AnalysisTab(QtWidgets.QWidget):
             self.choice.setCurrentIndex(self.choice.findData(self.current))
 
     def _browse(self) -> None:
-        path = QtWidgets.QFileDialog.getExistingDirectory(self, "Session folder", str(self.root()))
+        path = ask_path(self, "Session folder", self.root(), mode=FOLDER)
         if path:
             self.choice.addItem(Path(path).name, path)
             self.choice.setCurrentIndex(self.choice.count() - 1)
@@ -331,7 +356,9 @@ class AnalysisTab(QtWidgets.QWidget):
                 label.setText(f"cannot show {path}")
             else:
                 label.set_image(pixmap)
-            label.setToolTip(path)
+            label.setToolTip(f"{path} (tap: full size)")
+        for label, button in zip(self.plots, self.full_size_buttons, strict=True):
+            button.setEnabled(label.image is not None and not label.image.isNull())
         self.analysisDone.emit(result)
 
     def _fill_table(self, result: dict[str, Any]) -> None:
@@ -347,10 +374,17 @@ class AnalysisTab(QtWidgets.QWidget):
                 self.table.setItem(r, c, QtWidgets.QTableWidgetItem(text))
         self.table.resizeColumnsToContents()
 
+    def show_full_size(self, index: int) -> QtWidgets.QDialog | None:
+        """Plot ``index`` at its own size in a window of its own (it scrolls; fits the screen)."""
+        image = self.plots[index].image
+        if image is None or image.isNull():
+            return None
+        return full_size_window(self, image, PLOT_NAMES[index], f"plot_{index}_full_size")
+
     # ---------------------------------------------------------------- saving
     def ask_save_folder(self) -> str:
         """The folder to copy the results to ("" = cancelled); tests replace this."""
-        return QtWidgets.QFileDialog.getExistingDirectory(self, "Save the analysis in", str(Path.home()))
+        return ask_path(self, "Save the analysis in", Path.home(), mode=FOLDER)
 
     def save_as(self) -> list[Path]:
         """Copy the last analysis' files to a folder the operator chooses; the copies' paths."""

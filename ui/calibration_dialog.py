@@ -48,6 +48,7 @@ from qrfield.virtual_board import VirtualChessboard
 from ui.background import BackgroundJob
 from ui.settings_form import SettingsForm
 from ui.text import short_path
+from ui.touch import TouchCheckBox, answer, install_touch_style, yes_no
 
 #: The pages beside the picture (in this order).
 BOARD_PAGE, VIEWS_PAGE, RESULT_PAGE = range(3)
@@ -134,6 +135,7 @@ class CalibrationDialog(QtWidgets.QDialog):
         parent: QtWidgets.QWidget | None = None,
     ) -> None:
         super().__init__(parent)
+        install_touch_style()  # finger-sized controls, also when opened on its own
         self.setWindowTitle("qrfield — camera calibration")
         self._initial_settings = settings
         self.camera_provider = camera_provider
@@ -150,6 +152,7 @@ class CalibrationDialog(QtWidgets.QDialog):
         self.finder = BackgroundJob("calibration-preview", self)
         self.job = BackgroundJob("calibrate", self)
         layout = QtWidgets.QHBoxLayout(self)
+        layout.setContentsMargins(4, 4, 4, 4)  # 44 px rows: every pixel of an 800x480 screen counts
         layout.addLayout(self._build_picture(), 3)
         layout.addWidget(self._build_controls(), 2)
         self._fit_screen()
@@ -208,13 +211,15 @@ class CalibrationDialog(QtWidgets.QDialog):
 
     def _build_board_page(self) -> QtWidgets.QWidget:
         """The settings and the virtual chessboard switch."""
-        self.virtual_check = QtWidgets.QCheckBox("virtual chessboard")
+        self.virtual_check = TouchCheckBox("virtual chessboard")
         self.virtual_check.setToolTip("seeded board poses rendered through the app's camera model")
         self.virtual_check.setObjectName("virtual")
         policy = QtWidgets.QSizePolicy.Policy
         self.virtual_check.setSizePolicy(policy.Maximum, policy.Fixed)  # a click beside the text does nothing
         page = QtWidgets.QWidget()
         layout = QtWidgets.QVBoxLayout(page)
+        layout.setContentsMargins(4, 4, 4, 4)
+        layout.setSpacing(2)
         layout.addWidget(self.form)
         layout.addWidget(self.virtual_check)
         layout.addStretch(1)
@@ -563,14 +568,7 @@ class CalibrationDialog(QtWidgets.QDialog):
     # ---------------------------------------------------------------- save / use
     def confirm_overwrite(self, path: Path) -> bool:
         """Ask before replacing an existing file (tests replace this method)."""
-        answer = QtWidgets.QMessageBox.question(
-            self,
-            "Overwrite?",
-            f"{path} exists. Replace it?",
-            QtWidgets.QMessageBox.StandardButton.Yes | QtWidgets.QMessageBox.StandardButton.No,
-            QtWidgets.QMessageBox.StandardButton.No,
-        )
-        return answer == QtWidgets.QMessageBox.StandardButton.Yes
+        return answer(*yes_no(self, "Overwrite?", f"{path} exists. Replace it?"), "no") == "yes"
 
     def save(self) -> Path | None:
         """Write the computed camera model to :meth:`save_path`; None when not saved (the note says why)."""

@@ -15,6 +15,7 @@ from qrfield.settings import setting, specs
 from qrfield.sources import SOURCE_CHOICES, Picamera2Settings
 from ui.camera_report import CameraReport
 from ui.settings_form import SettingsForm, set_widget_value, widget_for, widget_value
+from ui.touch import FOLDER, ask_path
 
 PRESET_SIZES = ("640x480", "1280x960", "1280x720", "1920x1080")
 
@@ -93,15 +94,13 @@ class SourceControls(QtWidgets.QWidget):
             self.combo.setCurrentText(spec)
 
     def _choose_file(self) -> None:
-        path, _ = QtWidgets.QFileDialog.getOpenFileName(
-            self, "Video file", "", "Video (*.avi *.mp4 *.mkv *.mov);;All (*)"
-        )
+        path = ask_path(self, "Video file", name_filter="Video (*.avi *.mp4 *.mkv *.mov);;All (*)")
         if path:
             self.set_source(path)
             self.openRequested.emit()
 
     def _choose_folder(self) -> None:
-        path = QtWidgets.QFileDialog.getExistingDirectory(self, "Folder of images")
+        path = ask_path(self, "Folder of images", mode=FOLDER)
         if path:
             self.set_source(path)
             self.openRequested.emit()
@@ -183,9 +182,7 @@ class CameraControls(QtWidgets.QWidget):
         self.plot_window_s.valueChanged.connect(lambda *_: self.changed.emit())
 
     def _choose_file(self) -> None:
-        path, _ = QtWidgets.QFileDialog.getOpenFileName(
-            self, "Camera model", "", "Camera JSON (*.json);;All (*)"
-        )
+        path = ask_path(self, "Camera model", name_filter="Camera JSON (*.json);;All (*)")
         if path:
             with QtCore.QSignalBlocker(self.camera):
                 self.camera.setCurrentText(path)

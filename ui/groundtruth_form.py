@@ -1,7 +1,11 @@
 """The ground-truth form: x, y, z (mm), alpha, beta, gamma (deg), the rotation combination and a note.
 
-Laid out for a small screen: x, y, z on one line, alpha, beta, gamma on the next, then the
-combination and the note. Each field is checked live with :func:`qrfield.sessions.validate_field`;
+Laid out for a small screen: x, y, z on one line (with "follow the bench" at its end on the
+virtual bench), alpha, beta, gamma on the next, then the combination and the note on one line;
+under them the form's two messages (what the combination's signs say, and the bad fields), which
+the Session tab moves below its buttons (:attr:`GroundTruthForm.messages`), so that no message
+that comes and goes ever moves a button; on a wide tab the six pose fields share one line. Each
+field is checked live with :func:`qrfield.sessions.validate_field`;
 :attr:`GroundTruthForm.valid` turns False when any field is bad (``validityChanged``), so the
 panel can disable "Log row": a half row is never logged. A bad field is marked (red border, its
 message as tooltip and in the line under the fields) only once the operator has typed into it or
@@ -12,7 +16,8 @@ The combination follows the angles' signs (:mod:`qrfield.sessions.combo_signs`):
 change and the combination shown disagrees with them (or none is chosen), the combination that
 fits is chosen and the line beside it says so; a combination the operator picks is kept while it
 agrees. :meth:`mismatch` says why the label disagrees with the angles (the panel asks first).
-Enter anywhere in the form emits ``submitted``. The form keeps its values after a row is logged.
+Enter anywhere in the form emits ``submitted``. The form keeps its pose and combination after a row
+is logged (the panel clears the note: it belongs to its row).
 
 On the virtual bench the pose fields follow the bench's true pose (:meth:`follow`) while the
 "follow the bench" box is ticked; typing into a pose field unticks it (the operator's value wins).
@@ -28,6 +33,7 @@ from PySide6 import QtCore, QtGui, QtWidgets
 
 from qrfield.sessions import GroundTruth, check_ground_truth, truth_fields, validate_field
 from qrfield.sessions.combo_signs import combination_mismatch, suggest_combination
+from ui.touch import TOUCH_PX, TouchCheckBox
 
 #: Pose fields in form (and Tab) order: name, label, unit; three per line.
 POSE_FIELDS = (
@@ -41,7 +47,15 @@ POSE_FIELDS = (
 ANGLES = ("alpha", "beta", "gamma")
 #: How a field is named in messages.
 FIELD_NAMES = {name: name for name, _, _ in POSE_FIELDS} | {"combo": "combination"}
-BAD_STYLE = "border: 2px solid #c0392b; background: #fdecea;"
+#: The narrowest a pose field gets (px): on one line of six, "-123.45" and its frame; on two lines.
+ONE_ROW_EDIT_PX = 54
+TWO_ROW_EDIT_PX = 64
+#: A bad field: a red border 2 px wide, its content 4 px lower, so that it stays TOUCH_PX high and
+#: marking it never moves anything.
+BAD_STYLE = (
+    "border: 2px solid #c0392b; background: #fdecea; "
+    f"min-height: {TOUCH_PX - 4}px; max-height: {TOUCH_PX - 4}px;"
+)
 ERROR_COLOUR = "#c0392b"
 HELP = {
     "x": "x of the QR centre in the camera frame (+X right), mm; a number, optionally with 'mm'",
@@ -53,6 +67,50 @@ HELP = {
     "combo": "the rotation combination this row belongs to (the simulation's names); "
     "chosen from the angles' signs when they change",
 }
+
+
+class ElidedLabel(QtWidgets.QLabel):
+    """A one-line label that shows as much of its text as fits, with "…" (its height never
+    changes); :meth:`full_text` is the whole text, which its tooltip shows unless one is set."""
+
+    def __init__(self, text: str = "") -> None:
+        super().__init__()
+        self._full = ""
+        self._own_tip = False
+        size = QtWidgets.QSizePolicy.Policy
+        self.setSizePolicy(size.Ignored, size.Fixed)
+        self.setMinimumWidth(20)
+        self.setText(text)
+
+    def full_text(self) -> str:
+        return self._full
+
+    def setText(self, text: str) -> None:
+        self._full = text
+        self._elide()
+
+    def setToolTip(self, text: str) -> None:
+        self._own_tip = bool(text)
+        super().setToolTip(text)
+
+    def resizeEvent(self, event: QtGui.QResizeEvent) -> None:
+        super().resizeEvent(event)
+        self._elide()
+
+    def sizeHint(self) -> QtCore.QSize:
+        margins = self.contentsMargins()
+        height = self.fontMetrics().height() + margins.top() + margins.bottom() + 2 * self.margin()
+        return QtCore.QSize(self.fontMetrics().horizontalAdvance(self._full), height)
+
+    def minimumSizeHint(self) -> QtCore.QSize:
+        return QtCore.QSize(20, self.sizeHint().height())
+
+    def _elide(self) -> None:
+        room = max(0, self.contentsRect().width() - 2 * self.margin())
+        shown = self.fontMetrics().elidedText(self._full, QtCore.Qt.TextElideMode.ElideRight, room)
+        super().setText(shown)
+        if not self._own_tip:
+            super().setToolTip(self._full if shown != self._full else "")
 
 
 class WrappedLabel(QtWidgets.QLabel):
@@ -102,18 +160,21 @@ class GroundTruthForm(QtWidgets.QWidget):
         self.touched: set[str] = set()
         self._valid = False
         self._bench_pose: tuple[Sequence[float], Sequence[float]] | None = None
-        grid = QtWidgets.QGridLayout(self)
-        grid.setContentsMargins(0, 0, 0, 0)
-        grid.setHorizontalSpacing(6)
-        grid.setVerticalSpacing(3)
-        self._build_pose_fields(grid)
-        self._build_combo(grid)
-        self._build_note_row(grid)
+        self.grid = QtWidgets.QGridLayout(self)
+        self.grid.setContentsMargins(0, 0, 0, 0)
+        self.grid.setHorizontalSpacing(6)
+        self.grid.setVerticalSpacing(2)
+        self._build_pose_fields()
+        self._build_combo()
+        self._build_note_row()
         self.problems = WrappedLabel("")
         self.problems.setObjectName("gt_problems")
         self.problems.setStyleSheet(f"color: {ERROR_COLOUR};")
         self.problems.hide()
-        grid.addWidget(self.problems, 4, 0, 1, 7)
+        #: The form's messages (the owner may lay them out elsewhere: below its buttons).
+        self.messages = (self.combo_note, self.problems)
+        self.one_row = False
+        self._place(one_row=False)
         order = [*self.edits.values(), self.combo, self.note]
         for first, second in itertools.pairwise(order):
             QtWidgets.QWidget.setTabOrder(first, second)
@@ -122,27 +183,23 @@ class GroundTruthForm(QtWidgets.QWidget):
         self._valid = not self.errors
 
     # ---------------------------------------------------------------- builders
-    def _build_pose_fields(self, grid: QtWidgets.QGridLayout) -> None:
-        for k, (name, label, unit) in enumerate(POSE_FIELDS):
-            row, column = divmod(k, 3)
+    def _build_pose_fields(self) -> None:
+        self.captions: dict[str, QtWidgets.QLabel] = {}
+        for name, label, unit in POSE_FIELDS:
             edit = QtWidgets.QLineEdit()
             edit.setObjectName(f"gt_{name}")
             edit.setPlaceholderText(unit)
             edit.setToolTip(HELP[name])
-            edit.setMinimumWidth(64)
             edit.textChanged.connect(lambda _text, n=name: self._field_changed(n))
             edit.textEdited.connect(lambda _text, n=name: self._typed(n))
             self.edits[name] = edit
             caption = QtWidgets.QLabel(label)
             caption.setToolTip(HELP[name])
             caption.setAlignment(QtCore.Qt.AlignmentFlag.AlignRight | QtCore.Qt.AlignmentFlag.AlignVCenter)
-            grid.addWidget(caption, row, 2 * column)
-            grid.addWidget(edit, row, 2 * column + 1)
-            grid.setColumnStretch(2 * column + 1, 1)
-            if column == 2:
-                grid.addWidget(QtWidgets.QLabel(unit), row, 6)
+            self.captions[name] = caption
+        self.units = (QtWidgets.QLabel("mm"), QtWidgets.QLabel("deg"))
 
-    def _build_combo(self, grid: QtWidgets.QGridLayout) -> None:
+    def _build_combo(self) -> None:
         self.combo = QtWidgets.QComboBox()
         self.combo.setObjectName("gt_combo")
         self.combo.setToolTip(HELP["combo"])
@@ -161,29 +218,87 @@ class GroundTruthForm(QtWidgets.QWidget):
         self.combo_note = WrappedLabel("")
         self.combo_note.setObjectName("gt_combo_note")
         self.combo_note.setStyleSheet("color: #555;")
-        caption = QtWidgets.QLabel("comb.")
-        caption.setToolTip(HELP["combo"])
-        caption.setAlignment(QtCore.Qt.AlignmentFlag.AlignRight | QtCore.Qt.AlignmentFlag.AlignVCenter)
-        grid.addWidget(caption, 2, 0)
-        grid.addWidget(self.combo, 2, 1, 1, 2)
-        grid.addWidget(self.combo_note, 2, 3, 1, 4)
+        self.combo_note.hide()
+        self.combo_caption = QtWidgets.QLabel("comb.")
+        self.combo_caption.setToolTip(HELP["combo"])
+        self.combo_caption.setAlignment(
+            QtCore.Qt.AlignmentFlag.AlignRight | QtCore.Qt.AlignmentFlag.AlignVCenter
+        )
 
-    def _build_note_row(self, grid: QtWidgets.QGridLayout) -> None:
+    def _build_note_row(self) -> None:
         self.note = QtWidgets.QLineEdit()
         self.note.setObjectName("gt_note")
         self.note.setPlaceholderText("note (optional, one line)")
-        self.follow_box = QtWidgets.QCheckBox("follow the bench")
+        self.follow_box = TouchCheckBox("follow the bench")
         self.follow_box.setObjectName("follow_bench")
         self.follow_box.setToolTip("pre-fill the pose with the virtual bench's true pose")
         self.follow_box.setChecked(True)
         self.follow_box.setEnabled(False)  # until a frame with a true pose arrives
         self.follow_box.hide()
         self.follow_box.toggled.connect(self._follow_toggled)
-        caption = QtWidgets.QLabel("note")
-        caption.setAlignment(QtCore.Qt.AlignmentFlag.AlignRight | QtCore.Qt.AlignmentFlag.AlignVCenter)
-        grid.addWidget(caption, 3, 0)
-        grid.addWidget(self.note, 3, 1, 1, 3)
-        grid.addWidget(self.follow_box, 3, 4, 1, 3)
+        note_caption = QtWidgets.QLabel("note")
+        note_caption.setAlignment(QtCore.Qt.AlignmentFlag.AlignRight | QtCore.Qt.AlignmentFlag.AlignVCenter)
+        self.last_row = QtWidgets.QHBoxLayout()  # the combination and the note, on one line
+        self.last_row.setSpacing(6)
+        self.last_row.addWidget(self.combo_caption)
+        self.last_row.addWidget(self.combo)
+        self.last_row.addWidget(note_caption)
+        self.last_row.addWidget(self.note, 1)
+
+    def _place(self, one_row: bool) -> None:
+        """Lay the fields out: the six pose fields on one line (``one_row``; no unit labels, the
+        fields' placeholders and tooltips say them) or three per line, "follow the bench" at the end
+        of the first; then the combination and the note, then the messages."""
+        grid = self.grid
+        for widget in [*self.captions.values(), *self.edits.values(), *self.units, self.follow_box]:
+            grid.removeWidget(widget)
+        grid.removeItem(self.last_row)
+        for widget in self.messages:
+            grid.removeWidget(widget)
+        for column in range(grid.columnCount()):
+            grid.setColumnStretch(column, 0)
+        per_row = 6 if one_row else 3
+        for edit in self.edits.values():
+            # On one line the fields only go there when each gets ONE_ROW_EDIT_PX (fit_width); their
+            # minimum is lower, so that the form never asks its tab to grow (it would stay one line).
+            edit.setMinimumWidth(ONE_ROW_EDIT_PX - 20 if one_row else TWO_ROW_EDIT_PX)
+        for k, (name, _label, _unit) in enumerate(POSE_FIELDS):
+            row, column = divmod(k, per_row)
+            grid.addWidget(self.captions[name], row, 2 * column)
+            grid.addWidget(self.edits[name], row, 2 * column + 1)
+            grid.setColumnStretch(2 * column + 1, 1)
+        end = 2 * per_row
+        for row, unit in enumerate(self.units):
+            unit.setVisible(not one_row)
+            if not one_row:
+                grid.addWidget(unit, row, end)
+        follow_column = end if one_row else end + 1
+        grid.addWidget(self.follow_box, 0, follow_column)
+        rows = 1 if one_row else 2
+        grid.addLayout(self.last_row, rows, 0, 1, follow_column + 1)
+        for k, widget in enumerate(self.messages):
+            if widget.parentWidget() is self:  # not laid out elsewhere by the owner
+                grid.addWidget(widget, rows + 1 + k, 0, 1, follow_column + 1)
+        self.one_row = one_row
+
+    def one_row_width(self) -> int:
+        """The width (px) the six pose fields need on one line, with "follow the bench" if shown."""
+        spacing = self.grid.horizontalSpacing()
+        captions = sum(c.sizeHint().width() for c in self.captions.values())
+        need = captions + 6 * ONE_ROW_EDIT_PX + 11 * spacing
+        if not self.follow_box.isHidden():
+            need += self.follow_box.sizeHint().width() + spacing
+        return need
+
+    def fit_width(self) -> None:
+        """Six fields on one line when they fit (a wide tab, or no "follow the bench" beside them)."""
+        one_row = self.width() >= self.one_row_width()
+        if one_row != self.one_row:
+            self._place(one_row)
+
+    def resizeEvent(self, event: QtGui.QResizeEvent) -> None:
+        super().resizeEvent(event)
+        self.fit_width()
 
     # ---------------------------------------------------------------- values
     def fields(self) -> dict[str, str]:
@@ -237,6 +352,7 @@ class GroundTruthForm(QtWidgets.QWidget):
         if not self.follow_box.isEnabled():
             self.follow_box.setEnabled(True)
             self.follow_box.show()
+            self.fit_width()
         if self.follow_box.isChecked():
             values = truth_fields(position_mm, angles_deg)
             values.pop("combo")
@@ -248,6 +364,7 @@ class GroundTruthForm(QtWidgets.QWidget):
         if self.follow_box.isEnabled():
             self.follow_box.setEnabled(False)
             self.follow_box.hide()
+            self.fit_width()
 
     def _follow_toggled(self, on: bool) -> None:
         if on and self._bench_pose is not None:
@@ -281,19 +398,23 @@ class GroundTruthForm(QtWidgets.QWidget):
             with QtCore.QSignalBlocker(self.combo):
                 self.combo.setCurrentText(suggestion)
             self._check("combo")
-            self.combo_note.setText("← from the angles' signs")
+            self._set_combo_note("← from the angles' signs")
         elif self.mismatch() or not self.combo_note.text().startswith("←"):
             self._note_mismatch()
 
     def _note_mismatch(self) -> None:
         """The line beside the combination: what the angles' signs fit when the label disagrees."""
         if not self.mismatch():
-            self.combo_note.setText("")
+            self._set_combo_note("")
             return
         suggestion = self.suggestion()
-        self.combo_note.setText(
+        self._set_combo_note(
             f"⚠ the angles fit '{suggestion}'" if suggestion else "⚠ the angles' signs fit no combination"
         )
+
+    def _set_combo_note(self, text: str) -> None:
+        self.combo_note.setText(text)
+        self.combo_note.setVisible(bool(text))
 
     # ---------------------------------------------------------------- validation
     def _typed(self, name: str) -> None:

@@ -19,8 +19,8 @@ from qrfield.sessions.criteria import FAR, GOOD, NEAR
 from qrfield.sessions.guide import GuideView
 from qrfield.sessions.progress import DONE, SKIPPED, TargetState
 from ui.groundtruth_form import WrappedLabel
-from ui.session_dialogs import touch_button
 from ui.text import fixed
+from ui.touch import TouchCheckBox, touch_button
 
 #: Cell colours by grade: (background, text).
 GRADE_COLOURS = {GOOD: ("#d9f0d9", "#1d6b1d"), NEAR: ("#fdf0c8", "#7a5000"), FAR: ("#f7d4d4", "#a01818")}
@@ -63,7 +63,7 @@ class GuidePanel(QtWidgets.QFrame):
         )
         self.chooser.setSizePolicy(QtWidgets.QSizePolicy.Policy.Expanding, QtWidgets.QSizePolicy.Policy.Fixed)
         self.chooser.setMinimumHeight(36)
-        self.auto_box = QtWidgets.QCheckBox("log when still")
+        self.auto_box = TouchCheckBox("log when still")
         self.auto_box.setObjectName("guide_auto")
         self.auto_box.setToolTip(
             "log the target's row by itself once the card has moved to it and been still for the hold time"

@@ -46,11 +46,11 @@ from ui.plots import PosePlots
 from ui.pose_panel import PosePanel, simulated_source_name
 from ui.preview import PreviewPane, PreviewView
 from ui.serial_panel import SerialPanel
-from ui.session_dialogs import touch_button
 from ui.sessions_panel import BenchContext, SessionPanel
 from ui.settings_form import SettingsForm
 from ui.simulation_tab import CONFIG_KEY as SIMULATION_KEY
 from ui.simulation_tab import SimulationTab
+from ui.touch import install_touch_style, touch_button
 from ui.wheel_guard import install_wheel_guard
 from ui.worker import STOP_WAIT_MS, PipelineWorker, Processed, start_worker, stop_worker
 
@@ -62,10 +62,25 @@ PLOT_PERIOD_S = 0.2
 DESKTOP_SIZE = (1300, 820)
 #: The smallest window (px): the Raspberry Pi Touch Display, the smallest size the layout is tested at.
 MINIMUM_SIZE = (800, 480)
+#: Config key of the screen's free area (px) the saved window geometry belongs to.
+SCREEN_KEY = "window_screen"
 #: Below this window height (px) the pose panel uses its compact type (800x480, 1024x600).
 COMPACT_BELOW_PX = 700
 #: The left column's (preview and pose) share of the window's width.
 LEFT_SHARE = 0.44
+#: The keys of the frequent actions: name -> (key sequence, what it does); their buttons' and the
+#: tabs' tooltips name them (docs/app.md, "Keys").
+SHORTCUTS = {
+    "log_row": ("Ctrl+L", "log a row (the target's, with a plan)"),
+    "cancel_row": ("Esc", "stop collecting the row (nothing logged)"),
+    "undo_row": ("Ctrl+Z", "withdraw the last row (asks first)"),
+    "new_session": ("Ctrl+N", "start a new session"),
+    "resume": ("Ctrl+O", "resume a session"),
+    "export_rows": ("Ctrl+E", "export the rows in force"),
+    "next_tab": ("Ctrl+Tab", "the next tab"),
+    "previous_tab": ("Ctrl+Shift+Tab", "the previous tab"),
+    "full_screen": ("F11", "full screen and back"),
+}
 #: How many notes the window keeps (the status bar's tooltip shows the last few).
 NOTES_KEPT = 50
 
@@ -94,11 +109,18 @@ class MainWindow(QtWidgets.QMainWindow):
     ) -> None:
         super().__init__()
         install_wheel_guard()  # before any control is polished (see ui/wheel_guard.py)
+        install_touch_style()  # every touch target 44 px high (ui/touch.py)
         self.setWindowTitle("qrfield — bench")
         self.store = store
+        stored: RunSettings = store.group("run", RunSettings)
         self.app_settings: RunSettings = dataclasses.replace(
-            store.group("run", RunSettings), **{k: v for k, v in (overrides or {}).items() if v is not None}
+            stored, **{k: v for k, v in (overrides or {}).items() if v is not None}
         )
+        #: What app.json gets for the source and the camera: the last ones that worked (a source
+        #: that opened, a camera model that was found), else what it held; a source that failed to
+        #: open never becomes the default that `qrfield run` then fails on.
+        self.worked = {"source": stored.source, "camera": stored.camera}
+        self._source_requests: dict[int, str] = {0: self.app_settings.source}  # request -> source
         self.view_settings: ViewSettings = store.group("view", ViewSettings)
         self.camera_model: CameraModel | None = None
         self.notes: list[str] = []  # every status note, in full (the status bar may shorten them)
@@ -176,7 +198,9 @@ class MainWindow(QtWidgets.QMainWindow):
         self.session_panel = SessionPanel(store, self._session_context)
         self.analysis_tab = AnalysisTab(self.session_panel.root)
         self.session_panel.set_default_solver(self.methods())
-        self.simulation_tab = SimulationTab(app.camera, app.side_mm, store.value(SIMULATION_KEY))
+        self.simulation_tab = SimulationTab(
+            self._camera_that_works(), app.side_mm, store.value(SIMULATION_KEY)
+        )
         work = QtWidgets.QTabWidget()
         work.setObjectName("work_tabs")
         work.addTab(self.session_panel, "Session")
@@ -214,8 +238,49 @@ class MainWindow(QtWidgets.QMainWindow):
         # 800x480 screen. That everything fits is checked by tests/ui/test_app_layout.py.
         self.layout().setSizeConstraint(QtWidgets.QLayout.SizeConstraint.SetNoConstraint)
         self._build_status_bar()
-        QtGui.QShortcut(QtGui.QKeySequence(QtCore.Qt.Key.Key_F11), self, self.toggle_full_screen)
+        self._build_shortcuts()
         self._restore_geometry()
+
+    def _build_shortcuts(self) -> None:
+        """The keys of the frequent actions (:data:`SHORTCUTS`), for the whole window, each named in
+        its button's (or tab's) tooltip."""
+        panel = self.session_panel
+        tabs = self.work_tabs
+        actions = {
+            "log_row": panel.log_row,
+            "cancel_row": panel.cancel_row,
+            "undo_row": panel.undo_row,
+            "new_session": panel.show_new_dialog,
+            "resume": panel.show_resume_dialog,
+            "export_rows": panel.export_rows,
+            "next_tab": lambda: tabs.setCurrentIndex((tabs.currentIndex() + 1) % tabs.count()),
+            "previous_tab": lambda: tabs.setCurrentIndex((tabs.currentIndex() - 1) % tabs.count()),
+            "full_screen": self.toggle_full_screen,
+        }
+        self.shortcuts: dict[str, QtGui.QShortcut] = {}
+        for name, (keys, _what) in SHORTCUTS.items():
+            shortcut = QtGui.QShortcut(QtGui.QKeySequence(keys), self)
+            shortcut.setContext(QtCore.Qt.ShortcutContext.WindowShortcut)
+            shortcut.activated.connect(actions[name])
+            self.shortcuts[name] = shortcut
+        buttons = {
+            "log_row": panel.log_button,
+            "cancel_row": panel.cancel_button,
+            "undo_row": panel.undo_button,
+            "new_session": panel.new_button,
+            "resume": panel.resume_button,
+            "export_rows": panel.export_button,
+        }
+        for name, button in buttons.items():
+            keys, what = SHORTCUTS[name]
+            shown = key_text(keys) + (" anywhere, Enter in the form" if name == "log_row" else "")
+            button.setToolTip(f"{button.toolTip() or what} ({shown})")
+        tip = (
+            f"{key_text(SHORTCUTS['next_tab'][0])}: next tab, "
+            f"{key_text(SHORTCUTS['previous_tab'][0])}: previous tab"
+        )
+        for k in range(tabs.count()):
+            tabs.setTabToolTip(k, f"{tabs.tabText(k).replace('&&', '&')} ({tip})")
 
     def _build_status_bar(self) -> None:
         """The source on the left, the rates on the right; notes show between them for a while."""
@@ -227,13 +292,56 @@ class MainWindow(QtWidgets.QMainWindow):
         self.statusBar().addPermanentWidget(self.status_rate)
 
     def _restore_geometry(self) -> None:
-        """The size and place of the last session, else the desktop size; never beyond the screen."""
+        """The size and place of the last session on the same screen size, else the desktop size;
+        never beyond the screen. A screen of another size since (a 1024x600 display where the app
+        ran at 800x480) gets the window fitted to it, not the old size."""
         geometry = self.store.value("window")
-        if isinstance(geometry, str):
+        saved_screen = self.store.value(SCREEN_KEY)
+        free = self._free_area()
+        same_screen = free is not None and saved_screen == [free.width(), free.height()]
+        if isinstance(geometry, str) and same_screen:
             self.restoreGeometry(QtCore.QByteArray.fromBase64(geometry.encode()))
+        elif free is not None:
+            self.fit_new_screen(free)
         else:
             self.resize(*DESKTOP_SIZE)
         self.fit_screen()
+
+    def _free_area(self) -> QtCore.QRect | None:
+        screen = self.screen() or QtWidgets.QApplication.primaryScreen()
+        return screen.availableGeometry() if screen is not None else None
+
+    def fit_new_screen(self, free: QtCore.QRect) -> None:
+        """A screen of another size (a new resolution, another monitor): the window takes the
+        desktop size, or all of the screen's free area ``free`` when that is smaller."""
+        if self.windowState() & (
+            QtCore.Qt.WindowState.WindowFullScreen | QtCore.Qt.WindowState.WindowMaximized
+        ):
+            return  # the window system sizes it
+        self.setMinimumSize(min(MINIMUM_SIZE[0], free.width()), min(MINIMUM_SIZE[1], free.height()))
+        self.resize(min(DESKTOP_SIZE[0], free.width()), min(DESKTOP_SIZE[1], free.height()))
+
+    def _watch_screen(self) -> None:
+        """Follow the screen the window is on: its free area changing size refits the window."""
+        handle = self.windowHandle()
+        if handle is None or getattr(self, "_watched_handle", None) is handle:
+            return
+        self._watched_handle = handle
+        handle.screenChanged.connect(self._screen_changed)
+        self._screen_changed(handle.screen())
+
+    def _screen_changed(self, screen: QtGui.QScreen | None) -> None:
+        previous = getattr(self, "_watched_screen", None)
+        if previous is not None and previous is not screen:
+            previous.availableGeometryChanged.disconnect(self._free_area_changed)
+            if screen is not None:
+                self.fit_new_screen(screen.availableGeometry())
+        self._watched_screen = screen
+        if screen is not None and previous is not screen:
+            screen.availableGeometryChanged.connect(self._free_area_changed)
+
+    def _free_area_changed(self, free: QtCore.QRect) -> None:
+        self.fit_new_screen(free)
 
     def _start_worker(self, source_factory: Any) -> None:
         config = self._run_config()
@@ -243,8 +351,10 @@ class MainWindow(QtWidgets.QMainWindow):
         self.worker.sourceFailed.connect(self._on_source_failed)
         self.worker.sourceNote.connect(self._on_note)
         self.worker.sourceDown.connect(self._on_source_down)
-        # Every result, on the worker thread: the serial link, and the guide of a planned experiment.
-        self.worker.result_sinks = (self.serial_panel.publisher, self.session_panel.guide)
+        # Every result, on the worker thread: the serial link, the session's row recorder and the
+        # guide of a planned experiment.
+        panel = self.session_panel
+        self.worker.result_sinks = (self.serial_panel.publisher, panel.recorder, panel.guide)
         self.thread = start_worker(self.worker)
         self._closed = False
         #: False when shutdown's bounded wait for the worker thread ran out (None before shutdown).
@@ -314,6 +424,7 @@ class MainWindow(QtWidgets.QMainWindow):
         app = self.app_settings
         try:
             self.camera_model = resolve_camera(app.camera)
+            self.worked["camera"] = app.camera
             self.camera_controls.camera_info.setText(
                 f"{self.camera_model.width}x{self.camera_model.height} px, fx {self.camera_model.fx:.1f}, "
                 f"fy {self.camera_model.fy:.1f}, cx {self.camera_model.cx:.1f}, cy {self.camera_model.cy:.1f}"
@@ -338,6 +449,14 @@ class MainWindow(QtWidgets.QMainWindow):
             stream=self.solver_controls.stream.value(),
         )
 
+    def _camera_that_works(self) -> str:
+        """The app's camera if its model is found, else the last one that was (saved with the study)."""
+        try:
+            resolve_camera(self.app_settings.camera)
+        except CameraModelError:
+            return self.worked["camera"]
+        return self.app_settings.camera
+
     def _apply(self, *_: object) -> None:
         """Controls changed: new settings for the worker, plots and panel."""
         self._reconfigure(reopen=False)
@@ -350,10 +469,11 @@ class MainWindow(QtWidgets.QMainWindow):
         )
         self.view_settings = view_settings_from(self.camera_controls)
         self.plots.set_window(self.view_settings.plot_window_s)
-        self.simulation_tab.set_app_camera(self.app_settings.camera, self.app_settings.side_mm)
         config = self._run_config()
+        self.simulation_tab.set_app_camera(self.worked["camera"], self.app_settings.side_mm)
         self.serial_panel.set_context(config.side_mm, config.camera.name, config.source)  # what HELLO reports
         request = self.worker.configure(config, reopen=reopen)
+        self._source_requests[request] = config.source
         self.session_panel.refresh_state()
         return request
 
@@ -410,7 +530,22 @@ class MainWindow(QtWidgets.QMainWindow):
         return self.worker.source_camera or self.camera_model
 
     # ---------------------------------------------------------------- worker signals
+    def _source_that_opened(self) -> str | None:
+        """The source of the worker's open source (by the request it was opened for), else None."""
+        loop = self.worker.loop
+        if loop.source is None:
+            return None
+        generation = loop.source_generation
+        numbers = [n for n in self._source_requests if n <= generation]
+        return self._source_requests[max(numbers)] if numbers else None
+
     def _on_source_opened(self, description: str) -> None:
+        spec = self._source_that_opened()
+        if spec is not None:
+            self.worked["source"] = spec
+            generation = self.worker.loop.source_generation
+            newest = max(n for n in self._source_requests if n <= generation)
+            self._source_requests = {n: v for n, v in self._source_requests.items() if n >= newest}
         self.camera_controls.report.show_stream(self.worker.stream_report)
         self.banner_row.hide()
         self.status_source.setText(f"source: {short_source(self.app_settings.source)}")
@@ -515,7 +650,10 @@ class MainWindow(QtWidgets.QMainWindow):
 
     # ---------------------------------------------------------------- shutdown
     def save_settings(self) -> None:
-        self.store.set_group("run", self.app_settings)
+        opened = self._source_that_opened()  # open now, its signal perhaps not handled yet
+        if opened is not None:
+            self.worked["source"] = opened
+        self.store.set_group("run", dataclasses.replace(self.app_settings, **self.worked))
         self.store.set_group("view", self.view_settings)
         self.store.set_group("virtual", self.virtual_form.value())
         self.store.set_group("picamera", self.source_controls.picamera.value())
@@ -530,6 +668,9 @@ class MainWindow(QtWidgets.QMainWindow):
         self.session_panel.save_settings(self.store)
         self.store.set_value(SIMULATION_KEY, self.simulation_tab.settings())
         self.store.set_value("window", bytes(self.saveGeometry().toBase64()).decode())
+        free = self._free_area()
+        if free is not None:
+            self.store.set_value(SCREEN_KEY, [free.width(), free.height()])
         try:
             self.store.save()
         except OSError as exc:
@@ -568,6 +709,7 @@ class MainWindow(QtWidgets.QMainWindow):
     def showEvent(self, event: QtGui.QShowEvent) -> None:
         super().showEvent(event)
         self.fit_screen()  # the screen is known for sure once shown
+        self._watch_screen()
 
     def closeEvent(self, event: QtGui.QCloseEvent) -> None:
         if not self._closed and not self.session_panel.confirm_close():
@@ -575,6 +717,11 @@ class MainWindow(QtWidgets.QMainWindow):
             return
         self.shutdown()
         super().closeEvent(event)
+
+
+def key_text(keys: str) -> str:
+    """A key sequence as the platform writes it ("Ctrl+L")."""
+    return QtGui.QKeySequence(keys).toString(QtGui.QKeySequence.SequenceFormat.NativeText)
 
 
 def short_source(spec: str) -> str:

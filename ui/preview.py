@@ -53,6 +53,7 @@ class PreviewView(pg.GraphicsLayoutWidget):
         self.info.setVisible(False)  # until there is something to say
         self.view.addItem(self.info)
         self._size: tuple[int, int] | None = None
+        self.view.sigTransformChanged.connect(self._transform_changed)  # the picture moved or scaled
 
     def _build_detection_overlay(self) -> None:
         """The code's outline, its four vertices and their V1..V4 labels (hidden until a code is found)."""
@@ -84,9 +85,22 @@ class PreviewView(pg.GraphicsLayoutWidget):
 
     def resizeEvent(self, event: QtGui.QResizeEvent | None) -> None:
         super().resizeEvent(event)
-        info = getattr(self, "info", None)  # pyqtgraph calls this from its own __init__, before ours
-        if info is not None:  # the info line wraps at the view's width instead of running out of it
-            info.textItem.setTextWidth(max(80.0, float(self.width() - 12)))
+        if getattr(self, "info", None) is not None:  # pyqtgraph calls this from its __init__, before ours
+            self._fit_info()
+
+    @QtCore.Slot(object)
+    def _transform_changed(self, _view: object = None) -> None:
+        self._fit_info()
+
+    def _fit_info(self) -> None:
+        """The info line wraps at the picture's right edge (or the widget's, if nearer): it starts at
+        the picture's left edge, which is inset when the widget is wider than the picture."""
+        room = float(self.width())
+        if self._size is not None:
+            corners = QtCore.QRectF(-0.5, -0.5, *self._size)
+            shown = self.mapFromScene(self.view.mapViewToScene(corners)).boundingRect()
+            room = float(min(shown.right(), self.width()) - max(shown.left(), 0))
+        self.info.textItem.setTextWidth(max(80.0, room - 8.0))
 
     def show_frame(self, image: np.ndarray) -> None:
         """Display a grey (H, W) or BGR (H, W, 3) uint8 image."""

@@ -13,7 +13,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from PySide6 import QtCore, QtWidgets
+from PySide6 import QtCore, QtGui, QtWidgets
 
 from qrfield.methods import METHODS
 from qrfield.sessions import AcceptanceCriteria, SessionSettings, session_folders
@@ -22,18 +22,17 @@ from qrfield.sessions.folders import SessionFolderSettings, sessions_root
 from ui.groundtruth_form import WrappedLabel
 from ui.settings_form import SettingsForm
 from ui.text import short_path
+from ui.touch import FOLDER, TOUCH_PX, ask_path, fit_to_screen, touch_button
 
-#: Height of the buttons of a session's actions (px): a finger on a touch screen.
-TOUCH_PX = 40
-
-
-def touch_button(text: str, name: str = "") -> QtWidgets.QPushButton:
-    """A push button a finger can hit (:data:`TOUCH_PX` high)."""
-    button = QtWidgets.QPushButton(text)
-    button.setMinimumHeight(TOUCH_PX)
-    if name:
-        button.setObjectName(name)
-    return button
+__all__ = [
+    "ENV_ROOT",
+    "TOUCH_PX",
+    "NewSessionDialog",
+    "ResumeDialog",
+    "SessionFolderSettings",
+    "sessions_root",
+    "touch_button",
+]
 
 
 def _message_label() -> WrappedLabel:
@@ -55,10 +54,27 @@ class NewSessionDialog(QtWidgets.QDialog):
         self.setMinimumWidth(440)
         self._build_fields(store)
         self._build_buttons()
+        # The fields scroll (ten rows of 44 px are more than an 800x480 screen holds with the title
+        # bar); the message and Create / Cancel stay in view under them.
+        fields = QtWidgets.QWidget()
+        fields.setLayout(self.form)
+        self.fields_area = QtWidgets.QScrollArea()
+        self.fields_area.setObjectName("new_session_fields")
+        self.fields_area.setWidget(fields)
+        self.fields_area.setWidgetResizable(True)
+        self.fields_area.setFrameShape(QtWidgets.QFrame.Shape.NoFrame)
+        self.fields_area.setHorizontalScrollBarPolicy(QtCore.Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
         layout = QtWidgets.QVBoxLayout(self)
-        layout.addLayout(self.form)
+        layout.setContentsMargins(6, 6, 6, 6)
+        layout.addWidget(self.fields_area, 1)
         layout.addWidget(self.message)
         layout.addLayout(self.buttons)
+
+    def showEvent(self, event: QtGui.QShowEvent) -> None:
+        super().showEvent(event)
+        fields = self.fields_area.widget().sizeHint()
+        wanted = QtCore.QSize(max(self.width(), fields.width() + 40), fields.height() + 2 * TOUCH_PX + 40)
+        fit_to_screen(self, self.parentWidget(), wanted)  # all of it on a desktop, the screen at 800x480
 
     def _build_fields(self, store: Any) -> None:
         self.name_edit = QtWidgets.QLineEdit()
@@ -79,7 +95,7 @@ class NewSessionDialog(QtWidgets.QDialog):
         root = self.folder_form.widgets["root"]
         assert isinstance(root, QtWidgets.QLineEdit)
         root.setPlaceholderText(short_path(sessions_root(SessionFolderSettings())))
-        browse = QtWidgets.QPushButton("Folder…")
+        browse = touch_button("Folder…", "sessions_folder")
         browse.clicked.connect(self._choose_root)
         folder_row = QtWidgets.QHBoxLayout()
         folder_row.addWidget(self.folder_form, 1)
@@ -116,7 +132,7 @@ class NewSessionDialog(QtWidgets.QDialog):
         self.message.setVisible(bool(text))
 
     def _choose_root(self) -> None:
-        path = QtWidgets.QFileDialog.getExistingDirectory(self, "Sessions folder", str(self.root()))
+        path = ask_path(self, "Sessions folder", self.root(), mode=FOLDER)
         if path:
             widget = self.folder_form.widgets["root"]
             assert isinstance(widget, QtWidgets.QLineEdit)

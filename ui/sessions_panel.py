@@ -1,15 +1,16 @@
 """The Session tab: the session bar (New, Resume, Export, the open session's name, folder and rows),
 the ground-truth form, "Log row" / Cancel / Undo, and the rows table, laid out to fit 800x480.
 
-A thin layer over :mod:`qrfield.sessions`. "Log row" collects the next N results the window draws
-(:meth:`SessionPanel.on_processed`, fed from the main window's redraw: the same results the
-preview shows, no second camera path; only frames captured after the press count), averages
-them with a :class:`~qrfield.sessions.FrameCollector` for the session's solver and calls
-:meth:`Session.log` on the GUI thread (one append and fsync per row). When the form follows the
-virtual bench, the row's ground truth is the bench's mean true pose over the frames collected
-(a wobbling bench moves while the row is measured). The status says "logged row K" only when
-``log`` returned "logged"; a row that could not be written stays in the session's pending queue
-and a red banner offers Retry and "Save pending elsewhere…".
+A thin layer over :mod:`qrfield.sessions`. "Log row" arms the core's one row recorder
+(:class:`qrfield.sessions.recorder.RowRecorder`, which ``qrfield session log`` and the guide use
+too): a sink of the worker's frame loop, it collects the next N frames the loop processes (every
+one, not only those the window draws; only frames captured after the press count), averages and
+judges them for the session's solver and criteria. The panel shows its progress on its timer and
+on each redraw, and logs the finished row with :meth:`Session.log` on the GUI thread (one append
+and fsync per row). When the form follows the virtual bench, the row's ground truth is the bench's
+mean true pose over the frames collected (a wobbling bench moves while the row is measured). The
+status says "logged row K" only when ``log`` returned "logged"; a row that could not be written
+stays in the session's pending queue and a red banner offers Retry and "Save pending elsewhere…".
 
 Frames must be arriving: "Log row" is disabled, with the reason, while no frame has come for
 ``frame_timeout_s`` (no source, a source that failed or stalled), and a row being collected is
@@ -47,8 +48,6 @@ from PySide6 import QtCore, QtWidgets
 from qrfield.camera import CameraModel
 from qrfield.handeye.setups import CAMERA
 from qrfield.sessions import (
-    FrameCollector,
-    GroundTruth,
     LogOutcome,
     Session,
     SessionError,
@@ -61,10 +60,10 @@ from qrfield.sessions.export import DEFAULT_NAME, export_session
 from qrfield.sessions.guide import Guide, GuideSettings
 from qrfield.sessions.plan import PlanError, PlanTarget, read_plan
 from qrfield.sessions.progress import DONE, PlanProgress, attach_plan
-from qrfield.sessions.recorder import bench_mean_truth
+from qrfield.sessions.recorder import RecordedRow, RowRecorder
 from qrfield.sessions.stillness import StillnessSettings
 from qrfield.settings import SettingError
-from ui.groundtruth_form import FIELD_NAMES, GroundTruthForm, WrappedLabel
+from ui.groundtruth_form import FIELD_NAMES, ElidedLabel, GroundTruthForm, WrappedLabel
 from ui.guide_panel import GuidePanel
 from ui.rows_table import RowsTable
 from ui.session_dialogs import (
@@ -76,6 +75,7 @@ from ui.session_dialogs import (
     touch_button,
 )
 from ui.text import short_path
+from ui.touch import FOLDER, SAVE, answer, ask_path, message_box, yes_no
 
 __all__ = ["ENV_ROOT", "BenchContext", "SessionFolderSettings", "SessionPanel", "sessions_root"]
 
@@ -113,11 +113,8 @@ class SessionPanel(QtWidgets.QWidget):
         super().__init__(parent)
         self.context = context
         self.session: Session | None = None
-        self._collector: FrameCollector | None = None
-        self._truth: GroundTruth | None = None
-        self._note = ""
-        self._following = False
-        self._t_press = 0.0
+        #: The one row recorder (a sink the window adds to the worker's frame loop: every frame).
+        self.recorder = RowRecorder()
         self._last_frame_t: float | None = None  # monotonic time of the last frame drawn
         self._last_pose_t: float | None = None  # ... of the last one with a pose of the session's solver
         self._source_problem = ""  # why the source gave no frames (it failed), "" while it runs
@@ -140,7 +137,9 @@ class SessionPanel(QtWidgets.QWidget):
         self.guide_panel = GuidePanel()
         self.guide_panel.hide()
         self.table = RowsTable()
-        self.table.setMinimumHeight(60)
+        # The part that gives way: at 800x480 with a plan and the pending-rows banner, the banner and
+        # every button stay whole and the table shrinks to a few pixels (it scrolls inside itself).
+        self.table.setMinimumHeight(16)
         self._build_layout()
         self._wire()
         self.timer = QtCore.QTimer(self)  # frames still arriving? (tick)
@@ -150,25 +149,26 @@ class SessionPanel(QtWidgets.QWidget):
 
     # ---------------------------------------------------------------- builders
     def _build_layout(self) -> None:
-        """Top to bottom: the session bar and its lines, the banners, the form, the actions with
-        why they are blocked, the status line, and the rows table (the part that scrolls)."""
+        """Top to bottom: the session bar and its two one-line labels, the guide strip, the form
+        and the actions; then, in one place below every button but the banners', the banners and
+        the messages (status, why Log row is blocked, the form's, the guide's, the session's
+        warnings), whose coming and going moves only the rows table (the part that scrolls)."""
         layout = QtWidgets.QVBoxLayout(self)
         layout.setContentsMargins(4, 4, 4, 4)
-        layout.setSpacing(3)
+        layout.setSpacing(2)
         layout.addLayout(self.session_bar)
-        for widget in (
-            self.title,
-            self.count,
-            self.reopen_banner,
-            self.warnings,
-            self.banner,
-            self.guide_panel,
-            self.form,
-        ):
+        for widget in (self.title, self.count, self.guide_panel, self.form):
             layout.addWidget(widget)
         layout.addLayout(self.actions)
-        layout.addWidget(self.why)
-        layout.addWidget(self.status)
+        self.messages = (
+            self.status,
+            self.why,
+            *self.form.messages,
+            self.guide_panel.note,
+            self.warnings,
+        )
+        for widget in (self.reopen_banner, self.banner, *self.messages):
+            layout.addWidget(widget)
         layout.addWidget(self.table, 1)
 
     def _build_session_bar(self) -> None:
@@ -188,10 +188,10 @@ class SessionPanel(QtWidgets.QWidget):
         self.session_bar.addStretch(1)
         self.session_bar.addWidget(self.plan_button)
         self.session_bar.addWidget(self.export_button)
-        self.title = WrappedLabel("")
+        self.title = ElidedLabel("")
         self.title.setObjectName("session_title")
         self.title.setStyleSheet("font-weight: bold;")
-        self.count = WrappedLabel("")
+        self.count = ElidedLabel("")
         self.count.setObjectName("session_count")
         self.count.setStyleSheet("color: #444;")
 
@@ -219,7 +219,7 @@ class SessionPanel(QtWidgets.QWidget):
         table = sign_table()
         self.form = GroundTruthForm(known_combinations(), signs=table)
         self.log_button = touch_button("Log row", "log_row")
-        self.log_button.setToolTip("collect the session's frames per row and log their mean (Enter)")
+        self.log_button.setToolTip("collect the session's frames per row and log their mean")
         self.cancel_button = touch_button("Cancel", "cancel_row")
         self.undo_button = touch_button("Undo…", "undo_row")
         self.undo_button.setToolTip("withdraw the last row (its line stays in rows.csv, marked withdrawn)")
@@ -306,59 +306,52 @@ class SessionPanel(QtWidgets.QWidget):
 
     # ---------------------------------------------------------------- dialogs (tests replace these)
     def ask_confirm(self, title: str, text: str) -> bool:
-        answer = QtWidgets.QMessageBox.question(self, title, text)
-        return answer == QtWidgets.QMessageBox.StandardButton.Yes
+        return answer(*yes_no(self, title, text), "no") == "yes"
+
+    def pending_choice_box(self, message: str) -> tuple[QtWidgets.QMessageBox, dict[str, Any]]:
+        """The question of :meth:`ask_pending_choice`, not run (tests measure it)."""
+        role = QtWidgets.QMessageBox.ButtonRole
+        buttons = [
+            ("retry", "Retry", role.AcceptRole),
+            ("save", "Save elsewhere…", role.ActionRole),
+            ("discard", "Discard them", role.DestructiveRole),
+            ("cancel", "Keep the app open", role.RejectRole),
+        ]
+        return message_box(self, "Rows not written", message, buttons, QtWidgets.QMessageBox.Icon.Warning)
 
     def ask_pending_choice(self, message: str) -> str:
         """'retry', 'save', 'discard' or 'cancel' (keep the app open)."""
-        box = QtWidgets.QMessageBox(self)
-        box.setIcon(QtWidgets.QMessageBox.Icon.Warning)
-        box.setWindowTitle("Rows not written")
-        box.setText(message)
-        buttons = {
-            "retry": box.addButton("Retry", QtWidgets.QMessageBox.ButtonRole.AcceptRole),
-            "save": box.addButton("Save elsewhere…", QtWidgets.QMessageBox.ButtonRole.ActionRole),
-            "discard": box.addButton("Discard them", QtWidgets.QMessageBox.ButtonRole.DestructiveRole),
-            "cancel": box.addButton("Keep the app open", QtWidgets.QMessageBox.ButtonRole.RejectRole),
-        }
-        box.exec()
-        clicked = box.clickedButton()
-        return next((name for name, button in buttons.items() if button is clicked), "cancel")
+        return answer(*self.pending_choice_box(message), "cancel")
+
+    def combo_choice_box(
+        self, message: str, suggestion: str | None
+    ) -> tuple[QtWidgets.QMessageBox, dict[str, Any]]:
+        """The question of :meth:`ask_combo_choice`, not run (tests measure it)."""
+        role = QtWidgets.QMessageBox.ButtonRole
+        buttons = [("keep", "Log as labelled", role.AcceptRole)]
+        if suggestion:
+            buttons.append(("use", f"Use '{suggestion}'", role.ActionRole))
+        buttons.append(("cancel", "Cancel", role.RejectRole))
+        text = f"{message[0].upper()}{message[1:]}.\n\nLog the row anyway?"
+        return message_box(self, "Combination and angles disagree", text, buttons)
 
     def ask_combo_choice(self, message: str, suggestion: str | None) -> str:
         """'keep' (log as labelled), 'use' (relabel with ``suggestion``) or 'cancel'."""
-        box = QtWidgets.QMessageBox(self)
-        box.setIcon(QtWidgets.QMessageBox.Icon.Question)
-        box.setWindowTitle("Combination and angles disagree")
-        box.setText(f"{message[0].upper()}{message[1:]}.\n\nLog the row anyway?")
-        buttons = {"keep": box.addButton("Log as labelled", QtWidgets.QMessageBox.ButtonRole.AcceptRole)}
-        if suggestion:
-            buttons["use"] = box.addButton(f"Use '{suggestion}'", QtWidgets.QMessageBox.ButtonRole.ActionRole)
-        buttons["cancel"] = box.addButton("Cancel", QtWidgets.QMessageBox.ButtonRole.RejectRole)
-        box.exec()
-        clicked = box.clickedButton()
-        return next((name for name, button in buttons.items() if button is clicked), "cancel")
+        return answer(*self.combo_choice_box(message, suggestion), "cancel")
 
     def ask_save_path(self) -> str:
-        path, _ = QtWidgets.QFileDialog.getSaveFileName(
-            self, "Save pending rows elsewhere", str(Path.home() / "qrfield-pending-rows.csv"), "CSV (*.csv)"
-        )
-        return path
+        default = Path.home() / "qrfield-pending-rows.csv"
+        return ask_path(self, "Save pending rows elsewhere", default, mode=SAVE, name_filter="CSV (*.csv)")
 
     def ask_export_path(self, default: Path) -> str:
-        path, _ = QtWidgets.QFileDialog.getSaveFileName(
-            self, "Export the rows in force", str(default), "CSV (*.csv)"
-        )
-        return path
+        return ask_path(self, "Export the rows in force", default, mode=SAVE, name_filter="CSV (*.csv)")
 
     def ask_folder(self) -> str:
-        return QtWidgets.QFileDialog.getExistingDirectory(self, "Open a session folder", str(self.root()))
+        return ask_path(self, "Open a session folder", self.root(), mode=FOLDER)
 
     def ask_plan_path(self) -> str:
-        path, _ = QtWidgets.QFileDialog.getOpenFileName(
-            self, "Follow an experiment plan", str(self.root()), "Plans (*.csv);;All files (*)"
-        )
-        return path
+        plans = "Plans (*.csv);;All files (*)"
+        return ask_path(self, "Follow an experiment plan", self.root(), name_filter=plans)
 
     # ---------------------------------------------------------------- open / create
     def show_new_dialog(self) -> NewSessionDialog:
@@ -653,6 +646,7 @@ class SessionPanel(QtWidgets.QWidget):
                 self._say(f"row NOT logged: {exc}", "error")
                 continue
             self.progress.setValue(0)
+            self.form.note.clear()  # the next target brings its own note
             j = row.measurement.judgement
             verdict = "pass" if j.passed else f"fail ({j.reason})"
             where = f" (target {target.number})" if target is not None else ""
@@ -672,8 +666,9 @@ class SessionPanel(QtWidgets.QWidget):
         """The window's source failed: no frames until it is reopened; a row being collected ends."""
         self._source_problem = message
         self.form.bench_gone()
-        if self._collector is not None:
-            self._give_up(f"the source failed while collecting ({message})")
+        ended = self.recorder.give_up(f"the source failed while collecting ({message})")
+        if ended is not None:
+            self._given_up(ended)
         self._update_state()
 
     def live_reason(self, now: float | None = None) -> str:
@@ -693,19 +688,14 @@ class SessionPanel(QtWidgets.QWidget):
         may be logged."""
         if self.guided:
             self._take_guided_rows()
-        now = time.monotonic()
-        collector = self._collector
-        if collector is not None:
-            last = max(self._t_press, self._last_frame_t or 0.0)
-            if now - last > self.frame_timeout_s():
-                self._give_up(f"no frame for {now - last:.1f} s")
-                return
+        self._poll_row()
         if (self.blocked_reason(), self.context_notes()) != self._shown_state:
             self._update_state()
 
     def on_processed(self, item: Any) -> None:
-        """One result the window drew (ui.worker.Processed): follow the bench's truth, or collect it.
-        With a plan, the guide (fed every result by the frame loop) is shown and its rows logged."""
+        """One result the window drew (ui.worker.Processed): the bench's truth followed in the form
+        and whether frames arrive; the row recorder's and the guide's progress (both fed every
+        result by the frame loop) shown, and their finished rows logged."""
         result = item.result
         self._last_frame_t = time.monotonic()
         pose = result.poses.get(self.session.info.solver) if self.session is not None else None
@@ -715,20 +705,15 @@ class SessionPanel(QtWidgets.QWidget):
             self._take_guided_rows()
             self.guide_panel.show_view(self.guide.view())
             return
-        collector = self._collector
-        if collector is None:
-            truth = getattr(result, "truth", None)
-            if truth is not None:
-                self.form.follow(truth.position_mm, truth.angles_deg)
-            else:
-                self.form.bench_gone()
+        if self.recorder.collecting:
+            self._poll_row()
             return
-        if item.frame.t_capture < self._t_press:
-            return  # captured before "Log row" was pressed
-        done = collector.add(result)
-        self.progress.setValue(collector.progress[0])
-        if done:
-            self._finish_row(collector)
+        truth = getattr(result, "truth", None)
+        if truth is not None:
+            self.form.follow(truth.position_mm, truth.angles_deg)
+        else:
+            self.form.bench_gone()
+        self._poll_row()  # a row that ended since the last redraw
 
     # ---------------------------------------------------------------- logging
     def blocked_reason(self) -> str:
@@ -784,17 +769,26 @@ class SessionPanel(QtWidgets.QWidget):
             if self.session is not None and not self.form.valid:
                 self.form.reveal_errors()
                 reason = self.blocked_reason()
-            self._say(f"cannot log: {reason}", "error" if self._collector is None else "info")
+            self._say(f"cannot log: {reason}", "info" if self.recorder.collecting else "error")
             return False
         assert self.session is not None
         if not self._combination_confirmed():
             return False
-        self._truth = self.form.truth()
-        self._note = self.form.note.text()
-        self._following = self.form.following
-        self._collector = FrameCollector(self.session.info.frames_per_row, method=self.session.info.solver)
-        self._t_press = time.monotonic()
-        return self._collecting(self._collector.frames_wanted, f"row {self.session.next_row}")
+        info = self.session.info
+        truth = self.form.truth()
+        assert truth is not None  # the form is valid (blocked_reason)
+        if not self.recorder.arm(
+            truth,
+            info.frames_per_row,
+            method=info.solver,
+            criteria=info.criteria,
+            note=self.form.note.text(),
+            follow_bench=self.form.following,
+            frame_timeout_s=self.frame_timeout_s(),
+        ):
+            self._say("a row is being collected already", "info")
+            return False
+        return self._collecting(info.frames_per_row, f"row {self.session.next_row}")
 
     def _collecting(self, frames: int, what: str) -> bool:
         """A row is being collected: the progress bar at 0 of ``frames``, the status says so."""
@@ -821,45 +815,49 @@ class SessionPanel(QtWidgets.QWidget):
         return False
 
     def cancel_row(self) -> None:
-        if self.guide.cancel() and self._collector is None:
-            self.progress.setValue(0)
-            self._say("row cancelled: nothing logged", "info")
-            self._update_state()
+        guided, plain = self.guide.cancel(), self.recorder.cancel()
+        if not (guided or plain):
             return
-        if self._collector is None:
-            return
-        self._collector = None
         self.progress.setValue(0)
         self._say("row cancelled: nothing logged", "info")
         self._update_state()
 
-    def _give_up(self, why: str) -> None:
-        """Frames stopped while collecting: end the row, log nothing, say so."""
-        collector, self._collector = self._collector, None
-        got = collector.progress[0] if collector is not None else 0
-        wanted = collector.frames_wanted if collector is not None else 0
+    def _given_up(self, row: RecordedRow) -> None:
+        """The recorder ended a row without a measurement (frames stopped, the source failed, no
+        bench truth): log nothing, say why."""
         self.progress.setValue(0)
-        row = self.session.next_row if self.session is not None else "?"
-        self._say(
-            f"row {row} not logged: {why} ({got} of {wanted} frames came); press Log row again", "error"
-        )
+        number = self.session.next_row if self.session is not None else "?"
+        why = row.problem
+        if row.stopped:
+            why += f" ({row.frames_in} of {row.frames_wanted} frames came); press Log row again"
+        self._say(f"row {number} not logged: {why}", "error")
         self._update_state()
 
     @property
     def collecting(self) -> bool:
         """A row is being collected (by "Log row", or by the guide for a target)."""
-        if self._collector is not None:
+        if self.recorder.collecting:
             return True
         view = self.guide.view() if self.guided else None
         return view is not None and (view.collecting is not None or view.waiting)
 
-    def _finish_row(self, collector: FrameCollector) -> None:
-        assert self.session is not None and self._truth is not None
-        self._collector = None
-        truth = self._truth
-        if self._following:
-            truth = bench_mean_truth(collector.frames, truth.combo, collector.method) or truth
-        measurement = collector.measurement(truth, self.session.info.criteria, note=self._note)
+    def _poll_row(self) -> None:
+        """The recorder's row (GUI thread): its progress on the bar, a finished row logged, a row
+        whose frames stopped for the frame timeout given up."""
+        ended = self.recorder.expire()
+        if ended is not None:
+            self._given_up(ended)
+        progress = self.recorder.progress
+        if progress is not None:
+            self.progress.setValue(progress[0])
+        for row in self.recorder.take():
+            if row.measurement is None:
+                self._given_up(row)
+            else:
+                self._finish_row(row.measurement)
+
+    def _finish_row(self, measurement: Any) -> None:
+        assert self.session is not None
         try:
             outcome = self.session.log(measurement)
         except SessionError as exc:  # refused before anything is written (e.g. a note too long)
@@ -867,6 +865,7 @@ class SessionPanel(QtWidgets.QWidget):
             self._update_state()
             return
         self.progress.setValue(0)
+        self.form.note.clear()  # a note belongs to its row: the next one starts without it
         passed = measurement.judgement.passed
         verdict = "pass" if passed else f"fail ({measurement.judgement.reason})"
         self._after(outcome, f"logged row {outcome.row}: {verdict}", "ok" if passed else "fail")
@@ -876,7 +875,7 @@ class SessionPanel(QtWidgets.QWidget):
     def undo_row(self) -> None:
         """Withdraw the last row (after confirmation): a withdrawal record is appended, nothing deleted."""
         session = self.session
-        if session is None or self._collector is not None:
+        if session is None or self.recorder.collecting:
             return
         last = next((r for r in reversed(session.rows) if not r.withdrawn), None)
         if last is None:
@@ -977,7 +976,7 @@ class SessionPanel(QtWidgets.QWidget):
 
     def shutdown(self) -> None:
         self.timer.stop()
-        self._collector = None
+        self.recorder.cancel()
         self.guide.cancel()
         if self.session is not None:
             self.session.close()
@@ -1017,25 +1016,25 @@ class SessionPanel(QtWidgets.QWidget):
             self.progress.setFormat("no session")
         if session is None:
             self.title.setText("No session open: start one with New session…, or Resume… one")
-            self.count.setText("")
-            self.count.hide()
+            self.title.setToolTip("")
+            self.count.setText("")  # its line stays: nothing below it moves when a session opens
+            self.count.setToolTip("")
             self.window_title_changed("")
             return
         info = session.info
         withdrawn = sum(1 for r in session.rows if r.withdrawn)
         active = [r for r in session.rows if not r.withdrawn]
         passed = sum(1 for r in active if r.passed)
-        self.title.setText(
+        title = (
             f"{info.name}: {len(active)} rows ({passed} pass), {withdrawn} withdrawn, "
             f"next row {session.next_row}"
             + (f"; {len(session.pending)} NOT WRITTEN" if session.pending else "")
         )
-        self.title.setToolTip(
-            f"solver {info.solver}, {info.frames_per_row} frames per row, QR side {info.side_mm:g} mm"
-        )
+        self.title.setText(title)
+        details = f"solver {info.solver}, {info.frames_per_row} frames per row, QR side {info.side_mm:g} mm"
+        self.title.setToolTip(f"{title}\n{details}")
         self.count.setText(f"{short_path(session.path)} · {info.solver}, QR {info.side_mm:g} mm")
         self.count.setToolTip(str(session.path))
-        self.count.show()
         self.window_title_changed(f"{info.name} ({len(active)} rows)")
 
     def window_title_changed(self, text: str) -> None:
@@ -1057,7 +1056,7 @@ def _banner(
     frame.setObjectName(name)
     frame.setStyleSheet(f"QFrame#{name} {{ background: {background}; border-radius: 3px; }}")
     layout = QtWidgets.QHBoxLayout(frame)
-    layout.setContentsMargins(6, 2, 6, 2)
+    layout.setContentsMargins(6, 0, 0, 0)  # its buttons are as high as the strip (800x480: every px)
     layout.addWidget(text, 1)
     for button in buttons:
         layout.addWidget(button)

@@ -1,7 +1,8 @@
 """A form of widgets generated from a settings dataclass (qrfield.settings.specs).
 
-float -> QDoubleSpinBox (unit suffix, limits, decimals), int -> QSpinBox, str with choices ->
-QComboBox, bool -> QCheckBox, other str -> QLineEdit. Tooltips carry each setting's help.
+float -> QDoubleSpinBox (unit suffix, limits, decimals), int -> QSpinBox (both with the app's 44 px
+step buttons, ui/touch.py), str with choices -> QComboBox, bool -> ui.touch.TouchCheckBox, other
+str -> QLineEdit. Tooltips carry each setting's help.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from typing import Any
 from PySide6 import QtCore, QtWidgets
 
 from qrfield.settings import SettingError, SettingSpec, specs, validated
+from ui.touch import TOUCH_PX, TouchCheckBox
 
 INT_LIMIT = 2**31 - 1
 FLOAT_LIMIT = 1e9
@@ -23,7 +25,7 @@ def widget_for(spec: SettingSpec) -> QtWidgets.QWidget:
     """An editor for one setting, set to its default."""
     tip = spec.describe()
     if spec.type is bool:
-        widget: QtWidgets.QWidget = QtWidgets.QCheckBox()
+        widget: QtWidgets.QWidget = TouchCheckBox()
     elif spec.choices:
         widget = QtWidgets.QComboBox()
         widget.addItems(list(spec.choices))
@@ -49,6 +51,10 @@ def widget_for(spec: SettingSpec) -> QtWidgets.QWidget:
             widget.setSuffix(f" {spec.unit}")
     else:
         widget = QtWidgets.QLineEdit()
+    if isinstance(widget, QtWidgets.QAbstractSpinBox):
+        # Room for the two step buttons and a short value: the width of the range's largest value
+        # (2147483647) would make forms wider than an 800x480 screen allows.
+        widget.setMinimumWidth(2 * TOUCH_PX + 64)
     zero = re.search(r"\(0 = ([^)]+)\)", spec.help)
     if zero and spec.minimum == 0 and isinstance(widget, (QtWidgets.QSpinBox, QtWidgets.QDoubleSpinBox)):
         widget.setSpecialValueText(zero.group(1))  # e.g. exposure 0 shows "automatic"
@@ -95,11 +101,14 @@ class SettingsForm(QtWidgets.QWidget):
         self.widgets: dict[str, QtWidgets.QWidget] = {}
         layout = QtWidgets.QFormLayout(self)
         layout.setFieldGrowthPolicy(QtWidgets.QFormLayout.FieldGrowthPolicy.AllNonFixedFieldsGrow)
+        layout.setVerticalSpacing(2)  # the rows are 44 px high already (ui/touch.py)
         for spec in self.specs:
             widget = widget_for(spec)
             self.widgets[spec.name] = widget
             label = QtWidgets.QLabel(spec.label)
             label.setToolTip(widget.toolTip())
+            label.setMinimumHeight(TOUCH_PX)  # as high as its field, its text centred beside it
+            label.setAlignment(QtCore.Qt.AlignmentFlag.AlignLeft | QtCore.Qt.AlignmentFlag.AlignVCenter)
             layout.addRow(label, widget)
             for signal_name in ("toggled", "currentTextChanged", "valueChanged", "editingFinished"):
                 signal = getattr(widget, signal_name, None)

@@ -45,7 +45,9 @@ from qrfield.simulation.outputs import (
 )
 from qrfield.simulation.study import SMALL_STUDY, field_specs, parse_override
 from ui.background import BackgroundJob, JobControl
+from ui.full_size import full_size_window
 from ui.settings_form import set_widget_value, widget_for, widget_value
+from ui.touch import FOLDER, TOUCH_PX, TouchCheckBox, ask_path, touch_button
 
 RANGE_FIELDS = ("x_range", "y_range", "z_range")
 #: Fields edited as text and read with the study's override parser.
@@ -229,7 +231,7 @@ class SimulationTab(QtWidgets.QWidget):
         presets.addStretch(1)
         form = QtWidgets.QFormLayout()
         form.setFieldGrowthPolicy(QtWidgets.QFormLayout.FieldGrowthPolicy.AllNonFixedFieldsGrow)
-        self.follow_app = QtWidgets.QCheckBox("use the app's camera model and QR side")
+        self.follow_app = TouchCheckBox("use the app's camera model and QR side")
         self.follow_app.setChecked(True)
         form.addRow(self.follow_app)
         self.widgets: dict[str, QtWidgets.QWidget] = {}
@@ -288,10 +290,10 @@ class SimulationTab(QtWidgets.QWidget):
         self.output_dir.setToolTip(
             "each run started by Run writes its outputs into a new <YYYYmmdd-HHMMSS> folder inside this one"
         )
-        browse = QtWidgets.QPushButton("…")
+        browse = touch_button("…")
+        browse.setFixedWidth(TOUCH_PX)
         browse.setObjectName("browse_output")
         browse.setToolTip("choose the output folder")
-        browse.setFixedWidth(32)
         browse.clicked.connect(self._browse_output)
         row = QtWidgets.QHBoxLayout()
         row.addWidget(self.output_dir, 1)
@@ -326,7 +328,7 @@ class SimulationTab(QtWidgets.QWidget):
         self.z_choice.setObjectName("heatmap_z")
         self.heatmap = ImageView()
         self.heatmap_path = _selectable_label("")
-        self.full_size_button = QtWidgets.QPushButton("Full size…")
+        self.full_size_button = touch_button("Full size…", "heatmap_full_size_button")
         self.full_size_button.setToolTip("the heatmap at its own size, in a window of its own")
         self.full_size_button.setEnabled(False)
         choose = QtWidgets.QHBoxLayout()
@@ -359,7 +361,7 @@ class SimulationTab(QtWidgets.QWidget):
         self.run_button.setToolTip("run the study and save its outputs in a new folder")
         self.stop_button = QtWidgets.QPushButton("Stop")
         self.stop_button.setEnabled(False)
-        self.auto_run = QtWidgets.QCheckBox("re-run on change")
+        self.auto_run = TouchCheckBox("re-run on change")
         self.auto_run.setChecked(True)
         self.auto_run.setToolTip(
             "once a study has been run, run it again shortly after each change of a field "
@@ -537,7 +539,7 @@ class SimulationTab(QtWidgets.QWidget):
             button.setEnabled(not running)
 
     def _browse_output(self) -> None:
-        folder = QtWidgets.QFileDialog.getExistingDirectory(self, "Output folder", self.output_dir.text())
+        folder = ask_path(self, "Output folder", self.output_dir.text(), mode=FOLDER)
         if folder:
             self.output_dir.setText(folder)
 
@@ -756,17 +758,7 @@ class SimulationTab(QtWidgets.QWidget):
         """The heatmap shown, at its own size in a scrollable window of its own."""
         if self.heatmap.pixmap.isNull():
             return
-        dialog = QtWidgets.QDialog(self)
-        dialog.setWindowTitle(f"qrfield — {self.heatmap_path.text()}")
-        dialog.setAttribute(QtCore.Qt.WidgetAttribute.WA_DeleteOnClose)
-        label = QtWidgets.QLabel()
-        label.setPixmap(self.heatmap.pixmap)
-        area = QtWidgets.QScrollArea()
-        area.setWidget(label)
-        QtWidgets.QVBoxLayout(dialog).addWidget(area)
-        size = self.heatmap.pixmap.size()
-        dialog.resize(min(size.width() + 40, 1400), min(size.height() + 40, 900))
-        dialog.show()
+        full_size_window(self, self.heatmap.pixmap, self.heatmap_path.text(), "heatmap_full_size")
 
     def _open_output(self) -> bool:
         """Open the last saved run's folder in the desktop's file manager (Open folder button).

@@ -68,14 +68,14 @@ def say(text: str) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from qrfield.commands.session import loop_thread
-    from qrfield.engine import FrameLoop
+    from qrfield.engine import FrameLoop, SayEvents
     from qrfield.handeye.setups import CAMERA
     from qrfield.runconfig import effective_settings
     from qrfield.sessions import Session
     from qrfield.sessions.guide import Guide, GuideSettings
     from qrfield.sessions.plan import read_plan
     from qrfield.sessions.progress import PlanProgress, attach_plan
-    from qrfield.sessions.recorder import RowRecorder, session_run_config
+    from qrfield.sessions.recorder import session_run_config
     from qrfield.sessions.stillness import StillnessSettings
     from qrfield.settings import from_arguments
 
@@ -116,8 +116,7 @@ def run(args: argparse.Namespace) -> int:
         guide = Guide(
             info.solver, info.criteria, args.frames or info.frames_per_row, stillness, guide_settings
         )
-        recorder = RowRecorder(info, say)
-        loop = FrameLoop(config, events=recorder, sinks=(guide,))
+        loop = FrameLoop(config, events=SayEvents(say), sinks=(guide,))
         try:
             with loop_thread(loop) as thread:
                 return _Runner(

@@ -195,8 +195,8 @@ def _interrupt(signum: int, _frame: Any) -> None:
 
 
 def _run_log(args: argparse.Namespace) -> int:
-    from qrfield.engine import FrameLoop
-    from qrfield.handeye import InFrameEvents, PoseFrame
+    from qrfield.engine import FrameLoop, SayEvents
+    from qrfield.handeye import InFrame, PoseFrame
     from qrfield.runconfig import effective_settings
     from qrfield.sessions import Session, known_combinations, validate_field
     from qrfield.sessions.recorder import RowRecorder, session_run_config
@@ -224,11 +224,12 @@ def _run_log(args: argparse.Namespace) -> int:
         for problem in effective.store.problems:
             say(f"settings: {problem}")
         config = session_run_config(effective.run_config(camera=session.info.camera), session.info)
-        recorder = RowRecorder(session.info, say)
+        recorder = RowRecorder(session.info)  # the one row recorder, a sink fed every frame
         pose_frame = PoseFrame.from_saved(session.info.pose_frame, session.info.handeye, session.info.name)
         pose_frame.check_source(may_be_live_camera(config.source))
-        events = recorder if pose_frame.identity else InFrameEvents(recorder, pose_frame)
-        loop = FrameLoop(config, events=events)
+        # The rows are in the session's frame: the recorder sees each result through it.
+        sink = recorder if pose_frame.identity else InFrame(recorder, pose_frame)
+        loop = FrameLoop(config, events=SayEvents(say), sinks=(sink,))
         with loop_thread(loop) as thread:
 
             def ended() -> bool:

@@ -10,9 +10,10 @@ session solver's pose and keeps, under one lock:
   (:meth:`qrfield.sessions.criteria.AcceptanceCriteria.grade`): over the current still run's mean
   (:mod:`qrfield.sessions.stillness`), which is the newest frame right after a move;
 - the stillness (:class:`~qrfield.sessions.stillness.StillnessDetector`);
-- a row being collected: the next ``frames_per_row`` frames (a
-  :class:`~qrfield.sessions.FrameCollector` for the session's solver), averaged and judged against
-  the ground truth given (the target, or what the operator typed) exactly as "Log row" does.
+- a row being collected: the next ``frames_per_row`` frames, by the one row recorder
+  (:class:`qrfield.sessions.recorder.RowRecorder`, which the guide feeds the frames it gets),
+  averaged and judged against the ground truth given (the target, or what the operator typed)
+  exactly as "Log row" does.
 
 A row is collected when the owner asks (:meth:`Guide.arm`: at once, a tap; or once still, the
 terminal's Enter) or, with ``auto`` on, by itself when the card is still, **after it has moved
@@ -26,16 +27,18 @@ thread) and saves the plan's progress. ``view()`` is the snapshot a screen or a 
 from __future__ import annotations
 
 import threading
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from qrfield.mailbox import Handoff
 from qrfield.seams import BaseSink
-from qrfield.sessions.averaging import FrameCollector, Measurement
+from qrfield.sessions.averaging import Measurement
 from qrfield.sessions.criteria import AcceptanceCriteria, Grades
 from qrfield.sessions.groundtruth import GroundTruth
 from qrfield.sessions.plan import PlanTarget
+from qrfield.sessions.recorder import RecordedRow, RowRecorder
 from qrfield.sessions.stillness import Stillness, StillnessDetector, StillnessSettings, pose_difference
 from qrfield.settings import setting
 
@@ -104,8 +107,7 @@ class _Request:
     note: str
     target: PlanTarget | None
     when_still: bool
-    collector: FrameCollector | None = None
-    frames: list[Any] = field(default_factory=list)
+    armed: bool = False  # the recorder collects its frames (else it waits for stillness)
 
 
 class Guide(BaseSink):
@@ -121,7 +123,6 @@ class Guide(BaseSink):
         settings: GuideSettings | None = None,
     ) -> None:
         self._lock = threading.Lock()
-        self._ready_event = threading.Event()
         self.method = method
         self.criteria = criteria or AcceptanceCriteria()
         self.frames_per_row = int(frames_per_row)
@@ -133,7 +134,8 @@ class Guide(BaseSink):
         self._auto = False
         self._moves_mark = 0  # the detector's moves when the target was set or the last row was taken
         self._request: _Request | None = None
-        self._ready: list[GuidedRow] = []
+        self._recorder = RowRecorder()  # the one row recorder; fed the frames this guide gets
+        self._ready: Handoff[GuidedRow] = Handoff()  # finished rows, for the owner to log
         self._frames_seen = 0
         self._problem = ""
 
@@ -150,7 +152,7 @@ class Guide(BaseSink):
         """Another session's solver, criteria or frames per row, or other settings (a row being
         collected is given up)."""
         with self._lock:
-            self._request = None
+            self._drop_request()
             if method is not None:
                 self.method = method
             if criteria is not None:
@@ -175,7 +177,7 @@ class Guide(BaseSink):
         target's). A row being collected for another target is given up."""
         with self._lock:
             if self._request is not None and self._request.target != target:
-                self._request = None
+                self._drop_request()
             if target != self._target:
                 self._moves_mark = self._detector.moves
             self._target = target
@@ -213,19 +215,17 @@ class Guide(BaseSink):
     def cancel(self) -> bool:
         """Give up the row being collected or waited for (nothing logged); True if there was one."""
         with self._lock:
-            had, self._request = self._request is not None, None
+            had = self._request is not None
+            self._drop_request()
             return had
 
     def take(self) -> list[GuidedRow]:
         """The rows finished since the last call, in order (the owner logs them)."""
-        with self._lock:
-            rows, self._ready = self._ready, []
-            self._ready_event.clear()
-            return rows
+        return self._ready.take()
 
     def wait(self, timeout_s: float) -> bool:
         """Block until a row is finished or ``timeout_s`` passed; True when one is ready."""
-        return self._ready_event.wait(timeout_s)
+        return self._ready.wait(timeout_s)
 
     def view(self) -> GuideView:
         with self._lock:
@@ -241,9 +241,9 @@ class Guide(BaseSink):
             state = self._detector.add(t_s, pose)
             request = self._request
             if request is not None:
-                if request.collector is not None:
-                    if request.collector.add(result):
-                        self._finish(request)
+                if request.armed:
+                    self._recorder.on_result(result, simulated)
+                    self._collect_ended()
                 elif state.still:
                     self._start_collecting(request)
             elif self._auto and state.still and not self._auto_reason(state):
@@ -253,23 +253,44 @@ class Guide(BaseSink):
     def on_source_down(self, reason: str) -> None:
         """No frames: a row being collected is given up (nothing logged), stillness starts over."""
         with self._lock:
-            if self._request is not None:
-                got = len(self._request.collector.frames) if self._request.collector is not None else 0
-                self._problem = f"row not logged: no frames ({reason}); {got} of {self.frames_per_row} came"
+            request = self._request
+            if request is not None and request.armed:
+                self._recorder.on_source_down(reason)  # the recorder gives it up and says why
+                self._collect_ended()
+            elif request is not None:  # waiting for stillness: no frame of it came yet
+                self._problem = f"row not logged: no frames ({reason}); 0 of {self.frames_per_row} came"
                 self._request = None
             self._detector.restart(f"no frames: {reason}")
 
     # ---------------------------------------------------------------- internals (under the lock)
     def _start_collecting(self, request: _Request) -> None:
-        request.collector = FrameCollector(self.frames_per_row, method=self.method)
+        """The recorder collects the request's row from the frames captured from now on."""
+        request.armed = self._recorder.arm(
+            request.truth,
+            self.frames_per_row,
+            method=self.method,
+            criteria=self.criteria,
+            note=request.note,
+            tag=request.target,
+        )
 
-    def _finish(self, request: _Request) -> None:
-        assert request.collector is not None
-        measurement = request.collector.measurement(request.truth, self.criteria, note=request.note)
-        self._ready.append(GuidedRow(request.target, measurement))
+    def _drop_request(self) -> None:
         self._request = None
-        self._moves_mark = self._detector.moves  # the next automatic row needs another move
-        self._ready_event.set()
+        self._recorder.cancel()
+
+    def _collect_ended(self) -> None:
+        """The rows the recorder ended: measured ones wait for :meth:`take`, a given-up one is said."""
+        for row in self._recorder.take():
+            self._request = None
+            if row.measurement is None:
+                self._problem = self._given_up(row)
+                continue
+            self._ready.put(GuidedRow(row.request.tag, row.measurement))
+            self._moves_mark = self._detector.moves  # the next automatic row needs another move
+
+    @staticmethod
+    def _given_up(row: RecordedRow) -> str:
+        return f"row not logged: {row.problem}; {row.frames_in} of {row.frames_wanted} came"
 
     def _difference(self, state: Stillness) -> np.ndarray:
         if self._truth is None:
@@ -304,9 +325,7 @@ class Guide(BaseSink):
             self.criteria.grade(difference[:3], difference[3:]) if np.all(np.isfinite(difference)) else None
         )
         request = self._request
-        collecting = None
-        if request is not None and request.collector is not None:
-            collecting = request.collector.progress
+        collecting = self._recorder.progress if request is not None and request.armed else None
         return GuideView(
             target=self._target,
             truth=self._truth,
@@ -314,7 +333,7 @@ class Guide(BaseSink):
             grades=grades,
             stillness=state,
             collecting=collecting,
-            waiting=request is not None and request.collector is None,
+            waiting=request is not None and not request.armed,
             auto=self._auto,
             auto_reason=self._auto_reason(state) if self._auto and request is None else "",
             frames_seen=self._frames_seen,

@@ -3,6 +3,7 @@ switching solver and source, a source failing mid-stream, a screenshot, settings
 
 from __future__ import annotations
 
+import dataclasses
 import threading
 from pathlib import Path
 
@@ -184,6 +185,44 @@ def test_settings_persist_across_two_app_instances(make_window, qtbot, tmp_path:
     assert second.last.result.truth.position_mm[2] == pytest.approx(420.0)
 
 
+def test_only_a_source_and_camera_that_worked_are_saved(make_window, qtbot, tmp_path: Path) -> None:
+    """A source that failed to open (the issue's `gui --source usb:0`) and a camera profile that does
+    not exist are not written to app.json, which `qrfield run` reads: the last ones that worked are."""
+    import json
+
+    from qrfield.runconfig import ConfigStore, RunSettings
+
+    def saved_run() -> RunSettings:
+        return ConfigStore(tmp_path / "config").group("run", RunSettings)
+
+    first = make_window({"source": "virtual", "camera": "picam-v2@640x480"})
+    qtbot.waitUntil(lambda: first.last is not None, timeout=WAIT_MS)
+    first.shutdown()
+    assert (saved_run().source, saved_run().camera) == ("virtual", "picam-v2@640x480")
+    missing = str(tmp_path / "no-such-video.avi")
+    second = make_window({"source": missing, "camera": "no-such-camera"})
+    qtbot.waitUntil(lambda: second.banner_row.isVisible(), timeout=WAIT_MS)
+    second.camera_controls.side_mm.setValue(41.0)  # a setting that works is saved as ever
+    second.shutdown()
+    run = json.loads((tmp_path / "config" / "app.json").read_text(encoding="utf-8"))
+    assert missing not in json.dumps(run) and "no-such-camera" not in json.dumps(run)
+    assert (saved_run().source, saved_run().camera, saved_run().side_mm) == (
+        "virtual",
+        "picam-v2@640x480",
+        41.0,
+    )
+    # A source that failed and then one that opened: the one that opened is saved.
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    cv2.imwrite(str(folder / "a.png"), np.full((480, 640), 128, np.uint8))
+    third = make_window({"source": missing})
+    qtbot.waitUntil(lambda: third.banner_row.isVisible(), timeout=WAIT_MS)
+    third.set_source(str(folder))
+    qtbot.waitUntil(lambda: not third.banner_row.isVisible() and third.last is not None, timeout=WAIT_MS)
+    third.shutdown()
+    assert saved_run().source == str(folder)
+
+
 def test_close_stops_the_worker_and_closes_the_source(make_window, qtbot) -> None:
     window = make_window({"source": "virtual"})
     qtbot.waitUntil(lambda: window.worker.source is not None, timeout=WAIT_MS)
@@ -350,3 +389,78 @@ def test_a_bad_command_line_value_is_named_and_no_window_opens(qtbot, tmp_path: 
     error = capsys.readouterr().err
     assert "side_mm" in error and "-5" in error and "minimum" in error
     assert len(QtWidgets.QApplication.topLevelWidgets()) == before and not (tmp_path / "config").exists()
+
+
+def test_the_frequent_actions_have_keys_named_in_their_tooltips(
+    make_window, qtbot, tmp_path, monkeypatch
+) -> None:
+    from PySide6 import QtCore
+
+    monkeypatch.setenv("QRFIELD_SESSIONS_DIR", str(tmp_path / "sessions"))
+    window = make_window({"source": "virtual", "method": "both"})
+    window.activateWindow()
+    qtbot.waitUntil(lambda: window.isActiveWindow(), timeout=WAIT_MS)
+    panel = window.session_panel
+    ctrl = QtCore.Qt.KeyboardModifier.ControlModifier
+    for button, key in (
+        (panel.log_button, "Ctrl+L"),
+        (panel.undo_button, "Ctrl+Z"),
+        (panel.new_button, "Ctrl+N"),
+        (panel.resume_button, "Ctrl+O"),
+        (panel.export_button, "Ctrl+E"),
+        (panel.cancel_button, "Esc"),
+    ):
+        assert f"({key}" in button.toolTip(), (button.objectName(), button.toolTip())
+    tabs = window.work_tabs
+    assert all("Ctrl+Tab: next tab" in tabs.tabToolTip(k) for k in range(tabs.count()))
+    qtbot.keyClick(window, QtCore.Qt.Key.Key_Tab, ctrl)  # next tab
+    assert tabs.currentIndex() == 1
+    qtbot.keyClick(window, QtCore.Qt.Key.Key_Backtab, ctrl | QtCore.Qt.KeyboardModifier.ShiftModifier)
+    assert tabs.currentIndex() == 0
+    qtbot.keyClick(window, QtCore.Qt.Key.Key_N, ctrl)  # New session…
+    assert panel.new_dialog.isVisible()
+    panel.name_edit.setText("keys")
+    qtbot.mouseClick(panel.create_button, QtCore.Qt.MouseButton.LeftButton)
+    assert panel.session is not None
+    window.activateWindow()
+    qtbot.waitUntil(lambda: panel.log_button.isEnabled(), timeout=WAIT_MS)  # follows the bench: valid
+    tabs.setCurrentIndex(1)  # Ctrl+L logs from any tab
+    with qtbot.waitSignal(panel.rowLogged, timeout=WAIT_MS):
+        qtbot.keyClick(window, QtCore.Qt.Key.Key_L, ctrl)
+    asked = []
+    monkeypatch.setattr(panel, "ask_confirm", lambda title, text: asked.append(text) or False)
+    qtbot.keyClick(window, QtCore.Qt.Key.Key_Z, ctrl)
+    assert asked and "row 1" in asked[0]
+    panel.session.info = dataclasses.replace(panel.session.info, frames_per_row=1000)
+    qtbot.keyClick(window, QtCore.Qt.Key.Key_L, ctrl)
+    assert panel.collecting
+    qtbot.keyClick(window, QtCore.Qt.Key.Key_Escape)
+    assert not panel.collecting and "nothing logged" in panel.status.text()
+
+
+def test_the_window_fits_a_newly_chosen_screen_size(make_window, qtbot, tmp_path) -> None:
+    """At 1024x600 the window kept the size it had at 800x480: it now takes the new screen's free
+    area (up to the desktop size), when the screen changes size and when the app starts on a screen
+    of another size than the one its size was saved on."""
+    from PySide6 import QtCore
+
+    from qrfield.runconfig import ConfigStore
+    from ui.main_window import DESKTOP_SIZE, SCREEN_KEY
+
+    window = make_window({"source": "virtual"})
+    window.fit_new_screen(QtCore.QRect(0, 0, 800, 480))
+    assert (window.width(), window.height()) == (800, 480)
+    window.fit_new_screen(QtCore.QRect(0, 0, 1024, 600))  # the display was set to 1024x600
+    assert (window.width(), window.height()) == (1024, 600)
+    window.fit_new_screen(QtCore.QRect(0, 0, 1920, 1080))
+    assert (window.width(), window.height()) == DESKTOP_SIZE
+    window.resize(800, 480)
+    window.shutdown()
+    free = window.screen().availableGeometry()
+    store = ConfigStore(tmp_path / "config")
+    assert store.value(SCREEN_KEY) == [free.width(), free.height()]  # saved with the window's size
+    store.set_value(SCREEN_KEY, [800, 480])  # as if the size was saved on an 800x480 screen
+    store.save()
+    second = make_window()
+    expected = (min(DESKTOP_SIZE[0], free.width()), min(DESKTOP_SIZE[1], free.height()))
+    assert (second.width(), second.height()) == expected != (800, 480)

@@ -27,3 +27,22 @@ def test_pixel_centres_of_the_image_sit_where_the_overlays_put_them(qtbot) -> No
     assert (shown.left(), shown.top(), shown.width(), shown.height()) == pytest.approx(
         (-0.5, -0.5, width, height)
     )
+
+
+@pytest.mark.parametrize("size", [(600, 200), (300, 400), (800, 300)], ids=["wide", "narrow", "very-wide"])
+def test_the_status_line_is_never_cut(qtbot, size) -> None:
+    """The line over the picture (status, fps, latency, detect and solve times) lies inside the
+    picture whatever the preview's shape: wider than the picture, it used to run out of the widget
+    ("...(detect 1, sol")."""
+    view = PreviewView()
+    qtbot.addWidget(view)
+    view.resize(*size)
+    view.show()
+    view.show_frame(np.zeros((480, 640), dtype=np.uint8))
+    view.show_info("SIM  19.5 fps  latency 62 ms (detect 41, solve 12.4)  #12345  3 behind")
+    qtbot.wait(100)  # the view's range and transform follow the resize
+    text = view.info.textItem
+    shown = view.mapFromScene(text.mapToScene(text.boundingRect())).boundingRect()
+    picture = view.mapFromScene(view.image_item.mapToScene(view.image_item.boundingRect())).boundingRect()
+    inside = view.rect().intersected(picture).adjusted(-1, -1, 1, 1)
+    assert inside.contains(shown), (shown, inside)

@@ -181,3 +181,28 @@ def test_export_writes_the_rows_in_force(make_window, qtbot, sessions, tmp_path,
     _header, raw = rows_csv(panel.session.path)
     assert rows[0]["err_pos_mm"] == raw[0]["err_pos"] and rows[0]["x_mm"] == raw[0]["x"]
     assert len(raw) == 3  # rows.csv keeps both rows and the withdrawal record
+
+
+def test_a_row_averages_the_frames_the_loop_processed_and_its_note_is_not_kept(
+    make_window, qtbot, sessions
+) -> None:
+    """The row recorder is a sink of the frame loop: with the window drawing nothing (its redraw
+    timer stopped) a row is still collected and logged, from frames no one drew. The note belongs
+    to its row: the next row starts without it."""
+    window = make_window({"source": "virtual", "method": "both"})
+    panel = create_session(qtbot, window)
+    type_truth(qtbot, panel, {k: f"{v:g}" for k, v in bench(window).items()})
+    qtbot.keyClicks(panel.form.note, "card re-taped")
+    window.timer.stop()  # nothing more is drawn
+    drawn, processed = window.frames_shown, window.worker.frames_processed
+    with qtbot.waitSignal(panel.rowLogged, timeout=WAIT_MS):
+        qtbot.mouseClick(panel.log_button, LEFT)
+    assert window.frames_shown == drawn and window.worker.frames_processed >= processed + FRAMES
+    assert panel.form.note.text() == "" and panel.form.valid  # the pose and combination stay
+    window.timer.start()
+    log_by_enter(qtbot, panel, 2)
+    _header, rows = rows_csv(panel.session.path)
+    assert [(r["row"], r["note"], r["n_frames"]) for r in rows] == [
+        ("1", "card re-taped", str(FRAMES)),
+        ("2", "", str(FRAMES)),
+    ]

@@ -15,7 +15,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from PySide6 import QtCore
+from PySide6 import QtCore, QtWidgets
 from session_steps import (
     COMBO,
     FRAMES,
@@ -338,6 +338,41 @@ def test_a_row_on_a_wobbling_bench_compares_with_its_mean_true_pose(session_wind
     # degrees; the row passes only if it is compared with where the card was while measured.
     assert row["pass"] == "1", {k: row[k] for k in DESIGN_COLUMNS}
     assert 15.0 - 20.0 <= float(row["gt_alpha"]) <= 15.0 + 20.0 and float(row["gt_gamma"]) == 10.0
+
+
+def test_analysis_plots_open_at_their_own_size(session_window, qtbot, tmp_path) -> None:
+    """On an 800x480 screen the Analysis tab shows its plots scaled down; Full size… (or a tap on
+    the plot) shows each at its own size, the PNG's pixels (cv2 reads their size), in a window that
+    fits the screen and scrolls."""
+    from test_app_layout import show_plots
+
+    window = session_window()
+    window.resize(800, 480)
+    tab = window.analysis_tab
+    show_tab(window, tab)
+    assert not any(b.isEnabled() for b in tab.full_size_buttons)  # nothing to show yet
+    show_plots(window, tmp_path)
+    tab.pages.setCurrentIndex(2)
+    qtbot.waitUntil(lambda: tab.plots[0].pixmap() is not None and not tab.plots[0].pixmap().isNull())
+    for k, path in enumerate(sorted(tmp_path.glob("plot*.png"))):
+        height, width = cv2.imread(str(path)).shape[:2]
+        assert tab.plots[k].pixmap().width() < width  # scaled into the tab
+        button = tab.full_size_buttons[k]
+        assert button.isEnabled()
+        with qtbot.waitSignal(button.clicked):
+            qtbot.mouseClick(button, LEFT)
+        dialog = next(
+            d for d in window.findChildren(QtWidgets.QDialog) if d.objectName() == f"plot_{k}_full_size"
+        )
+        picture = dialog.findChild(QtWidgets.QLabel, f"plot_{k}_full_size_picture")
+        assert (picture.pixmap().width(), picture.pixmap().height()) == (width, height)
+        free = dialog.screen().availableGeometry()
+        assert dialog.width() <= free.width() and dialog.height() <= free.height()
+        dialog.close()
+    qtbot.mouseClick(tab.plots[1], LEFT)  # a tap on the plot opens it too
+    assert any(
+        d.objectName() == "plot_1_full_size" and d.isVisible() for d in window.findChildren(QtWidgets.QDialog)
+    )
 
 
 def test_a_session_in_the_tool_frame_is_not_resumed_by_the_app(session_window, tmp_path: Path) -> None:

@@ -44,3 +44,37 @@ def test_form_emits_validated_settings(qtbot) -> None:
     assert signal.args[0].beta_deg == 33.5 and signal.args[0].z_mm == 250.0
     form.widgets["alpha_deg"].setValue(500.0)  # the spin box clamps to the declared maximum
     assert form.value().alpha_deg == 180.0
+
+
+def test_spin_boxes_step_with_44_px_buttons_and_a_whole_check_box_row_toggles(qtbot) -> None:
+    """A tap on the left 44x44 px of a spin box steps it down, on the right 44x44 px up (the two
+    stacked 10 px arrows were too small for a finger); a check box toggles by a tap anywhere on its
+    44 px row, far from its small square too."""
+    from PySide6 import QtCore
+
+    from ui.touch import TOUCH_PX, install_touch_style
+
+    install_touch_style()
+    form = SettingsForm(VirtualBenchSettings, VirtualBenchSettings(z_mm=250.0))
+    qtbot.addWidget(form)
+    form.resize(400, 800)
+    form.show()
+    z = form.widgets["z_mm"]
+    qtbot.waitUntil(lambda: z.height() >= TOUCH_PX)
+    step = z.singleStep()
+    left = QtCore.Qt.MouseButton.LeftButton
+    for x, y, expected in (
+        (TOUCH_PX - 4, 3, 250.0 - step),  # near the top edge of the down button, left
+        (z.width() - TOUCH_PX + 4, z.height() - 3, 250.0),  # the bottom edge of the up button, right
+        (z.width() - 3, z.height() // 2, 250.0 + step),
+    ):
+        qtbot.mouseClick(z, left, pos=QtCore.QPoint(x, y))
+        assert z.value() == pytest.approx(expected), (x, y)
+    loop = widget_for(spec_of(RunSettings, "loop"))
+    qtbot.addWidget(loop)
+    loop.resize(300, TOUCH_PX)
+    loop.show()
+    qtbot.waitUntil(lambda: loop.height() >= TOUCH_PX)
+    was = loop.isChecked()
+    qtbot.mouseClick(loop, left, pos=QtCore.QPoint(loop.width() - 5, 2))  # the row's far corner
+    assert loop.isChecked() != was
