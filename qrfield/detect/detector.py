@@ -11,7 +11,7 @@ from qrfield.detect.backends import Candidate, find_candidates, parse_backends
 from qrfield.detect.bilinear import sample_bilinear
 from qrfield.detect.detection import Detection, DetectorSettings, quality_of
 from qrfield.detect.lens import Lens, module_points_px
-from qrfield.detect.patterns import best_module_count, check_patterns
+from qrfield.detect.patterns import PatternCheck, best_module_count, check_patterns
 from qrfield.detect.refine import refine_corners
 from qrfield.detect.symbol import decoded_cells, fixed_cells, verified_matrix
 from qrfield.detect.symbol_fit import FitState, fit_symbol
@@ -98,6 +98,36 @@ def matrix_agrees(
     threshold = 0.5 * (np.median(values[dark]) + np.median(values[~dark]))
     seen_dark = values > threshold if inverted else values < threshold
     return float(np.mean(seen_dark == dark)) >= MATRIX_AGREEMENT
+
+
+def confirmed_matrix(
+    grey: np.ndarray,
+    corners: np.ndarray,
+    matrix: np.ndarray,
+    inverted: bool,
+    lens: Lens | None = None,
+    offset: tuple[int, int] = (0, 0),
+) -> np.ndarray | None:
+    """The decoded (n, n) ``matrix`` (bool) as the image at ``corners`` V1..V4 confirms it (float:
+    1 dark, 0 light, NaN where a module's centre reads the other colour or too near the middle:
+    :func:`qrfield.detect.symbol.verified_matrix`), or None when it does not agree with the image
+    (:data:`MATRIX_AGREEMENT`, as :func:`matrix_agrees`): one sampling of the module centres for
+    both. The levels are the medians of the decoded dark and light modules."""
+    n = matrix.shape[0]
+    values = sample_bilinear(grey, module_points_px(lens, corners, n, _module_centres(n), offset))
+    m = np.asarray(matrix, dtype=np.float64).reshape(-1)
+    known = np.isfinite(m) & np.isfinite(values)
+    if known.mean() < 0.5:
+        return None
+    seen, dark = values[known], m[known] > 0.5
+    if dark.all() or not dark.any():
+        return None
+    dark_level, light_level = float(np.median(seen[dark])), float(np.median(seen[~dark]))
+    threshold = 0.5 * (dark_level + light_level)
+    seen_dark = seen > threshold if inverted else seen < threshold
+    if float(np.mean(seen_dark == dark)) < MATRIX_AGREEMENT:
+        return None
+    return verified_matrix(values.reshape(n, n), matrix, dark_level, light_level)
 
 
 def symbol_cells(
@@ -218,8 +248,11 @@ class Detector:
         modules = rough.modules
         result = Refined(corners, None, np.full(4, np.nan), rough.score, False)
         if settings.refine:
-            seeds = self._seeds(grey, corners)
-            result = self.refine(grey, corners, modules, rough.score, rough.inverted, candidate.symbol, seeds)
+            symbol = candidate.symbol
+            result = self.refine_cold(grey, corners, modules, rough, symbol) if settings.symbol_fit else None
+            if result is None:  # the edge lines and the full fit, from each seed in turn
+                seeds = self._seeds(grey, corners)
+                result = self.refine(grey, corners, modules, rough.score, rough.inverted, symbol, seeds)
             if result is None:
                 result = Refined(corners, None, np.full(4, np.nan), rough.score, False)
         score, refined = result.score, result.refined
@@ -278,6 +311,68 @@ class Detector:
         if text is None:
             return None
         return Candidate(fit.corners_px, text, candidate.backend, n, matrix)
+
+    def refine_cold(
+        self,
+        grey: np.ndarray,
+        corners: np.ndarray,
+        modules: int,
+        rough: PatternCheck,
+        matrix: np.ndarray | None,
+    ) -> Refined | None:
+        """Sub-pixel corners from a backend's ``corners`` by the inverse-compositional fits of
+        qrfield.detect.symbol_cold (a fifth of :meth:`refine`'s cost): the blurred model, the
+        decoded matrix confirmed there (``matrix``: the backend's, None when not decoded), the sharp
+        model at the pixel centres. None when that does not hold (then :meth:`refine` runs): a
+        corner that moved more than max(3 px, 2 modules), a matrix the image does not confirm,
+        another polarity than the pattern check's (``rough``), a residual above a fifth of the
+        contrast, or patterns that fit worse than at ``corners`` (by 0.02)."""
+        from qrfield.detect.symbol_cold import coarse_fit, crop_around, fine_fit
+
+        lens = self.lens
+        region = crop_around(grey.shape, corners, modules)
+        if region is None or not lens.fits(grey.shape) or not np.isfinite(rough.light - rough.dark):
+            return None
+        x0, y0, x1, y1 = region
+        crop, offset = grey[y0:y1, x0:x1], (x0, y0)
+        shift = np.array(offset, dtype=np.float64)
+        decoded = matrix is not None and matrix.shape == (modules, modules)
+        cells = decoded_cells(matrix) if decoded else fixed_cells(modules)
+        coarse = coarse_fit(crop, corners - shift, cells, lens, rough.light, rough.dark, offset)
+        if not coarse.ok or coarse.state is None:
+            return None
+        confirmed = None
+        if decoded:
+            confirmed = confirmed_matrix(grey, coarse.corners_px + shift, matrix, rough.inverted, lens)
+            if confirmed is None:
+                return None
+            cells = decoded_cells(confirmed)
+        fine = fine_fit(crop, coarse.corners_px, cells, lens, coarse.state, offset)
+        if not fine.ok or fine.state is None or fine.corners_cov is None:
+            return None
+        fitted = fine.corners_px + shift
+        module_px = float(np.ptp(corners, axis=0).max()) / modules
+        moved = float(np.linalg.norm(fitted - corners, axis=1).max())
+        if (
+            moved > max(3.0, 2.0 * module_px)
+            or (fine.contrast < 0) != rough.inverted
+            or not fine.residual < 0.2 * abs(fine.contrast)
+        ):
+            return None
+        check = check_patterns(grey, fitted, modules, lens)
+        if check.score < rough.score - 0.02:
+            return None
+        return Refined(
+            fitted,
+            fine.corners_cov,
+            fine.corners_std_px,
+            check.score,
+            True,
+            fine.state,
+            fine.residual,
+            cells,
+            confirmed,
+        )
 
     def refine(
         self,
