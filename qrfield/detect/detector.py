@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -149,6 +149,12 @@ def symbol_cells(
     return fixed_cells(modules)
 
 
+def _area(corners: np.ndarray) -> float:
+    """Area (px^2) of the quadrilateral V1..V4 (shoelace)."""
+    x, y = corners[:, 0], corners[:, 1]
+    return 0.5 * abs(float(x @ np.roll(y, -1) - y @ np.roll(x, -1)))
+
+
 def same_code(a: np.ndarray, b: np.ndarray) -> bool:
     """True when corner sets ``a`` and ``b`` (4, 2) outline the same code (centres and sizes close)."""
     size_a = float(np.linalg.norm(a[2] - a[0]))
@@ -195,15 +201,25 @@ class Detector:
         if grey.shape[0] < 21 or grey.shape[1] < 21:
             return []
         found: list[Detection] = []
+        settings = self.settings
+        most = settings.max_codes or None
         for backend in self.backends:
             skipped = False
-            for candidate in find_candidates(grey, backend):
+            candidates = find_candidates(grey, backend)
+            if len(candidates) > 1 and most is not None:  # the largest first: they are the ones kept
+                candidates.sort(key=lambda c: -_area(c.corners_px))
+            for candidate in candidates:
+                if most is not None and len(found) >= most:
+                    break
                 if any(same_code(candidate.corners_px, d.corners_px) for d in found):
                     continue  # the same code seen again
                 if known and any(same_code(candidate.corners_px, k) for k in known):
                     skipped = True
                     continue
-                detection = self.accept(grey, candidate)
+                # A code read with another text than the one selected is not refined (its corners
+                # could give no pose the pipeline would use): reported with the backend's corners.
+                other = bool(settings.select_text) and candidate.text not in (None, settings.select_text)
+                detection = self.accept(grey, candidate, refine=not other)
                 if detection is not None:
                     found.append(detection)
             if found or skipped:
@@ -229,9 +245,15 @@ class Detector:
             if same_code(located + offset, corners):
                 yield located + offset
 
-    def accept(self, grey: np.ndarray, candidate: Candidate, backend: str | None = None) -> Detection | None:
-        """Check and refine one backend candidate on a grey image; None when it does not hold up."""
+    def accept(
+        self, grey: np.ndarray, candidate: Candidate, backend: str | None = None, refine: bool = True
+    ) -> Detection | None:
+        """Check and refine one backend candidate on a grey image; None when it does not hold up.
+        ``refine`` False: checked only, the backend's corners kept (quality at most half the
+        pattern score, not refined)."""
         settings = self.settings
+        if not refine:
+            settings = replace(settings, refine=False)
         corners = candidate.corners_px
         if corners.shape != (4, 2) or not np.all(np.isfinite(corners)):
             return None
@@ -287,15 +309,17 @@ class Detector:
         rough = check_patterns(grey, candidate.corners_px, n, self.lens)
         if rough.reason and rough.score == 0.0:
             return None
-        fit = self.refine(
-            grey,
-            candidate.corners_px,
-            n,
-            rough.score,
-            rough.inverted,
-            None,
-            self._seeds(grey, candidate.corners_px),
-        )
+        fit = self.refine_cold(grey, candidate.corners_px, n, rough, None) if self.settings.refine else None
+        if fit is None:
+            fit = self.refine(
+                grey,
+                candidate.corners_px,
+                n,
+                rough.score,
+                rough.inverted,
+                None,
+                self._seeds(grey, candidate.corners_px),
+            )
         # The bar of a decoded code (accept()): at 1.2-2 px modules the pattern score is noisy
         # (0.78-0.87 on well-fitted views); a successful decode is the stronger check.
         if (

@@ -39,7 +39,7 @@ from qrfield.detect.symbol_track import WarmFit
 COARSE_POINTS = 400
 COARSE_ITERATIONS = 4
 COARSE_SETTLE_PX = 0.05
-FINE_POINTS = 1500
+FINE_POINTS = 1000
 FINE_ITERATIONS = 3
 FINE_SETTLE_PX = 0.01
 #: Modules of margin around the corners in the crop the fits work on (the quiet zone's first

@@ -422,11 +422,22 @@ class _Problem:
         self.ph_t[1:] = self.p_t
         self.corner_t = np.ascontiguousarray(corner.T)
         self.colour_t = np.ascontiguousarray(colour.transpose(1, 2, 0))
-        # px per module unit across u and across v edges (k, 2): 1 / |du/dp|, 1 / |dv/dp|.
-        duv = (g[None, :2, :2] - uv[ok][:, :, None] * g[None, 2:3, :2]) / (uvw[ok, 2:3, None] * scale)
+        # px per module unit across u and across v edges (2, k): 1 / |du/dp|, 1 / |dv/dp|, with
+        # d(u, v)/d(normalised ideal) = (G[:2, :2] - (u, v) G[2, :2]) / w and the lens' d ideal /
+        # d pixel, component by component (whole (k, 2, 2) arrays cost several times as much).
+        u_ok, v_ok = uv[ok, 0], uv[ok, 1]
+        inv_w = 1.0 / (uvw[ok, 2] * scale)
+        ux, uy = (g[0, 0] - u_ok * g[2, 0]) * inv_w, (g[0, 1] - u_ok * g[2, 1]) * inv_w
+        vx, vy = (g[1, 0] - v_ok * g[2, 0]) * inv_w, (g[1, 1] - v_ok * g[2, 1]) * inv_w
         if lens.distorted:
-            duv = duv @ jl[ok]
-        self.inv_grad_t = np.ascontiguousarray((1.0 / np.sqrt((duv * duv).sum(axis=2))).T)
+            j = jl[ok]
+            j00, j01, j10, j11 = j[:, 0, 0], j[:, 0, 1], j[:, 1, 0], j[:, 1, 1]
+            ux, uy = ux * j00 + uy * j10, ux * j01 + uy * j11
+            vx, vy = vx * j00 + vy * j10, vx * j01 + vy * j11
+        self.inv_grad_t = np.empty((2, len(u_ok)))
+        np.hypot(ux, uy, out=self.inv_grad_t[0])
+        np.hypot(vx, vy, out=self.inv_grad_t[1])
+        np.divide(1.0, self.inv_grad_t, out=self.inv_grad_t)
         self.radius = r
 
     def __len__(self) -> int:

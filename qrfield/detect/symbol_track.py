@@ -38,13 +38,13 @@ from qrfield.detect.symbol_fit import (
     MIN_EDGE_PX,
     FitState,
     SymbolFit,
+    _Darkness,
     _g_from_params,
     _layout,
     _params_from_g,
     _Problem,
     _windows,
     corner_covariance,
-    darkness_at,
 )
 from qrfield.linalg import small_inverse, small_solve
 
@@ -81,19 +81,26 @@ def _scales(h: list[float], n: int) -> tuple[float, float]:
 
 
 def _inv_grad(uv: np.ndarray, h: np.ndarray, lens: Lens | None) -> np.ndarray:
-    """(k, 2) px per module unit across u and across v edges at module points ``uv`` (k, 2) for
+    """(2, k) px per module unit across u and across v edges at module points ``uv`` (k, 2) for
     the homography ``h`` (3, 3, module -> ideal px), through the lens: the edges are blurred in the
-    image's pixels, not the ideal ones (as the full fit's samples)."""
-    q = uv @ h[:2, :2].T + h[:2, 2]
-    w = uv @ h[2, :2] + h[2, 2]
-    px = q / w[:, None]
-    jac = (h[None, :2, :2] - px[:, :, None] * h[None, 2:3, :2]) / w[:, None, None]  # d px / d uv
+    image's pixels, not the ideal ones (as the full fit's samples). Component by component: the
+    rows of the inverse of d px / d uv are the gradients of u and v."""
+    u, v = uv[:, 0], uv[:, 1]
+    w = 1.0 / (h[2, 0] * u + h[2, 1] * v + h[2, 2])
+    x = (h[0, 0] * u + h[0, 1] * v + h[0, 2]) * w
+    y = (h[1, 0] * u + h[1, 1] * v + h[1, 2]) * w
+    a, b = (h[0, 0] - x * h[2, 0]) * w, (h[0, 1] - x * h[2, 1]) * w  # d x / d (u, v)
+    c, d = (h[1, 0] - y * h[2, 0]) * w, (h[1, 1] - y * h[2, 1]) * w  # d y / d (u, v)
     if lens is not None and lens.distorted:
-        jac = lens.distort_jacobian(px) @ jac
-    det = jac[:, 0, 0] * jac[:, 1, 1] - jac[:, 0, 1] * jac[:, 1, 0]
-    grad_u = np.column_stack([jac[:, 1, 1], -jac[:, 0, 1]]) / det[:, None]  # rows of the inverse
-    grad_v = np.column_stack([-jac[:, 1, 0], jac[:, 0, 0]]) / det[:, None]
-    return 1.0 / np.column_stack([np.hypot(*grad_u.T), np.hypot(*grad_v.T)])
+        j = lens.distort_jacobian(np.column_stack([x, y]))
+        j00, j01, j10, j11 = j[:, 0, 0], j[:, 0, 1], j[:, 1, 0], j[:, 1, 1]
+        a, b, c, d = j00 * a + j01 * c, j00 * b + j01 * d, j10 * a + j11 * c, j10 * b + j11 * d
+    det = np.abs(a * d - b * c)
+    # grad u = (d, -b) / det, grad v = (-c, a) / det: their lengths' inverses.
+    out = np.empty((2, len(u)))
+    np.divide(det, np.hypot(d, b), out=out[0])
+    np.divide(det, np.hypot(c, a), out=out[1])
+    return out
 
 
 def pixel_samples(
@@ -151,12 +158,14 @@ class _Template:
         module_px = 0.5 * (self.scales[0] + self.scales[1])
         r = 1 if edge_px / max(module_px, 1e-6) < 0.4 else 2
         band = 1.5 * edge_px + 1.0
+        # Per-point terms with the points on the last axis (as the full fit's: every operation on
+        # contiguous runs; the Jacobian is filled row by row, transposed).
         if samples is not None:
             g = _g_from_params(samples.geo)
             uvw = g[:, :2] @ samples.p_t + g[:, 2:3]
-            uv = (uvw[:2] / uvw[2]).T
-            corner, inv_grad = samples.corner_t.T, samples.inv_grad_t.T
-            colour, xy = samples.colour_t.transpose(2, 0, 1), samples.p_t.T
+            uv_t = uvw[:2] / uvw[2]
+            dark = _Darkness(uv_t - samples.corner_t, samples.inv_grad_t, samples.colour_t, edge_px)
+            xy_t = samples.p_t
         else:
             layout = _layout(cells, r)
             pts = layout.candidates(max(1, min(8, round(module_px))), max(module_px, 0.05), band, points)
@@ -164,37 +173,52 @@ class _Template:
                 pts = pts[np.linspace(0, len(pts) - 1, points).astype(np.int64)]
             ok, colour, corner = _windows(layout, pts, r)
             uv = pts[ok]
-            inv_grad = _inv_grad(uv, h, lens)
-            xy = uv / (n / 2.0) - 1.0
-        t, dt, dts = darkness_at(uv, corner, inv_grad, colour, edge_px, edge_derivative=free_edge)
-        self.uv = uv
+            uv_t = np.ascontiguousarray(uv.T)
+            dark = _Darkness(
+                np.ascontiguousarray((uv - corner).T),
+                _inv_grad(uv, h, lens),
+                np.ascontiguousarray(colour.transpose(1, 2, 0)),
+                edge_px,
+            )
+            xy_t = uv_t / (n / 2.0) - 1.0
+        t = dark.value
+        (du, dv), dts = dark.derivatives(free_edge)
+        k = len(t)
         self.t = t
         #: dT/ds at the points (the edge width's derivative), None without ``free_edge``
         self.dts = dts
-        one = np.ones(len(uv))
-        u, v = uv[:, 0], uv[:, 1]
-        # d W(x; dH) / d dH at the identity, for dH = I + [[d0 d1 d2], [d3 d4 d5], [d6 d7 0]]
-        dwu = np.column_stack([u, v, one, 0 * one, 0 * one, 0 * one, -u * u, -u * v])
-        dwv = np.column_stack([0 * one, 0 * one, 0 * one, u, v, one, -u * v, -v * v])
-        self.geo = dt[:, :1] * dwu + dt[:, 1:] * dwv  # dT / d dH, (k, 8)
-        # Lighting basis 1, x, y: normalised module coordinates, or the samples' (see above).
-        self.basis = np.column_stack([one, xy])
-        self.light_cols = np.concatenate([self.basis, -self.basis * t[:, None]], axis=1)
+        u, v = uv_t
+        # -dT / d dH, dH = I + [[d0 d1 d2], [d3 d4 d5], [d6 d7 0]] at the identity: dT/du (u, v, 1,
+        # 0, 0, 0, -u u, -u v) + dT/dv (0, 0, 0, u, v, 1, -u v, -v v).
+        radial = du * u + dv * v
+        self.neg_geo_t = neg = np.empty((8, k))
+        np.multiply(du, u, out=neg[0])
+        np.multiply(du, v, out=neg[1])
+        neg[2] = du
+        np.multiply(dv, u, out=neg[3])
+        np.multiply(dv, v, out=neg[4])
+        neg[5] = dv
+        np.multiply(radial, -u, out=neg[6])
+        np.multiply(radial, -v, out=neg[7])
+        np.negative(neg, out=neg)
         self.n = n
-        # The Jacobian's buffer: its lighting columns do not change, the geometry's are -B dT/d dH.
-        # Kept transposed, (14, k): each parameter's column is one contiguous row, so filling
-        # the geometry's rows and forming J^T W J cost half as much as on (k, 14) (measured).
-        # With the edge width free, its row is the 9th (15 rows).
-        self.neg_geo_t = np.ascontiguousarray(-self.geo.T)
+        # Lighting basis 1, x, y as rows (3, k): normalised module coordinates, or the samples'
+        # (see above); (A, B) = light.reshape(2, 3) @ basis_t in one product.
+        self.basis_t = basis = np.empty((3, k))
+        basis[0] = 1.0
+        basis[1:] = xy_t
+        # The Jacobian's buffer, transposed (14, k): each parameter's column is one contiguous row,
+        # so filling the geometry's rows (-B dT/d dH, each step) and forming J^T W J cost half as
+        # much as on (k, 14) (measured). The lighting's rows (basis, -T basis) do not change; with
+        # the edge width free its row is the 9th (15 rows).
         self.light_row = 9 if free_edge else 8
-        self.jac_t = np.empty((self.light_row + 6, len(t)))
-        self.jac_t[self.light_row :] = self.light_cols.T
-        self.uv_cv = np.ascontiguousarray(uv.reshape(1, -1, 2))
+        self.jac_t = np.empty((self.light_row + 6, k))
+        self.jac_t[self.light_row : self.light_row + 3] = basis
+        np.multiply(basis, -t, out=self.jac_t[self.light_row + 3 :])
+        self.uv = uv_t.T
+        self.uv_cv = np.ascontiguousarray(self.uv.reshape(1, -1, 2))
         # float32 points: cv2.perspectiveTransform then gives the float32 map cv2.remap takes.
         self.uv_cv32 = self.uv_cv.astype(np.float32)
-        # The lighting basis as rows: (A, B) = light.reshape(2, 3) @ basis_t in one product (a
-        # (k, 3) @ (3,) matvec costs twice as much as this (2, 3) @ (3, k), measured).
-        self.basis_t = np.ascontiguousarray(self.basis.T)
         # The points' box in module coordinates: where a homography keeps w > 0 over it, the box's
         # image is the convex quad of its mapped corners, so those four inside the crop put every
         # point inside (a test in floats instead of two passes over the (k, 2) pixels).

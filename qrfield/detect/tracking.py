@@ -239,11 +239,17 @@ class Tracker:
             # The periodic full look: keep the codes tracked (the backends may miss a code that
             # tracking holds), add the ones that came into view.
             new = [d for d in detections if not any(same_code(d.corners_px, f.corners_px) for f in found)]
-            self._tracks += [self._new_track(grey, d) for d in new]
+            self._tracks += [self._new_track(grey, d) for d in new if self._follows(d)]
             return found + new
-        self._tracks = [self._new_track(grey, d) for d in detections]
+        self._tracks = [self._new_track(grey, d) for d in detections if self._follows(d)]
         self.last_mode = "full"
         return detections
+
+    def _follows(self, detection: Detection) -> bool:
+        """Whether a detected code becomes a track: not one read with another text than the one
+        selected (the detector reports it unrefined; following it would only cost)."""
+        select = self.settings.select_text
+        return not (select and detection.text is not None and detection.text != select)
 
     def _new_track(self, grey: np.ndarray, detection: Detection) -> _Track:
         lens = self.detector.lens
