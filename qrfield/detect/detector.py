@@ -258,7 +258,9 @@ class Detector:
         if corners.shape != (4, 2) or not np.all(np.isfinite(corners)):
             return None
         if not candidate.text and candidate.modules and settings.refine and settings.symbol_fit:
-            candidate = self.read(grey, candidate) or candidate
+            read = self.read(grey, candidate)
+            if read is not None:  # from the read fit's corners: a backend's V3 can be modules off
+                candidate, corners = read, read.corners_px
         if settings.require_text and not candidate.text:
             return None
         if candidate.modules:
