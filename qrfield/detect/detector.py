@@ -273,7 +273,8 @@ class Detector:
         result = Refined(corners, None, np.full(4, np.nan), rough.score, False)
         if settings.refine:
             symbol = candidate.symbol
-            result = self.refine_cold(grey, corners, modules, rough, symbol) if settings.symbol_fit else None
+            decoded = symbol is not None and settings.symbol_fit
+            result = self.refine_cold(grey, corners, modules, rough, symbol) if decoded else None
             if result is None:  # the edge lines and the full fit, from each seed in turn
                 seeds = self._seeds(grey, corners)
                 result = self.refine(grey, corners, modules, rough.score, rough.inverted, symbol, seeds)
@@ -311,17 +312,17 @@ class Detector:
         rough = check_patterns(grey, candidate.corners_px, n, self.lens)
         if rough.reason and rough.score == 0.0:
             return None
-        fit = self.refine_cold(grey, candidate.corners_px, n, rough, None) if self.settings.refine else None
-        if fit is None:
-            fit = self.refine(
-                grey,
-                candidate.corners_px,
-                n,
-                rough.score,
-                rough.inverted,
-                None,
-                self._seeds(grey, candidate.corners_px),
-            )
+        # (The edge lines and the full fit: with the fixed patterns alone, at modules of 1.2-2 px, the
+        # inverse-compositional fit left V3 a few px off where these do not: measured.)
+        fit = self.refine(
+            grey,
+            candidate.corners_px,
+            n,
+            rough.score,
+            rough.inverted,
+            None,
+            self._seeds(grey, candidate.corners_px),
+        )
         # The bar of a decoded code (accept()): at 1.2-2 px modules the pattern score is noisy
         # (0.78-0.87 on well-fitted views); a successful decode is the stronger check.
         if (
@@ -347,12 +348,13 @@ class Detector:
         matrix: np.ndarray | None,
     ) -> Refined | None:
         """Sub-pixel corners from a backend's ``corners`` by the inverse-compositional fits of
-        qrfield.detect.symbol_cold (a fifth of :meth:`refine`'s cost): the blurred model, the
-        decoded matrix confirmed there (``matrix``: the backend's, None when not decoded), the sharp
-        model at the pixel centres. None when that does not hold (then :meth:`refine` runs): a
-        corner that moved more than max(3 px, 2 modules), a matrix the image does not confirm,
-        another polarity than the pattern check's (``rough``), a residual above a fifth of the
-        contrast, or patterns that fit worse than at ``corners`` (by 0.02)."""
+        qrfield.detect.symbol_cold (a third of :meth:`refine`'s cost): the blurred model, the
+        decoded matrix confirmed there (``matrix``: the backend's, None when not decoded: then the
+        fixed patterns alone, which hold V3 less well), the sharp model at the pixel centres. None
+        when that does not hold (then :meth:`refine` runs): a corner that moved more than max(3 px,
+        2 modules), a matrix the image does not confirm, another polarity than the pattern
+        check's (``rough``), a residual above a fifth of the contrast, or patterns that fit worse
+        than at ``corners`` (by 0.02)."""
         from qrfield.detect.symbol_cold import coarse_fit, crop_around, fine_fit
 
         lens = self.lens
