@@ -37,11 +37,17 @@ from qrfield.detect.symbol_track import WarmFit
 
 #: Template points, Gauss-Newton steps (at most) and the move (px) below which a stage has settled.
 COARSE_POINTS = 400
-COARSE_ITERATIONS = 4
+COARSE_ITERATIONS = 3
 COARSE_SETTLE_PX = 0.05
 FINE_POINTS = 1000
 FINE_ITERATIONS = 3
 FINE_SETTLE_PX = 0.01
+#: Most Gauss-Newton steps of the full model at the end, and the largest corner move (px) of the
+#: last one: a step that still moves a corner further is taken again, and a fit still moving
+#: after POLISH_STEPS is not trusted (the full fit runs). On steep views the template's answer
+#: was 0.3-0.6 px off where one step brought it within 0.03 px (or, from a poor start, not).
+POLISH_STEPS = 3
+POLISH_SETTLE_PX = 0.05
 #: Modules of margin around the corners in the crop the fits work on (the quiet zone's first
 #: rings, the coarse model's wide edges, a corner a module or two off).
 CROP_MODULES = 4.0
@@ -76,7 +82,10 @@ def coarse_fit(
     from a backend's corners (4, 2) px, with the blurred model of ``cells``; ``light`` and ``dark``
     (grey levels, as seen) start the lighting. Never raises for image content (ok False)."""
     n = cells.shape[0] - 2 * QUIET_RINGS
-    module_px = float(np.ptp(corners_px, axis=0).max()) / n
+    # The module along the code's shortest side: a code seen at a steep angle has modules several
+    # times as long one way as the other, and a blur sized by the long way washes out the short.
+    sides = np.linalg.norm(np.roll(corners_px, -1, axis=0) - corners_px, axis=1)
+    module_px = float(sides.min()) / n
     edge = max(1.5, 0.35 * module_px, START_EDGE_PX)
     start = FitState(edge, np.array([light, 0.0, 0.0, light - dark, 0.0, 0.0]))
     warm = WarmFit(cells, lens, COARSE_POINTS)
@@ -96,18 +105,27 @@ def fine_fit(
     centres, the edge width fitted from START_EDGE_PX and ``state``'s lighting level and contrast.
     Never raises for image content (ok False).
 
-    A few steps on a template made at the pixel centres where the corners start, then the full
-    fit's last iterations on the same pixels from there (:func:`qrfield.detect.symbol_fit.polish`):
-    the model evaluated where the corners now are, at the pixel centres exactly, and the
-    covariance. (Further steps on the template sample between pixels, where cv2.remap rounds the
-    positions to 1/32 px: after a common sub-pixel move every sample rounds alike, and the corners
-    drifted 0.01-0.03 px: measured.)"""
+    A few steps on a template made at the pixel centres where the corners start, then Gauss-Newton
+    steps of the full model on the same pixels from there (:func:`qrfield.detect.symbol_fit.polish`,
+    until a step moves no corner by POLISH_SETTLE_PX): the model evaluated where the corners now
+    are, at the pixel centres exactly, and the covariance. (Further steps on the template sample
+    between pixels, where cv2.remap rounds the positions to 1/32 px: after a common sub-pixel move
+    every sample rounds alike, and the corners drifted 0.01-0.03 px: measured.)"""
     warm = WarmFit(cells, lens, FINE_POINTS, pixel_centred=True, free_edge=True)
     # The lighting's level and contrast carry over; its slopes do not (the coarse template's basis
     # is the module coordinates, this one's the image's).
     light = np.asarray(state.lighting, dtype=np.float64)
     begin = FitState(START_EDGE_PX, np.array([light[0], 0.0, 0.0, light[3], 0.0, 0.0]), state.scale)
     fit = warm.fit(grey, corners_px, begin, offset, FINE_ITERATIONS, COARSE_SETTLE_PX)
-    if not fit.ok or fit.state is None or warm.samples is None:
+    samples = warm.samples
+    if not fit.ok or fit.state is None or samples is None:
         return fit
-    return polish(warm.samples, fit.corners_px, fit.state, lens, offset)
+    for _ in range(POLISH_STEPS):
+        last = fit.corners_px
+        fit = polish(samples, last, fit.state, lens, offset)
+        if not fit.ok or fit.state is None:
+            return fit
+        if float(np.abs(fit.corners_px - last).max()) < POLISH_SETTLE_PX:
+            return fit
+    # Still moving: the template's answer was not near one the full model holds.
+    return SymbolFit(False, np.asarray(corners_px, dtype=np.float64).copy(), None, "the fit does not settle")
