@@ -20,8 +20,9 @@ is closed and, with ``retry_s`` > 0, reopened every ``retry_s`` seconds; else th
 configuration (``hold_when_down`` True: the app). New settings (:meth:`FrameLoop.configure`, any
 thread) apply before the next frame and reopen the source only when they must.
 
-Events for the owner (all optional methods of ``events``, called on the loop's thread, except
-``source_down`` which also comes from the opening timer's thread): ``opened(description, again)``,
+Events for the owner (the methods of :class:`qrfield.seams.LoopEvents`, called on the loop's thread,
+except ``source_down`` which also comes from the opening timer's thread; sinks implement
+:class:`qrfield.seams.Sink`, both checked when the loop is made): ``opened(description, again)``,
 ``failed(message, ended)``, ``note(message)`` (each source note once, pipeline problems),
 ``processed(frame, result, frames_behind)``, and ``source_down(reason)`` / ``source_up()`` with the
 sinks' calls of the same names.
@@ -40,6 +41,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from qrfield.runconfig import RunConfig
+from qrfield.seams import LoopEvents, LoopEventsBase, Sink
 
 #: How the loop ended (:meth:`FrameLoop.run`).
 STOPPED, DONE, ENDED, FAILED = "stopped", "done", "ended", "failed"
@@ -57,17 +59,30 @@ class FrameLoop:
         self,
         config: RunConfig,
         *,
-        events: Any = None,
-        sinks: Sequence[Any] = (),
+        events: LoopEvents | None = None,
+        sinks: Sequence[Sink] = (),
         opener: Callable[..., Any] | None = None,
         hold_when_down: bool = False,
         max_frames: int = 0,
     ) -> None:
         if max_frames < 0:
             raise ValueError(f"max_frames must be >= 0, got {max_frames}")
-        self.events = events
-        #: Frame sinks (on_result, on_source_down, on_source_up); replace the tuple, never mutate it.
-        self.sinks: tuple[Any, ...] = tuple(sinks)
+        self.events: LoopEvents = LoopEventsBase() if events is None else events
+        #: Frame sinks (qrfield.seams.Sink); replace the tuple, never mutate it.
+        self.sinks: tuple[Sink, ...] = tuple(sinks)
+        missing = _missing_methods(self.events, LoopEvents)
+        if missing:
+            raise TypeError(
+                f"events {type(self.events).__name__} lacks {', '.join(missing)} of qrfield.seams.LoopEvents "
+                "(subclass qrfield.seams.LoopEventsBase)"
+            )
+        for sink in self.sinks:
+            missing = _missing_methods(sink, Sink)
+            if missing:
+                raise TypeError(
+                    f"sink {type(sink).__name__} lacks {', '.join(missing)} of qrfield.seams.Sink "
+                    "(subclass qrfield.seams.BaseSink)"
+                )
         self.hold_when_down = hold_when_down
         self.max_frames = int(max_frames)
         self._opener = opener
@@ -170,11 +185,6 @@ class FrameLoop:
         finally:
             self._close_source()
 
-    def _event(self, name: str, *args: Any) -> None:
-        handler = getattr(self.events, name, None)
-        if handler is not None:
-            handler(*args)
-
     def _apply_pending(self) -> None:
         """New settings and a reopen request, taken together: a source that must be opened anyway
         is opened once."""
@@ -205,7 +215,7 @@ class FrameLoop:
             self.pipeline = config.make_pipeline(self.source_camera)
         except Exception as exc:  # bad settings are said, not a crash of the loop
             self.pipeline = None
-            self._event("note", f"cannot set up the pipeline: {exc}")
+            self.events.note(f"cannot set up the pipeline: {exc}")
             return
         self.pipeline.t0 = t0  # one stream clock (t_ms) for the whole run
 
@@ -228,7 +238,7 @@ class FrameLoop:
             again = "still " if self._failed else ""
             self._failed = True
             self._mark_down(f"cannot open source: {exc}")
-            self._event("failed", f"{again}cannot open source {config.source!r}: {exc}", False)
+            self.events.failed(f"{again}cannot open source {config.source!r}: {exc}", False)
             self._after_failure()
             return
         finally:
@@ -244,7 +254,7 @@ class FrameLoop:
         self._notes_seen = 0
         self.reader = LatestFrameReader(source).start()
         self._last_frame_at = time.monotonic()
-        self._event("opened", source.description, self._failed)
+        self.events.opened(source.description, self._failed)
         self._failed = False
         self._forward_notes()
         if self.pipeline is not None:
@@ -267,7 +277,7 @@ class FrameLoop:
             self._forward_notes()
             self._close_source()
             self._mark_down(f"end of stream: {exc}")
-            self._event("failed", f"end of stream: {exc}", True)
+            self.events.failed(f"end of stream: {exc}", True)
             self._ending = ENDED
             return
         except SourceError as exc:
@@ -275,7 +285,7 @@ class FrameLoop:
             self._close_source()
             self._failed = True
             self._mark_down(f"source failed: {exc}")
-            self._event("failed", f"source failed: {exc}", False)
+            self.events.failed(f"source failed: {exc}", False)
             self._after_failure()
             return
         self._forward_notes()
@@ -294,32 +304,32 @@ class FrameLoop:
             try:
                 sink.on_result(result, self.simulated)
             except Exception as exc:  # a faulty sink must not stop the measurements
-                self._event("note", f"result sink failed: {exc!r}")
+                self.events.note(f"result sink failed: {exc!r}")
         behind = max(0, reader.read_count - 1 - frame.index)
-        self._event("processed", frame, result, behind)
+        self.events.processed(frame, result, behind)
 
     def _mark_down(self, reason: str) -> None:
         with self._down_lock:
             if self._down:
                 return
             self._down = True
-        self._tell_down_up("source_down", reason)
+        self._to_sinks(lambda sink: sink.on_source_down(reason))
+        self.events.source_down(reason)
 
     def _mark_up(self) -> None:
         with self._down_lock:
             if not self._down:
                 return
             self._down = False
-        self._tell_down_up("source_up")
+        self._to_sinks(lambda sink: sink.on_source_up())
+        self.events.source_up()
 
-    def _tell_down_up(self, name: str, *args: Any) -> None:
-        """Every sink's ``on_<name>(*args)``, then the owner's event ``name``."""
+    def _to_sinks(self, call: Callable[[Sink], object]) -> None:
         for sink in self.sinks:
             try:
-                getattr(sink, f"on_{name}")(*args)
+                call(sink)
             except Exception as exc:  # a faulty sink must not stop the loop
-                self._event("note", f"sink failed: {exc!r}")
-        self._event(name, *args)
+                self.events.note(f"sink failed: {exc!r}")
 
     def _forward_notes(self) -> None:
         source = self.source
@@ -327,7 +337,7 @@ class FrameLoop:
             return
         notes = list(source.notes)
         for note in notes[self._notes_seen :]:
-            self._event("note", note)
+            self.events.note(note)
         self._notes_seen = len(notes)
 
     def _close_source(self) -> None:
@@ -341,4 +351,11 @@ class FrameLoop:
             try:
                 source.close()
             except Exception as exc:  # closing a broken device must not take the loop down
-                self._event("note", f"closing the source failed: {exc}")
+                self.events.note(f"closing the source failed: {exc}")
+
+
+def _missing_methods(obj: object, protocol: type) -> list[str]:
+    """The methods of ``protocol`` that ``obj`` does not have (a clear error at construction beats a
+    missing method found mid-stream)."""
+    names = [n for n, v in vars(protocol).items() if callable(v) and not n.startswith("_")]
+    return [n for n in names if not callable(getattr(obj, n, None))]

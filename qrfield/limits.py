@@ -96,3 +96,7 @@ def check_corners_in_view(corners: Any, width: int, height: int, where: str = "-
                 f"{where}: V{i} ({u:g}, {v:g}) px lies outside the {width}x{height} image by more than "
                 f"{CORNER_MARGIN_FRACTION:.0%} of its size (u {lo_u:g}..{hi_u:g}, v {lo_v:g}..{hi_v:g})"
             )
+
+
+#: A robot's tool position (pairs.csv, ``$QRC,TOOL``) in mm: 100 m is beyond any arm or gantry.
+TOOL_POSITION_MM = Limit("tool position", "mm", -100_000.0, 100_000.0, "any robot's reach")

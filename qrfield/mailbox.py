@@ -2,7 +2,7 @@
 
 The project's one "newest replaces older" hand-over between threads: the newest camera frame
 (:class:`qrfield.sources.LatestFrameReader`), the newest pose waiting for the serial port
-(:class:`qrfield.serial_link.SerialLink`), the newest result waiting for the app's redraw
+(:class:`qrfield.serial.link.SerialLink`), the newest result waiting for the app's redraw
 (``ui/worker.py``) and the newest input waiting for a background job (``ui/background.py``).
 Whoever reads never sees a queue build up behind a slow step: an item not taken before the next
 one arrives is dropped and counted (:attr:`Mailbox.dropped`).

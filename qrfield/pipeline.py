@@ -75,6 +75,7 @@ class FrameResult:
         latency_ms: capture to finished result; detect_ms, solve_ms: time spent in each step.
         label: the frame's label (file name, ...).
         camera: the camera model used for this frame (scaled to the frame's size).
+        t_capture: time.monotonic() s of the frame's capture (the serial line's age_ms counts from it).
     """
 
     index: int
@@ -90,6 +91,7 @@ class FrameResult:
     solve_ms: float = 0.0
     label: str = ""
     camera: CameraModel | None = None
+    t_capture: float = math.nan
 
     @property
     def primary(self) -> Any:
@@ -253,7 +255,9 @@ class Pipeline:
         if self.t0 is None:
             self.t0 = frame.t_capture
         t_ms = max(0, round((frame.t_capture - self.t0) * 1000.0))
-        result = FrameResult(frame.index, t_ms, NOQR, truth=frame.truth, label=frame.label)
+        result = FrameResult(
+            frame.index, t_ms, NOQR, truth=frame.truth, label=frame.label, t_capture=frame.t_capture
+        )
         try:
             self._process(frame, result)
         except Exception as exc:  # never raise per frame: a broken frame is a status, not a crash

@@ -16,14 +16,16 @@ virtual     VirtualBenchSettings         ``--virtual-NAME``
 picamera    Picamera2Settings            ``--picamera-NAME``
 usb         UsbCameraSettings            ``--usb-NAME``
 serial      SerialLinkSettings           ``--serial-NAME`` (``--serial [PORT]`` turns the link on)
+handeye     HandEyeSettings              ``--frame --handeye-file`` (poses in the tool or base frame)
 =========== ============================ ======================================================
 
 The app writes the file when it closes (with sections of its own: window, simulation, session
 folder, ...); the commands read it and never write it. Unknown keys are ignored and bad values fall
 back to their defaults with a note (:attr:`ConfigStore.problems`), so a damaged or older file never
-stops anything; a file that cannot be read as a JSON object at all is kept as
-``app.json.bad-<time>`` (whoever reads it first moves it aside, so the app never saves defaults
-over it), with one line saying so. :func:`effective_settings` says where each value came from
+stops the app (``qrfield run`` is strict: a bad value it would use stops it at start, naming the
+file and the key, ``effective_settings(strict=True)``); a file that cannot be read as a JSON object
+at all is kept as ``app.json.bad-<time>`` (whoever reads it first moves it aside, so the app never
+saves defaults over it), with one line saying so. :func:`effective_settings` says where each value came from
 (``qrfield config``).
 """
 
@@ -104,8 +106,9 @@ class Section:
 def sections() -> dict[str, Section]:
     """The run configuration's sections, in file order (imports the settings' modules)."""
     from qrfield.detect import DetectorSettings
-    from qrfield.methods import settings_classes
-    from qrfield.serial_link import SerialLinkSettings
+    from qrfield.handeye.settings import HandEyeSettings
+    from qrfield.serial.link import SerialLinkSettings
+    from qrfield.solvers import settings_classes
     from qrfield.sources import Picamera2Settings, UsbCameraSettings, VirtualBenchSettings
 
     solvers = settings_classes()
@@ -118,6 +121,7 @@ def sections() -> dict[str, Section]:
         Section("picamera", Picamera2Settings, "picamera_", "Raspberry Pi camera (--source picamera2)"),
         Section("usb", UsbCameraSettings, "usb_", "USB camera (--source usb:N)"),
         Section("serial", SerialLinkSettings, "serial_", "serial link to the gripper controller"),
+        Section("handeye", HandEyeSettings, "", "the frame poses are reported in (docs/handeye.md)"),
     ]
     return {s.name: s for s in table}
 
@@ -410,13 +414,19 @@ class Effective:
 
 
 def effective_settings(
-    args: argparse.Namespace | None = None, *, config_dir: Any = None, resolve_camera: bool = True
+    args: argparse.Namespace | None = None,
+    *,
+    config_dir: Any = None,
+    resolve_camera: bool = True,
+    strict: bool = False,
 ) -> Effective:
     """Every setting of the run configuration: command line over the file over the default.
 
     ``args``: options added by :func:`add_run_arguments` (None = the file alone). Raises
     SettingError (a ValueError) naming a bad command-line value, CameraModelError for a camera that
-    cannot be resolved (``resolve_camera`` False: not resolved, ``camera`` is None).
+    cannot be resolved (``resolve_camera`` False: not resolved, ``camera`` is None). ``strict``: a
+    bad value in the file that would be used raises SettingError naming the file and the key (a
+    headless run must not run on a default nobody chose), instead of a note and the default.
     """
     from qrfield.camera import camera_from_args
     from qrfield.camera import resolve_camera as resolve
@@ -441,6 +451,11 @@ def effective_settings(
                 origins[spec.name] = (FROM_COMMAND_LINE, option)
             elif spec.name in in_file and _saved_ok(store, section, spec):
                 origins[spec.name] = (FROM_FILE, option)
+            elif spec.name in in_file and strict:
+                try:
+                    spec.validate(store.value(section.name)[spec.name])
+                except SettingError as exc:
+                    raise SettingError(f"{store.path}: key {section.name}.{spec.name}: {exc}") from None
             else:
                 origins[spec.name] = (FROM_DEFAULT, option)
         instance = from_dict(section.cls, data)

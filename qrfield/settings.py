@@ -45,6 +45,8 @@ class SettingSpec:
     choices: tuple[str, ...] | None = None
     help: str = ""
     decimals: int = 3
+    # A text setting's own rule beyond choices (a comma list of names): raises ValueError saying why.
+    check: typing.Callable[[Any], Any] | None = None
 
     def describe(self) -> str:
         """One line for help texts: label, unit, limits, default."""
@@ -84,6 +86,12 @@ class SettingSpec:
                 raise SettingError(f"setting {name}: expected text, got {value!r}")
             if self.choices and value not in self.choices:
                 raise SettingError(f"setting {name}: {value!r} is not one of {', '.join(self.choices)}")
+            if self.check is not None:
+                try:
+                    self.check(value)
+                except ValueError as exc:  # a SettingError subclass (BackendError) keeps its class
+                    kind = type(exc) if isinstance(exc, SettingError) else SettingError
+                    raise kind(f"setting {name}: {exc}") from None
             return value
         if self.type in (int, float):
             if isinstance(value, bool):
@@ -121,8 +129,10 @@ def setting(
     choices: tuple[str, ...] | None = None,
     help: str = "",
     decimals: int = 3,
+    check: typing.Callable[[Any], Any] | None = None,
 ) -> Any:
-    """A dataclass field declaring one setting (use as the field's default)."""
+    """A dataclass field declaring one setting (use as the field's default). ``check``: for a text
+    setting, a function that raises ValueError for a value its type and choices cannot rule out."""
     meta = {
         "qrfield_setting": {
             "label": label,
@@ -132,6 +142,7 @@ def setting(
             "choices": choices,
             "help": help,
             "decimals": decimals,
+            "check": check,
         }
     }
     return dataclasses.field(default=default, metadata=meta)

@@ -1,4 +1,4 @@
-"""``qrfield benchmark serial`` runs end to end on a pty and loop:// (tiny sizes; asserts no figures)."""
+"""``qrfield benchmark serial`` runs on a pty, loop:// and the UART relay (tiny sizes, no figures)."""
 
 from __future__ import annotations
 
@@ -10,9 +10,11 @@ pytestmark = pytest.mark.timeout(60)
 
 
 def test_bench_serial_runs_and_prints_its_figures(capsys):
-    assert main(["benchmark", "serial", "--frames", "200", "--seconds", "0.05", "--latency-frames", "5"]) == 0
+    args = ["--frames", "200", "--seconds", "0.05", "--latency-frames", "5", "--relay-seconds", "0.6"]
+    assert main(["benchmark", "serial", *args, "--baseline-seconds", "0.6"]) == 0
     out = capsys.readouterr().out
     labels = ("encode", "via link to pty", "via link to loop://", "publish -> read", "bare write")
+    labels += ("UART 9600 baud, link", "UART 115200 baud, link", "PING answers", "UART 9600 baud, baseline")
     for label in labels:
         assert label in out
 

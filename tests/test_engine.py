@@ -13,6 +13,7 @@ import pytest
 from qrfield.camera import resolve_camera
 from qrfield.engine import DONE, ENDED, FAILED, STOPPED, FrameLoop
 from qrfield.runconfig import RunConfig
+from qrfield.seams import LoopEventsBase
 from qrfield.sources import EndOfStream, Frame, FrameSource, SourceError, VirtualBenchSettings
 
 pytestmark = pytest.mark.timeout(60)
@@ -48,7 +49,7 @@ class FakeSource(FrameSource):
         pass
 
 
-class Recorder:
+class Recorder(LoopEventsBase):
     """Events and sink calls, in order, with the simulated flag of each result."""
 
     def __init__(self) -> None:
@@ -168,7 +169,7 @@ def test_without_retry_a_failed_source_ends_the_loop_or_waits_for_reopen() -> No
     assert not thread.is_alive() and held.source is None
 
 
-class OwnerEvents:
+class OwnerEvents(LoopEventsBase):
     """The owner's down/up events (the app's worker turns them into signals), into ``rec``."""
 
     def __init__(self, rec: Recorder) -> None:
@@ -244,7 +245,7 @@ def test_each_source_records_the_request_it_was_opened_for() -> None:
     first, second = FakeSource("one"), FakeSource("two")
     seen: list[tuple[str, int]] = []  # (source, generation) of each processed frame
 
-    class Events:
+    class Events(LoopEventsBase):
         def processed(self, frame, result, behind):
             seen.append((loop.source.name, loop.source_generation))
 
@@ -263,3 +264,19 @@ def test_each_source_records_the_request_it_was_opened_for() -> None:
     assert {g for name, g in seen if name == "two"} == {request}
     switch = next(i for i, (name, _) in enumerate(seen) if name == "two")
     assert all(name == "two" for name, _ in seen[switch:])  # no frame of the old source after it
+
+
+def test_a_sink_or_events_object_missing_a_method_is_refused_when_the_loop_is_made() -> None:
+    class HalfSink:
+        def on_result(self, result, simulated):
+            pass
+
+    with pytest.raises(TypeError, match="on_source_down, on_source_up"):
+        FrameLoop(config(), sinks=[HalfSink()], opener=opener_of(FakeSource()))
+
+    class HalfEvents:
+        def note(self, message):
+            pass
+
+    with pytest.raises(TypeError, match="opened, failed, processed, source_down, source_up"):
+        FrameLoop(config(), events=HalfEvents(), opener=opener_of(FakeSource()))

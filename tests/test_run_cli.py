@@ -14,6 +14,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from serial_truth import parse_frame_line, split_lines
 
 from qrfield.geometry import Pose, angle_difference
 from qrfield.render import render_view
@@ -211,14 +212,6 @@ def test_picamera2_missing_is_one_clear_line(tmp_path: Path) -> None:
     )
 
 
-def xor_checksum(body: str) -> str:
-    """docs/conventions.md: XOR of every byte between '$' and '*', two uppercase hex digits."""
-    value = 0
-    for byte in body.encode("ascii"):
-        value ^= byte
-    return f"{value:02X}"
-
-
 def test_serial_link_sends_each_bench_pose_as_a_sim_qrf_line(tmp_path: Path) -> None:
     master, slave = os.openpty()
     os.set_blocking(master, False)
@@ -241,16 +234,14 @@ def test_serial_link_sends_each_bench_pose_as_a_sim_qrf_line(tmp_path: Path) -> 
         os.close(slave)
     assert done.returncode == 0, done.stderr
     poses = {line["t_ms"]: line for line in map(json.loads, done.stdout.splitlines())}
-    frames = [f for f in received.decode("ascii").split("\r\n") if f]
-    assert len(frames) >= 3, (frames, done.stderr)
-    for frame in frames:
-        body, checksum = frame[1:].split("*")
-        assert frame[0] == "$" and checksum == xor_checksum(body)
-        fields = body.split(",")
-        assert fields[0] == "QRF" and fields[-1] == "SIM"  # the virtual bench is never OK
-        line = poses[int(fields[2])]  # t_ms ties each frame to the JSON line of the same capture
-        x, y, z, a, b, g = map(float, fields[3:9])
-        assert np.allclose([x, y, z], line["position_mm"], atol=0.051)
-        assert np.allclose([a, b, g], line["angles_deg"], atol=0.0051)
-    assert [int(f.split(",")[1]) for f in frames] == list(range(len(frames)))  # seq counts up from 0
+    frames = [parse_frame_line(line) for line in split_lines(received)]
+    assert len(frames) >= 4, (frames, done.stderr)
+    assert frames[-1]["status"] == "NOSRC"  # the last line as the run ends
+    for frame in frames[:-1]:
+        assert frame["status"] == "SIM"  # the virtual bench is never OK
+        line = poses[frame["t_ms"]]  # t_ms ties each frame to the JSON line of the same capture
+        assert np.allclose(frame["pose"][:3], line["position_mm"], atol=0.051)
+        assert np.allclose(frame["pose"][3:], line["angles_deg"], atol=0.0051)
+        assert np.allclose(frame["sigma"][:3], line["position_std_mm"], atol=0.051)  # its uncertainty too
+    assert [f["seq"] for f in frames] == list(range(len(frames)))  # seq counts up from 0
     assert "frames sent" in done.stderr

@@ -3,9 +3,11 @@
 The controller's end of the pty is read here and every line is checked with tests/serial_truth.py
 (written from the conventions, sharing no code with the link): the virtual bench sends SIM, never
 OK; ``--source auto`` without a camera falls back to nothing; a missing camera sends NOSRC at least
-once a second; PING, STREAM and MEAS,5 are answered; a port that never opens is exit code 1; and
-a stdout nobody reads holds up neither the serial line nor SIGTERM. Waits are bounded polls with
-margins of several times what the machine needs; timings come from the lines' own t_ms.
+once a second; PING, HELLO, RATE, STREAM and MEAS,5 are answered; the last line before exit (on
+SIGTERM, or when a folder ends) is NOSRC; a second run on the same port is refused naming the
+first; unknown settings stop the run at start; a port that never opens is exit code 1; and a stdout
+nobody reads holds up neither the serial line nor SIGTERM. Waits are bounded polls with margins of
+several times what the machine needs; timings come from the lines' own t_ms.
 """
 
 from __future__ import annotations
@@ -23,6 +25,8 @@ import numpy as np
 import pytest
 from serial_truth import command_line, frames_and_answers
 
+from qrfield import __version__
+from qrfield.camera import DEFAULT_CAMERA, resolve_camera
 from qrfield.geometry import angle_difference
 
 pytestmark = pytest.mark.timeout(90)
@@ -113,15 +117,17 @@ def test_the_bench_sends_sim_and_ping_stream_meas_are_answered(controller) -> No
     try:
         controller.wait(lambda f, a: sum(x["status"] == "SIM" for x in f) >= 5, 30, "SIM frames")
         controller.send("PING")
-        controller.wait(lambda f, a: a, 10, "the PING answer")
+        controller.send("HELLO")
+        controller.send("RATE", "10")
+        controller.wait(lambda f, a: len(a) >= 3, 10, "the PING, HELLO and RATE answers")
         controller.send("STREAM", "OFF")
-        controller.wait(lambda f, a: len(a) >= 2, 10, "the STREAM,OFF answer")
+        controller.wait(lambda f, a: len(a) >= 4, 10, "the STREAM,OFF answer")
         time.sleep(0.3)  # frames already on the wire when the command came
         quiet = len(controller.lines()[0])
         time.sleep(1.0)  # 20 poses a second would have been sent meanwhile
         assert len(controller.lines()[0]) == quiet, "$QRF lines kept coming after STREAM,OFF"
         controller.send("STREAM", "ON")
-        controller.wait(lambda f, a: len(f) > quiet and len(a) >= 3, 10, "frames again after STREAM,ON")
+        controller.wait(lambda f, a: len(f) > quiet and len(a) >= 5, 10, "frames again after STREAM,ON")
         sent_at = time.monotonic()
         controller.send("MEAS", "5")
         controller.wait(lambda f, a: any(x["type"] == "QRM" for x in a), 10, "the $QRM answer")
@@ -129,14 +135,16 @@ def test_the_bench_sends_sim_and_ping_stream_meas_are_answered(controller) -> No
     finally:
         err = finish(proc)
     frames, answers = controller.lines()
-    assert {f["status"] for f in frames} <= {"SIM", "STALE"}, "the virtual bench must never send OK"
+    assert {f["status"] for f in frames[:-1]} <= {"SIM", "STALE"}, "the virtual bench must never send OK"
+    assert frames[-1]["status"] == "NOSRC", "the last line before exit on SIGTERM"
     assert all(meets_criteria(f["pose"], BENCH) for f in frames if f["status"] == "SIM")
-    assert answers[:3] == [
-        {"type": "QRA", "command": "PING", "result": "OK"},
-        {"type": "QRA", "command": "STREAM", "result": "OK"},
-        {"type": "QRA", "command": "STREAM", "result": "OK"},
-    ]
-    meas = answers[3]
+    assert all(f["age_ms"] is not None and f["age_ms"] < 5000 for f in frames if f["status"] == "SIM")
+    got = [(a["command"], a["result"], *a["values"]) for a in answers[:5]]
+    assert got[0] == ("PING", "OK") and got[2] == ("RATE", "OK", "10")
+    camera = resolve_camera(DEFAULT_CAMERA).name  # the model the run measured with
+    assert got[1] == ("HELLO", "QRF2", __version__, "50.0", camera, "camera")
+    assert got[3:] == [("STREAM", "OK"), ("STREAM", "OK")]
+    meas = answers[5]
     assert meas["status"] == "SIM" and meas["n_used"] == 5 and meets_criteria(meas["pose"], BENCH)
     assert all(s < 1.0 for s in meas["std"])  # a still bench: tenths of a mm, hundredths of a degree
     assert waited < 2.0 + 5 / 5, f"MEAS,5 took {waited:.2f} s"  # the conventions' own deadline
@@ -213,3 +221,64 @@ def test_a_blocked_stdout_holds_up_neither_the_serial_line_nor_sigterm(controlle
     assert last_t >= 8000, "the serial line stopped getting fresh poses"
     assert "lines not written" in err  # stdout really was blocked
     assert proc.returncode == 0 and exit_s < 2.0, (exit_s, err)
+
+
+def test_a_folder_that_ends_says_nosrc_as_its_last_line(controller, tmp_path: Path) -> None:
+    import cv2
+
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    for k in range(3):
+        cv2.imwrite(str(folder / f"{k}.png"), np.full((120, 160), 200, np.uint8))  # no code: NOQR
+    proc = start_run("--source", str(folder), "--serial", controller.tty)
+    err = finish(proc, stop=False)
+    assert proc.returncode == 0, err
+    controller.wait(lambda f, a: f and f[-1]["status"] == "NOSRC", 10, "NOSRC at the end")
+    frames, _ = controller.lines()
+    # Three NOQR frames (a newer one may replace one not yet sent), then NOSRC, repeated while the
+    # run lasts (every 0.5 s: a slow machine's run sends several), and NOSRC last.
+    statuses = [f["status"] for f in frames]
+    first_nosrc = statuses.index("NOSRC")
+    assert set(statuses[:first_nosrc]) <= {"NOQR", "STALE"} and statuses[0] == "NOQR"
+    assert set(statuses[first_nosrc:]) == {"NOSRC"}
+    assert frames[-1]["age_ms"] is not None
+
+
+def test_a_second_run_on_the_same_port_is_refused_naming_the_first(controller) -> None:
+    first = start_run("--source", "virtual", "--virtual-fps", "10", "--serial", controller.tty)
+    try:
+        controller.wait(lambda f, a: len(f) >= 3, 30, "the first run's lines")
+        second = start_run("--source", "virtual", "--serial", controller.tty)
+        err = finish(second, stop=False)
+        assert second.returncode == 2, err
+        (line,) = [x for x in err.splitlines() if "error" in x]
+        assert f"serial port {controller.tty} is in use by pid {first.pid}" in line and "qrfield" in line
+        seqs = [f["seq"] for f in controller.lines()[0]]
+        assert seqs == list(range(seqs[0], seqs[0] + len(seqs)))  # one stream, one seq counter
+        assert first.poll() is None
+    finally:
+        finish(first)
+
+
+@pytest.mark.parametrize(
+    ("args", "app_json", "message"),
+    [
+        (["--detect-backends", "x"], None, "unknown detector backend(s) x"),
+        ([], {"detector": {"backends": "x"}}, "key detector.backends"),
+        ([], {"run": {"method": "nope"}}, "key run.method"),
+        (["--serial", "socket://localhost:9"], None, "only device paths and loop://"),
+    ],
+)
+def test_unknown_settings_stop_the_run_at_start_with_exit_2(tmp_path: Path, args, app_json, message) -> None:
+    import json
+
+    config = tmp_path / "config"
+    config.mkdir()
+    if app_json is not None:
+        (config / "app.json").write_text(json.dumps(app_json))
+    proc = start_run("--config-dir", str(config), "--source", "virtual", "--serial", "loop://", *args)
+    err = finish(proc, stop=False)
+    assert proc.returncode == 2, err
+    assert message in err and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    if app_json is not None:
+        assert str(config / "app.json") in err

@@ -12,7 +12,7 @@ import numpy as np
 from qrfield.cli import main
 from qrfield.detect import DetectorSettings
 from qrfield.runconfig import ConfigStore, RunSettings, effective_settings
-from qrfield.serial_link import SerialLinkSettings
+from qrfield.serial.link import SerialLinkSettings
 from qrfield.solvers import NumericalSettings
 
 

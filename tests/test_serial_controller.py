@@ -1,12 +1,13 @@
-"""The controller's commands (docs/conventions.md): PING, STREAM, MEAS answered per the conventions.
+"""The controller's commands (docs/conventions.md, "Serial protocol 2"), answered in order.
 
 Answers are decoded by tests/serial_truth.py (written from the conventions, no shared code); the
-expected means and deviations are worked out by hand in the comments; time is a fake clock, so no
-test here waits for a deadline.
+expected means and uncertainties are worked out by hand in the comments; time is a fake clock, so
+no test here waits for a deadline.
 """
 
 from __future__ import annotations
 
+import math
 import re
 import threading
 import time
@@ -14,11 +15,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pytest
-from serial_truth import command_line, frames_and_answers, parse_answer_line
+from serial_truth import command_line, crc16, frames_and_answers, parse_answer_line
 
-from qrfield.serial_controller import CommandHandler, GripperLink
-from qrfield.serial_frames import FrameDecoder
-from qrfield.serial_link import CONNECTED, SerialLinkSettings
+from qrfield import __version__
+from qrfield.serial.codec import FrameDecoder
+from qrfield.serial.controller import MAX_WAITING, CommandHandler, GripperLink
+from qrfield.serial.link import CONNECTED, SerialLinkSettings
 
 pytestmark = pytest.mark.timeout(30)
 
@@ -28,6 +30,8 @@ class Pose:
     position_mm: np.ndarray
     angles_deg: np.ndarray
     converged: bool = True
+    position_std_mm: np.ndarray = field(default_factory=lambda: np.array([0.5, 0.5, 2.0]))
+    angles_std_deg: np.ndarray = field(default_factory=lambda: np.array([0.2, 0.2, 0.1]))
 
 
 @dataclass
@@ -37,10 +41,11 @@ class Result:
     t_ms: int
     status: str = "OK"
     primary: Pose | None = None
+    ambiguous: bool = False
 
 
-def ok(t_ms: int, position, angles) -> Result:
-    return Result(t_ms, "OK", Pose(np.array(position, float), np.array(angles, float)))
+def ok(t_ms: int, position, angles, ambiguous: bool = False) -> Result:
+    return Result(t_ms, "OK", Pose(np.array(position, float), np.array(angles, float)), ambiguous)
 
 
 class Clock:
@@ -52,38 +57,138 @@ class Clock:
 
 
 @dataclass
-class Harness:
-    clock: Clock = field(default_factory=Clock)
+class FakeLink:
+    """What the commands need of a link; answers are 'written' when the test says so."""
+
     sent: list[bytes] = field(default_factory=list)
     streaming: list[bool] = field(default_factory=list)
+    rates: list[float] = field(default_factory=list)
+    unwritten: int = 0
+
+    def send_line(self, line: bytes) -> bool:
+        self.sent.append(line)
+        return True
+
+    def set_streaming(self, on: bool) -> None:
+        self.streaming.append(on)
+
+    def set_rate(self, hz: float) -> None:
+        self.rates.append(hz)
+
+    def answers_waiting(self) -> int:
+        return self.unwritten
+
+
+@dataclass
+class Harness:
+    clock: Clock = field(default_factory=Clock)
+    link: FakeLink = field(default_factory=FakeLink)
 
     def __post_init__(self) -> None:
-        self.handler = CommandHandler(self.sent.append, self.streaming.append, self.clock)
-        self.decoder = FrameDecoder()
+        self.handler = CommandHandler(self.link, self.clock)
+        self.decoder = FrameDecoder(report_rejected=True)
 
-    def command(self, *fields: str) -> None:
-        for item in self.decoder.feed(command_line(*fields)):  # bytes a controller writes
+    def feed(self, data: bytes) -> None:
+        for item in self.decoder.feed(data):  # bytes a controller writes
             self.handler.handle(item)
 
+    def command(self, *fields: str) -> None:
+        self.feed(command_line(*fields))
+
+    @property
+    def sent(self) -> list[bytes]:
+        return self.link.sent
+
     def answers(self) -> list[dict]:
-        return [parse_answer_line(line) for line in self.sent]
+        return [parse_answer_line(line) for line in self.link.sent]
 
 
-def test_ping_stream_and_unknown_commands_are_answered_at_once() -> None:
+def test_each_command_gets_one_answer_in_order() -> None:
     h = Harness()
-    h.command("PING")
-    h.command("STREAM", "OFF")
-    h.command("STREAM", "ON")
+    h.handler.context.side_mm, h.handler.context.camera = 50.0, "pi-hq@2028x1520"
+    for fields in (
+        ("PING",),
+        ("HELLO",),
+        ("STREAM", "OFF"),
+        ("STREAM", "ON"),
+        ("RATE", "12.5"),
+        ("RATE", "0"),
+    ):
+        h.command(*fields)
     h.command("STREAM", "MAYBE")
     h.command("HOME")
-    assert h.streaming == [False, True]
+    h.command("PING", "1")
+    h.command("RATE", "1e3")
+    h.command("TOOL", "1", "2", "3", "1", "0", "0", "0")
+    h.command("HANDEYE")
+    h.feed(b"$QRC,PING*0000\r\n")  # a wrong CRC
+    h.feed(b"$QRC,PING\r")  # no CRC, a CR alone ends it
     answers = h.answers()
-    assert answers[:3] == [
-        {"type": "QRA", "command": c, "result": "OK"} for c in ("PING", "STREAM", "STREAM")
+    got = [(a["command"], a["result"], *a["values"]) for a in answers]
+    assert got[:6] == [
+        ("PING", "OK"),
+        ("HELLO", "QRF2", __version__, "50.0", "pi-hq@2028x1520", "camera"),
+        ("STREAM", "OK"),
+        ("STREAM", "OK"),
+        ("RATE", "OK", "12.5"),
+        ("RATE", "OK", "0"),
     ]
-    assert answers[3]["command"] == "STREAM" and answers[3]["result"] == "ERR"
-    assert answers[4]["command"] == "HOME" and answers[4]["result"] == "ERR"
+    assert h.link.streaming == [False, True] and h.link.rates == [12.5, 0.0]
+    assert [(a["command"], a["result"]) for a in answers[6:]] == [
+        ("STREAM", "ERR"),
+        ("HOME", "ERR"),
+        ("PING", "ERR"),  # PING takes no argument: an error, not "unknown"
+        ("RATE", "ERR"),  # the strict number grammar: no exponent
+        ("TOOL", "ERR"),
+        ("HANDEYE", "ERR"),
+        ("?", "ERR"),
+        ("?", "ERR"),
+    ]
+    assert (
+        answers[7]["reason"] == "unknown command" and answers[-2]["reason"] == "CRC" == answers[-1]["reason"]
+    )
+    assert "hand-eye" in answers[10]["reason"]
     assert all("," not in a.get("reason", "") and len(a.get("reason", "")) <= 40 for a in answers)
+    assert h.handler.last_command == "$QRC,PING -> QRA,?,ERR,CRC"
+
+
+def test_a_meas_holds_the_commands_after_it_until_its_answer_is_out() -> None:
+    h = Harness()
+    h.command("MEAS", "2")
+    h.command("PING")
+    h.command("MEAS", "1")
+    assert h.sent == []  # the PING waits behind the MEAS: one answer per command, in order
+    for t in (1, 2, 3):
+        h.handler.on_result(ok(t, [1, 2, 300], [0, 0, 0]), simulated=False)
+    kinds = [(a["type"], a.get("command"), a.get("n_used")) for a in h.answers()]
+    assert kinds == [("QRM", None, 2), ("QRA", "PING", None), ("QRM", None, 1)]
+    assert [a["seq"] for a in h.answers() if a["type"] == "QRM"] == [0, 1]
+
+
+def test_more_than_16_waiting_commands_overflow_and_say_so_once_drained() -> None:
+    h = Harness()
+    h.command("MEAS", "1")  # holds the queue
+    for _ in range(MAX_WAITING + 4):
+        h.command("PING")
+    assert h.sent == []
+    h.handler.on_result(ok(1, [1, 2, 300], [0, 0, 0]), simulated=False)
+    answers = h.answers()
+    # MEAS plus 15 PINGs waited (16 in all); 5 PINGs were discarded and that is said last.
+    assert answers[0]["type"] == "QRM" and [a["command"] for a in answers[1:16]] == ["PING"] * 15
+    assert (answers[16]["command"], answers[16]["reason"], answers[16]["values"]) == (
+        "?",
+        "OVERFLOW",
+        ["OVERFLOW", "5"],
+    )
+    assert len(answers) == 17
+    h.link.unwritten = MAX_WAITING  # answers not yet on the wire count as waiting too
+    h.command("PING")  # discarded; nothing of ours waits, so that is said at once
+    h.link.unwritten = 0
+    h.command("PING")
+    assert [a["values"] if a["result"] == "ERR" else a["result"] for a in h.answers()[17:]] == [
+        ["OVERFLOW", "1"],
+        "OK",
+    ]
 
 
 @pytest.mark.parametrize("arg", [("0",), ("101",), ("x",), (), ("5", "6"), ("-3",)])
@@ -94,7 +199,7 @@ def test_meas_with_a_bad_count_is_an_error(arg) -> None:
     assert answer["command"] == "MEAS" and answer["result"] == "ERR" and "1..100" in answer["reason"]
 
 
-def test_meas_averages_the_next_n_converged_frames_with_circular_angles() -> None:
+def test_meas_averages_the_next_n_converged_frames_with_a_standard_uncertainty_of_the_mean() -> None:
     h = Harness()
     h.handler.on_result(ok(10, [99, 99, 99], [0, 0, 0]), simulated=False)  # before MEAS: not counted
     h.command("MEAS", "4")
@@ -110,50 +215,47 @@ def test_meas_averages_the_next_n_converged_frames_with_circular_angles() -> Non
     assert h.sent == []  # three converged so far
     h.handler.on_result(ok(205, [12, 18, 302], [7, 0, -179]), simulated=False)
     (answer,) = h.answers()
-    # By hand: x 10,12,10,12 -> mean 11, sample std sqrt(4 * 1^2 / 3) = 1.1547 -> 1.2 (1 decimal);
-    # y 20,18,.. -> 19, 1.2; z 300,302,.. -> 301, 1.2; alpha 5,7,.. -> 6.00, 1.15; beta 0, 0.00;
-    # gamma 179,-179,..: circular mean 180.00 (not 0), deviations +-1 -> 1.15.
+    # By hand: x 10,12,10,12 -> mean 11, sample std 2/sqrt(3) = 1.1547, / sqrt(4) = 0.577; each
+    # frame's own sigma 0.5 / sqrt(2) (frames of a still card share their error: at most 2
+    # independent) = 0.354: the larger, 0.6. y likewise 0.6; z: 0.577 against 2 / sqrt(2) = 1.414
+    # -> 1.4. alpha 5,7: 0.577 vs 0.2 / 1.414 = 0.141 -> 0.58; beta 0: 0 vs 0.141 -> 0.14; gamma
+    # 179,-179: circular mean 180.00, deviations +-1 -> 0.58.
     assert answer["type"] == "QRM" and answer["status"] == "OK" and answer["n_used"] == 4
     assert answer["pose"] == [11.0, 19.0, 301.0, 6.0, 0.0, 180.0]
-    assert answer["std"] == [1.2, 1.2, 1.2, 1.15, 0.0, 1.15]
-    assert answer["t_ms"] == 205 and answer["seq"] == 0  # the last frame averaged; the first answer
-    raw = h.sent[0].decode()
-    assert ",180.00," in raw and ",1.15," in raw  # 2 decimals for angles, as in $QRF
+    assert answer["std"] == [0.6, 0.6, 1.4, 0.58, 0.14, 0.58]
+    assert answer["t_ms"] == 205 and answer["seq"] == 0
 
 
-def test_one_frame_has_zero_spread_and_a_simulated_frame_makes_it_sim() -> None:
+def test_simulated_frames_make_sim_and_ambiguous_live_frames_make_ambig() -> None:
     h = Harness()
     h.command("MEAS", "1")
     h.handler.on_result(ok(5, [1, 2, 3], [4, 5, 6]), simulated=True)
     h.command("MEAS", "2")
     h.handler.on_result(ok(6, [1, 2, 3], [4, 5, 6]), simulated=False)
-    h.handler.on_result(ok(7, [1, 2, 3], [4, 5, 6]), simulated=True)
-    first, second = h.answers()
-    assert (first["status"], first["std"], first["n_used"], first["seq"]) == ("SIM", [0.0] * 6, 1, 0)
-    assert (second["status"], second["n_used"], second["seq"]) == ("SIM", 2, 1)
-
-
-def test_a_second_meas_while_collecting_is_busy() -> None:
-    h = Harness()
-    h.command("MEAS", "3")
-    h.command("MEAS", "3")
-    (answer,) = h.answers()
-    assert answer["result"] == "ERR" and "busy" in answer["reason"]
+    h.handler.on_result(ok(7, [1, 2, 3], [4, 5, 6], ambiguous=True), simulated=False)
+    h.command("MEAS", "1")
+    h.handler.on_result(ok(8, [1, 2, 3], [4, 5, 6], ambiguous=True), simulated=True)
+    first, second, third = h.answers()
+    # One frame: no spread, so its own sigma (0.5 mm, 2.0 mm, 0.2 deg, ...) is the uncertainty.
+    assert (first["status"], first["std"], first["n_used"]) == ("SIM", [0.5, 0.5, 2.0, 0.2, 0.2, 0.1], 1)
+    assert (second["status"], second["n_used"]) == ("AMBIG", 2)
+    assert third["status"] == "SIM"  # made up: never OK, whatever its flip
 
 
 @pytest.mark.parametrize(
     ("frames", "down", "status"),
     [
-        ([], False, "TIMEOUT"),  # no frames at all
-        (["ok", "ok"], False, "TIMEOUT"),  # fewer than n converged
-        (["noqr", "noqr"], False, "NOQR"),  # the card is not seen
-        (["noqr", "noconv"], False, "NOCONV"),  # the last frame: seen, not converged
-        (["ok"], True, "NOSRC"),  # the source went down
+        ([], False, "TIMEOUT"),
+        (["ok", "ok"], False, "TIMEOUT"),
+        (["noqr", "noqr"], False, "NOQR"),
+        (["noqr", "noconv"], False, "NOCONV"),
+        (["ok"], True, "NOSRC"),
     ],
 )
 def test_meas_that_cannot_complete_times_out_with_a_reason(frames, down, status) -> None:
     h = Harness()
     h.command("MEAS", "5")  # deadline 2 s + 5 / 5 s = 3 s after the command
+    h.command("PING")  # waits behind it
     for k, kind in enumerate(frames):
         result = {
             "ok": ok(k, [1, 2, 3], [0, 0, 0]),
@@ -168,23 +270,26 @@ def test_meas_that_cannot_complete_times_out_with_a_reason(frames, down, status)
     assert h.sent == []
     h.clock.t += 0.02
     h.handler.poll()
-    (answer,) = h.answers()
-    assert answer == {"type": "QRM", "seq": 0, "t_ms": answer["t_ms"], "status": status} | {
+    answer, ping = h.answers()
+    assert {k: answer[k] for k in ("type", "status", "pose", "std", "n_used")} == {
+        "type": "QRM",
+        "status": status,
         "pose": None,
         "std": None,
         "n_used": None,
     }
+    assert ping["command"] == "PING"
     h.handler.poll()
-    assert len(h.sent) == 1  # answered once
+    assert len(h.sent) == 2  # answered once
 
 
 def test_lines_of_other_talkers_are_ignored() -> None:
     h = Harness()
-    for item in h.decoder.feed(
-        b"$QRF,7,100,,,,,,,NOQR*6D\r\n" + command_line("PING").replace(b"QRC", b"XYZ")
-    ):
-        h.handler.handle(item)
-    assert h.sent == []
+    body = b"QRF,7,100,3,,,,,,,,,,,,,NOQR"
+    h.feed(b"$%s*%04X\r\n" % (body, crc16(body)) + command_line("PING").replace(b"$QRC", b"$XYZ"))
+    assert h.answers() == [
+        {"type": "QRA", "command": "?", "result": "ERR", "values": ["CRC"], "reason": "CRC"}
+    ]
 
 
 class FakePort:
@@ -216,7 +321,7 @@ def wait_for(predicate, timeout: float = 10.0) -> None:
         time.sleep(0.01)
 
 
-def test_gripper_link_answers_on_its_port_and_sends_ok_only_for_a_live_camera() -> None:
+def test_gripper_link_answers_on_its_port_and_sends_ok_only_for_an_unambiguous_live_pose() -> None:
     port = FakePort()
     settings = SerialLinkSettings(port="fake", max_rate_hz=1000, stale_after_s=0)
     link = GripperLink(settings, opener=lambda s: port).start()
@@ -224,21 +329,25 @@ def test_gripper_link_answers_on_its_port_and_sends_ok_only_for_a_live_camera() 
         assert link.wait_for_state(CONNECTED, 5)
         link.on_result(ok(1, [1, 2, 3], [4, 5, 6]), simulated=True)
         wait_for(lambda: b"SIM*" in port.written)
-        link.on_result(ok(2, [1, 2, 3], [4, 5, 6]), simulated=False)
+        link.on_result(ok(2, [1, 2, 3], [4, 5, 6], ambiguous=True), simulated=False)
+        wait_for(lambda: b"AMBIG*" in port.written)
+        link.on_result(ok(3, [1, 2, 3], [4, 5, 6]), simulated=False)
         wait_for(lambda: b",OK*" in port.written)
         with port.lock:
             port.incoming += command_line("PING") + command_line("MEAS", "2")
         wait_for(lambda: b"$QRA,PING,OK" in port.written)
-        for t in (3, 4):
+        for t in (4, 5):
             link.on_result(ok(t, [1, 2, 3], [4, 5, 6]), simulated=False)
         wait_for(lambda: b"$QRM" in port.written)
         link.on_source_down("unplugged")
         wait_for(lambda: b"NOSRC" in port.written)
+        assert link.status().last_command.startswith("MEAS,2 -> QRM,0,")
     finally:
         link.close()
     frames, answers = frames_and_answers(bytes(port.written))
-    assert [f["status"] for f in frames[:2]] == ["SIM", "OK"] and frames[-1]["status"] == "NOSRC"
-    assert answers[0] == {"type": "QRA", "command": "PING", "result": "OK"}
+    assert [f["status"] for f in frames[:3]] == ["SIM", "AMBIG", "OK"] and frames[-1]["status"] == "NOSRC"
+    assert frames[2]["sigma"] == [0.5, 0.5, 2.0, 0.2, 0.2, 0.1]
+    assert answers[0]["command"] == "PING" and answers[0]["result"] == "OK"
     assert answers[1]["status"] == "OK" and answers[1]["pose"] == [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]
     assert link.status().answers_sent == 2
 
@@ -249,10 +358,11 @@ def test_the_example_lines_in_docs_serial_md_are_valid() -> None:
     from serial_truth import parse_frame_line, parse_line
 
     text = (Path(__file__).resolve().parent.parent / "docs" / "serial.md").read_text(encoding="utf-8")
-    lines = re.findall(r"\$Q[A-Z]{2},[^\s`*]*\*[0-9A-F]{2}", text)
+    lines = re.findall(r"\$Q[A-Z]{2},[^\s`*]*\*[0-9A-F]{4}", text)
     assert len(lines) >= 10
     for line in lines:
         data = line.encode() + b"\r\n"
         parse_frame_line(data) if line.startswith("$QRF") else parse_line(data)
         if line.startswith(("$QRA", "$QRM")):
             parse_answer_line(data)
+    assert not math.isnan(len(lines))

@@ -43,12 +43,14 @@ def test_serial_demo_streams_sim_then_noqr_frames_to_a_pty(capsys):
     frames = [parse_frame_line(line) for line in split_lines(bytes(received))]
     assert len(frames) >= 10
     assert [f["seq"] for f in frames] == list(range(len(frames)))
-    for f in frames:
+    assert frames[-1]["status"] == "NOSRC"  # the last line as the demo ends
+    for f in frames[:-1]:
         if f["t_ms"] < 500:
             position, angles = demo_pose(f["t_ms"] / 1000.0)
             assert f["status"] == "SIM"  # made-up poses are never OK
             assert np.all(np.abs(np.array(f["pose"][:3]) - position) <= 0.05 + 1e-9)
             assert np.all(np.abs(np.array(f["pose"][3:]) - angles) <= 0.005 + 1e-9)
+            assert f["sigma"] == [0.2, 0.2, 1.0, 0.1, 0.1, 0.05]  # the path's made-up uncertainty
         else:
             assert f["status"] in ("NOQR", "STALE") and f["pose"] is None
     assert {f["status"] for f in frames} >= {"SIM", "NOQR"}
@@ -88,7 +90,7 @@ def test_serial_demo_answers_ping_and_meas_from_its_path(capsys):
         os.close(master)
         reader.join(5)
     frames, answers = frames_and_answers(bytes(received))
-    assert answers[0] == {"type": "QRA", "command": "PING", "result": "OK"}
+    assert (answers[0]["command"], answers[0]["result"]) == ("PING", "OK")
     meas = answers[1]
     assert meas["type"] == "QRM" and meas["status"] == "SIM" and meas["n_used"] == 5
     # The mean of 5 poses of the path lies within the path's range over those 5 frames (1/8 s).
@@ -96,4 +98,4 @@ def test_serial_demo_answers_ping_and_meas_from_its_path(capsys):
     window = np.array([np.concatenate(demo_pose(t - k / 40.0)) for k in range(5)])
     assert np.all(np.array(meas["pose"]) >= window.min(axis=0) - 0.06)
     assert np.all(np.array(meas["pose"]) <= window.max(axis=0) + 0.06)
-    assert {f["status"] for f in frames} <= {"SIM", "STALE"}
+    assert {f["status"] for f in frames[:-1]} <= {"SIM", "STALE"} and frames[-1]["status"] == "NOSRC"

@@ -331,7 +331,7 @@ def test_ambiguity_is_the_same_ratio_for_both_methods_on_hand_made_views(
     0.6 px right and 0.4 px down by hand: both poses of the planar ambiguity fit it with some error.
     For either method ``ambiguity`` is min/max of the two RMS reprojection errors, each measured
     here with cv2.projectPoints, whichever of the two fits better."""
-    from qrfield.methods import settings_class
+    from qrfield.solvers import settings_class
 
     camera = resolve_camera("picam-v2@640x480")
     h = SIDE_MM / 2.0

@@ -7,6 +7,10 @@ Results belong to their session: each analysis writes ``<session>/analysis/`` (`
 last one, each file written whole). "Save as…" copies them to a folder the operator chooses.
 Only when the session folder cannot be written (a read-only medium) do they go to a temporary
 folder, and the tab says so.
+
+"Open report" writes the session's ``report.html`` (:func:`qrfield.sessions.report.write_report`,
+in the background: it runs the simulation for the session's poses) and opens it in the system's
+browser (:meth:`AnalysisTab.open_url`; a temporary file when the session folder is read-only).
 """
 
 from __future__ import annotations
@@ -80,6 +84,22 @@ def analyse_into_session(session_dir: str) -> dict[str, Any]:
     return result
 
 
+def report_into_session(session_dir: str) -> dict[str, Any]:
+    """Write ``session_dir``'s report.html (a temporary file when the folder cannot be written:
+    ``note`` says why); {"path", "note", "summary"}. Runs off the GUI thread."""
+    from qrfield.sessions.report import REPORT_FILE, write_report
+
+    read_session(session_dir)  # SessionError for a folder that is no session: nothing written into it
+    try:
+        summary = write_report(session_dir)
+        note = ""
+    except OSError as exc:
+        note = f"the session folder cannot be written ({exc.strerror or exc}): report in a temporary folder"
+        out = Path(tempfile.mkdtemp(prefix="qrfield-report-")) / REPORT_FILE
+        summary = write_report(session_dir, out)
+    return {"path": str(summary.path), "note": note, "summary": summary}
+
+
 def result_files(result: dict[str, Any]) -> list[Path]:
     """The files an analysis wrote (report, JSON, plots)."""
     out = Path(result["out_dir"])
@@ -127,6 +147,10 @@ class AnalysisTab(QtWidgets.QWidget):
         self.job = BackgroundJob("qrfield-analysis", self)
         self.job.finished.connect(self._done)
         self.job.failed.connect(self._failed)
+        self.report_job = BackgroundJob("qrfield-report", self)
+        self.report_job.finished.connect(self._report_done)
+        self.report_job.failed.connect(self._report_failed)
+        self.report_path: str | None = None
         self._build_controls()
         self._build_results()
         layout = QtWidgets.QVBoxLayout(self)
@@ -159,12 +183,19 @@ class AnalysisTab(QtWidgets.QWidget):
         self.save_button.setToolTip("copy the report, its JSON and the plots to a folder you choose")
         self.save_button.setEnabled(False)
         self.save_button.clicked.connect(self.save_as)
+        self.report_button = touch_button("Open report", "open_report")
+        self.report_button.setToolTip(
+            "write the session's report.html (settings, pass rates, figures, rows, the simulation's "
+            "prediction; one file that opens offline) and open it in the browser"
+        )
+        self.report_button.clicked.connect(self.open_report)
         first, second = QtWidgets.QHBoxLayout(), QtWidgets.QHBoxLayout()
         first.addWidget(self.choice, 1)
         first.addWidget(refresh)
         first.addWidget(browse)
         second.addWidget(self.run_button)
         second.addWidget(self.save_button)
+        second.addWidget(self.report_button)
         second.addStretch(1)
         self.controls = QtWidgets.QVBoxLayout()  # two lines: the session's name needs the width
         self.controls.addLayout(first)
@@ -249,15 +280,23 @@ class AnalysisTab(QtWidgets.QWidget):
 
     def run(self) -> bool:
         """Start the analysis of the chosen session in the background; False if it cannot start."""
+        return self._start(
+            self.job, analyse_into_session, self.run_button, "an analysis is running", "analysing"
+        )
+
+    def _start(
+        self, job: BackgroundJob, work: Any, button: QtWidgets.QPushButton, busy: str, doing: str
+    ) -> bool:
+        """Run ``work(chosen session)`` on ``job``, its button off meanwhile; False if it cannot start."""
         session_dir = self.chosen()
         if not session_dir:
             self._set_state("choose a session first", error=True)
             return False
-        if not self.job.start(analyse_into_session, session_dir):
-            self._set_state("an analysis is running", error=False)
+        if not job.start(work, session_dir):
+            self._set_state(busy, error=False)
             return False
-        self.run_button.setEnabled(False)
-        self._set_state(f"analysing {short_path(session_dir)} …", error=False)
+        button.setEnabled(False)
+        self._set_state(f"{doing} {short_path(session_dir)} …", error=False)
         return True
 
     def _set_state(self, text: str, error: bool) -> None:
@@ -333,6 +372,35 @@ class AnalysisTab(QtWidgets.QWidget):
         self._set_state(f"saved {len(copies)} files to {short_path(folder)}", error=False)
         return copies
 
+    # ---------------------------------------------------------------- the report
+    def open_url(self, path: str) -> bool:
+        """Open a file in the system's browser; tests replace this."""
+        return QtGui.QDesktopServices.openUrl(QtCore.QUrl.fromLocalFile(path))
+
+    def open_report(self) -> bool:
+        """Write the chosen session's report.html in the background, then open it."""
+        return self._start(
+            self.report_job,
+            report_into_session,
+            self.report_button,
+            "a report is being written",
+            "writing the report of",
+        )
+
+    def _report_done(self, result: dict[str, Any]) -> None:
+        self.report_button.setEnabled(True)
+        self.report_path = result["path"]
+        opened = self.open_url(result["path"])
+        text = f"report: {short_path(result['path'])}" + ("" if opened else " (no browser to open it)")
+        if result["note"]:
+            text += f"\n⚠ {result['note']}"
+        self._set_state(text, error=bool(result["note"]) or not opened)
+
+    def _report_failed(self, message: str) -> None:
+        self.report_button.setEnabled(True)
+        self._set_state(f"report of {self.chosen()} not written: {message}", error=True)
+
     def shutdown(self) -> None:
-        """Wait briefly for a running analysis (the window is closing)."""
+        """Wait briefly for a running analysis or report (the window is closing)."""
         self.job.join(5.0)
+        self.report_job.join(5.0)

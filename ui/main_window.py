@@ -22,9 +22,10 @@ import numpy as np
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from qrfield.camera import DEFAULT_CAMERA, CameraModel, CameraModelError, resolve_camera
-from qrfield.methods import methods_from_choice, settings_classes
+from qrfield.methods import methods_from_choice
 from qrfield.runconfig import ConfigStore, RunConfig, RunSettings
-from qrfield.serial_link import SerialLinkSettings
+from qrfield.serial.link import SerialLinkSettings
+from qrfield.solvers import settings_classes
 from qrfield.sources import Picamera2Settings, VirtualBenchSettings
 from ui.analysis_tab import AnalysisTab
 from ui.calibration_dialog import CalibrationDialog, CalibrationDialogSettings
@@ -224,12 +225,15 @@ class MainWindow(QtWidgets.QMainWindow):
         self.fit_screen()
 
     def _start_worker(self, source_factory: Any) -> None:
-        self.worker = PipelineWorker(self._run_config(), source_factory=source_factory)
+        config = self._run_config()
+        self.serial_panel.set_context(config.side_mm, config.camera.name)
+        self.worker = PipelineWorker(config, source_factory=source_factory)
         self.worker.sourceOpened.connect(self._on_source_opened)
         self.worker.sourceFailed.connect(self._on_source_failed)
         self.worker.sourceNote.connect(self._on_note)
         self.worker.sourceDown.connect(self._on_source_down)
-        self.worker.result_sinks = (self.serial_panel.publisher,)  # every result, on the worker thread
+        # Every result, on the worker thread: the serial link, and the guide of a planned experiment.
+        self.worker.result_sinks = (self.serial_panel.publisher, self.session_panel.guide)
         self.thread = start_worker(self.worker)
         self._closed = False
 
@@ -333,7 +337,9 @@ class MainWindow(QtWidgets.QMainWindow):
         self.view_settings = view_settings_from(self.camera_controls)
         self.plots.set_window(self.view_settings.plot_window_s)
         self.simulation_tab.set_app_camera(self.app_settings.camera, self.app_settings.side_mm)
-        request = self.worker.configure(self._run_config(), reopen=reopen)
+        config = self._run_config()
+        self.serial_panel.set_context(config.side_mm, config.camera.name)  # what HELLO reports
+        request = self.worker.configure(config, reopen=reopen)
         self.session_panel.refresh_state()
         return request
 

@@ -1,11 +1,13 @@
 """The serial panel: stream each measured pose to the gripper controller as $QRF lines and answer its
-$QRC commands (PING, STREAM, MEAS) on the same port (docs/conventions.md).
+$QRC commands (PING, HELLO, STREAM, RATE, MEAS) on the same port (protocol 2, docs/serial.md).
 
-The panel owns at most one :class:`~qrfield.serial_controller.GripperLink` (the link's own thread
+The panel owns at most one :class:`~qrfield.serial.controller.GripperLink` (the link's own thread
 opens, writes, reads and reconnects the port, and answers the commands). The frame loop hands every
-result to :class:`LinkPublisher` on the worker thread (OK from a live camera, else SIM; NOSRC while
-the source is down); publishing returns at once (the link keeps only the newest pose), so neither
-the worker nor the GUI ever waits for the port. The GUI reads ``link.status()`` on its redraw timer
+result to :class:`LinkPublisher` on the worker thread (OK for an unambiguous pose from a live camera,
+AMBIG for an ambiguous one, else SIM; NOSRC while the source is down); publishing returns at once
+(the link keeps only the newest pose), so neither the worker nor the GUI ever waits for the port.
+The panel shows the link's line rate, its lag (the last pose's age when its last byte left) and the
+controller's last command with its answer. The GUI reads ``link.status()`` on its redraw timer
 (:meth:`SerialPanel.refresh`): nothing from the link's thread touches a widget. Disconnecting closes
 the link as a :class:`ui.background.BackgroundJob`, since ``close`` joins the link's thread (up to a
 write timeout).
@@ -14,20 +16,15 @@ write timeout).
 from __future__ import annotations
 
 import dataclasses
+import math
 import threading
 from typing import Any
 
 from PySide6 import QtCore, QtWidgets
 
-from qrfield.serial_controller import GripperLink
-from qrfield.serial_link import (
-    CLOSED,
-    CONNECTED,
-    LOOP_URL,
-    LinkStatus,
-    SerialLinkSettings,
-    list_ports,
-)
+from qrfield.serial.controller import GripperLink
+from qrfield.serial.link import CLOSED, CONNECTED, LinkStatus, SerialLinkSettings
+from qrfield.serial.port import LOOP_URL, list_ports
 from qrfield.settings import SettingError, specs, validated
 from ui.background import BackgroundJob
 from ui.settings_form import set_widget_value, widget_for, widget_value
@@ -105,6 +102,7 @@ class SerialPanel(QtWidgets.QWidget):
     ) -> None:
         super().__init__(parent)
         self._opener = opener
+        self._context: tuple[float, str] | None = None  # (side_mm, camera model) for HELLO
         self.link: GripperLink | None = None
         self.publisher = LinkPublisher()
         self._closers: list[BackgroundJob] = []  # one job per link being closed
@@ -172,6 +170,21 @@ class SerialPanel(QtWidgets.QWidget):
         self.last_sent.setReadOnly(True)
         self.last_sent.setToolTip("the last $QRF line written to the port (without CR LF)")
         grid.addRow("last line sent", self.last_sent)
+        self.line_rate = QtWidgets.QLabel("")
+        self.line_rate.setObjectName("line_rate")
+        self.line_rate.setToolTip("$QRF lines written per second (paced to the baud rate and the rate limit)")
+        grid.addRow("line rate", self.line_rate)
+        self.lag = QtWidgets.QLabel("")
+        self.lag.setObjectName("lag")
+        self.lag.setToolTip(
+            "the last pose's age when its last byte left: its age_ms plus the line's time on the wire"
+        )
+        grid.addRow("lag", self.lag)
+        self.last_command = QtWidgets.QLineEdit("")
+        self.last_command.setObjectName("last_command")
+        self.last_command.setReadOnly(True)
+        self.last_command.setToolTip("the controller's last command and the answer it got")
+        grid.addRow("last command", self.last_command)
         return box
 
     # ---------------------------------------------------------------- settings
@@ -210,6 +223,12 @@ class SerialPanel(QtWidgets.QWidget):
             port = self.port.currentText().strip() or base.port
             return dataclasses.replace(base, port=port)
 
+    def set_context(self, side_mm: float, camera: str) -> None:
+        """The QR side (mm) and camera model the measurements use: what HELLO reports."""
+        self._context = (float(side_mm), str(camera))
+        if self.link is not None:
+            self.link.set_context(side_mm=self._context[0], camera=self._context[1])
+
     # ---------------------------------------------------------------- connect / disconnect
     @property
     def connected(self) -> bool:
@@ -235,6 +254,8 @@ class SerialPanel(QtWidgets.QWidget):
             self.note.setText(f"⚠ cannot connect: {exc}")
             return False
         self.note.setText("")
+        if self._context is not None:
+            link.set_context(side_mm=self._context[0], camera=self._context[1])
         self.link = link.start()
         self.publisher.set_link(self.link)
         self._set_editable(False)
@@ -294,6 +315,11 @@ class SerialPanel(QtWidgets.QWidget):
         self.last_error.setText(status.last_error)
         self.last_sent.setText(status.last_sent)
         self.last_sent.setCursorPosition(0)
+        limit = f" (limit {status.max_rate_hz:g}/s)" if status.max_rate_hz > 0 else " (no limit)"
+        self.line_rate.setText(f"{status.line_rate_hz:.1f} lines/s{limit}")
+        self.lag.setText(f"{status.lag_ms:.0f} ms" if math.isfinite(status.lag_ms) else "—")
+        self.last_command.setText(status.last_command)
+        self.last_command.setCursorPosition(0)
 
     def _show_state(self, state: str, port: str) -> None:
         colour = STATE_COLOURS.get(state, "#808080")

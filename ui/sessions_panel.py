@@ -18,9 +18,20 @@ combination label disagrees with the signs of its angles is logged only after th
 so (:meth:`ask_combo_choice`). At start the window offers to reopen the last session
 (:meth:`offer_reopen`, a banner: no dialog in the way).
 
+Guided logging (a session that follows a plan: *Plan…* attaches one, a resumed session brings its
+own): the guide strip (:mod:`ui.guide_panel`) shows the current target, the live difference to it
+and whether the card is still, and the form holds the target's pose (editable before logging,
+e.g. when the jig reads differently). Its rows are measured by the core's
+:class:`qrfield.sessions.guide.Guide`, which the window hands every result of the frame loop to
+(a sink on the worker's thread: every frame, not the ones drawn); "Log target" (or Enter) asks it
+for a row now, "log when still" lets it log by itself (:mod:`qrfield.sessions.guide` says when),
+and each finished row is entered in the plan's progress and logged here on the GUI thread, then
+the next target to do is shown. Skip leaves a target; choosing a target with a row and logging it
+again withdraws its old row first (after a question): a redo.
+
 Dialogs go through small methods (:meth:`ask_confirm`, :meth:`ask_pending_choice`,
-:meth:`ask_save_path`, :meth:`ask_export_path`, :meth:`ask_folder`, :meth:`ask_combo_choice`)
-so that tests can answer them.
+:meth:`ask_save_path`, :meth:`ask_export_path`, :meth:`ask_folder`, :meth:`ask_combo_choice`,
+:meth:`ask_plan_path`) so that tests can answer them.
 """
 
 from __future__ import annotations
@@ -46,9 +57,14 @@ from qrfield.sessions import (
 )
 from qrfield.sessions.combo_signs import sign_table
 from qrfield.sessions.export import DEFAULT_NAME, export_session
+from qrfield.sessions.guide import Guide, GuideSettings
+from qrfield.sessions.plan import PlanError, PlanTarget, read_plan
+from qrfield.sessions.progress import DONE, PlanProgress, attach_plan
 from qrfield.sessions.recorder import bench_mean_truth
+from qrfield.sessions.stillness import StillnessSettings
 from qrfield.settings import SettingError
 from ui.groundtruth_form import FIELD_NAMES, GroundTruthForm, WrappedLabel
+from ui.guide_panel import GuidePanel
 from ui.rows_table import RowsTable
 from ui.session_dialogs import (
     ENV_ROOT,
@@ -106,12 +122,22 @@ class SessionPanel(QtWidgets.QWidget):
         self._source_problem = ""  # why the source gave no frames (it failed), "" while it runs
         self._reopen_path = ""
         self._last_session = str(store.value(LAST_SESSION_KEY) or "")
+        #: The guided experiment: the core's guide (a frame sink the window feeds with every
+        #: result), the open session's plan and the target shown (None without a plan).
+        self.stillness_settings = store.group("stillness", StillnessSettings)
+        self.guide_settings = store.group("guide", GuideSettings)
+        self.guide = Guide("numerical", stillness=self.stillness_settings, settings=self.guide_settings)
+        self.plan: PlanProgress | None = None
+        self.target: PlanTarget | None = None
+        self._guide_row = 0  # the row number a guided row being collected will get
 
         self.new_dialog = NewSessionDialog(store, self)
         self.resume_dialog = ResumeDialog(self.root, lambda: self.ask_folder(), self)
         self._build_session_bar()
         self._build_banners()
         self._build_row_box()
+        self.guide_panel = GuidePanel()
+        self.guide_panel.hide()
         self.table = RowsTable()
         self.table.setMinimumHeight(60)
         self._build_layout()
@@ -129,7 +155,15 @@ class SessionPanel(QtWidgets.QWidget):
         layout.setContentsMargins(4, 4, 4, 4)
         layout.setSpacing(3)
         layout.addLayout(self.session_bar)
-        for widget in (self.title, self.count, self.reopen_banner, self.warnings, self.banner, self.form):
+        for widget in (
+            self.title,
+            self.count,
+            self.reopen_banner,
+            self.warnings,
+            self.banner,
+            self.guide_panel,
+            self.form,
+        ):
             layout.addWidget(widget)
         layout.addLayout(self.actions)
         layout.addWidget(self.why)
@@ -143,10 +177,15 @@ class SessionPanel(QtWidgets.QWidget):
         self.export_button.setToolTip(
             "write the rows in force (withdrawn rows left out) to a CSV with units in the column names"
         )
+        self.plan_button = touch_button("Plan…", "load_plan")
+        self.plan_button.setToolTip(
+            "follow an experiment plan (qrfield plan): the Session tab guides to each target in turn"
+        )
         self.session_bar = QtWidgets.QHBoxLayout()
         self.session_bar.addWidget(self.new_button)
         self.session_bar.addWidget(self.resume_button)
         self.session_bar.addStretch(1)
+        self.session_bar.addWidget(self.plan_button)
         self.session_bar.addWidget(self.export_button)
         self.title = WrappedLabel("")
         self.title.setObjectName("session_title")
@@ -214,6 +253,12 @@ class SessionPanel(QtWidgets.QWidget):
         self.undo_button.clicked.connect(self.undo_row)
         self.retry_button.clicked.connect(self.retry)
         self.pending_button.clicked.connect(self.export_pending)
+        self.plan_button.clicked.connect(self.choose_plan)
+        self.guide_panel.targetChosen.connect(self.choose_target)
+        self.guide_panel.skipRequested.connect(self.skip_target)
+        self.guide_panel.autoToggled.connect(lambda _on: self._sync_guide())
+        self.form.changed.connect(self._sync_guide)
+        self.form.note.textChanged.connect(lambda _text: self._sync_guide())
 
     # ---------------------------------------------------------------- settings
     def root(self) -> Path:
@@ -244,6 +289,8 @@ class SessionPanel(QtWidgets.QWidget):
         return float(self.row_settings.value().frame_timeout_s)
 
     def save_settings(self, store: Any) -> None:
+        store.set_group("stillness", self.stillness_settings)
+        store.set_group("guide", self.guide_settings)
         store.set_group("session_folder", self.new_dialog.folder_form.value())
         store.set_group("session", self.row_settings.value())
         store.set_group("criteria", self.criteria_form.value())
@@ -305,6 +352,12 @@ class SessionPanel(QtWidgets.QWidget):
 
     def ask_folder(self) -> str:
         return QtWidgets.QFileDialog.getExistingDirectory(self, "Open a session folder", str(self.root()))
+
+    def ask_plan_path(self) -> str:
+        path, _ = QtWidgets.QFileDialog.getOpenFileName(
+            self, "Follow an experiment plan", str(self.root()), "Plans (*.csv);;All files (*)"
+        )
+        return path
 
     # ---------------------------------------------------------------- open / create
     def show_new_dialog(self) -> NewSessionDialog:
@@ -408,8 +461,197 @@ class SessionPanel(QtWidgets.QWidget):
         self.banner.setVisible(bool(session.pending))
         self.progress.setRange(0, session.info.frames_per_row)
         self.progress.setValue(0)
+        info = session.info
+        self.guide.configure(method=info.solver, criteria=info.criteria, frames_per_row=info.frames_per_row)
+        plan = None
+        try:
+            plan = PlanProgress.load(session.path, session.rows)
+        except (PlanError, SessionError, OSError) as exc:
+            self._add_warning(f"the session's plan cannot be read ({exc}); logging without it")
+        self._use_plan(plan)
         self._update_state()
         self.sessionChanged.emit(session)
+
+    def _add_warning(self, text: str) -> None:
+        shown = [line for line in self.warnings.text().split("\n") if line]
+        self.warnings.setText("\n".join([*shown, f"⚠ {text}"]))
+        self.warnings.show()
+
+    # ---------------------------------------------------------------- guided experiments
+    @property
+    def guided(self) -> bool:
+        """The open session follows a plan (the guide strip is shown)."""
+        return self.session is not None and self.plan is not None
+
+    def choose_plan(self) -> PlanProgress | None:
+        """*Plan…*: the operator picks a plan file for the open session."""
+        path = self.ask_plan_path()
+        return self.load_plan(path) if path else None
+
+    def load_plan(self, path: str | os.PathLike[str]) -> PlanProgress | None:
+        """Attach the plan in ``path`` to the open session and guide to its first target to do;
+        None, with every problem of the file named, when it cannot be used."""
+        session = self.session
+        if session is None:
+            self._say("open a session first: New session… or Resume…", "error")
+            return None
+        if self.collecting:
+            self._say("wait for the row being collected (or Cancel it) first", "error")
+            return None
+        try:
+            targets = read_plan(path)
+            plan = attach_plan(session.path, targets, session.rows, source=str(path))
+        except PlanError as exc:
+            shown = exc.problems[:6] + (
+                [f"… and {len(exc.problems) - 6} more"] if len(exc.problems) > 6 else []
+            )
+            self._say("plan not used:\n" + "\n".join(shown), "error")
+            return None
+        except (SessionError, OSError) as exc:
+            self._say(f"plan not used: {exc}", "error")
+            return None
+        self._use_plan(plan)
+        counts = plan.counts(session.rows)
+        self._say(
+            f"following {Path(path).name}: {len(plan.targets)} targets, {counts['done']} done, "
+            f"{counts['todo']} to do",
+            "ok",
+        )
+        self._update_state()
+        return plan
+
+    def _use_plan(self, plan: PlanProgress | None) -> None:
+        self.plan = plan
+        self.guide.cancel()
+        if plan is None or self.session is None:
+            self.guide_panel.hide()
+            self.target = None
+            self.guide.set_target(None)
+            self.guide.set_auto(False)
+            return
+        for warning in plan.warnings:
+            self._add_warning(warning)
+        self.guide_panel.show()
+        self.form.bench_gone()  # the ground truth is the target's, not the bench's
+        self.go_to(plan.next_target(self.session.rows))
+
+    def go_to(self, target: PlanTarget | None) -> None:
+        """Show ``target`` (None: every target has a row): the chooser, the form, the guide."""
+        self.target = target
+        if target is not None:
+            with QtCore.QSignalBlocker(self.form.note):
+                self.form.note.setText(target.note)
+            self.form.set_fields(target.truth.as_fields())
+        self.guide.set_target(
+            target, self.form.truth() if target is not None else None, self.form.note.text()
+        )
+        self._show_targets()
+        self._sync_guide()
+        self._update_state()
+
+    def _show_targets(self) -> None:
+        if self.plan is None or self.session is None:
+            return
+        states = self.plan.states(self.session.rows)
+        self.guide_panel.show_targets(states, self.target.number if self.target is not None else None)
+
+    def choose_target(self, number: int) -> None:
+        """The operator chose a target in the strip (to visit or redo it)."""
+        if self.plan is None or self.collecting:
+            self._show_targets()
+            return
+        self.go_to(self.plan.target(number))
+
+    def skip_target(self) -> None:
+        """Leave the current target (its state says skipped) and go to the next one to do."""
+        if self.plan is None or self.target is None or self.session is None or self.collecting:
+            return
+        skipped = self.target.number
+        try:
+            self.plan.skip(skipped)
+        except OSError as exc:
+            self._say(f"cannot save the plan's progress: {exc}", "error")
+            return
+        self.go_to(self.plan.next_target(self.session.rows, after=skipped))
+        self._say(f"skipped target {skipped}", "info")
+
+    def _sync_guide(self) -> None:
+        """The form's truth and note to the guide; "log when still" only with a good form."""
+        if not self.guided:
+            return
+        truth = self.form.truth()
+        self.guide.set_truth(truth, self.form.note.text())
+        auto = self.guide_panel.auto_box.isChecked() and truth is not None and not self.form.mismatch()
+        self.guide.set_auto(auto and self.target is not None and not self._redo_rows())
+
+    def _redo_rows(self) -> tuple[int, ...]:
+        """The rows in force of the current target (a new row for it is a redo)."""
+        if self.plan is None or self.target is None or self.session is None:
+            return ()
+        state = self.plan.states(self.session.rows)[self.target.number - 1]
+        return state.rows if state.state == DONE else ()
+
+    def log_target(self) -> bool:
+        """ "Log target": ask the guide for a row of the current target now (the next N frames)."""
+        reason = self.blocked_reason()
+        if reason:
+            if self.session is not None and not self.form.valid:
+                self.form.reveal_errors()
+                reason = self.blocked_reason()
+            self._say(f"cannot log: {reason}", "error")
+            return False
+        assert self.session is not None and self.target is not None
+        if not self._combination_confirmed():
+            return False
+        redo = self._redo_rows()
+        if redo:
+            rows = ", ".join(str(r) for r in redo)
+            if not self.ask_confirm(
+                "Redo target",
+                f"Target {self.target.number} has row {rows}. Withdraw it and log the target again?",
+            ):
+                return False
+            for number in redo:
+                outcome = self.session.withdraw(number, f"redo of target {self.target.number}")
+                self._after(outcome, f"withdrew row {number}", "ok")
+        self._sync_guide()
+        if not self.guide.arm():
+            self._say("the guide is collecting a row already", "info")
+            return False
+        return self._collecting(self.session.info.frames_per_row, f"target {self.target.number}")
+
+    def _take_guided_rows(self) -> None:
+        """Log the rows the guide finished (GUI thread), then show the next target to do."""
+        session = self.session
+        if session is None:
+            self.guide.take()
+            return
+        view = self.guide.view()
+        if view.collecting is not None:
+            self.progress.setValue(view.collecting[0])
+        for row in self.guide.take():
+            target = row.target
+            if self.plan is not None and target is not None:
+                try:
+                    self.plan.will_log(target.number, session.next_row)
+                except OSError as exc:
+                    self._add_warning(
+                        f"the plan's progress cannot be saved ({exc}); the row is logged anyway"
+                    )
+            try:
+                outcome = session.log(row.measurement)
+            except SessionError as exc:
+                self._say(f"row NOT logged: {exc}", "error")
+                continue
+            self.progress.setValue(0)
+            j = row.measurement.judgement
+            verdict = "pass" if j.passed else f"fail ({j.reason})"
+            where = f" (target {target.number})" if target is not None else ""
+            self._after(outcome, f"logged row {outcome.row}{where}: {verdict}", "ok" if j.passed else "fail")
+            if outcome.ok and outcome.row is not None:
+                self.rowLogged.emit(outcome.row)
+            if self.plan is not None and target is not None and self.target == target:
+                self.go_to(self.plan.next_target(session.rows, after=target.number))
 
     # ---------------------------------------------------------------- frames
     def source_opened(self) -> None:
@@ -438,7 +680,10 @@ class SessionPanel(QtWidgets.QWidget):
         return ""
 
     def tick(self) -> None:
-        """Every LIVENESS_MS: give up a row whose frames stopped; re-check what may be logged."""
+        """Every LIVENESS_MS: give up a row whose frames stopped; log the guide's rows; re-check what
+        may be logged."""
+        if self.guided:
+            self._take_guided_rows()
         now = time.monotonic()
         collector = self._collector
         if collector is not None:
@@ -450,12 +695,17 @@ class SessionPanel(QtWidgets.QWidget):
             self._update_state()
 
     def on_processed(self, item: Any) -> None:
-        """One result the window drew (ui.worker.Processed): follow the bench's truth, or collect it."""
+        """One result the window drew (ui.worker.Processed): follow the bench's truth, or collect it.
+        With a plan, the guide (fed every result by the frame loop) is shown and its rows logged."""
         result = item.result
         self._last_frame_t = time.monotonic()
         pose = result.poses.get(self.session.info.solver) if self.session is not None else None
         if pose is not None and pose.converged:  # a hint ("a row now fails"), not the average's test
             self._last_pose_t = self._last_frame_t
+        if self.guided:
+            self._take_guided_rows()
+            self.guide_panel.show_view(self.guide.view())
+            return
         collector = self._collector
         if collector is None:
             truth = getattr(result, "truth", None)
@@ -476,8 +726,10 @@ class SessionPanel(QtWidgets.QWidget):
         """Why "Log row" cannot be pressed now ("" when it can)."""
         if self.session is None:
             return "open a session first: New session… or Resume…"
-        if self._collector is not None:
+        if self.collecting:
             return "collecting frames…"
+        if self.guided and self.target is None:
+            return "every target of the plan has a row (choose one in the list to redo it)"
         if not self.form.valid:
             shown = self.form.shown_errors()
             if shown:
@@ -514,7 +766,10 @@ class SessionPanel(QtWidgets.QWidget):
         return notes
 
     def log_row(self) -> bool:
-        """Start collecting the next N frames for a row; False (with the reason shown) if it cannot."""
+        """Start collecting the next N frames for a row; False (with the reason shown) if it cannot.
+        With a plan: the row of the current target, measured by the guide (:meth:`log_target`)."""
+        if self.guided:
+            return self.log_target()
         reason = self.blocked_reason()
         if reason:
             if self.session is not None and not self.form.valid:
@@ -530,11 +785,13 @@ class SessionPanel(QtWidgets.QWidget):
         self._following = self.form.following
         self._collector = FrameCollector(self.session.info.frames_per_row, method=self.session.info.solver)
         self._t_press = time.monotonic()
-        self.progress.setRange(0, self._collector.frames_wanted)
+        return self._collecting(self._collector.frames_wanted, f"row {self.session.next_row}")
+
+    def _collecting(self, frames: int, what: str) -> bool:
+        """A row is being collected: the progress bar at 0 of ``frames``, the status says so."""
+        self.progress.setRange(0, frames)
         self.progress.setValue(0)
-        self._say(
-            f"collecting {self._collector.frames_wanted} frames for row {self.session.next_row}…", "info"
-        )
+        self._say(f"collecting {frames} frames for {what}…", "info")
         self._update_state()
         return True
 
@@ -555,6 +812,11 @@ class SessionPanel(QtWidgets.QWidget):
         return False
 
     def cancel_row(self) -> None:
+        if self.guide.cancel() and self._collector is None:
+            self.progress.setValue(0)
+            self._say("row cancelled: nothing logged", "info")
+            self._update_state()
+            return
         if self._collector is None:
             return
         self._collector = None
@@ -576,7 +838,11 @@ class SessionPanel(QtWidgets.QWidget):
 
     @property
     def collecting(self) -> bool:
-        return self._collector is not None
+        """A row is being collected (by "Log row", or by the guide for a target)."""
+        if self._collector is not None:
+            return True
+        view = self.guide.view() if self.guided else None
+        return view is not None and (view.collecting is not None or view.waiting)
 
     def _finish_row(self, collector: FrameCollector) -> None:
         assert self.session is not None and self._truth is not None
@@ -665,6 +931,7 @@ class SessionPanel(QtWidgets.QWidget):
 
     def _after(self, outcome: LogOutcome, success: str, kind: str) -> None:
         self.table.refresh()
+        self._show_targets()
         if outcome.ok:
             self.banner.setVisible(bool(self.session and self.session.pending))
             self._say(success, kind)
@@ -702,6 +969,7 @@ class SessionPanel(QtWidgets.QWidget):
     def shutdown(self) -> None:
         self.timer.stop()
         self._collector = None
+        self.guide.cancel()
         if self.session is not None:
             self.session.close()
 
@@ -717,7 +985,7 @@ class SessionPanel(QtWidgets.QWidget):
 
     def _update_state(self) -> None:
         session = self.session
-        collecting = self._collector is not None
+        collecting = self.collecting
         reason = self.blocked_reason()
         notes = self.context_notes()
         self._shown_state = (reason, notes)
@@ -725,6 +993,8 @@ class SessionPanel(QtWidgets.QWidget):
         self.cancel_button.setEnabled(collecting)
         self.form.setEnabled(not collecting)
         self.export_button.setEnabled(session is not None)
+        self.plan_button.setEnabled(session is not None and not collecting)
+        self.log_button.setText("Log target" if self.guided else "Log row")
         self.undo_button.setEnabled(
             session is not None and not collecting and any(not r.withdrawn for r in session.rows)
         )

@@ -132,6 +132,9 @@ class PipelineWorker(QtCore.QObject):
     def source_down(self, reason: str) -> None:
         self.sourceDown.emit(reason)
 
+    def source_up(self) -> None:
+        """Frames come again: the next processed result says so (nothing else to tell the GUI)."""
+
     def processed(self, frame: Frame, result: FrameResult, behind: int) -> None:
         loop = self.loop  # read on the loop's thread: the source this frame came from
         item = Processed(frame, result, time.monotonic(), behind, loop.simulated, loop.source_generation)

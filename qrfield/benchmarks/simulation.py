@@ -24,6 +24,8 @@ import os
 import time
 from typing import Any
 
+from qrfield.methods import IPPE
+
 HELP = "time the simulation study: batch solvers on every core beside the old per-pose IPPE path"
 
 #: Poses per task of the old path (runner.CHUNK_POSES before issue 17).
@@ -46,7 +48,7 @@ def old_solve(spec: Any, corners: Any, camera: Any, side_mm: float) -> Any:
     from qrfield.solvers.checks import check_corners_batch
     from qrfield.solvers.ippe import solve_ippe_batch
 
-    if spec.method == "ippe":
+    if spec.method == IPPE:
         checked, valid = check_corners_batch(corners)
         return solve_ippe_batch(checked, valid, camera, side_mm, spec.settings)
     return solve_batch(corners, camera, side_mm, settings=spec.settings, method=spec.method)

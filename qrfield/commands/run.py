@@ -6,16 +6,28 @@ one line per frame goes to stdout (JSON lines with ``--json-lines``, else a comp
 Notes and errors go to stderr. Settings come from the run configuration the app saves
 (:mod:`qrfield.runconfig`; ``qrfield config`` shows them), options override them.
 
-With ``--serial [PORT]`` every pose also goes to the gripper controller as a $QRF line and its $QRC
-commands are answered (:mod:`qrfield.serial_controller`): a pose is OK only from a live camera
-(SIM from the virtual bench, a video or a folder), NOSRC goes out while the source is down, and
-``--source auto`` then never falls back to the virtual bench unless ``--allow-virtual`` is given.
+With ``--serial [PORT]`` every pose also goes to the gripper controller as a $QRF line (protocol 2,
+docs/serial.md) and its $QRC commands are answered (:mod:`qrfield.serial.controller`): a pose is OK
+only unambiguous and from a live camera (AMBIG when its flip is unresolved, SIM from the virtual
+bench, a video or a folder), NOSRC goes out while the source is down, after a video or folder ends
+and as the last line before the run exits; ``--source auto`` then never falls back to the virtual
+bench unless ``--allow-virtual`` is given. The port is opened exclusively: a port another qrfield
+(or any program holding its lock) has open is refused at start, naming the other process.
+
+No silent states: an unknown backend, method or setting value, on the command line or in app.json
+(the message names the file and the key), stops the run at start with exit code 2.
+
+With ``--frame tool`` or ``--frame base`` (and a hand-eye file, docs/handeye.md) the poses on stdout
+are in the gripper's tool frame or the robot's base frame, their uncertainty with the calibration's
+added; each JSON line says which in ``pose_frame``. The serial link's $QRF lines stay in the camera
+frame (HELLO reports ``camera``) until the hand-eye commands reach the link.
 
 stdout is best effort: lines are written by a thread of their own, so a reader that stops reading
 never holds up the frame loop, the serial line or shutdown (lines it did not take are counted on
 stderr). SIGINT (Ctrl-C) and SIGTERM stop the run cleanly after the current frame. Exit codes: 0
 done or stopped; 1 the source could not be opened or failed (without ``--retry-s``), or the serial
-port could not be opened during the whole run; 2 bad options. No Qt is imported, ever.
+port could not be opened during the whole run; 2 bad options or settings, or a busy serial port.
+No Qt is imported, ever.
 """
 
 from __future__ import annotations
@@ -26,6 +38,8 @@ import signal
 import sys
 import time
 from typing import Any
+
+from qrfield.seams import BaseSink, LoopEventsBase
 
 HELP = "measure poses from a camera source without a window (headless; JSON lines for other programs)"
 
@@ -55,7 +69,7 @@ class _Stderr:
         print(f"qrfield run: {message}", file=sys.stderr, flush=True)
 
 
-class _Events:
+class _Events(LoopEventsBase):
     """The frame loop's events, said on stderr; a broken stdout without a serial link stops the run."""
 
     def __init__(self, say: _Stderr, writer: Any, link: Any, camera_line: str = "") -> None:
@@ -97,7 +111,7 @@ class _Events:
             self.loop.stop()  # the reader went away (e.g. `| head`) and nothing else listens
 
 
-class _StdoutSink:
+class _StdoutSink(BaseSink):
     """Each result as one line on stdout (through the LineWriter: never blocks)."""
 
     def __init__(self, writer: Any, json_lines: bool) -> None:
@@ -107,15 +121,9 @@ class _StdoutSink:
         line = (_json_line if self.json_lines else _human_line)(result, simulated)
         self.writer.write(line)
 
-    def on_source_down(self, reason: str) -> None:
-        pass
 
-    def on_source_up(self) -> None:
-        pass
-
-
-def _gripper_link(settings: Any, say: _Stderr) -> Any:
-    from qrfield.serial_controller import GripperLink
+def _gripper_link(settings: Any, say: _Stderr, config: Any) -> Any:
+    from qrfield.serial.controller import GripperLink
 
     shown = {"state": "", "error": ""}
 
@@ -129,10 +137,13 @@ def _gripper_link(settings: Any, say: _Stderr) -> Any:
             shown["error"] = status.last_error
             say(f"serial {status.port}: {status.last_error}")
 
-    link = GripperLink(settings, on_status=on_status).start()
+    link = GripperLink(settings, on_status=on_status)
+    link.set_context(side_mm=config.side_mm, camera=config.camera.name)
+    link.start(open_first=True)  # a busy port refuses here, with one line naming the other process
+    rate = f"at most {settings.max_rate_hz:g}/s" if settings.max_rate_hz > 0 else "as fast as the port allows"
     say(
-        f"serial: $QRF frames to {settings.port} at {settings.baud} baud, at most "
-        f"{settings.max_rate_hz:g}/s; answering $QRC commands (PING, STREAM, MEAS)"
+        f"serial: $QRF lines (protocol 2) to {settings.port} at {settings.baud} baud, {rate}, newest pose "
+        "first; answering $QRC commands (PING, HELLO, STREAM, RATE, MEAS)"
     )
     return link
 
@@ -140,13 +151,14 @@ def _gripper_link(settings: Any, say: _Stderr) -> Any:
 def run(args: argparse.Namespace) -> int:
     from qrfield.camera import camera_origin
     from qrfield.engine import FAILED, STOPPED, FrameLoop
+    from qrfield.handeye import InFrame, PoseFrame
     from qrfield.runconfig import effective_settings
     from qrfield.sources import source_kind
     from qrfield.stdout_lines import LineWriter
 
     if args.frames < 0:
         raise ValueError(f"--frames must be >= 0, got {args.frames}")
-    effective = effective_settings(args)
+    effective = effective_settings(args, strict=True)
     say = _Stderr()
     for problem in effective.store.problems:
         say(f"settings: {problem}")
@@ -155,14 +167,23 @@ def run(args: argparse.Namespace) -> int:
     if source_kind(config.source) != "virtual":
         for note in effective.assumed():
             say(note)
+    pose_frame = PoseFrame.from_settings(effective.groups["handeye"], args.config_dir)
+    if not pose_frame.identity:
+        say(pose_frame.describe())
+        if serial:
+            say("serial: $QRF poses stay in the camera frame (HELLO says camera) for now")
+    config.make_pipeline()  # every detector, solver and camera setting is checked now, not per frame
+    link = _gripper_link(effective.serial_settings(), say, config) if serial else None
     writer = LineWriter(sys.stdout)
     stop_signal = {"name": ""}
-    link = _gripper_link(effective.serial_settings(), say) if serial else None
     camera = config.camera
     events = _Events(
         say, writer, link, f"camera {camera.name} from {camera_origin(camera)}" if camera.path else ""
     )
-    sinks: list[Any] = [_StdoutSink(writer, args.json_lines)] + ([link] if link is not None else [])
+    stdout_sink: Any = _StdoutSink(writer, args.json_lines)
+    if not pose_frame.identity:
+        stdout_sink = InFrame(stdout_sink, pose_frame)
+    sinks: list[Any] = [stdout_sink] + ([link] if link is not None else [])
     loop = FrameLoop(config, events=events, sinks=sinks, max_frames=args.frames)
     events.loop = loop
 
@@ -207,8 +228,16 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _json_line(result: Any, simulated: bool) -> str:
-    return json.dumps(result.to_json_dict(simulated))
+    from qrfield.handeye.frames import frame_of
+
+    out = result.to_json_dict(simulated)
+    out["pose_frame"] = frame_of(result)  # camera, tool or base (docs/handeye.md)
+    return json.dumps(out)
 
 
 def _human_line(result: Any, simulated: bool) -> str:
-    return result.summary(simulated)
+    from qrfield.handeye.frames import frame_of
+    from qrfield.handeye.setups import CAMERA
+
+    frame = frame_of(result)
+    return result.summary(simulated) + ("" if frame == CAMERA else f"  [{frame} frame]")

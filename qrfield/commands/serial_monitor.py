@@ -1,13 +1,15 @@
-"""``qrfield serial-monitor PORT``: print the frames arriving on a serial port, count what is wrong.
+"""``qrfield serial-monitor PORT``: print the lines arriving on a serial port, count what is wrong.
 
 A tool for whoever writes the gripper controller: point it at the line (or at the other end of a
-pty / a USB-serial adapter in loopback) and it prints every decoded ``$QRF`` frame, ``$QRA`` /
-``$QRM`` answer and controller command, one per line (``--json`` for JSON lines), and at the end
-(Ctrl-C, SIGTERM, ``--count`` or ``--seconds``) the counts of bad checksums, truncated and malformed
-lines, garbage bytes and seq gaps. Frames go to stdout, the summary and messages to stderr.
+pty / a USB-serial adapter in loopback) and it prints every decoded ``$QRF`` line (protocol 2,
+docs/serial.md: the pose, its sigmas, age_ms and the pose's age when the line's last byte arrived,
+age_ms + bytes x 10 / baud), ``$QRA`` / ``$QRM`` answer and controller command, one per line
+(``--json`` for JSON lines), and at the end (Ctrl-C, SIGTERM, ``--count`` or ``--seconds``) the
+counts of bad CRCs, truncated and malformed lines, garbage bytes and seq gaps. Lines go to stdout,
+the summary and messages to stderr.
 
-``--send "MEAS,10"`` (repeatable) sends ``$QRC,MEAS,10*CS`` once the port is open, playing the
-controller (docs/conventions.md); the monitor then stops once every command sent is answered, or
+``--send "MEAS,10"`` (repeatable) sends ``$QRC,MEAS,10*<CRC>`` (the CRC computed here) once the port
+is open, playing the controller; the monitor then stops once every command sent is answered, or
 once the answers are overdue (3 s, plus 2 s + n / 5 s for MEAS,n), or after ``--seconds``.
 ``--answers-only`` prints the answers, not the frames.
 """
@@ -20,6 +22,7 @@ import math
 import signal
 import sys
 import time
+from typing import Any
 
 HELP = "print decoded pose frames arriving on a serial port and count bad checksums and garbage"
 
@@ -44,50 +47,67 @@ def _fmt(value: float, decimals: int) -> str:
     return f"{value:.{decimals}f}"
 
 
-def _triplet(values: tuple[float, ...] | None, names: tuple[str, str, str], decimals: int) -> str:
+def _triplet(values: tuple[float | None, ...] | None, names: tuple[str, str, str], decimals: int) -> str:
     if values is None:
         return ""
-    return " ".join(f"{n}={_fmt(v, decimals)}" for n, v in zip(names, values, strict=True))
+    texts = ("?" if v is None else _fmt(v, decimals) for v in values)
+    return " ".join(f"{n}={t}" for n, t in zip(names, texts, strict=True))
 
 
-def describe(item: object, as_json: bool) -> str:
+XYZ, ANGLES = ("x", "y", "z"), ("alpha", "beta", "gamma")
+
+
+def arrival_age_ms(item: Any, baud: float) -> float | None:
+    """docs/serial.md: a $QRF pose's age when the line's last byte arrived, age_ms + bytes x 10 / baud
+    (the line's bytes are those the codec writes for it: one spelling per value)."""
+    from qrfield.serial import codec
+
+    if item.age_ms is None:
+        return None
+    pose = None
+    if item.position_mm is not None:
+        pose = codec.wire_pose(item.position_mm, item.angles_deg, item.std_position_mm, item.std_angles_deg)
+    n_bytes = len(codec.encode_frame(item.seq, item.t_ms, item.age_ms, item.status, pose))
+    return item.age_ms + n_bytes * 10_000.0 / baud
+
+
+def _record(kind: str, item: Any) -> dict:
+    record = {"type": kind, **{k: getattr(item, k) for k in item.__dataclass_fields__}}
+    return {k: list(v) if isinstance(v, tuple) else v for k, v in record.items()}
+
+
+def describe(item: object, as_json: bool, baud: float = 115200) -> str:
     """One output line for a decoded frame, answer or command (mm and degrees)."""
-    from qrfield.serial_link import QraAnswer, QrfFrame, QrmMeasurement
+    from qrfield.serial.codec import QraAnswer, QrfFrame, QrmMeasurement
 
     if isinstance(item, QrmMeasurement):
         if as_json:
-            record = {"type": "measurement", **{k: getattr(item, k) for k in item.__dataclass_fields__}}
-            return json.dumps({k: list(v) if isinstance(v, tuple) else v for k, v in record.items()})
+            return json.dumps(_record("measurement", item))
         if item.position_mm is None:
             return f"measurement seq={item.seq} t={item.t_ms} ms  {item.status}"
         return (
             f"measurement seq={item.seq} t={item.t_ms} ms  "
-            f"{_triplet(item.position_mm, ('x', 'y', 'z'), 1)} mm  "
-            f"{_triplet(item.angles_deg, ('alpha', 'beta', 'gamma'), 2)} deg  "
-            f"std {_triplet(item.std_position_mm, ('x', 'y', 'z'), 1)} mm "
-            f"{_triplet(item.std_angles_deg, ('alpha', 'beta', 'gamma'), 2)} deg  "
-            f"n={item.n_used}  {item.status}"
+            f"{_triplet(item.position_mm, XYZ, 1)} mm  {_triplet(item.angles_deg, ANGLES, 2)} deg  "
+            f"sigma of the mean {_triplet(item.std_position_mm, XYZ, 1)} mm "
+            f"{_triplet(item.std_angles_deg, ANGLES, 2)} deg  n={item.n_used}  {item.status}"
         )
     if isinstance(item, QraAnswer):
         if as_json:
-            return json.dumps(
-                {"type": "answer", "command": item.command, "result": item.result, "reason": item.reason}
-            )
-        return f"answer {item.command} {item.result}" + (f" ({item.reason})" if item.reason else "")
+            return json.dumps({"type": "answer", "command": item.command, "fields": list(item.fields)})
+        return f"answer {item.command} {','.join(item.fields)}"
     if isinstance(item, QrfFrame):
-        pos, ang = item.position_mm, item.angles_deg
+        arrival = arrival_age_ms(item, baud)
         if as_json:
-            record: dict = {"type": "frame", "seq": item.seq, "t_ms": item.t_ms, "status": item.status}
-            record["position_mm"] = list(pos) if pos is not None else None
-            record["angles_deg"] = list(ang) if ang is not None else None
-            return json.dumps(record)
+            return json.dumps({**_record("frame", item), "arrival_age_ms": arrival})
         pose = "(no pose)"
-        if pos is not None and ang is not None:
+        if item.position_mm is not None:
             pose = (
-                f"x={_fmt(pos[0], 1)} y={_fmt(pos[1], 1)} z={_fmt(pos[2], 1)} mm  "
-                f"alpha={_fmt(ang[0], 2)} beta={_fmt(ang[1], 2)} gamma={_fmt(ang[2], 2)} deg"
+                f"{_triplet(item.position_mm, XYZ, 1)} mm  {_triplet(item.angles_deg, ANGLES, 2)} deg  "
+                f"sigma {_triplet(item.std_position_mm, XYZ, 1)} mm "
+                f"{_triplet(item.std_angles_deg, ANGLES, 2)} deg"
             )
-        return f"seq={item.seq:<5} t={item.t_ms} ms  {pose}  {item.status}"
+        age = "age -" if arrival is None else f"age {item.age_ms} ms (at arrival {arrival:.0f} ms)"
+        return f"seq={item.seq:<5} t={item.t_ms} ms  {age}  {pose}  {item.status}"
     talker, fields = item.talker, item.fields  # type: ignore[attr-defined]
     if as_json:
         return json.dumps({"type": "command", "talker": talker, "fields": list(fields)})
@@ -97,15 +117,9 @@ def describe(item: object, as_json: bool) -> str:
 def run(args: argparse.Namespace) -> int:
     import serial
 
-    from qrfield.serial_controller import meas_timeout_s
-    from qrfield.serial_link import (
-        FrameDecoder,
-        QraAnswer,
-        QrfFrame,
-        QrmMeasurement,
-        SerialLinkSettings,
-        encode_command,
-    )
+    from qrfield.serial.codec import FrameDecoder, QraAnswer, QrfFrame, QrmMeasurement, encode_command
+    from qrfield.serial.controller import meas_timeout_s
+    from qrfield.serial.link import SerialLinkSettings
     from qrfield.settings import specs
 
     baud_spec = next(s for s in specs(SerialLinkSettings) if s.name == "baud")
@@ -114,8 +128,8 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--count must be at least 1, got {args.count}")
     if args.seconds is not None and not 0 < args.seconds < math.inf:
         raise ValueError(f"--seconds must be a positive number of seconds, got {args.seconds}")
-    fields = [text.strip().removeprefix("$QRC,").split(",") for text in args.send]
-    commands = [encode_command("QRC", *f) for f in fields]
+    fields = [text.strip().removeprefix("$QRC,").split("*")[0].split(",") for text in args.send]
+    commands = [encode_command(*f) for f in fields]  # the CRC is computed here
     if commands and args.seconds is None and args.count is None:
         # Stop at the latest once every answer is overdue (MEAS,n may take 2 s + n / 5 s).
         args.seconds = 3.0 + max(
@@ -163,7 +177,7 @@ def run(args: argparse.Namespace) -> int:
                 answers += answer
                 if args.answers_only and not answer:
                     continue
-                print(describe(item, args.json), flush=True)
+                print(describe(item, args.json, baud), flush=True)
                 printed += 1
                 if args.count is not None and printed >= args.count:
                     ended = f"{args.count} lines decoded"
@@ -180,7 +194,7 @@ def run(args: argparse.Namespace) -> int:
     c = decoder.counters
     print(
         f"serial-monitor: {ended}; frames {c.frames}, answers {c.answers}, commands {c.commands}, "
-        f"bad checksums {c.bad_checksum}, "
+        f"bad CRCs {c.bad_checksum}, "
         f"truncated {c.truncated}, malformed {c.malformed}, overlong {c.overlong}, "
         f"garbage bytes {c.garbage_bytes}, seq gaps {seq_gaps}",
         file=sys.stderr,

@@ -13,18 +13,21 @@ adding one is one entry.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import signal
 import sys
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-HELP = "make experiment sessions and log rows without the app (new, log, undo, list, show, export)"
+HELP = "make experiment sessions and log rows without the app (new, log, run-plan, undo, list, show, export)"
 DESCRIPTION = (
     "Experiment sessions on disk, as the app's Session tab makes them: 'new' creates one, 'log' "
-    "measures a row (averaged frames against a ground truth measured by hand), 'undo' withdraws the "
+    "measures a row (averaged frames against a ground truth measured by hand), 'run-plan' logs a plan's "
+    "targets one by one (the virtual bench is set to each; from a camera the terminal asks), 'undo' "
+    "withdraws the "
     "last row, 'list' and 'show' read them, 'export' writes the rows in force for a spreadsheet."
 )
 
@@ -68,11 +71,12 @@ def _add_new(parser: argparse.ArgumentParser) -> None:
     )
     add_arguments(group, SessionSettings)
     add_arguments(group, AcceptanceCriteria)
-    add_run_arguments(parser, only=METHODS)
+    add_run_arguments(parser, only=(*METHODS, "handeye"))
 
 
 def _run_new(args: argparse.Namespace) -> int:
     from qrfield.camera import camera_origin
+    from qrfield.handeye import PoseFrame
     from qrfield.methods import METHODS, methods_from_choice
     from qrfield.runconfig import effective_settings
     from qrfield.sessions import AcceptanceCriteria, Session, SessionSettings
@@ -94,6 +98,9 @@ def _run_new(args: argparse.Namespace) -> int:
     store = effective.store
     rows = from_arguments(SessionSettings, args, base=store.group("session", SessionSettings))
     criteria = from_arguments(AcceptanceCriteria, args, base=store.group("criteria", AcceptanceCriteria))
+    pose_frame = PoseFrame.from_settings(effective.groups["handeye"], args.config_dir)
+    if not pose_frame.identity:
+        say(f"rows and their ground truth in the {pose_frame.frame} frame: {pose_frame.describe()}")
     session = Session.create(
         args.root,
         args.name,
@@ -105,6 +112,8 @@ def _run_new(args: argparse.Namespace) -> int:
         frames_per_row=rows.frames_per_row,
         operator=args.operator,
         notes=args.notes,
+        pose_frame=pose_frame.frame,
+        handeye=pose_frame.calibration.to_dict() if pose_frame.calibration is not None else None,
     )
     session.close()
     info = session.info
@@ -159,6 +168,7 @@ def _interrupt(signum: int, _frame: Any) -> None:
 
 def _run_log(args: argparse.Namespace) -> int:
     from qrfield.engine import FrameLoop
+    from qrfield.handeye import InFrameEvents, PoseFrame
     from qrfield.runconfig import effective_settings
     from qrfield.sessions import Session, known_combinations, validate_field
     from qrfield.sessions.recorder import RowRecorder, session_run_config
@@ -183,11 +193,10 @@ def _run_log(args: argparse.Namespace) -> int:
             say(f"settings: {problem}")
         config = session_run_config(effective.run_config(camera=session.info.camera), session.info)
         recorder = RowRecorder(session.info, say)
-        loop = FrameLoop(config, events=recorder)
-        thread = threading.Thread(target=loop.run, name="frame loop", daemon=True)
-        previous = signal.signal(signal.SIGTERM, _interrupt)
-        thread.start()
-        try:
+        pose_frame = PoseFrame.from_saved(session.info.pose_frame, session.info.handeye, session.info.name)
+        events = recorder if pose_frame.identity else InFrameEvents(recorder, pose_frame)
+        loop = FrameLoop(config, events=events)
+        with loop_thread(loop) as thread:
 
             def ended() -> bool:
                 return not thread.is_alive()
@@ -195,12 +204,23 @@ def _run_log(args: argparse.Namespace) -> int:
             if truth is not None or follow:
                 return _log_one(session, recorder, truth, args, follow, ended)
             return _log_interactive(session, recorder, args, combinations, ended)
-        finally:
-            loop.stop()
-            thread.join(5.0)
-            signal.signal(signal.SIGTERM, previous)
     finally:
         session.close()
+
+
+@contextlib.contextmanager
+def loop_thread(loop: Any) -> Iterator[threading.Thread]:
+    """Run a frame loop on a daemon thread for the block (SIGTERM ends the block as Ctrl-C does);
+    then stop the loop and join its thread (it closes the source)."""
+    thread = threading.Thread(target=loop.run, name="frame loop", daemon=True)
+    previous = signal.signal(signal.SIGTERM, _interrupt)
+    thread.start()
+    try:
+        yield thread
+    finally:
+        loop.stop()
+        thread.join(5.0)
+        signal.signal(signal.SIGTERM, previous)
 
 
 def _log_one(session: Any, recorder: Any, truth: Any, args: Any, follow: bool, ended: Any) -> int:
@@ -349,6 +369,7 @@ def _add_show(parser: argparse.ArgumentParser) -> None:
 
 
 def _run_show(args: argparse.Namespace) -> int:
+    from qrfield.handeye import PoseFrame
     from qrfield.sessions import read_session
 
     info, content = read_session(args.folder)
@@ -357,6 +378,14 @@ def _run_show(args: argparse.Namespace) -> int:
     print(f"  created {info.created}, operator {info.operator or '-'}, app {info.app_version}")
     print(f"  camera {cam.name} {cam.width}x{cam.height} (fx {cam.fx:.1f}), QR side {info.side_mm:g} mm")
     print(f"  solver {info.solver}, {info.frames_per_row} frames per row, criteria {info.criteria.label()}")
+    print(
+        f"  poses in the {info.pose_frame} frame"
+        + (
+            f" ({PoseFrame.from_saved(info.pose_frame, info.handeye, info.name).describe()})"
+            if info.handeye
+            else ""
+        )
+    )
     if info.notes:
         print(f"  notes: {' '.join(info.notes.split())}")
     print(f"  {_counts(content)}")
@@ -403,6 +432,11 @@ SUBCOMMANDS: dict[str, Subcommand] = {
     "log": Subcommand(
         "measure and log one row (or, without --truth, ask for each field)", _add_log, _run_log
     ),
+    "run-plan": Subcommand(
+        "log a plan's targets one by one: the virtual bench is set to each, a camera's operator is asked",
+        lambda parser: _run_plan().add_arguments(parser),
+        lambda args: _run_plan().run(args),
+    ),
     "undo": Subcommand("withdraw the last row (a withdrawal record is appended)", _add_undo, _run_undo),
     "list": Subcommand("list the sessions in a folder", _add_list, _run_list),
     "show": Subcommand("print a session's setup and rows", _add_show, _run_show),
@@ -410,6 +444,12 @@ SUBCOMMANDS: dict[str, Subcommand] = {
         "write the rows still in force as a clean CSV (units in the column names)", _add_export, _run_export
     ),
 }
+
+
+def _run_plan() -> Any:
+    from qrfield.commands import _run_plan as module
+
+    return module
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -422,9 +462,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from qrfield.sessions import GroundTruthError, SessionError
+    from qrfield.sessions.plan import PlanError
 
     try:
         return int(args._session_run(args) or 0)
+    except PlanError as exc:
+        for problem in exc.problems:
+            say(f"error: {problem}")
+        return 2
     except GroundTruthError as exc:
         for name, message in exc.errors.items():
             say(f"error: {name}: {message}")

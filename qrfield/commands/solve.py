@@ -10,7 +10,7 @@ import sys
 
 from qrfield.arguments import add_side_argument, number, parse_numbers
 from qrfield.camera import add_camera_arguments
-from qrfield.methods import BOTH, METHOD_CHOICES, methods_from_choice, settings_classes
+from qrfield.methods import BOTH, METHOD_CHOICES, methods_from_choice
 
 HELP = "compute a QR code's position (mm) and orientation (degrees) from images or its four corner pixels"
 DESCRIPTION = (
@@ -142,7 +142,7 @@ def run(args: argparse.Namespace) -> int:
     from qrfield.camera import camera_from_args, say_camera
     from qrfield.limits import check_corners_in_view
     from qrfield.settings import from_arguments
-    from qrfield.solvers import solve
+    from qrfield.solvers import settings_classes, solve
 
     if bool(args.images) == (args.corners is not None):
         raise ValueError("give either IMAGE files or --corners (one of them)")

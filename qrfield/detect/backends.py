@@ -18,6 +18,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from qrfield.settings import SettingError
+
 #: Backend names accepted by the ``backends`` setting, fastest first. "zxing-x2" runs zxing-cpp on the
 #: image upscaled twice (bicubic): slower, but it reads codes whose modules are 2-3 px. "finders"
 #: locates finder patterns by contours and decodes the rectified symbol (strong perspective).
@@ -26,8 +28,9 @@ import numpy as np
 BACKEND_NAMES = ("zxing", "zxing-x2", "opencv-aruco", "opencv", "finders", "small")
 
 
-class BackendError(ValueError):
-    """An unknown backend name, or a backend that is not installed."""
+class BackendError(SettingError):
+    """An unknown backend name, or a backend that is not installed (a SettingError: the
+    ``backends`` setting's own rule, a ValueError as before)."""
 
 
 @dataclass(frozen=True)

@@ -171,6 +171,14 @@ def quality_of(score: float, corners_cov: np.ndarray | None) -> float:
     return score * min(1.0, GOOD_CORNER_STD_PX / max(std, 1e-12))
 
 
+def _check_backends(spec: str) -> None:
+    """The backends setting's rule (BackendError, a ValueError, for an unknown name), so a wrong
+    name stops a run at start rather than leaving it without a detector."""
+    from qrfield.detect.backends import parse_backends  # the backends import this module
+
+    parse_backends(spec)
+
+
 @dataclass(frozen=True)
 class DetectorSettings:
     """Settings of QR detection, refinement, tracking and selection (see qrfield.settings)."""
@@ -182,6 +190,7 @@ class DetectorSettings:
         "image upscaled 2x, for small codes), finders (finder patterns by contours, for strong "
         "perspective), small (finder patterns in busy regions upscaled 3x and sharpened, for "
         "modules of 1.2-3 px), opencv-aruco, opencv",
+        check=_check_backends,
     )
     refine: bool = setting(
         True, label="sub-pixel refinement", help="fit the symbol's outer edges for sub-pixel corners"

@@ -14,6 +14,7 @@ Angles are averaged one by one (not as rotations): fine for the small spreads of
 Two kinds of spread, kept apart: ``std_*`` is the frame-to-frame sample standard deviation (what
 the frames did); ``sigma_*`` is the mean of the frames' own uncertainty (what each frame's image
 evidence allowed, docs/conventions.md "Pose uncertainty"), over the converged frames that have one.
+``sem_*`` is the standard uncertainty of the mean (a MEAS answer's sigmas; see :func:`_sem`).
 Errors: err_pos = |mean position - truth| (Euclidean, mm); err_alpha/beta/gamma = mean minus
 truth, wrapped to (-180, 180] (signed, degrees).
 """
@@ -63,6 +64,8 @@ class AveragedPose:
     mean_reprojection_px: float
     sigma_position_mm: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
     sigma_angles_deg: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    sem_position_mm: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    sem_angles_deg: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
 
     @property
     def has_pose(self) -> bool:
@@ -133,6 +136,7 @@ def average_frames(frames: Iterable[Any], method: str = "") -> AveragedPose:
     known = np.isfinite(sigma)
     with np.errstate(invalid="ignore", divide="ignore"):
         mean_sigma = np.where(known.any(axis=0), np.nansum(sigma, axis=0) / known.sum(axis=0), np.nan)
+    sem = _sem(np.concatenate([std_pos, std_ang]), sigma, n)
     return AveragedPose(
         n_frames=n_frames,
         n_converged=n,
@@ -144,7 +148,37 @@ def average_frames(frames: Iterable[Any], method: str = "") -> AveragedPose:
         mean_reprojection_px=float(np.mean(reprojections)) if reprojections else math.nan,
         sigma_position_mm=mean_sigma[:3],
         sigma_angles_deg=mean_sigma[3:],
+        sem_position_mm=sem[:3],
+        sem_angles_deg=sem[3:],
     )
+
+
+#: Frames of a still card share most of their error (the same corners' bias, the same lens), so
+#: their own sigmas average down as if there were at most this many independent frames.
+SEM_EFFECTIVE_FRAMES = 2
+
+
+def _sem(spread: np.ndarray, sigmas: np.ndarray, n: int) -> np.ndarray:
+    """(6,) standard uncertainty of the mean of x, y, z (mm), alpha, beta, gamma (deg): the larger of
+    spread / sqrt(n) and the frames' median sigma / sqrt(min(n, SEM_EFFECTIVE_FRAMES)); NaN where
+    neither is known.
+
+    A conservative stand-in until it is calibrated on still cards (issue 25 owns that): frames of a
+    still card share their error, so the spread / sqrt(n) alone claims far too much (docs/conventions.md,
+    MEAS: over many MEAS, (mean - truth) / s should have an RMS near 1).
+    """
+    with np.errstate(invalid="ignore"):
+        by_spread = spread / math.sqrt(n) if n >= 2 else np.full(6, np.nan)
+        known = np.isfinite(sigmas).any(axis=0)
+        median = np.full(6, np.nan)
+        if known.any():
+            median[known] = np.nanmedian(sigmas[:, known], axis=0)
+        by_frames = median / math.sqrt(min(n, SEM_EFFECTIVE_FRAMES))
+        both = np.vstack([by_spread, by_frames])
+        out = np.full(6, np.nan)
+        some = np.isfinite(both).any(axis=0)
+        out[some] = np.nanmax(both[:, some], axis=0)
+    return out
 
 
 def _frame_sigma(frame: Any, index: int) -> np.ndarray:

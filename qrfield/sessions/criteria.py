@@ -8,11 +8,13 @@ every session's ``session.json``.
 The one home of the rule: :func:`pose_errors` (how far a pose is from its truth) and
 :meth:`AcceptanceCriteria.judge` (whether that passes), used by a session row
 (:func:`qrfield.sessions.averaging.judge_row`), the simulation study, the benchmarks and the app's
-verdict against the virtual bench's true pose.
+verdict against the virtual bench's true pose; and :meth:`AcceptanceCriteria.grade`, the colour of
+a guided experiment's live difference to its target (:data:`GOOD`, :data:`NEAR`, :data:`FAR`).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -20,6 +22,11 @@ import numpy as np
 
 from qrfield.geometry import angle_difference
 from qrfield.settings import setting
+
+#: Grades of a difference to the target (the guide's colours): within the criteria; within
+#: NEAR_FACTOR times them; beyond (or unknown).
+GOOD, NEAR, FAR = "good", "near", "far"
+NEAR_FACTOR = 2.0
 
 
 def pose_errors(
@@ -44,6 +51,18 @@ def pose_errors(
         err_pos = np.linalg.norm(pos - truth_pos, axis=-1)
         err_ang = np.asarray(angle_difference(ang, truth_ang), dtype=float)
     return err_pos, err_ang
+
+
+@dataclass(frozen=True)
+class Grades:
+    """:meth:`AcceptanceCriteria.grade` of a difference: GOOD, NEAR or FAR per axis and for the
+    Euclidean distance (mm), and whether the difference passes the criteria."""
+
+    position: tuple[str, str, str]
+    angles: tuple[str, str, str]
+    distance: str
+    distance_mm: float
+    passes: bool
 
 
 @dataclass(frozen=True)
@@ -96,6 +115,47 @@ class AcceptanceCriteria:
             worst = np.max(np.abs(err_ang), axis=-1)
         passed = self.meets(err_pos, worst) & np.isfinite(err_pos) & np.isfinite(worst)
         return passed, err_pos, worst
+
+    def grade(self, position_diff_mm: Any, angle_diff_deg: Any) -> Grades:
+        """Grades of a pose's difference to its target, measured minus target: x, y, z in mm and
+        alpha, beta, gamma in degrees (each (3,); angles wrapped here).
+
+        Each angle: GOOD when |d| <= the angle limit, NEAR when <= NEAR_FACTOR times it, else FAR.
+        The distance (Euclidean, the rule that decides) and each position axis: GOOD when below
+        the position limit, NEAR below NEAR_FACTOR times it, else FAR. So every axis GOOD does not
+        make the distance GOOD (three axes of 4 mm are 6.9 mm apart): ``distance`` says that.
+        NaN grades FAR. ``passes`` is the criteria's verdict on these differences.
+        """
+        pos = np.asarray(position_diff_mm, dtype=float).reshape(-1)
+        ang = np.asarray(angle_diff_deg, dtype=float).reshape(-1)
+        if pos.shape != (3,) or ang.shape != (3,):
+            raise ValueError(
+                f"differences of x, y, z (3, mm) and alpha, beta, gamma (3, deg) expected, "
+                f"got {pos.size} and {ang.size}"
+            )
+        ang = np.asarray(angle_difference(ang, 0.0), dtype=float)
+        with np.errstate(invalid="ignore"):
+            distance = float(np.linalg.norm(pos))
+
+        def below(value: float, limit: float, inclusive: bool) -> str:
+            size = abs(value)
+            if not math.isfinite(size):
+                return FAR
+            within = (lambda a, b: a <= b) if inclusive else (lambda a, b: a < b)
+            if within(size, limit):
+                return GOOD
+            return NEAR if within(size, NEAR_FACTOR * limit) else FAR
+
+        p, a = self.max_position_error_mm, self.max_angle_error_deg
+        grades_pos = tuple(below(v, p, False) for v in pos)
+        grades_ang = tuple(below(v, a, True) for v in ang)
+        return Grades(
+            position=grades_pos,  # type: ignore[arg-type]
+            angles=grades_ang,  # type: ignore[arg-type]
+            distance=below(distance, p, False),
+            distance_mm=distance,
+            passes=bool(math.isfinite(distance) and self.passes(distance, ang)),
+        )
 
     def label(self) -> str:
         """The criteria in a few characters for screens and reports, e.g. "2°/5 mm"."""

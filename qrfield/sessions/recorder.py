@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from qrfield.runconfig import RunConfig
+from qrfield.seams import LoopEventsBase
 from qrfield.sessions.averaging import FrameCollector, Measurement, circular_mean_deg
 from qrfield.sessions.groundtruth import GroundTruth
 from qrfield.sessions.store import SessionInfo
@@ -30,8 +31,8 @@ def session_run_config(base: RunConfig, info: SessionInfo) -> RunConfig:
     session's own camera model, QR side, solver and solver settings (what its rows claim)."""
     import dataclasses
 
-    from qrfield.methods import settings_class
     from qrfield.settings import from_dict
+    from qrfield.solvers import settings_class
 
     settings = from_dict(settings_class(info.solver), info.solver_settings, strict=False)
     return dataclasses.replace(
@@ -67,7 +68,7 @@ def _converged(pose: Any) -> bool:
     )
 
 
-class RowRecorder:
+class RowRecorder(LoopEventsBase):
     """A frame loop's event handler that collects frames for one row at a time (thread-safe).
 
     ``say(text)`` receives the loop's messages (source opened or failed, notes).

@@ -3,12 +3,14 @@
 Format: docs/conventions.md, "Experiment sessions on disk".
 
 ``session.json`` (written atomically: temp file, fsync, os.replace) records the camera model, QR
-side, solver and its settings, acceptance criteria, frames per row, app version, operator, notes
-and creation time. ``rows.csv`` is UTF-8 with a header row: the required columns in the order of
-docs/conventions.md, then EXTRA_COLUMNS. Values in mm and degrees with 3 decimals, empty where unknown (no
-converged frame); ``time`` is local ISO 8601 time with its UTC offset; ``pass`` is 1 or 0;
-``x``..``gamma`` are the means over the converged frames (angles: circular means), ``err_*`` are
-measured minus ground truth (angles wrapped to (-180, 180]), ``err_pos`` the Euclidean distance.
+side, solver and its settings, acceptance criteria, frames per row, app version, operator, notes,
+creation time, and the frame the rows' poses are in (``pose_frame``: camera, or tool / base with
+the hand-eye calibration that took them there in ``handeye``, docs/handeye.md). ``rows.csv`` is
+UTF-8 with a header row: the required columns in the order of docs/conventions.md, then
+EXTRA_COLUMNS. Values in mm and degrees with 3 decimals, empty where unknown (no converged frame);
+``time`` is local ISO 8601 time with its UTC offset; ``pass`` is 1 or 0; ``x``..``gamma`` are the
+means over the converged frames (angles: circular means), ``err_*`` are measured minus ground
+truth (angles wrapped to (-180, 180]), ``err_pos`` the Euclidean distance.
 
 Crash safety: each record is one physical line (notes are kept to one line), appended with one
 ``write`` on an O_APPEND descriptor and fsynced before :meth:`Session.log` reports "logged".
@@ -53,8 +55,9 @@ from qrfield.files import (
     read_bytes,
     read_json,
 )
+from qrfield.handeye.setups import FRAMES
 from qrfield.limits import SIDE_MM, LimitError
-from qrfield.methods import METHODS, settings_class
+from qrfield.methods import METHODS
 from qrfield.sessions.averaging import Measurement
 from qrfield.sessions.criteria import AcceptanceCriteria, SessionSettings
 from qrfield.sessions.files import FileOps, atomic_write, fsync_dir, unique_path
@@ -151,8 +154,13 @@ class SessionInfo:
     operator: str = ""
     notes: str = ""
     app_version: str = qrfield.__version__
+    #: The frame of the rows' poses and ground truth (qrfield.handeye.FRAMES), and the contents of
+    #: the hand-eye file that took them there (empty for the camera frame).
+    pose_frame: str = "camera"
+    handeye: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
+        extra: dict[str, Any] = {"handeye": dict(self.handeye)} if self.handeye else {}
         return {
             "format": FORMAT,
             "name": self.name,
@@ -166,6 +174,8 @@ class SessionInfo:
             "criteria": to_dict(self.criteria),
             "frames_per_row": self.frames_per_row,
             "columns": list(COLUMNS),
+            "pose_frame": self.pose_frame,
+            **extra,
         }
 
     @classmethod
@@ -186,6 +196,12 @@ class SessionInfo:
             texts = {
                 key: fields.text(key, "") for key in ("name", "created", "operator", "notes", "app_version")
             }
+            pose_frame = fields.text("pose_frame", "camera")
+            if pose_frame not in FRAMES:
+                raise SessionError(
+                    f"{where}: field 'pose_frame' must be one of {', '.join(FRAMES)}, got {pose_frame!r}"
+                )
+            handeye = fields.mapping("handeye", {})
         except (FileFormatError, CameraModelError, SettingError, LimitError) as exc:
             raise SessionError(str(exc) if str(exc).startswith(where) else f"{where}: {exc}") from None
         return cls(
@@ -200,6 +216,8 @@ class SessionInfo:
             operator=texts["operator"],
             notes=texts["notes"],
             app_version=texts["app_version"],
+            pose_frame=pose_frame,
+            handeye=handeye,
         )
 
 
@@ -505,12 +523,22 @@ class Session:
         notes: str = "",
         now: dt.datetime | None = None,
         file_ops: FileOps | None = None,
+        pose_frame: str = "camera",
+        handeye: dict[str, Any] | None = None,
     ) -> Session:
         """Make ``root/<YYYYmmdd-HHMMSS>-<name>/`` with session.json and rows.csv (header only).
 
         Never overwrites: when the folder exists, the next free second is taken for the stamp.
         ``solver_settings``: the solver's settings dataclass or a dict (saved as a dict).
+        ``pose_frame``, ``handeye``: the frame the rows are measured in and the hand-eye file's
+        contents that take poses there (``qrfield.handeye.HandEyeCalibration.to_dict``).
         """
+        if pose_frame not in FRAMES:
+            raise SessionError(f"pose frame {pose_frame!r} is not one of {', '.join(FRAMES)}")
+        if (pose_frame == "camera") != (not handeye):
+            raise SessionError(
+                f"pose frame {pose_frame}: a hand-eye calibration goes with the tool or base frame only"
+            )
         safe = sanitize_name(name)
         if not isinstance(camera, CameraModel):
             raise SessionError(f"camera must be a CameraModel, got {type(camera).__name__}")
@@ -560,6 +588,8 @@ class Session:
             frames_per_row=int(frames),
             operator=_one_line(operator),
             notes=notes or "",
+            pose_frame=pose_frame,
+            handeye=dict(handeye or {}),
         )
         atomic_write(folder / SESSION_FILE, (json.dumps(info.to_dict(), indent=2) + "\n").encode("utf-8"))
         atomic_write(folder / ROWS_FILE, _csv_line({c: c for c in COLUMNS}, COLUMNS))
@@ -772,6 +802,8 @@ class Session:
 def _checked_solver_settings(solver: str, settings: dict[str, Any]) -> dict[str, Any]:
     """The solver's settings validated by its own declaration."""
     try:
+        from qrfield.solvers import settings_class  # the solvers load only when a session is made
+
         return to_dict(from_dict(settings_class(solver), settings))
     except SettingError as exc:
         raise SessionError(f"solver settings: {exc}") from None

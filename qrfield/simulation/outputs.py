@@ -32,6 +32,7 @@ import numpy as np
 
 from qrfield.files import atomic_file, atomic_write, make_folder
 from qrfield.images import write_image
+from qrfield.methods import NUMERICAL
 from qrfield.simulation import heatmap
 from qrfield.simulation.runner import (
     END_FAILED,
@@ -60,7 +61,7 @@ def solver_note(key: str, result: StudyResult) -> str:
     if key in SOLVER_NOTES:
         return SOLVER_NOTES[key]
     spec = next(s for s in result.config.solver_specs() if s.key == key)
-    if spec.method == "numerical":
+    if spec.method == NUMERICAL:
         return f"the numerical model with initial guess '{spec.settings.initial_guess}' (ours)"
     return "OpenCV IPPE_SQUARE"
 

@@ -260,13 +260,22 @@ def judge_samples(
     result: Any, truth_position: np.ndarray, truth_angles: np.ndarray, config: StudyConfig
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(passed, position error mm, largest angle error deg) of N solved samples against the truth:
-    the acceptance criteria (:meth:`AcceptanceCriteria.judge`, the rule's one home) and, the study's
-    own condition, a solver that stopped before n_max (see the module doc)."""
+    the study's criteria, by :func:`judge_solved`."""
     c = config.criteria
-    passed, pos_err, ang_err = c.acceptance.judge(
+    return judge_solved(result, truth_position, truth_angles, c.acceptance, c.n_max)
+
+
+def judge_solved(
+    result: Any, truth_position: np.ndarray, truth_angles: np.ndarray, acceptance: Any, n_max: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(passed, position error mm, largest angle error deg) of N solved samples (``result``: arrays
+    position_mm (N, 3), angles_deg (N, 3), converged (N,), iterations (N,)) against the truth (N, 3)
+    mm and degrees: the acceptance criteria (:meth:`AcceptanceCriteria.judge`, the rule's one home)
+    and, the study's own condition, a solver that stopped before ``n_max`` (see the module doc)."""
+    passed, pos_err, ang_err = acceptance.judge(
         result.position_mm, result.angles_deg, truth_position, truth_angles
     )
-    within = np.asarray(result.converged, bool) | (np.asarray(result.iterations) < c.n_max)
+    within = np.asarray(result.converged, bool) | (np.asarray(result.iterations) < n_max)
     return passed & within, pos_err, ang_err
 
 

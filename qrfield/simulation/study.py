@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 
 from qrfield.files import FileFormatError, loads_toml, read_toml
-from qrfield.methods import METHODS
+from qrfield.methods import IPPE, METHODS, NUMERICAL
 from qrfield.sessions.criteria import AcceptanceCriteria
 from qrfield.settings import SettingError, SettingSpec
 from qrfield.simulation.combinations import DEFAULT_NAME, Combination, load_combinations
@@ -266,7 +266,7 @@ def solver_spec(key: str, table: Mapping[str, Any], n_max: int) -> SolverSpec:
     where = f"solver.{key}"
     if "n_max" in table:
         raise StudyError(f"field '{where}.n_max': set n_max once, as criteria.n_max")
-    if method == "ippe":
+    if method == IPPE:
         cls: type = IppeSettings
         base = settings_mod.to_dict(IppeSettings())
     else:
@@ -295,7 +295,7 @@ def solver_spec(key: str, table: Mapping[str, Any], n_max: int) -> SolverSpec:
             )
     try:
         settings = settings_mod.from_dict(cls, {**base, **table})
-        if method == "numerical":
+        if method == NUMERICAL:
             from qrfield.solvers.numerical import checked_settings
 
             checked_settings(settings)

@@ -19,25 +19,27 @@ from __future__ import annotations
 import numpy as np
 
 from qrfield.camera import CameraModel
-from qrfield.methods import METHODS, settings_class  # the method registry (re-exported)
+from qrfield.methods import METHODS, NUMERICAL
 from qrfield.solvers.checks import check_camera, check_corners_batch, check_corners_single, check_side
-from qrfield.solvers.ippe import IppeSettings, solve_ippe
-from qrfield.solvers.ippe_batch import solve_ippe_vectorised
-from qrfield.solvers.numerical import SEED_SETTINGS, NumericalSettings, solve_numerical
-from qrfield.solvers.numerical_batch import solve_numerical_batch
+from qrfield.solvers.ippe import IppeSettings
+from qrfield.solvers.numerical import SEED_SETTINGS, NumericalSettings
 from qrfield.solvers.rays import normalised_single
+from qrfield.solvers.registry import POSE_METHODS, pose_method, settings_class, settings_classes
 from qrfield.solvers.result import BatchResult, PoseResult, SolverError
 from qrfield.solvers.uncertainty import check_corners_cov, with_uncertainties
 
 __all__ = [
     "METHODS",
+    "POSE_METHODS",
     "SEED_SETTINGS",
     "BatchResult",
     "IppeSettings",
     "NumericalSettings",
     "PoseResult",
     "SolverError",
+    "pose_method",
     "settings_class",
+    "settings_classes",
     "solve",
     "solve_batch",
     "solve_methods",
@@ -48,7 +50,7 @@ def solve(
     corners_px: np.ndarray,
     camera: CameraModel,
     side_mm: float,
-    method: str = "numerical",
+    method: str = NUMERICAL,
     settings: NumericalSettings | IppeSettings | None = None,
     corners_cov: np.ndarray | None = None,
 ) -> PoseResult:
@@ -90,20 +92,13 @@ def solve_methods(
     settings (missing: the defaults). Raises as :func:`solve` does.
     """
     settings = settings or {}
-    for method in methods:
-        if method not in METHODS:
-            settings_class(method)  # raises SolverError naming the methods (no imports for known ones)
+    specs = [pose_method(method) for method in methods]  # SolverError naming the known ones
     cam = check_camera(camera)
     side = check_side(side_mm)
     corners, flat = check_corners_single(corners_px)
     cov = None if corners_cov is None else check_corners_cov(corners_cov)
     xy = normalised_single(corners, flat, cam)
-    results = []
-    for method in methods:
-        if method == "numerical":
-            results.append(solve_numerical(corners, flat, cam, side, settings.get(method), xy))  # type: ignore[arg-type]
-        else:
-            results.append(solve_ippe(corners, flat, cam, side, settings.get(method), xy))  # type: ignore[arg-type]
+    results = [spec.solve_single(corners, flat, cam, side, settings.get(spec.name), xy) for spec in specs]
     return dict(zip(methods, with_uncertainties(results, corners, flat, cam, side, cov, xy), strict=True))
 
 
@@ -111,7 +106,7 @@ def solve_batch(
     corners_px: np.ndarray,
     camera: CameraModel,
     side_mm: float,
-    method: str = "numerical",
+    method: str = NUMERICAL,
     settings: NumericalSettings | IppeSettings | None = None,
     corners_cov: np.ndarray | None = None,
 ) -> BatchResult:
@@ -135,11 +130,9 @@ def solve_batch(
             f"solve_batch(corners, camera, side_mm, method, settings): method must be a name, got "
             f"{type(method).__name__}; pass settings=... by keyword"
         )
-    settings_class(method)
+    spec = pose_method(method)
     cam = check_camera(camera)
     side = check_side(side_mm)
     corners, valid = check_corners_batch(corners_px)
     cov = None if corners_cov is None else check_corners_cov(corners_cov, batch=corners.shape[0])
-    if method == "numerical":
-        return solve_numerical_batch(corners, valid, cam, side, settings, cov)  # type: ignore[arg-type]
-    return solve_ippe_vectorised(corners, valid, cam, side, settings, cov)  # type: ignore[arg-type]
+    return spec.solve_batch(corners, valid, cam, side, settings, cov)

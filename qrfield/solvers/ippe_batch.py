@@ -39,6 +39,7 @@ import numpy as np
 
 from qrfield.camera import CameraModel
 from qrfield.geometry import angles_from_rotation, marker_vertices, project_points
+from qrfield.homography import square_to_quad
 from qrfield.solvers.ippe import checked_settings
 from qrfield.solvers.rays import normalised_batch
 from qrfield.solvers.result import BatchResult, SolverError
@@ -64,27 +65,8 @@ def square_homography(x: np.ndarray, y: np.ndarray, side: float) -> np.ndarray:
     ``x``, ``y``: (N, 4) normalised coordinates of V1..V4. H[2, 2] = 1; rows whose corners admit
     no homography (three collinear) come out NaN/inf.
     """
-    # Projective map of the unit square (u, v) in {0, 1}^2 onto the quadrilateral V1 V2 V3 V4
-    # (V1 at (0, 0), V2 at (1, 0), V3 at (1, 1), V4 at (0, 1)): Heckbert's closed form.
-    x0, x1, x2, x3 = x[:, 0], x[:, 1], x[:, 2], x[:, 3]
-    y0, y1, y2, y3 = y[:, 0], y[:, 1], y[:, 2], y[:, 3]
-    sx = x0 - x1 + x2 - x3
-    sy = y0 - y1 + y2 - y3
-    dx1, dx2 = x1 - x2, x3 - x2
-    dy1, dy2 = y1 - y2, y3 - y2
-    den = dx1 * dy2 - dx2 * dy1
-    g = (sx * dy2 - dx2 * sy) / den
-    k = (dx1 * sy - sx * dy1) / den
-    unit = np.empty((x.shape[0], 3, 3))
-    unit[:, 0, 0] = x1 - x0 + g * x1
-    unit[:, 0, 1] = x3 - x0 + k * x3
-    unit[:, 0, 2] = x0
-    unit[:, 1, 0] = y1 - y0 + g * y1
-    unit[:, 1, 1] = y3 - y0 + k * y3
-    unit[:, 1, 2] = y0
-    unit[:, 2, 0] = g
-    unit[:, 2, 1] = k
-    unit[:, 2, 2] = 1.0
+    # The unit square (V1 at (0, 0) .. V4 at (0, 1)) onto the quadrilateral V1 V2 V3 V4.
+    unit = square_to_quad(x, y)
     # Marker coordinates to the unit square: u = qx / L + 1/2, v = qy / L + 1/2.
     to_unit = np.array([[1.0 / side, 0.0, 0.5], [0.0, 1.0 / side, 0.5], [0.0, 0.0, 1.0]])
     h = unit @ to_unit

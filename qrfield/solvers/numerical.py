@@ -54,7 +54,7 @@ from qrfield.settings import setting, validated
 from qrfield.solvers import kernel
 from qrfield.solvers.floats import angles_single, reprojection_single
 from qrfield.solvers.rays import normalised_single
-from qrfield.solvers.result import PoseResult, SolverError, built
+from qrfield.solvers.result import PoseResult, SolverError
 from qrfield.solvers.uncertainty import ambiguity_ratio
 
 #: A Gauss-Newton step whose largest depth change is below this (mm, 0.1 micrometre) means the
@@ -306,22 +306,20 @@ def _result_single(
             z2 * x[2], z2 * y[2], z2, z3 * x[3], z3 * y[3], z3,
         ]
     )  # fmt: skip
-    return built(
-        {
-            "method": "numerical",
-            "position_mm": values[0:3],
-            "angles_deg": values[3:6],
-            "rotation": values[6:15].reshape(3, 3),
-            "vertices_mm": values[15:27].reshape(4, 3),
-            "converged": status == CONVERGED,
-            "iterations": n,
-            "residual_mm": worst,
-            "reprojection_px": reprojection,
-            "reason": _reason(status, worst, n, s),
-            "corners_px": corners,
-            "alternative": alternative,
-            "ambiguity": ambiguity,
-        }
+    return PoseResult(
+        method="numerical",
+        position_mm=values[0:3],
+        angles_deg=values[3:6],
+        rotation=values[6:15].reshape(3, 3),
+        vertices_mm=values[15:27].reshape(4, 3),
+        converged=status == CONVERGED,
+        iterations=n,
+        residual_mm=worst,
+        reprojection_px=reprojection,
+        reason=_reason(status, worst, n, s),
+        corners_px=corners,
+        alternative=alternative,
+        ambiguity=ambiguity,
     )
 
 

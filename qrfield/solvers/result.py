@@ -9,7 +9,7 @@ top-right, bottom-right, bottom-left of the symbol).
 from __future__ import annotations
 
 import math
-from dataclasses import MISSING, dataclass, field, fields
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -146,42 +146,6 @@ class PoseResult:
             "angles_std_deg": [_plain(v) for v in self.angles_std_deg],
             "ambiguous": bool(self.ambiguous),
         }
-
-
-_POSE_FIELDS = frozenset(f.name for f in fields(PoseResult))
-_POSE_REQUIRED = frozenset(
-    f.name for f in fields(PoseResult) if f.default is MISSING and f.default_factory is MISSING
-)
-#: The defaults of PoseResult's optional fields (the factories return shared read-only arrays).
-_POSE_DEFAULTS = {
-    f.name: f.default if f.default is not MISSING else f.default_factory()
-    for f in fields(PoseResult)
-    if f.name not in _POSE_REQUIRED
-}
-
-
-def built(values: dict[str, Any]) -> PoseResult:
-    """``PoseResult(**values)`` for the per-frame path, without the frozen dataclass' __init__
-    (one object.__setattr__ per field and a call per default factory; PoseResult has no
-    __post_init__ to skip). TypeError for a missing required field or a name that is not a field."""
-    if not (_POSE_REQUIRED <= values.keys() <= _POSE_FIELDS):
-        missing, unknown = _POSE_REQUIRED - values.keys(), values.keys() - _POSE_FIELDS
-        raise TypeError(f"PoseResult fields missing {sorted(missing)}, unknown {sorted(unknown)}")
-    out = object.__new__(PoseResult)
-    out.__dict__.update(_POSE_DEFAULTS)
-    out.__dict__.update(values)
-    return out
-
-
-def updated(result: PoseResult, changes: dict[str, Any]) -> PoseResult:
-    """``dataclasses.replace(result, **changes)`` for the per-frame path (see :func:`built`): a
-    copy of the instance's attributes with ``changes`` put in. TypeError for a name that is not a field."""
-    if not changes.keys() <= _POSE_FIELDS:
-        raise TypeError(f"PoseResult has no field {sorted(changes.keys() - _POSE_FIELDS)}")
-    out = object.__new__(PoseResult)
-    out.__dict__.update(result.__dict__)
-    out.__dict__.update(changes)
-    return out
 
 
 @dataclass(frozen=True, eq=False)

@@ -31,6 +31,7 @@ ratio mirror / answer above exp(-FLIP_DELTA_CHI2 / 2)). There the error is not G
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from typing import Any
@@ -41,7 +42,7 @@ from qrfield.camera import CameraModel
 from qrfield.geometry import marker_vertices
 from qrfield.lens import distortion_jacobian_terms, has_distortion
 from qrfield.solvers.rays import normalised_single
-from qrfield.solvers.result import PoseResult, SolverError, updated
+from qrfield.solvers.result import PoseResult, SolverError
 
 #: The mirror candidate counts as fitting the corners within their uncertainty when its
 #: reprojection chi-square exceeds the answer's by less than this, i.e. when the mirror is at least
@@ -445,8 +446,10 @@ def with_uncertainties(
         x_list, y_list = xy if xy is not None else normalised_single(corners, flat, camera)
         cov16 = one.normalised_cov_single(cov, x_list, y_list, camera, has_distortion(camera))
         solved = list(poses)
+        from qrfield.solvers.registry import uses_depth_model  # here: the registry imports the solvers
+
         for i in solved:
-            if results[i].method == "numerical":
+            if uses_depth_model(results[i].method):  # its covariance goes through the depths
                 method, rows, t, angles, _ = poses[i]
                 poses[i] = (method, rows, t, angles, results[i].vertices_mm[:, 2].tolist())
         mirrors = [_mirror_start(results[i], poses[i][1], poses[i][2], x_list, y_list) for i in solved]
@@ -455,7 +458,7 @@ def with_uncertainties(
         )
         for i, f in zip(solved, computed, strict=True):
             fields[i].update(f)
-    return [updated(r, f) if f else r for r, f in zip(results, fields, strict=True)]
+    return [dataclasses.replace(r, **f) if f else r for r, f in zip(results, fields, strict=True)]
 
 
 def _mirror_start(
@@ -469,7 +472,9 @@ def _mirror_start(
         alt_rows = alternative.rotation.tolist()
         if all(math.isfinite(v) for row in alt_rows for v in row):
             return alt_rows, alternative.position_mm.tolist()
-    if result.method != "numerical":
+    from qrfield.solvers.registry import uses_depth_model  # here: the registry imports the solvers
+
+    if not uses_depth_model(result.method):
         return None  # IPPE's second candidate was behind the camera or facing away: no mirror
     from qrfield.solvers.numerical import reflected_pose_single
 
@@ -490,7 +495,8 @@ def batch_uncertainty(
 ) -> dict[str, np.ndarray]:
     """The std fields of a BatchResult ((N, 4), (N, 3), (N, 3)) for N corner sets (N, 4, 2) with
     covariances (N, 4, 2, 2); pose stds only at ``rows`` (bool (N,), the converged ones), from
-    rotation (N, 3, 3), position (N, 3), angles (N, 3) and, for "numerical", depths (N, 4)."""
+    rotation (N, 3, 3), position (N, 3), angles (N, 3) and, for a depth model (the numerical one),
+    depths (N, 4), else None (``method`` names the method for messages)."""
     from qrfield.solvers.rays import normalised_batch
 
     count = corners.shape[0]
@@ -503,7 +509,7 @@ def batch_uncertainty(
     if idx.size == 0:
         return out
     x, y = normalised_batch(corners[idx], camera)
-    if method == "numerical":
+    if depths is not None:  # a depth model (the numerical one): through its depths
         jac = numerical_jacobian(depths[idx], x, y)
     else:
         jac = ippe_jacobian(rotation[idx], position[idx], side, camera)

@@ -219,13 +219,6 @@ def branch_chi2_many(
     return out
 
 
-def branch_chi2_single(
-    projection: tuple[list[float], list[float], float], n_obs: np.ndarray, info: np.ndarray
-) -> float:
-    """:func:`branch_chi2_many` of one branch."""
-    return branch_chi2_many([projection], np.array(projection[1]).reshape(1, 8, 6), n_obs, info)[0]
-
-
 def uncertainty_fields(
     poses: list[tuple[str, list[list[float]], list[float], list[float], list[float]]],
     mirrors: list[tuple[list[list[float]], list[float]] | None],
@@ -259,9 +252,9 @@ def uncertainty_fields(
     jac = np.array(jac_flat).reshape(len(projections), 8, 6)
     chi2 = branch_chi2_many(projections, jac, n_obs, info)
     out = []
-    for (method, _, _, angles, z), (own, other) in zip(poses, slots, strict=True):
+    for (_, _, _, angles, z), (own, other) in zip(poses, slots, strict=True):
         euler = euler_rows(angles[0], angles[1])
-        if method == "numerical":
+        if z is not None:  # a depth model (the numerical one): through its depths
             full = _pose_rows(*_numerical_terms(z, x, y), 0.25, euler)
         else:
             full = _pose_rows(ippe_jacobian_single(jac[own], camera), _EYE9, 1.0, euler)

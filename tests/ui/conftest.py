@@ -15,16 +15,27 @@ import pytest
 
 @pytest.fixture(autouse=True)
 def no_unanswered_dialogs(monkeypatch, tmp_path: Path):
-    """The Session tab's questions raise unless a test answers them (monkeypatch the method);
-    the user's config folder (calibrations) is a temporary one."""
+    """The Session tab's questions (and the Analysis tab's browser) raise unless a test answers
+    them (monkeypatch the method); the user's config folder (calibrations) is a temporary one."""
+    from ui.analysis_tab import AnalysisTab
     from ui.sessions_panel import SessionPanel
 
-    for name in ("ask_confirm", "ask_pending_choice", "ask_combo_choice", "ask_save_path", "ask_export_path"):
+    def unanswered_method(name: str):
+        def unanswered(self, *args, **kwargs):
+            raise AssertionError(f"the test did not answer {name}{args}")
 
-        def unanswered(self, *args, _name=name, **kwargs):
-            raise AssertionError(f"the test did not answer {_name}{args}")
+        return unanswered
 
-        monkeypatch.setattr(SessionPanel, name, unanswered)
+    for name in (
+        "ask_confirm",
+        "ask_pending_choice",
+        "ask_combo_choice",
+        "ask_save_path",
+        "ask_export_path",
+        "ask_plan_path",
+    ):
+        monkeypatch.setattr(SessionPanel, name, unanswered_method(name))
+    monkeypatch.setattr(AnalysisTab, "open_url", unanswered_method("open_url"))  # never a real browser
     monkeypatch.setenv("QRFIELD_CONFIG_DIR", str(tmp_path / "user-config"))
     monkeypatch.setenv("QRFIELD_DATA_DIR", str(tmp_path / "user-data"))
 

@@ -16,7 +16,7 @@ from serial_truth import command_line, frames_and_answers, parse_frame_line, spl
 
 from qrfield.geometry import Pose, angle_difference
 from qrfield.runconfig import ConfigStore
-from qrfield.serial_link import CLOSED, CONNECTED, DISCONNECTED, SerialLinkSettings
+from qrfield.serial.link import CLOSED, CONNECTED, DISCONNECTED, SerialLinkSettings
 from ui.main_window import MainWindow
 from ui.serial_panel import STATE_COLOURS, SerialPanel
 
@@ -183,10 +183,13 @@ def test_the_controllers_commands_are_answered_in_the_serial_tab(make_window, qt
         os.write(pty.master, command_line("PING") + command_line("MEAS", "5"))
         qtbot.waitUntil(lambda: len(frames_and_answers(pty.drain())[1]) >= 2, timeout=WAIT_MS)
         ping, meas = frames_and_answers(pty.drain())[1][:2]
-        assert ping == {"type": "QRA", "command": "PING", "result": "OK"}
+        assert (ping["command"], ping["result"]) == ("PING", "OK")
         assert meas["type"] == "QRM" and meas["status"] == "SIM" and meas["n_used"] == 5
         assert meets_seed_criteria(meas["pose"], truth)
         qtbot.waitUntil(lambda: panel.counter_labels["answers_sent"].text() == "2", timeout=WAIT_MS)
+        # The tab shows the last command with its answer, the line rate and the lag.
+        qtbot.waitUntil(lambda: panel.last_command.text().startswith("MEAS,5 -> QRM,"), timeout=WAIT_MS)
+        assert panel.line_rate.text().endswith("lines/s (limit 30/s)") and panel.lag.text().endswith(" ms")
         # The source goes away: the controller hears NOSRC, not silence.
         window.set_source(str(tmp_path / "missing.avi"))
         qtbot.waitUntil(lambda: any(f["status"] == "NOSRC" for f in pty.frames()), timeout=WAIT_MS)

@@ -90,7 +90,8 @@ def test_a_row_whose_frames_stop_is_given_up_with_a_message(make_window, qtbot, 
 
     window = make_window({"source": "virtual", "method": "both"}, source_factory=factory)
     panel = create_session(qtbot, window)
-    panel.row_settings.widgets["frame_timeout_s"].setValue(0.5)
+    # Long enough for a frame of a loaded machine to come before the stall, short for the test.
+    panel.row_settings.widgets["frame_timeout_s"].setValue(3.0)
     type_truth(qtbot, panel, {k: f"{v:g}" for k, v in bench(window).items()})
     panel.session.info = dataclasses.replace(panel.session.info, frames_per_row=1000)  # a row never done
     qtbot.mouseClick(panel.log_button, LEFT)
