@@ -85,19 +85,8 @@ def matrix_agrees(
     offset: tuple[int, int] = (0, 0),
 ) -> bool:
     """True when the (n, n) module matrix (bool, or float with NaN for unknown) shows its colours at
-    ``corners`` V1..V4 in ``grey``."""
-    n = matrix.shape[0]
-    values = sample_bilinear(grey, module_points_px(lens, corners, n, _module_centres(n), offset))
-    m = np.asarray(matrix, dtype=np.float64).reshape(-1)
-    known = np.isfinite(m) & np.isfinite(values)
-    if known.mean() < 0.5:
-        return False
-    values, dark = values[known], m[known] > 0.5
-    if dark.all() or not dark.any():
-        return False
-    threshold = 0.5 * (np.median(values[dark]) + np.median(values[~dark]))
-    seen_dark = values > threshold if inverted else values < threshold
-    return float(np.mean(seen_dark == dark)) >= MATRIX_AGREEMENT
+    ``corners`` V1..V4 in ``grey`` (see :func:`confirmed_matrix`)."""
+    return confirmed_matrix(grey, corners, matrix, inverted, lens, offset) is not None
 
 
 def confirmed_matrix(
@@ -108,11 +97,12 @@ def confirmed_matrix(
     lens: Lens | None = None,
     offset: tuple[int, int] = (0, 0),
 ) -> np.ndarray | None:
-    """The decoded (n, n) ``matrix`` (bool) as the image at ``corners`` V1..V4 confirms it (float:
-    1 dark, 0 light, NaN where a module's centre reads the other colour or too near the middle:
-    :func:`qrfield.detect.symbol.verified_matrix`), or None when it does not agree with the image
-    (:data:`MATRIX_AGREEMENT`, as :func:`matrix_agrees`): one sampling of the module centres for
-    both. The levels are the medians of the decoded dark and light modules."""
+    """The decoded (n, n) ``matrix`` (bool, or float with NaN for unknown) as the image at
+    ``corners`` V1..V4 confirms it (float: 1 dark, 0 light, NaN where a module's centre reads the
+    other colour or too near the middle: :func:`qrfield.detect.symbol.verified_matrix`), or None
+    when it does not agree with the image: fewer than :data:`MATRIX_AGREEMENT` of its known
+    modules on the right side of the middle between the dark and light modules' medians (the
+    levels of the confirmation too). One sampling of the module centres for both."""
     n = matrix.shape[0]
     values = sample_bilinear(grey, module_points_px(lens, corners, n, _module_centres(n), offset))
     m = np.asarray(matrix, dtype=np.float64).reshape(-1)
