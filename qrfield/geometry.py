@@ -96,6 +96,37 @@ def angles_from_rotation(rotation: np.ndarray) -> np.ndarray:
     return out
 
 
+def rotation_vector(rotation: np.ndarray) -> np.ndarray:
+    """(3,) rotation vector (axis times angle, radians) of one rotation matrix R (3, 3): the
+    logarithm, R = exp([w]x), by OpenCV's Rodrigues (angle in [0, pi])."""
+    import cv2
+
+    r = _as_rotation(rotation)
+    if r.shape != (3, 3):
+        raise ValueError(f"rotation_vector takes one (3, 3) rotation, got {r.shape}")
+    return cv2.Rodrigues(np.ascontiguousarray(r))[0].reshape(3)
+
+
+def rotation_from_vector(vector: np.ndarray) -> np.ndarray:
+    """(3, 3) rotation exp([w]x) of a rotation vector w (3,) in radians (OpenCV's Rodrigues)."""
+    import cv2
+
+    w = np.asarray(vector, dtype=float).reshape(-1)
+    if w.shape != (3,) or not np.all(np.isfinite(w)):
+        raise ValueError(f"a rotation vector needs 3 finite values (radians), got {vector!r}")
+    return cv2.Rodrigues(w.reshape(3, 1))[0]
+
+
+def rotation_angle_deg(a: np.ndarray, b: np.ndarray) -> float:
+    """The angle of the rotation between R_a and R_b (3, 3 each), degrees in [0, 180]: how far one
+    turns from the other, whatever the axis."""
+    ra, rb = _as_rotation(a), _as_rotation(b)
+    if ra.shape != (3, 3) or rb.shape != (3, 3):
+        raise ValueError(f"rotation_angle_deg takes two (3, 3) rotations, got {ra.shape} and {rb.shape}")
+    cosine = (float(np.sum(ra * rb)) - 1.0) / 2.0  # trace(R_a^T R_b) = sum of the elementwise product
+    return float(np.degrees(np.arccos(min(1.0, max(-1.0, cosine)))))
+
+
 def marker_vertices(side_mm: float) -> np.ndarray:
     """(4, 3) vertices V1..V4 of a QR symbol of side L in the marker frame, mm."""
     if not np.isfinite(side_mm) or side_mm <= 0:

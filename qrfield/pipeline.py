@@ -14,6 +14,12 @@ Statuses (:class:`qrfield.status.ResultStatus`):
 Reported to other programs (``qrfield run`` output, the app), OK becomes AMBIG or SIM by the one rule
 of :func:`qrfield.status.reported_status` (:meth:`FrameResult.reported_status`), as on the serial link.
 
+After the solve, the stream stage (:class:`qrfield.stream.StreamStage`, docs/conventions.md "The
+live stream") resolves an ambiguous frame's flip from the stream's recent history and, with
+``filter_s`` > 0, filters the pose: ``FrameResult.poses`` holds what is reported (``ambiguous``: the
+flag after history), ``FrameResult.frame_poses`` the frame's own solve, ``FrameResult.stream`` what
+the stage did (``resolved_by``, ``filtered``).
+
 Timing: ``t_ms`` is the frame's capture time in ms since the stream started (the first frame
 processed, or the ``t0`` given); ``latency_ms`` runs from capture to the finished result.
 """
@@ -76,6 +82,9 @@ class FrameResult:
         label: the frame's label (file name, ...).
         camera: the camera model used for this frame (scaled to the frame's size).
         t_capture: time.monotonic() s of the frame's capture (the serial line's age_ms counts from it).
+        stream: method name -> qrfield.stream.StreamMark (``resolved_by``, ``filtered``) for each
+            method with a usable pose; frame_poses: the frame's own solver results before the
+            stream stage (``poses`` holds what is reported).
     """
 
     index: int
@@ -92,6 +101,8 @@ class FrameResult:
     label: str = ""
     camera: CameraModel | None = None
     t_capture: float = math.nan
+    stream: dict[str, Any] = field(default_factory=dict)
+    frame_poses: dict[str, Any] = field(default_factory=dict)
 
     @property
     def primary(self) -> Any:
@@ -100,9 +111,28 @@ class FrameResult:
 
     @property
     def ambiguous(self) -> bool:
-        """The first method's pose is usable and its flip (mirror) ambiguity is unresolved."""
+        """The first method's pose is usable and its flip (mirror) ambiguity is unresolved after the
+        stream's history (the stream stage sets the reported pose's ``ambiguous`` to that)."""
         primary = self.primary
         return usable_pose(primary) and bool(getattr(primary, "ambiguous", False))
+
+    def _mark(self) -> Any:
+        """The stream stage's mark of the first method (None without a usable pose)."""
+        return self.stream.get(next(iter(self.poses), ""))
+
+    @property
+    def resolved_by(self) -> str | None:
+        """How the first method's flip was decided: "frame" or "history" (None without a pose)."""
+        mark = self._mark()
+        if mark is not None:
+            return mark.resolved_by
+        return "frame" if usable_pose(self.primary) else None
+
+    @property
+    def filtered(self) -> bool:
+        """The first method's pose is the stream filter's (earlier frames were used)."""
+        mark = self._mark()
+        return bool(mark is not None and mark.filtered)
 
     def converged_pose(self, method: str) -> Pose | None:
         """The converged pose of ``method`` as a Pose (mm, degrees), else None."""
@@ -122,8 +152,10 @@ class FrameResult:
         """One JSON line of ``qrfield run --json-lines``: the keys of ``qrfield solve --json``
         (of the first method; null when there is no pose) plus t_ms, status (SIM for a converged
         pose from a source that is not a live camera, see :meth:`reported_status`), simulated,
-        reason, frame, text, latency_ms; ``methods`` (every method's result) when more than one
-        ran; ``truth`` on the virtual bench."""
+        reason, frame, text, latency_ms, resolved_by ("frame" or "history", null without a pose)
+        and filtered (docs/conventions.md, "The live stream"); ``methods`` (every method's result,
+        each with its own resolved_by and filtered) when more than one ran; ``truth`` on the
+        virtual bench. ``ambiguous`` is the flag after the stream's history."""
         primary = self.primary
         out: dict[str, Any] = dict.fromkeys(POSE_JSON_KEYS)
         if primary is not None:
@@ -138,9 +170,11 @@ class FrameResult:
             frame=self.index,
             text=None if self.detection is None else self.detection.text,
             latency_ms=None if not math.isfinite(self.latency_ms) else round(self.latency_ms, 3),
+            resolved_by=self.resolved_by,
+            filtered=self.filtered,
         )
         if len(self.poses) > 1:
-            out["methods"] = {name: result.to_json_dict() for name, result in self.poses.items()}
+            out["methods"] = {name: self._method_json(name, result) for name, result in self.poses.items()}
         if self.truth is not None:
             out["truth"] = {
                 "position_mm": [float(v) for v in self.truth.position_mm],
@@ -150,8 +184,18 @@ class FrameResult:
             out["label"] = self.label
         return out
 
+    def _method_json(self, name: str, result: Any) -> dict[str, Any]:
+        mark = self.stream.get(name)
+        out = result.to_json_dict()
+        out["resolved_by"] = (
+            mark.resolved_by if mark is not None else ("frame" if usable_pose(result) else None)
+        )
+        out["filtered"] = bool(mark is not None and mark.filtered)
+        return out
+
     def summary(self, simulated: bool = False) -> str:
-        """One compact human line: frame, time, status (:meth:`reported_status`) and each method's pose."""
+        """One compact human line: frame, time, status (:meth:`reported_status`), each method's pose
+        and what the live stream did (``[flip from history]``, ``[filtered]``)."""
         line = f"#{self.index:<5d} t={self.t_ms / 1000:8.3f}s {self.reported_status(simulated):<6s}"
         for k, (name, pose) in enumerate(self.poses.items()):
             if not np.all(np.isfinite(pose.position_mm)):
@@ -166,6 +210,10 @@ class FrameResult:
             )
         if self.reason:
             line += f"  ({self.reason})"
+        if self.resolved_by == "history":
+            line += "  [flip from history]"
+        if self.filtered:
+            line += "  [filtered]"
         return line + f"  lat={self.latency_ms:.1f}ms"
 
 
@@ -182,6 +230,8 @@ class Pipeline:
             chooses the code (only one with this payload counts, "" = any; see
             qrfield.detect.select_code).
         t0: stream start, time.monotonic() s (None = the first frame's capture time).
+        stream: qrfield.stream.StreamSettings for the stream stage after the solve (None = the
+            defaults: branch continuity on, no filter).
         tracker, solve, select: replace qrfield.detect.Tracker(settings), qrfield.solvers.solve
             (called with the ``corners_cov`` keyword: the detection's ``pose_cov``) and
             qrfield.detect.select_code (tests, other detectors).
@@ -196,6 +246,7 @@ class Pipeline:
         solver_settings: dict[str, Any] | None = None,
         detector_settings: Any = None,
         t0: float | None = None,
+        stream: Any = None,
         tracker: Any = None,
         solve: Callable[..., Any] | None = None,
         select: Callable[..., Any] | None = None,
@@ -234,6 +285,9 @@ class Pipeline:
         self._solve = solve
         self._select = select
         self._scaled: dict[tuple[int, int], CameraModel | str] = {}
+        from qrfield.stream import StreamStage
+
+        self.stream = StreamStage(stream)
 
     def camera_for(self, size: tuple[int, int]) -> CameraModel:
         """The camera model at ``size`` (width, height); CameraModelError if the aspect differs."""
@@ -314,7 +368,6 @@ class Pipeline:
                 )
             except Exception as exc:  # one method failing must not hide the other's answer
                 errors.append(f"{method}: {type(exc).__name__}: {exc}")
-        result.solve_ms = (time.perf_counter() - t) * 1000.0
         primary = result.poses.get(self.methods[0])
         if primary is None:
             result.status, result.reason = ERROR, "; ".join(errors)
@@ -322,10 +375,14 @@ class Pipeline:
             result.status, result.reason = OK, "; ".join(errors)
         else:
             result.status, result.reason = NOCONV, primary.reason or f"{primary.method} did not converge"
+        self.stream.apply(result, self.side_mm, cov)  # the flip from history, the filter
+        result.solve_ms = (time.perf_counter() - t) * 1000.0
 
     def reset(self, t0: float | None = None) -> None:
-        """Start a new stream: the clock restarts and the tracker forgets the last code."""
+        """Start a new stream: the clock restarts, the tracker forgets the last code and the stream
+        stage its history and filter."""
         self.t0 = t0
+        self.stream.reset()
         reset = getattr(self._tracker, "reset", None)
         if callable(reset):
             reset()

@@ -17,6 +17,8 @@ picamera    Picamera2Settings            ``--picamera-NAME``
 usb         UsbCameraSettings            ``--usb-NAME``
 serial      SerialLinkSettings           ``--serial-NAME`` (``--serial [PORT]`` turns the link on)
 handeye     HandEyeSettings              ``--frame --handeye-file`` (poses in the tool or base frame)
+stream      StreamSettings               ``--continuity --filter-s`` (the live stream: flips from
+                                         history, the filter; docs/conventions.md)
 =========== ============================ ======================================================
 
 The app writes the file when it closes (with sections of its own: window, simulation, session
@@ -110,6 +112,7 @@ def sections() -> dict[str, Section]:
     from qrfield.serial.link import SerialLinkSettings
     from qrfield.solvers import settings_classes
     from qrfield.sources import Picamera2Settings, UsbCameraSettings, VirtualBenchSettings
+    from qrfield.stream import StreamSettings
 
     solvers = settings_classes()
     table = [
@@ -122,6 +125,7 @@ def sections() -> dict[str, Section]:
         Section("usb", UsbCameraSettings, "usb_", "USB camera (--source usb:N)"),
         Section("serial", SerialLinkSettings, "serial_", "serial link to the gripper controller"),
         Section("handeye", HandEyeSettings, "", "the frame poses are reported in (docs/handeye.md)"),
+        Section("stream", StreamSettings, "", "the live stream: flips resolved from history, the filter"),
     ]
     return {s.name: s for s in table}
 
@@ -216,7 +220,8 @@ class RunConfig:
         virtual, picamera, usb: those sources' settings (picamera None = sized from the camera
         model);
         loop, pace: for files and folders; retry_s: reopen a failed source after this long
-        (0 = do not); allow_virtual: ``auto`` may fall back to the virtual bench.
+        (0 = do not); allow_virtual: ``auto`` may fall back to the virtual bench;
+        stream: qrfield.stream.StreamSettings (branch continuity, the filter; None = defaults).
     """
 
     source: str
@@ -232,6 +237,7 @@ class RunConfig:
     pace: bool = False
     retry_s: float = 0.0
     allow_virtual: bool = True
+    stream: Any = None
 
     def source_key(self) -> tuple[Any, ...]:
         """What requires reopening the source when it changes."""
@@ -253,6 +259,7 @@ class RunConfig:
             self.methods,
             tuple(sorted(self.solver_settings.items())),
             self.detector_settings,
+            self.stream,
         )
 
     def make_pipeline(self, camera: Any = None) -> Any:
@@ -267,6 +274,7 @@ class RunConfig:
             self.methods,
             solver_settings=self.solver_settings,
             detector_settings=self.detector_settings,
+            stream=self.stream,
         )
 
     def open_source(self, opener: Callable[..., Any] | None = None) -> Any:
@@ -405,6 +413,7 @@ class Effective:
             pace=run.pace if pace is None else pace,
             retry_s=run.retry_s,
             allow_virtual=allow_virtual,
+            stream=g["stream"],
         )
 
     def serial_settings(self) -> Any:

@@ -76,3 +76,19 @@ def test_an_older_session_is_in_the_camera_frame_and_a_mismatch_is_refused(tmp_p
             solver="ippe",
             pose_frame="tool",
         )
+
+
+def test_a_session_through_a_simulated_calibration_is_not_logged_from_a_camera(
+    tmp_path: Path, capsys
+) -> None:
+    from qrfield.camera import resolve_camera
+
+    simulated = HandEyeCalibration("eye-in-hand", X, 0.1, 0.02, 15, "test", extra={"simulated": True})
+    session = Session.create(tmp_path, "sim", camera=resolve_camera("picam-v2@640x480"), side_mm=50.0,
+                             solver="ippe", pose_frame="tool", handeye=simulated.to_dict())  # fmt: skip
+    session.close()
+    args = ["session", "log", str(session.path), "--config-dir", str(tmp_path / "cfg"), "--truth", "virtual"]
+    assert main([*args, "--source", "usb:7", "--combo", "alpha", "--frames", "1"]) == 2
+    assert "made from simulated frames" in capsys.readouterr().err
+    assert (session.path / "rows.csv").read_text().count("\n") == 1  # nothing logged
+    assert main([*args, "--source", "virtual", "--combo", "alpha", "--frames", "1"]) == 0  # the bench may

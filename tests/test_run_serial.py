@@ -236,11 +236,14 @@ def test_a_folder_that_ends_says_nosrc_as_its_last_line(controller, tmp_path: Pa
     controller.wait(lambda f, a: f and f[-1]["status"] == "NOSRC", 10, "NOSRC at the end")
     frames, _ = controller.lines()
     # Three NOQR frames (a newer one may replace one not yet sent), then NOSRC, repeated while the
-    # run lasts (every 0.5 s: a slow machine's run sends several), and NOSRC last.
+    # run lasts (every 0.5 s: a slow machine's run sends several), and NOSRC last. On a loaded
+    # machine a NOSRC may also come between frames (no frame for a second is "no frames": the
+    # protocol's rule for any source), so only what follows the last frame is fixed.
     statuses = [f["status"] for f in frames]
-    first_nosrc = statuses.index("NOSRC")
-    assert set(statuses[:first_nosrc]) <= {"NOQR", "STALE"} and statuses[0] == "NOQR"
-    assert set(statuses[first_nosrc:]) == {"NOSRC"}
+    assert set(statuses) <= {"NOQR", "STALE", "NOSRC"} and statuses[0] == "NOQR"
+    last_frame = max(i for i, s in enumerate(statuses) if s == "NOQR")
+    assert statuses[last_frame + 1 :] and set(statuses[last_frame + 1 :]) <= {"NOSRC", "STALE"}
+    assert statuses[-1] == "NOSRC"
     assert frames[-1]["age_ms"] is not None
 
 

@@ -215,15 +215,34 @@ def test_meas_averages_the_next_n_converged_frames_with_a_standard_uncertainty_o
     assert h.sent == []  # three converged so far
     h.handler.on_result(ok(205, [12, 18, 302], [7, 0, -179]), simulated=False)
     (answer,) = h.answers()
-    # By hand: x 10,12,10,12 -> mean 11, sample std 2/sqrt(3) = 1.1547, / sqrt(4) = 0.577; each
-    # frame's own sigma 0.5 / sqrt(2) (frames of a still card share their error: at most 2
-    # independent) = 0.354: the larger, 0.6. y likewise 0.6; z: 0.577 against 2 / sqrt(2) = 1.414
-    # -> 1.4. alpha 5,7: 0.577 vs 0.2 / 1.414 = 0.141 -> 0.58; beta 0: 0 vs 0.141 -> 0.14; gamma
-    # 179,-179: circular mean 180.00, deviations +-1 -> 0.58.
+    # By hand (qrfield.sessions.averaging: sem^2 = rho sigma^2 + max(s^2, (1 - rho) sigma^2) / n,
+    # rho = FRAME_SHARED_SHARE, frames of a still card share their error): x 10,12,10,12 -> mean
+    # 11, s^2 = 4/3; sigma 0.5, rho 0.67: 0.1675 + 1.3333 / 4 = 0.5008 -> 0.7; y (rho 0.68) 0.7;
+    # z 300,302: sigma 2, rho 0.68: 2.72 + 0.3333 -> 1.747 -> 1.7. alpha 5,7: sigma 0.2, rho 0.57:
+    # 0.0228 + 0.3333 -> 0.597 -> 0.60; beta 0: rho 0.61: 0.0244 + 0.39 * 0.04 / 4 -> 0.168 -> 0.17;
+    # gamma 179,-179: circular mean 180.00, deviations +-1, sigma 0.1, rho 0.52: 0.0052 + 0.3333 -> 0.58.
     assert answer["type"] == "QRM" and answer["status"] == "OK" and answer["n_used"] == 4
     assert answer["pose"] == [11.0, 19.0, 301.0, 6.0, 0.0, 180.0]
-    assert answer["std"] == [0.6, 0.6, 1.4, 0.58, 0.14, 0.58]
+    assert answer["std"] == [0.7, 0.7, 1.7, 0.6, 0.17, 0.58]
     assert answer["t_ms"] == 205 and answer["seq"] == 0
+
+
+def test_meas_of_filtered_frames_keeps_their_sigma_as_the_mean_uncertainty() -> None:
+    """Frames the stream filter made have already averaged their own noise: the mean's sigma is
+    theirs (qrfield.sessions.averaging), not shrunk again by the number of frames."""
+    from qrfield.pipeline import FrameResult
+    from qrfield.stream import StreamMark
+
+    h = Harness()
+    h.command("MEAS", "4")
+    for k in range(4):
+        pose = Pose(np.array([10.0, 20.0, 300.0 + 0.01 * k]), np.array([5.0, 0.0, 30.0]))
+        result = FrameResult(
+            k, 33 * k, "OK", poses={"ippe": pose}, stream={"ippe": StreamMark("frame", True, False)}
+        )
+        h.handler.on_result(result, simulated=False)
+    (answer,) = h.answers()
+    assert answer["n_used"] == 4 and answer["std"] == [0.5, 0.5, 2.0, 0.2, 0.2, 0.1]
 
 
 def test_simulated_frames_make_sim_and_ambiguous_live_frames_make_ambig() -> None:

@@ -99,3 +99,43 @@ def test_serial_demo_answers_ping_and_meas_from_its_path(capsys):
     assert np.all(np.array(meas["pose"]) >= window.min(axis=0) - 0.06)
     assert np.all(np.array(meas["pose"]) <= window.max(axis=0) + 0.06)
     assert {f["status"] for f in frames[:-1]} <= {"SIM", "STALE"} and frames[-1]["status"] == "NOSRC"
+
+
+@pytest.mark.parametrize(
+    ("setup", "key", "truth"),
+    [
+        # SimulatedRobot.example's cells, written out: camera_to_tool, camera_to_base (mm, degrees).
+        ("eye-in-hand", "camera_to_tool", ([60.0, -15.0, 40.0], [2.0, -3.0, 90.0])),
+        ("eye-to-hand", "camera_to_base", ([420.0, 20.0, 900.0], [180.0, 0.0, 90.0])),
+    ],
+)
+def test_serial_demo_robot_recovers_the_known_transform_over_a_pty(tmp_path, capsys, setup, key, truth):
+    import json
+
+    from serial_truth import parse_answer_line
+
+    from qrfield.handeye.rigid import difference, transform_from_pose
+
+    args = ["serial-demo", "--robot", "--setup", setup, "--poses", "10", "--seed", "5"]
+    assert main([*args, "--out-dir", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    sent = [line[3:] for line in out.splitlines() if line.startswith("-> ")]
+    answers = [
+        parse_answer_line(line[3:].encode() + b"\r\n") for line in out.splitlines() if line.startswith("<- ")
+    ]
+    assert len(sent) == len(answers) == 12  # HELLO, 10 TOOL, HANDEYE: one answer each, in order
+    assert answers[0]["command"] == "HELLO" and answers[0]["values"][-1] == "camera"
+    tools = answers[1:11]
+    assert all(a["command"] == "TOOL" for a in tools)
+    ok = [a for a in tools if a["result"] == "OK"]
+    assert all(a["values"][-1] == "SIM" for a in ok)  # the bench is not a live camera
+    assert [int(a["values"][0]) for a in ok] == list(range(1, len(ok) + 1)) and len(ok) >= 8
+    assert all(a["reason"].startswith("ambiguous") for a in tools if a["result"] == "ERR")
+    handeye = answers[-1]
+    assert (handeye["command"], handeye["result"], handeye["values"][-1]) == ("HANDEYE", "OK", "SIM")
+    saved = json.loads((tmp_path / "handeye-simulated.json").read_text())
+    assert saved["setup"] == setup and saved["simulated"] is True and saved["n_pairs"] == len(ok)
+    assert f"{float(handeye['values'][0]):.3f}" == f"{saved['residual_mm']:.3f}"
+    err = difference(np.array(saved[key]), transform_from_pose(*truth))
+    assert np.linalg.norm(err[:3]) < 2.0 and np.degrees(np.linalg.norm(err[3:])) < 0.3, err
+    assert "error against the true" in out

@@ -108,7 +108,8 @@ class SourceControls(QtWidgets.QWidget):
 
 
 class SolverControls(QtWidgets.QWidget):
-    """Method choice and each method's settings (forms generated from their declarations)."""
+    """Method choice, the live stream's settings (flips from history, the filter), the detector's
+    and each method's settings (forms generated from their declarations)."""
 
     changed = QtCore.Signal()
 
@@ -117,6 +118,7 @@ class SolverControls(QtWidgets.QWidget):
         settings_classes: dict[str, type],
         values: dict[str, Any],
         detector: tuple[type, Any] | None = None,
+        stream: tuple[type, Any] | None = None,
         parent=None,
     ) -> None:
         super().__init__(parent)
@@ -125,6 +127,7 @@ class SolverControls(QtWidgets.QWidget):
         self.method = widget_for(_spec("method"))
         form.addRow(_spec("method").label, self.method)
         layout.addLayout(form)
+        self.stream = None if stream is None else self._add_form(layout, "live stream", *stream)
         self.detector = None if detector is None else self._add_form(layout, "detector", *detector)
         self.forms: dict[str, SettingsForm] = {}
         for name, cls in settings_classes.items():

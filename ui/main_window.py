@@ -22,11 +22,13 @@ import numpy as np
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from qrfield.camera import DEFAULT_CAMERA, CameraModel, CameraModelError, resolve_camera
+from qrfield.handeye import HandEyeSettings
 from qrfield.methods import methods_from_choice
 from qrfield.runconfig import ConfigStore, RunConfig, RunSettings
 from qrfield.serial.link import SerialLinkSettings
 from qrfield.solvers import settings_classes
 from qrfield.sources import Picamera2Settings, VirtualBenchSettings
+from qrfield.stream import StreamSettings
 from ui.analysis_tab import AnalysisTab
 from ui.calibration_dialog import CalibrationDialog, CalibrationDialogSettings
 from ui.controls import (
@@ -137,12 +139,17 @@ class MainWindow(QtWidgets.QMainWindow):
             classes,
             {n: store.group(n, c) for n, c in classes.items()},
             detector=(detector_cls, store.group("detector", detector_cls)),
+            stream=(StreamSettings, store.group("stream", StreamSettings)),
         )
         self.camera_controls = CameraControls()
         self.virtual_form = SettingsForm(VirtualBenchSettings, store.group("virtual", VirtualBenchSettings))
         show_app_settings(self.app_settings, self.source_controls, self.solver_controls, self.camera_controls)
         show_view_settings(self.view_settings, self.camera_controls)
-        self.serial_panel = SerialPanel(store.group("serial", SerialLinkSettings))
+        self.serial_panel = SerialPanel(
+            store.group("serial", SerialLinkSettings),
+            handeye=store.group("handeye", HandEyeSettings),
+            config_dir=store.path.parent,
+        )
         self.calibration_dialog: CalibrationDialog | None = None
         self.calibrate_button = QtWidgets.QPushButton("Calibrate camera…")
         self.calibrate_button.setObjectName("calibrate")
@@ -226,7 +233,7 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def _start_worker(self, source_factory: Any) -> None:
         config = self._run_config()
-        self.serial_panel.set_context(config.side_mm, config.camera.name)
+        self.serial_panel.set_context(config.side_mm, config.camera.name, config.source)
         self.worker = PipelineWorker(config, source_factory=source_factory)
         self.worker.sourceOpened.connect(self._on_source_opened)
         self.worker.sourceFailed.connect(self._on_source_failed)
@@ -322,6 +329,7 @@ class MainWindow(QtWidgets.QMainWindow):
             picamera=self.source_controls.picamera.value(),
             pace=True,  # the preview plays a video at its own rate
             retry_s=app.retry_s,
+            stream=self.solver_controls.stream.value(),
         )
 
     def _apply(self, *_: object) -> None:
@@ -338,7 +346,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.plots.set_window(self.view_settings.plot_window_s)
         self.simulation_tab.set_app_camera(self.app_settings.camera, self.app_settings.side_mm)
         config = self._run_config()
-        self.serial_panel.set_context(config.side_mm, config.camera.name)  # what HELLO reports
+        self.serial_panel.set_context(config.side_mm, config.camera.name, config.source)  # what HELLO reports
         request = self.worker.configure(config, reopen=reopen)
         self.session_panel.refresh_state()
         return request
@@ -508,7 +516,9 @@ class MainWindow(QtWidgets.QMainWindow):
         for name, value in self.solver_controls.settings().items():
             self.store.set_group(name, value)
         self.store.set_group("detector", self.solver_controls.detector.value())
+        self.store.set_group("stream", self.solver_controls.stream.value())
         self.store.set_group("serial", self.serial_panel.saved_settings())
+        self.store.set_group("handeye", self.serial_panel.handeye_settings())
         if self.calibration_dialog is not None:
             self.store.set_group("calibration", self.calibration_dialog.settings())
         self.session_panel.save_settings(self.store)

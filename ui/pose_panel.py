@@ -1,7 +1,10 @@
 """The pose panel: x, y, z (mm) and alpha, beta, gamma (degrees) in large type, one column per
 method (and the virtual bench's true pose beside them), each value with its standard uncertainty
 (+- in small type, when the corners' covariance is known: docs/uncertainty.md), and each solver's
-status below (with the flip warning of the core's mirror test, ``PoseResult.ambiguous``).
+status below (with the flip warning of the core's mirror test, ``PoseResult.ambiguous``, after the
+stream's history) and what the live stream did to it: "flip resolved by history" when the frame
+alone was ambiguous and the recent resolved pose decided it, "filtered" when the value is the
+stream filter's (``FrameResult.stream``; docs/conventions.md, "The live stream").
 
 The headline shows the engine's state, in the serial link's words (docs/conventions.md): the
 pipeline's status (NOQR, NOCONV, ERROR), OK only for an unambiguous pose from a live camera, AMBIG for an
@@ -91,8 +94,21 @@ def _pose_std(pose: Any) -> np.ndarray:
     return np.concatenate([np.asarray(position, float), np.asarray(angles, float)])
 
 
-def solver_status_text(result: Any) -> tuple[str, bool]:
-    """One line about a PoseResult (converged, iterations, reprojection, ambiguity) and whether it warns."""
+def stream_text(mark: Any) -> str:
+    """What the live stream did to a pose (a qrfield.stream.StreamMark, or None): "" when nothing."""
+    if mark is None:
+        return ""
+    parts = []
+    if mark.resolved_by == "history":
+        parts.append("flip resolved by history" + (" (the mirror branch)" if mark.flipped else ""))
+    if mark.filtered:
+        parts.append("filtered")
+    return ", ".join(parts)
+
+
+def solver_status_text(result: Any, mark: Any = None) -> tuple[str, bool]:
+    """One line about a PoseResult (converged, iterations, reprojection, ambiguity, what the live
+    stream did: ``mark``, its qrfield.stream.StreamMark) and whether it warns."""
     if result is None:
         return "no pose", True
     parts = [
@@ -106,6 +122,9 @@ def solver_status_text(result: Any) -> tuple[str, bool]:
         ratio = f" (ambiguity {ambiguity:.2f})" if ambiguity is not None and math.isfinite(ambiguity) else ""
         parts.append(f"⚠ the mirror pose also fits the corners{ratio}: flip risk")
         warn = True
+    streamed = stream_text(mark)
+    if streamed:
+        parts.append(streamed)
     if not result.converged and result.reason:
         parts.append(result.reason)
     return ", ".join(parts), warn
@@ -249,6 +268,9 @@ class PosePanel(QtWidgets.QWidget):
             text += f"   “{result.detection.text}”"
         if result.reason:
             text += f"   {result.reason}"
+        streamed = stream_text(getattr(result, "stream", {}).get(methods[0]) if methods else None)
+        if streamed:
+            text += f"   ({streamed})"
         self.headline.setText(text)
         self._style_headline(STATE_COLOURS.get(self.state, "#d22"))
         self.badge.setText(f"SIMULATED — {self.source_name}, not a camera")
@@ -265,7 +287,10 @@ class PosePanel(QtWidgets.QWidget):
             stds = _pose_std(pose)
             for r, cell in enumerate(self._cells[name]):
                 self._set_cell(cell, format_value(float(values[r]), r), format_std(float(stds[r])))
-            line, warn = solver_status_text(pose) if result.detection is not None else ("no code", False)
+            mark = getattr(result, "stream", {}).get(name)
+            line, warn = (
+                solver_status_text(pose, mark) if result.detection is not None else ("no code", False)
+            )
             self._status[name].setText(f"{name}: {line}")
             self._status[name].setStyleSheet("color: #d60;" if warn else "")
             self._status[name].setVisible(warn or not self.compact)

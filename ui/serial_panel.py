@@ -1,5 +1,6 @@
 """The serial panel: stream each measured pose to the gripper controller as $QRF lines and answer its
-$QRC commands (PING, HELLO, STREAM, RATE, MEAS) on the same port (protocol 2, docs/serial.md).
+$QRC commands (PING, HELLO, STREAM, RATE, MEAS, TOOL, HANDEYE) on the same port (protocol 2,
+docs/serial.md).
 
 The panel owns at most one :class:`~qrfield.serial.controller.GripperLink` (the link's own thread
 opens, writes, reads and reconnects the port, and answers the commands). The frame loop hands every
@@ -11,6 +12,13 @@ controller's last command with its answer. The GUI reads ``link.status()`` on it
 (:meth:`SerialPanel.refresh`): nothing from the link's thread touches a widget. Disconnecting closes
 the link as a :class:`ui.background.BackgroundJob`, since ``close`` joins the link's thread (up to a
 write timeout).
+
+The hand-eye box holds the ``handeye`` settings (the frame of the link's poses, the hand-eye file,
+the set-up HANDEYE solves for; applied at Connect like the link's) and shows the pairs the
+controller's ``$QRC,TOOL`` commands recorded and the last ``$QRC,HANDEYE`` result (residuals,
+pairs, where it was saved), read from :meth:`qrfield.serial.handeye.HandEyeCommands.status` on the
+redraw timer. The frame applies to the serial link only: the app's pose panel, plots and sessions
+stay in the camera frame (docs/app.md).
 """
 
 from __future__ import annotations
@@ -22,12 +30,14 @@ from typing import Any
 
 from PySide6 import QtCore, QtWidgets
 
+from qrfield.handeye import HandEyeError, HandEyeSettings, PoseFrame
 from qrfield.serial.controller import GripperLink
+from qrfield.serial.handeye import HandEyeCommands, HandEyeStatus
 from qrfield.serial.link import CLOSED, CONNECTED, LinkStatus, SerialLinkSettings
 from qrfield.serial.port import LOOP_URL, list_ports
 from qrfield.settings import SettingError, specs, validated
 from ui.background import BackgroundJob
-from ui.settings_form import set_widget_value, widget_for, widget_value
+from ui.settings_form import SettingsForm, set_widget_value, widget_for, widget_value
 
 #: Colour of the state label: connected green, trying amber, closed grey.
 STATE_COLOURS = {CONNECTED: "#1e8c1e", "connecting": "#c78400", "disconnected": "#c78400", CLOSED: "#808080"}
@@ -88,21 +98,29 @@ class LinkPublisher:
 
 
 class SerialPanel(QtWidgets.QWidget):
-    """Port chooser, link settings, Connect/Disconnect and live counters of the serial link.
+    """Port chooser, link settings, Connect/Disconnect and live counters of the serial link; the
+    hand-eye settings, pairs and result.
 
-    ``opener`` is passed to :class:`SerialLink` (tests may pass a fake port factory).
+    ``opener`` is passed to :class:`SerialLink` (tests may pass a fake port factory);
+    ``handeye``: the saved :class:`~qrfield.handeye.HandEyeSettings`; ``config_dir``: the folder
+    of the app's settings (the default hand-eye file's folder).
     """
 
     def __init__(
         self,
         settings: SerialLinkSettings | None = None,
         *,
+        handeye: HandEyeSettings | None = None,
+        config_dir: Any = None,
         opener: Any = None,
         parent: QtWidgets.QWidget | None = None,
     ) -> None:
         super().__init__(parent)
         self._opener = opener
+        self._config_dir = config_dir
         self._context: tuple[float, str] | None = None  # (side_mm, camera model) for HELLO
+        self._live_source = False  # the app measures from a live camera (a simulated file is refused)
+        self._handeye_shown: HandEyeStatus | None = None
         self.link: GripperLink | None = None
         self.publisher = LinkPublisher()
         self._closers: list[BackgroundJob] = []  # one job per link being closed
@@ -112,6 +130,7 @@ class SerialPanel(QtWidgets.QWidget):
         outer = QtWidgets.QVBoxLayout(self)
         outer.addLayout(self._build_settings_form())
         outer.addWidget(self._build_link_box())
+        outer.addWidget(self._build_handeye_box(handeye))
         self.note = QtWidgets.QLabel("")
         self.note.setWordWrap(True)
         outer.addWidget(self.note)
@@ -121,6 +140,7 @@ class SerialPanel(QtWidgets.QWidget):
         self._show_state(CLOSED, "")
         self.refresh_button.clicked.connect(self.refresh_ports)
         self.connect_button.clicked.connect(self.toggle)
+        self.clear_pairs_button.clicked.connect(self.clear_pairs)
 
     # ---------------------------------------------------------------- builders
     def _build_settings_form(self) -> QtWidgets.QFormLayout:
@@ -187,6 +207,45 @@ class SerialPanel(QtWidgets.QWidget):
         grid.addRow("last command", self.last_command)
         return box
 
+    def _build_handeye_box(self, settings: HandEyeSettings | None) -> QtWidgets.QGroupBox:
+        """The hand-eye settings, the pairs recorded over the link and the last calibration."""
+        box = QtWidgets.QGroupBox("hand-eye over the link ($QRC,TOOL and $QRC,HANDEYE)")
+        layout = QtWidgets.QVBoxLayout(box)
+        self.handeye_form = SettingsForm(HandEyeSettings, settings or HandEyeSettings())
+        self.handeye_form.setObjectName("handeye_settings")
+        layout.addWidget(self.handeye_form)
+        frame_note = QtWidgets.QLabel(
+            "The pose frame applies to this serial link ($QRF, $QRM, HELLO) and to qrfield run: the app's "
+            "pose panel, plots and sessions stay in the camera frame."
+        )
+        frame_note.setObjectName("frame_note")
+        frame_note.setWordWrap(True)
+        layout.addWidget(frame_note)
+        self.pairs_label = QtWidgets.QLabel("pairs recorded: 0")
+        self.pairs_label.setObjectName("handeye_pairs_count")
+        layout.addWidget(self.pairs_label)
+        self.pairs_list = QtWidgets.QListWidget()
+        self.pairs_list.setObjectName("handeye_pairs")
+        self.pairs_list.setToolTip(
+            "each pair: the tool's position in the base frame (from $QRC,TOOL) and the code's position in "
+            "the camera frame (the frame measured after it), mm"
+        )
+        self.pairs_list.setMinimumHeight(60)
+        self.pairs_list.setMaximumHeight(120)
+        layout.addWidget(self.pairs_list)
+        self.handeye_result = QtWidgets.QLabel("no calibration made over the link yet")
+        self.handeye_result.setObjectName("handeye_result")
+        self.handeye_result.setWordWrap(True)
+        self.handeye_result.setTextInteractionFlags(QtCore.Qt.TextInteractionFlag.TextSelectableByMouse)
+        layout.addWidget(self.handeye_result)
+        self.clear_pairs_button = QtWidgets.QPushButton("Clear pairs")
+        self.clear_pairs_button.setObjectName("clear_pairs")
+        self.clear_pairs_button.setToolTip(
+            "forget the pairs recorded so far: the next $QRC,TOOL starts a new set"
+        )
+        layout.addWidget(self.clear_pairs_button)
+        return box
+
     # ---------------------------------------------------------------- settings
     def refresh_ports(self) -> None:
         """Offer pyserial's ports and loop:// again (keeps what is typed in the box)."""
@@ -223,9 +282,17 @@ class SerialPanel(QtWidgets.QWidget):
             port = self.port.currentText().strip() or base.port
             return dataclasses.replace(base, port=port)
 
-    def set_context(self, side_mm: float, camera: str) -> None:
-        """The QR side (mm) and camera model the measurements use: what HELLO reports."""
+    def handeye_settings(self) -> HandEyeSettings:
+        """The hand-eye settings shown (to persist; used at the next Connect)."""
+        return self.handeye_form.value()
+
+    def set_context(self, side_mm: float, camera: str, source: str = "") -> None:
+        """The QR side (mm) and camera model the measurements use: what HELLO reports; ``source``:
+        the app's source (a live camera's poses never go through a simulated calibration)."""
+        from qrfield.sources import may_be_live_camera
+
         self._context = (float(side_mm), str(camera))
+        self._live_source = bool(source) and may_be_live_camera(source)
         if self.link is not None:
             self.link.set_context(side_mm=self._context[0], camera=self._context[1])
 
@@ -249,11 +316,19 @@ class SerialPanel(QtWidgets.QWidget):
             settings = self.settings()
             if not settings.port:
                 raise ValueError("no port given: choose one or type a device path or loop://")
-            link = GripperLink(settings, opener=self._opener)
-        except ValueError as exc:
+            handeye_settings = self.handeye_settings()
+            pose_frame = PoseFrame.from_settings(handeye_settings, self._config_dir)
+            pose_frame.check_source(self._live_source)
+            info: dict[str, Any] = {}
+            if self._context is not None:
+                info = {"side_mm": self._context[0], "camera": self._context[1]}
+            handeye = HandEyeCommands.from_settings(handeye_settings, self._config_dir, info=info)
+            link = GripperLink(settings, opener=self._opener, pose_frame=pose_frame)
+        except (ValueError, HandEyeError) as exc:
             self.note.setText(f"⚠ cannot connect: {exc}")
             return False
-        self.note.setText("")
+        link.add_handeye(handeye)
+        self.note.setText("" if pose_frame.identity else f"serial link: {pose_frame.describe()}")
         if self._context is not None:
             link.set_context(side_mm=self._context[0], camera=self._context[1])
         self.link = link.start()
@@ -293,6 +368,13 @@ class SerialPanel(QtWidgets.QWidget):
         self.refresh_button.setEnabled(editable)
         for widget in self.fields.values():
             widget.setEnabled(editable)
+        self.handeye_form.setEnabled(editable)
+
+    def clear_pairs(self) -> None:
+        """Forget the pairs recorded over the current link."""
+        if self.link is not None and self.link.handeye is not None:
+            self.link.handeye.clear()
+            self.refresh()
 
     # ---------------------------------------------------------------- live counters
     def status(self) -> LinkStatus | None:
@@ -301,7 +383,11 @@ class SerialPanel(QtWidgets.QWidget):
         return None if link is None else link.status()
 
     def refresh(self) -> None:
-        """Show the link's counters (called on the GUI's redraw timer; cheap when nothing changed)."""
+        """Show the link's counters and the hand-eye pairs and result (called on the GUI's redraw
+        timer; cheap when nothing changed)."""
+        link = self.link or getattr(self, "_last_link", None)
+        if link is not None and link.handeye is not None:
+            self._show_handeye(link.handeye.status())
         status = self.status()
         if status is None:
             return
@@ -320,6 +406,39 @@ class SerialPanel(QtWidgets.QWidget):
         self.lag.setText(f"{status.lag_ms:.0f} ms" if math.isfinite(status.lag_ms) else "—")
         self.last_command.setText(status.last_command)
         self.last_command.setCursorPosition(0)
+
+    def _show_handeye(self, status: HandEyeStatus) -> None:
+        if status == self._handeye_shown:
+            return
+        self._handeye_shown = status
+        sim = " from a simulated source (SIM)" if status.simulated else ""
+        busy = {"TOOL": "; waiting for a frame ($QRC,TOOL)", "HANDEYE": "; solving ($QRC,HANDEYE)"}
+        self.pairs_label.setText(f"pairs recorded: {len(status.pairs)}{sim}{busy.get(status.busy, '')}")
+        self.pairs_list.clear()
+        for k, pair in enumerate(status.pairs, start=1):
+            tool = ", ".join(f"{v:.1f}" for v in pair.tool_mm)
+            code = ", ".join(f"{v:.1f}" for v in pair.code_mm)
+            self.pairs_list.addItem(f"{k}: tool ({tool}) mm in the base; code ({code}) mm in the camera")
+        self.pairs_list.scrollToBottom()
+        lines = []
+        done = status.done
+        if done is not None:
+            c = done.calibration
+            kind = " from simulated frames" if done.simulated else ""
+            kept = f" (the one before kept as {done.previous.name})" if done.previous else ""
+            lines.append(
+                f"last calibration: {c.setup}{kind} from {c.n_pairs} pairs, residuals "
+                f"{c.residual_mm:.3f} mm, {c.residual_deg:.3f} deg; saved to {done.path}{kept}"
+            )
+        elif status.setup is None:
+            lines.append(
+                "HANDEYE has no set-up to solve for: choose the hand-eye set-up (or a tool/base frame)"
+            )
+        else:
+            lines.append(f"HANDEYE solves {status.setup} and saves {status.save_to}")
+        if status.last:
+            lines.append(f"last: {status.last}")
+        self.handeye_result.setText("\n".join(lines))
 
     def _show_state(self, state: str, port: str) -> None:
         colour = STATE_COLOURS.get(state, "#808080")

@@ -45,6 +45,7 @@ from typing import Any
 from PySide6 import QtCore, QtWidgets
 
 from qrfield.camera import CameraModel
+from qrfield.handeye.setups import CAMERA
 from qrfield.sessions import (
     FrameCollector,
     GroundTruth,
@@ -408,6 +409,14 @@ class SessionPanel(QtWidgets.QWidget):
             return None
         try:
             session = Session.open(path)
+            if session.info.pose_frame != CAMERA:
+                # The app measures and logs in the camera frame: its rows would not be the session's.
+                frame = session.info.pose_frame
+                session.close()
+                raise SessionError(
+                    f"its rows are in the {frame} frame (qrfield session new --frame {frame}); the app logs "
+                    f"in the camera frame: log them with qrfield session log"
+                )
         except (SessionError, OSError) as exc:
             self.resume_dialog.say(f"cannot open {path}: {exc}")
             self._say(f"cannot open {path}: {exc}", "error")

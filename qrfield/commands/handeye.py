@@ -87,6 +87,7 @@ def run(args: argparse.Namespace) -> int:
     from qrfield.detect import Detector, DetectorSettings
     from qrfield.handeye import HandEyeCalibration, Pair, read_pairs_csv, solve_handeye
     from qrfield.handeye.measure import pose_for_pair
+    from qrfield.handeye.store import save_keeping_previous
     from qrfield.images import ImageError, ImageSettings, read_image
     from qrfield.settings import from_arguments
 
@@ -142,20 +143,11 @@ def run(args: argparse.Namespace) -> int:
         from qrfield.files import make_folder
 
         make_folder(out.parent, "config folder")
-    _keep_previous(out)
-    calibration.save(out)
+    kept = save_keeping_previous(calibration, out)
+    if kept is not None:
+        _say(f"the calibration there before is kept as {kept}")
     _say(f"wrote {out}" + ("" if args.out else " (the config folder's: --frame tool/base uses it)"))
     return 0
-
-
-def _keep_previous(out: Path) -> None:
-    """An existing calibration at ``out`` is kept as ``out.previous`` (the one before is replaced)."""
-    import os
-
-    if out.is_file():
-        previous = out.with_name(out.name + ".previous")
-        os.replace(out, previous)
-        _say(f"the calibration there before is kept as {previous}")
 
 
 def _print_result(result: Any) -> None:

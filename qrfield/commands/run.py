@@ -18,9 +18,13 @@ No silent states: an unknown backend, method or setting value, on the command li
 (the message names the file and the key), stops the run at start with exit code 2.
 
 With ``--frame tool`` or ``--frame base`` (and a hand-eye file, docs/handeye.md) the poses on stdout
-are in the gripper's tool frame or the robot's base frame, their uncertainty with the calibration's
-added; each JSON line says which in ``pose_frame``. The serial link's $QRF lines stay in the camera
-frame (HELLO reports ``camera``) until the hand-eye commands reach the link.
+and in the serial link's $QRF and $QRM lines are in the gripper's tool frame or the robot's base
+frame, their uncertainty with the calibration's added; each JSON line says which in ``pose_frame``
+and HELLO reports it. The controller may calibrate over the link: ``$QRC,TOOL`` records pairs,
+``$QRC,HANDEYE`` solves for ``--handeye-setup`` (auto: the frame's) and saves the hand-eye file (the
+previous one kept); in a ``--frame tool|base`` run both streams take the new calibration at once
+(:mod:`qrfield.serial.handeye`). A hand-eye file made from simulated frames is refused with a live
+camera.
 
 stdout is best effort: lines are written by a thread of their own, so a reader that stops reading
 never holds up the frame loop, the serial line or shutdown (lines it did not take are counted on
@@ -122,7 +126,7 @@ class _StdoutSink(BaseSink):
         self.writer.write(line)
 
 
-def _gripper_link(settings: Any, say: _Stderr, config: Any) -> Any:
+def _gripper_link(settings: Any, say: _Stderr, config: Any, pose_frame: Any, handeye: Any) -> Any:
     from qrfield.serial.controller import GripperLink
 
     shown = {"state": "", "error": ""}
@@ -137,15 +141,41 @@ def _gripper_link(settings: Any, say: _Stderr, config: Any) -> Any:
             shown["error"] = status.last_error
             say(f"serial {status.port}: {status.last_error}")
 
-    link = GripperLink(settings, on_status=on_status)
+    link = GripperLink(settings, on_status=on_status, pose_frame=pose_frame)
     link.set_context(side_mm=config.side_mm, camera=config.camera.name)
+    link.add_handeye(handeye)
     link.start(open_first=True)  # a busy port refuses here, with one line naming the other process
     rate = f"at most {settings.max_rate_hz:g}/s" if settings.max_rate_hz > 0 else "as fast as the port allows"
     say(
         f"serial: $QRF lines (protocol 2) to {settings.port} at {settings.baud} baud, {rate}, newest pose "
-        "first; answering $QRC commands (PING, HELLO, STREAM, RATE, MEAS)"
+        f"first, in the {pose_frame.frame} frame; answering $QRC commands (PING, HELLO, STREAM, RATE, "
+        "MEAS, TOOL, HANDEYE)"
     )
+    if handeye.setup is None:
+        say("serial: HANDEYE has no set-up to solve for (--handeye-setup eye-in-hand|eye-to-hand)")
+    else:
+        say(f"serial: HANDEYE solves {handeye.setup} and saves {handeye.save_to}")
     return link
+
+
+def _handeye_commands(effective: Any, args: argparse.Namespace, config: Any, say: _Stderr) -> Any:
+    """$QRC,TOOL and $QRC,HANDEYE for the link; HandEyeError when the set-up does not fit the frame."""
+    from qrfield.serial.handeye import HandEyeCommands
+
+    info = {"camera": config.camera.name, "side_mm": float(config.side_mm), "pose_method": config.methods[0]}
+    handeye = HandEyeCommands.from_settings(effective.groups["handeye"], args.config_dir, info=info)
+
+    def calibrated(done: Any) -> None:
+        c = done.calibration
+        kept = f" (the one before kept as {done.previous})" if done.previous else ""
+        kind = " from simulated frames" if done.simulated else ""
+        say(
+            f"serial: HANDEYE: {c.setup} calibration{kind} from {c.n_pairs} pairs, residuals "
+            f"{c.residual_mm:.3f} mm, {c.residual_deg:.3f} deg; saved to {done.path}{kept}"
+        )
+
+    handeye.calibrated.append(calibrated)
+    return handeye
 
 
 def run(args: argparse.Namespace) -> int:
@@ -153,7 +183,7 @@ def run(args: argparse.Namespace) -> int:
     from qrfield.engine import FAILED, STOPPED, FrameLoop
     from qrfield.handeye import InFrame, PoseFrame
     from qrfield.runconfig import effective_settings
-    from qrfield.sources import source_kind
+    from qrfield.sources import may_be_live_camera, source_kind
     from qrfield.stdout_lines import LineWriter
 
     if args.frames < 0:
@@ -168,12 +198,12 @@ def run(args: argparse.Namespace) -> int:
         for note in effective.assumed():
             say(note)
     pose_frame = PoseFrame.from_settings(effective.groups["handeye"], args.config_dir)
+    pose_frame.check_source(may_be_live_camera(config.source))
+    handeye = _handeye_commands(effective, args, config, say) if serial else None
     if not pose_frame.identity:
         say(pose_frame.describe())
-        if serial:
-            say("serial: $QRF poses stay in the camera frame (HELLO says camera) for now")
     config.make_pipeline()  # every detector, solver and camera setting is checked now, not per frame
-    link = _gripper_link(effective.serial_settings(), say, config) if serial else None
+    link = _gripper_link(effective.serial_settings(), say, config, pose_frame, handeye) if serial else None
     writer = LineWriter(sys.stdout)
     stop_signal = {"name": ""}
     camera = config.camera
@@ -183,6 +213,8 @@ def run(args: argparse.Namespace) -> int:
     stdout_sink: Any = _StdoutSink(writer, args.json_lines)
     if not pose_frame.identity:
         stdout_sink = InFrame(stdout_sink, pose_frame)
+        if link is not None:  # after a HANDEYE, stdout follows the link's new calibration
+            link.handeye.calibrated.append(lambda _done: setattr(stdout_sink, "pose_frame", link.pose_frame))
     sinks: list[Any] = [stdout_sink] + ([link] if link is not None else [])
     loop = FrameLoop(config, events=events, sinks=sinks, max_frames=args.frames)
     events.loop = loop

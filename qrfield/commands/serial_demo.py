@@ -1,4 +1,5 @@
-"""``qrfield serial-demo PORT``: stream a synthetic moving pose to a port, without camera or app.
+"""``qrfield serial-demo PORT``: stream a synthetic moving pose to a port, without camera or app;
+``qrfield serial-demo --robot``: the whole hand-eye workflow over serial, without hardware.
 
 For whoever writes the gripper controller: the controller sees exactly the lines the app would
 send (protocol 2, through the same :class:`~qrfield.serial.controller.GripperLink`: pacing to the
@@ -7,6 +8,11 @@ STREAM, RATE and MEAS), from a smooth made-up path (the card
 swaying 300-500 mm in front of the camera), with one second of NOQR every ``--noqr-every`` seconds
 so the controller's "no pose" branch gets exercised too. The poses are made up, so they go out as
 SIM, never OK (docs/conventions.md): a controller under test treats SIM as a pose in its test mode.
+
+With ``--robot`` (no PORT) the demo plays both ends (:mod:`qrfield.serial.robot_demo`): a simulated
+robot with a known hand-eye transform moves the virtual bench's card, a scripted controller sends
+``$QRC,TOOL`` at each tool pose and then ``$QRC,HANDEYE`` over a pty at a UART's pace; every command
+and answer is printed, then the transform found and its error against the known one.
 """
 
 from __future__ import annotations
@@ -24,8 +30,35 @@ HELP = "stream a synthetic moving pose to a serial port (test a controller witho
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from qrfield.arguments import whole_number
+    from qrfield.handeye.setups import SETUPS
+
     parser.add_argument(
-        "port", metavar="PORT", help="device path (/dev/ttyUSB0, COM3, a pty) or URL (loop://)"
+        "port",
+        metavar="PORT",
+        nargs="?",
+        help="device path (/dev/ttyUSB0, COM3, a pty) or URL (loop://); not with --robot",
+    )
+    robot = parser.add_argument_group("hand-eye over serial (--robot)")
+    robot.add_argument(
+        "--robot",
+        action="store_true",
+        help="play a robot program and qrfield on both ends of a pty: TOOL at each tool pose, then HANDEYE",
+    )
+    robot.add_argument(
+        "--setup", choices=SETUPS, default="eye-in-hand", help="the cell (default eye-in-hand)"
+    )
+    robot.add_argument(
+        "--poses",
+        type=whole_number("--poses", 5, 100),
+        default=15,
+        help="tool poses visited (5..100, default 15)",
+    )
+    robot.add_argument("--seed", type=int, default=0, help="the tool poses' seed (default 0)")
+    robot.add_argument(
+        "--out-dir",
+        metavar="DIR",
+        help="keep the calibration in DIR (default: a temporary folder, removed at the end)",
     )
     parser.add_argument("--fps", type=float, default=30.0, help="poses produced per second (default 30)")
     parser.add_argument("--seconds", type=float, default=None, metavar="S", help="stop after S seconds")
@@ -78,6 +111,12 @@ def run(args: argparse.Namespace) -> int:
 
     if not 0 < args.fps < math.inf:
         raise ValueError(f"--fps must be positive, got {args.fps}")
+    if args.robot:
+        if args.port is not None:
+            raise ValueError("--robot plays both ends of its own pty: give no PORT")
+        return _robot(args)
+    if args.port is None:
+        raise ValueError("give PORT (a device path or loop://), or --robot")
     if args.seconds is not None and not 0 < args.seconds < math.inf:
         raise ValueError(f"--seconds must be a positive number of seconds, got {args.seconds}")
     settings = validated(SerialLinkSettings(port=args.port, baud=args.baud, max_rate_hz=args.max_rate))
@@ -116,4 +155,66 @@ def run(args: argparse.Namespace) -> int:
         link.close()
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+    return 0
+
+
+def _robot(args: argparse.Namespace) -> int:
+    import tempfile
+    from pathlib import Path
+
+    from qrfield.camera import DEFAULT_CAMERA, resolve_camera
+    from qrfield.geometry import angles_from_rotation
+    from qrfield.handeye import SimulatedRobot
+    from qrfield.handeye.setups import TRANSFORM_KEY
+    from qrfield.serial.robot_demo import run_robot_demo
+
+    def fmt(values: object, digits: int) -> str:
+        return ", ".join(f"{v:.{digits}f}" for v in values)  # type: ignore[attr-defined]
+
+    camera = resolve_camera(DEFAULT_CAMERA)
+    robot = SimulatedRobot.example(args.setup)
+    key = TRANSFORM_KEY[args.setup]
+    truth = robot.transform
+    print(
+        f"serial-demo --robot: {args.setup} cell, true {key} at ({fmt(truth[:3, 3], 2)}) mm, "
+        f"({fmt(angles_from_rotation(truth[:3, :3]), 2)}) deg; {args.poses} tool poses (seed {args.seed}); "
+        f"{camera.name}, {args.side_mm:g} mm code on the virtual bench at {args.fps:g} fps; {args.baud} baud",
+        flush=True,
+    )
+
+    def show(command: str, answer: str) -> None:
+        print(f"-> {command}\n<- {answer}", flush=True)
+
+    with tempfile.TemporaryDirectory(prefix="qrfield-serial-demo-") as scratch:
+        folder = Path(args.out_dir).expanduser() if args.out_dir else Path(scratch)
+        result = run_robot_demo(
+            args.setup,
+            folder,
+            poses=args.poses,
+            seed=args.seed,
+            camera=camera,
+            side_mm=args.side_mm,
+            fps=args.fps,
+            baud=args.baud,
+            robot=robot,
+            on_exchange=show,
+        )
+        print(f"{result.pairs} pairs recorded, {result.refused} tool poses refused")
+        if result.calibration is None:
+            reason = result.handeye.reason if result.handeye is not None else "no answer"
+            print(f"serial-demo --robot: HANDEYE failed: {reason}", file=sys.stderr)
+            return 1
+        c = result.calibration
+        found = c.transform
+        std_mm = c.extra.get("translation_std_mm", [math.nan] * 3)
+        std_deg = c.extra.get("rotation_std_deg", [math.nan] * 3)
+        print(
+            f"{key} found: ({fmt(found[:3, 3], 2)}) mm, std ({fmt(std_mm, 3)}) mm; "
+            f"({fmt(angles_from_rotation(found[:3, :3]), 3)}) deg, rotation std ({fmt(std_deg, 4)}) deg"
+        )
+        print(f"residuals {c.residual_mm:.3f} mm, {c.residual_deg:.3f} deg over {c.n_pairs} pairs")
+        where = (
+            f"saved to {c.path}" if args.out_dir else "in a temporary folder, removed (--out-dir keeps it)"
+        )
+        print(f"error against the true {key}: {result.error_mm:.3f} mm, {result.error_deg:.4f} deg ({where})")
     return 0

@@ -172,6 +172,7 @@ def _run_log(args: argparse.Namespace) -> int:
     from qrfield.runconfig import effective_settings
     from qrfield.sessions import Session, known_combinations, validate_field
     from qrfield.sessions.recorder import RowRecorder, session_run_config
+    from qrfield.sources import may_be_live_camera
 
     if args.frames is not None and args.frames < 1:
         raise ValueError(f"--frames must be at least 1, got {args.frames}")
@@ -194,6 +195,7 @@ def _run_log(args: argparse.Namespace) -> int:
         config = session_run_config(effective.run_config(camera=session.info.camera), session.info)
         recorder = RowRecorder(session.info, say)
         pose_frame = PoseFrame.from_saved(session.info.pose_frame, session.info.handeye, session.info.name)
+        pose_frame.check_source(may_be_live_camera(config.source))
         events = recorder if pose_frame.identity else InFrameEvents(recorder, pose_frame)
         loop = FrameLoop(config, events=events)
         with loop_thread(loop) as thread:

@@ -100,7 +100,8 @@ def check_diversity(
     if count < min_pairs:
         raise HandEyeError(
             f"{count} usable pairs; a hand-eye calibration needs at least {min_pairs} (15 or more "
-            "recommended), at poses turned 15-30 deg about different axes"
+            "recommended), at poses turned 15-30 deg about different axes",
+            f"{count} pairs: at least {min_pairs} needed",
         )
     spread = rotation_spread(tool_in_base, setup)
     main, across, _ = spread.turns_deg
@@ -108,7 +109,8 @@ def check_diversity(
         raise HandEyeError(
             f"the tool hardly turns between the {count} poses (RMS turn {main:.1f} deg, largest "
             f"{spread.largest_turn_deg:.1f} deg; at least {min_turn_deg:g} deg needed): add poses "
-            f"turned 15-30 deg about the {spread.frame}'s X and Y axes"
+            f"turned 15-30 deg about the {spread.frame}'s X and Y axes",
+            f"add 15-30 deg turns about {spread.frame} X and Y",
         )
     if across < min_spread_deg:
         axis = spread.axes[0] * np.sign(spread.axes[0][np.argmax(np.abs(spread.axes[0]))])
@@ -117,6 +119,7 @@ def check_diversity(
             f"the tool's turns between the {count} poses are all about one axis (({axis[0]:.2f}, "
             f"{axis[1]:.2f}, {axis[2]:.2f}) in the {spread.frame} frame; RMS turn across it "
             f"{across:.1f} deg, at least {min_spread_deg:g} deg needed): add poses turned 15-30 deg "
-            f"about an axis across it, e.g. the {spread.frame}'s {other} axis"
+            f"about an axis across it, e.g. the {spread.frame}'s {other} axis",
+            f"one turn axis: add turns about {spread.frame} {other}",
         )
     return spread

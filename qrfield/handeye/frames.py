@@ -110,6 +110,19 @@ class PoseFrame:
             return cls(frame)
         return cls(frame, HandEyeCalibration.from_dict(calibration, f"session {session}: field 'handeye'"))
 
+    def check_source(self, live: bool) -> None:
+        """HandEyeError (one line) when poses of a live camera (``live``) would go through a
+        calibration made from simulated frames (the file's ``simulated`` field): its numbers are
+        those of a made-up cell."""
+        c = self.calibration
+        if live and c is not None and c.simulated:
+            where = f" {c.path}" if c.path else ""
+            raise HandEyeError(
+                f"the hand-eye file{where} was made from simulated frames (the virtual bench, a video or "
+                "a folder): not for a live camera; calibrate with the camera (qrfield handeye, or "
+                "$QRC,TOOL and $QRC,HANDEYE over serial)"
+            )
+
     @property
     def identity(self) -> bool:
         """Poses stay in the camera frame (nothing to do)."""

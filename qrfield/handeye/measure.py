@@ -14,19 +14,33 @@ import numpy as np
 
 from qrfield.camera import CameraModel
 
+#: The kinds of :func:`pair_problem_kind` ("" when the pose makes a pair).
+NO_POSE, NOT_CONVERGED, AMBIGUOUS = "no pose", "not converged", "ambiguous"
+
+
+def pair_problem_kind(result: Any) -> str:
+    """Why a PoseResult cannot make a pair, in one word: NO_POSE (no code, or no result),
+    NOT_CONVERGED, AMBIGUOUS, or "" when it can."""
+    if result is None:
+        return NO_POSE
+    if not result.converged or not np.all(np.isfinite(result.position_mm)):
+        return NOT_CONVERGED
+    if result.ambiguous:
+        return AMBIGUOUS
+    return ""
+
 
 def pair_problem(result: Any) -> str:
-    """Why a PoseResult cannot make a pair ("" when it can)."""
-    if result is None:
-        return "no pose"
-    if not result.converged or not np.all(np.isfinite(result.position_mm)):
+    """Why a PoseResult cannot make a pair, for a person ("" when it can)."""
+    kind = pair_problem_kind(result)
+    if kind == NOT_CONVERGED:
         return f"not converged: {result.reason or 'no pose'}"
-    if result.ambiguous:
+    if kind == AMBIGUOUS:
         return (
             "ambiguous: the mirror pose fits the corners as well (a view with more tilt, or a closer "
             "or larger code, makes the pose unique)"
         )
-    return ""
+    return kind
 
 
 def pose_for_pair(

@@ -10,12 +10,13 @@ the line and the column (:func:`read_pairs_csv`).
 :class:`PairCollector` records pairs from the frame loop (a sink: ``on_result``): armed with a
 tool pose (:meth:`PairCollector.expect`), it takes the next result captured after that whose pose
 converged and is not ambiguous (:func:`qrfield.handeye.measure.pair_problem`); :meth:`PairCollector.solve`
-solves the pairs so far. It is what serial protocol 2's ``$QRC,TOOL`` and ``$QRC,HANDEYE`` will
-call (:meth:`PairCollector.record`, :meth:`PairCollector.solve`), docs/handeye.md.
+solves the pairs so far. It is the core of serial protocol 2's ``$QRC,TOOL`` and ``$QRC,HANDEYE``
+(:mod:`qrfield.serial.handeye`: :meth:`PairCollector.expect`, :meth:`PairCollector.solve`), docs/handeye.md.
 """
 
 from __future__ import annotations
 
+import math
 import os
 import threading
 import time
@@ -26,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from qrfield.files import csv_text_reader, read_text
-from qrfield.handeye.measure import pair_problem
+from qrfield.handeye.measure import pair_problem, pair_problem_kind
 from qrfield.handeye.rigid import transform_from_quaternion
 from qrfield.handeye.setups import HandEyeError
 from qrfield.handeye.solve import HandEyeResult, Pair, solve_handeye
@@ -105,21 +106,32 @@ def read_pairs_csv(path: str | os.PathLike[str]) -> list[ToolRow]:
     return out
 
 
+#: A :attr:`PairCollector.last_problem` beside pair_problem_kind's: the frame's source is live and
+#: the pairs so far are from a simulated one, or the other way round (never mixed in one set).
+SOURCE_CHANGED = "source changed"
+
+
 class PairCollector(BaseSink):
     """Hand-eye pairs from a frame loop (thread-safe: results arrive on the loop's thread, the
     rest is called from another, e.g. the serial command handler).
 
-    ``method``: the pose method whose result makes the pair (None: the result's first).
+    ``method``: the pose method whose result makes the pair (None: the result's first). The pairs
+    of one set all come from a live camera or all from a source that is not one (the virtual
+    bench, a video, a folder: :attr:`simulated`); a frame of the other kind makes no pair
+    (SOURCE_CHANGED) until :meth:`clear`.
     """
 
     def __init__(self, method: str | None = None) -> None:
         self.method = method
         self._lock = threading.Lock()
         self._pairs: list[Pair] = []
+        self._simulated = False
         self._waiting: tuple[np.ndarray, str, float] | None = None
         self._done = threading.Event()
         #: Why the results seen while waiting made no pair (the latest last), for the caller's answer.
         self.passed_over: list[str] = []
+        #: The kind (qrfield.handeye.measure.pair_problem_kind) of the latest of them ("" if none).
+        self.last_problem = ""
 
     # ----- frame-loop sink (the loop's thread)
     def on_result(self, result: Any, simulated: bool) -> None:
@@ -128,17 +140,32 @@ class PairCollector(BaseSink):
             if waiting is None:
                 return
             tool, label, armed_at = waiting
-            # Captured after the tool pose was given: the robot was there (latency_ms: capture to now).
-            latency = float(getattr(result, "latency_ms", 0.0) or 0.0)
-            if time.monotonic() - latency / 1000.0 < armed_at:
+            # Captured after the tool pose was given: the robot was there (t_capture: time.monotonic()
+            # of the capture; else latency_ms, capture to the result).
+            captured = float(getattr(result, "t_capture", math.nan))
+            if not math.isfinite(captured):
+                latency = float(getattr(result, "latency_ms", 0.0) or 0.0)
+                captured = time.monotonic() - (latency / 1000.0 if math.isfinite(latency) else 0.0)
+            if captured < armed_at:
+                return
+            if self._pairs and bool(simulated) != self._simulated:
+                self.last_problem = SOURCE_CHANGED
+                self.passed_over.append(
+                    f"frame {result.index}: the source changed: the pairs so far are from "
+                    f"{'a simulated source' if self._simulated else 'a live camera'}, this frame is not "
+                    "(clear the pairs to start again)"
+                )
+                del self.passed_over[:-20]
                 return
             pose = result.poses.get(self.method) if self.method else result.primary
-            problem = pair_problem(pose)
-            if problem:
-                self.passed_over.append(f"frame {result.index}: {problem}")
+            kind = pair_problem_kind(pose)
+            if kind:
+                self.last_problem = kind
+                self.passed_over.append(f"frame {result.index}: {pair_problem(pose)}")
                 del self.passed_over[:-20]
                 return
             self._pairs.append(Pair.from_pose(tool, pose, label or f"frame {result.index}"))
+            self._simulated = bool(simulated)
             self._waiting = None
             self._done.set()
 
@@ -150,6 +177,7 @@ class PairCollector(BaseSink):
         with self._lock:
             self._waiting = (tool, label, time.monotonic())
             self.passed_over = []
+            self.last_problem = ""
             self._done.clear()
 
     def wait(self, timeout_s: float) -> bool:
@@ -172,11 +200,20 @@ class PairCollector(BaseSink):
         with self._lock:
             self._waiting = None
 
-    def add(self, pair: Pair) -> int:
+    def add(self, pair: Pair, simulated: bool = False) -> int:
         """Add a pair made elsewhere; returns the number of pairs."""
         with self._lock:
+            if self._pairs and simulated != self._simulated:
+                raise HandEyeError("the pairs so far are from another kind of source (live or simulated)")
             self._pairs.append(pair)
+            self._simulated = bool(simulated)
             return len(self._pairs)
+
+    @property
+    def simulated(self) -> bool:
+        """The pairs come from a source that is not a live camera (False while there are none)."""
+        with self._lock:
+            return self._simulated and bool(self._pairs)
 
     @property
     def pairs(self) -> list[Pair]:
@@ -188,8 +225,10 @@ class PairCollector(BaseSink):
             return len(self._pairs)
 
     def clear(self) -> None:
+        """Forget the pairs (and a pose still waiting): the next pair starts a new set."""
         with self._lock:
             self._pairs.clear()
+            self._simulated = False
             self._waiting = None
 
     def solve(self, setup: str, **options: Any) -> HandEyeResult:

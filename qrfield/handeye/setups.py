@@ -16,7 +16,14 @@ from __future__ import annotations
 
 class HandEyeError(ValueError):
     """Pairs that cannot be solved, a hand-eye file that cannot be used, a frame that does not fit
-    the loaded calibration: the message (one line) says what is wrong and what to do."""
+    the loaded calibration: the message (one line) says what is wrong and what to do.
+
+    ``short``: the same in at most 40 bytes without commas, for a serial answer's reason
+    (``$QRA,HANDEYE,ERR,<reason>``, docs/serial.md); empty when none was given."""
+
+    def __init__(self, message: str, short: str = "") -> None:
+        super().__init__(message)
+        self.short = short
 
 
 EYE_IN_HAND, EYE_TO_HAND = "eye-in-hand", "eye-to-hand"
@@ -34,7 +41,7 @@ TRANSFORM_KEY = {EYE_IN_HAND: "camera_to_tool", EYE_TO_HAND: "camera_to_base"}
 def check_setup(setup: str) -> str:
     """``setup`` if it is one of SETUPS, else HandEyeError naming them."""
     if setup not in SETUPS:
-        raise HandEyeError(f"hand-eye set-up {setup!r} is not one of {', '.join(SETUPS)}")
+        raise HandEyeError(f"hand-eye set-up {setup!r} is not one of {', '.join(SETUPS)}", "unknown set-up")
     return setup
 
 

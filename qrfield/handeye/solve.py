@@ -254,7 +254,8 @@ def _whiteners(cov: np.ndarray) -> np.ndarray:
         chol = np.linalg.cholesky(cov)
     except np.linalg.LinAlgError:
         raise HandEyeError(
-            "a pair's pose covariance is not positive definite (a pose without usable uncertainty)"
+            "a pair's pose covariance is not positive definite (a pose without usable uncertainty)",
+            "a pose has no usable covariance",
         ) from None
     return np.linalg.inv(chol)
 
@@ -365,7 +366,10 @@ def solve_handeye(
     try:
         inverse = np.linalg.inv(jac.T @ jac)
     except np.linalg.LinAlgError:
-        raise HandEyeError("the pairs do not determine the transform (singular normal equations)") from None
+        raise HandEyeError(
+            "the pairs do not determine the transform (singular normal equations)",
+            "the pairs do not fix the transform",
+        ) from None
     ratio = chi2 / dof if dof > 0 else math.nan
     if weighted:
         scale = max(1.0, ratio) if math.isfinite(ratio) else 1.0

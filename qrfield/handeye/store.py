@@ -32,8 +32,13 @@ from qrfield.handeye.rigid import check_transform, make_transform
 from qrfield.handeye.setups import EYE_IN_HAND, SETUPS, TARGET_FRAME, TRANSFORM_KEY, HandEyeError
 
 FORMAT = "qrfield-handeye/1"
-#: The file's name in the config folder (where ``$QRC,HANDEYE`` will save it, and ``frame`` looks).
+#: The file's name in the config folder (where ``$QRC,HANDEYE`` saves it, and ``frame`` looks).
 FILE_NAME = "handeye.json"
+#: The field that marks a calibration made from frames of a source that is not a live camera (the
+#: virtual bench, a video, a folder): ``qrfield run`` refuses it with a live camera.
+SIMULATED_KEY = "simulated"
+#: What a file replaced by a new calibration is renamed to: ``handeye.json.previous``.
+PREVIOUS_SUFFIX = ".previous"
 #: How far from a rotation a file's matrix may be (rounded by hand) before it is refused.
 ROTATION_TOLERANCE = 1e-3
 #: The key of the code's place found with the transform.
@@ -64,6 +69,11 @@ class HandEyeCalibration:
     covariance: np.ndarray | None = None
     extra: dict[str, Any] = field(default_factory=dict)
     path: Path | None = None
+
+    @property
+    def simulated(self) -> bool:
+        """Made from frames of a source that is not a live camera (the file's ``simulated`` field)."""
+        return self.extra.get(SIMULATED_KEY) is True
 
     @property
     def target_frame(self) -> str:
@@ -167,6 +177,32 @@ class HandEyeCalibration:
             )
             raise HandEyeError(f"{exc}{hint}") from None
         return cls.from_dict(data, f"hand-eye file {path}", path)
+
+
+def simulated_path(path: str | os.PathLike[str]) -> Path:
+    """Where a calibration from simulated frames is saved instead of ``path``: ``handeye.json`` ->
+    ``handeye-simulated.json`` (never over the file a live camera's run reads)."""
+    path = Path(path)
+    return path.with_name(f"{path.stem}-simulated{path.suffix}")
+
+
+def save_keeping_previous(calibration: HandEyeCalibration, path: str | os.PathLike[str]) -> Path | None:
+    """Write ``calibration`` to ``path``; a file already there is kept as ``path.previous`` (the one
+    before that is replaced), and put back if the new one cannot be written (the OSError is raised).
+    Returns the kept file's path, or None when there was none."""
+    path = Path(path)
+    previous = path.with_name(path.name + PREVIOUS_SUFFIX)
+    kept = None
+    if path.is_file():
+        os.replace(path, previous)
+        kept = previous
+    try:
+        calibration.save(path)
+    except BaseException:
+        if kept is not None and not path.exists():
+            os.replace(previous, path)
+        raise
+    return kept
 
 
 _KNOWN = frozenset({"setup", "residual_mm", "residual_deg", "n_pairs", "method", "format", "covariance"})

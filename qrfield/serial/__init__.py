@@ -9,7 +9,11 @@ Modules, each with one job (docs/architecture.md):
 - :mod:`qrfield.serial.link`: the port's own thread: pacing (newest pose first, by baud and the
   driver's queue), answers ahead of poses, NOSRC and STALE, reconnecting;
 - :mod:`qrfield.serial.controller`: the controller's commands (PING, HELLO, STREAM, RATE, MEAS, ...)
-  answered in order, and :class:`~qrfield.serial.controller.GripperLink`, a frame loop's sink;
+  answered in order, and :class:`~qrfield.serial.controller.GripperLink`, a frame loop's sink (its
+  poses in the chosen frame);
+- :mod:`qrfield.serial.handeye`: ``$QRC,TOOL`` and ``$QRC,HANDEYE``: hand-eye pairs and their solve;
+- :mod:`qrfield.serial.robot_demo`: the serial hand-eye workflow with a simulated robot and a
+  scripted controller (``qrfield serial-demo --robot``);
 - :mod:`qrfield.serial.relay`: a UART-speed relay between two ptys (the twin of a real UART's
   pace, for tests and ``qrfield benchmark serial``).
 

@@ -8,13 +8,14 @@ controller's ``$QRC`` commands on the same port, one answer per command, in orde
 (docs/conventions.md, "Serial protocol 2"):
 
 - ``PING`` -> ``$QRA,PING,OK``;
-- ``HELLO`` -> ``$QRA,HELLO,QRF2,<version>,<side_mm>,<camera model>,<frame>`` (frame: ``camera``
-  until hand-eye, issue 28, reports poses in another frame);
+- ``HELLO`` -> ``$QRA,HELLO,QRF2,<version>,<side_mm>,<camera model>,<frame>`` (frame: camera,
+  tool or base: the frame of the ``$QRF`` and ``$QRM`` poses, :meth:`GripperLink.set_pose_frame`);
 - ``STREAM,ON`` / ``STREAM,OFF`` -> ``$QRA,STREAM,OK``; ``RATE,<hz>`` -> ``$QRA,RATE,OK,<hz>``;
 - ``MEAS,<n>`` -> ``$QRM,...``: the mean of the next n frames with a converged pose and its
   standard uncertainty of the mean (:func:`qrfield.sessions.averaging.average_frames`), or why there
   is none when they are not in within 2 s + n / 5 s;
-- ``TOOL`` and ``HANDEYE``: ``ERR`` until hand-eye is built (it fills :attr:`CommandHandler.handlers`);
+- ``TOOL`` and ``HANDEYE``: hand-eye pairs and their solve once :meth:`GripperLink.add_handeye` put
+  :class:`qrfield.serial.handeye.HandEyeCommands` in :attr:`CommandHandler.handlers` (else ``ERR``);
 - anything else -> ``$QRA,<command>,ERR,<reason>``; a line that cannot be read (CRC, length,
   format) -> ``$QRA,?,ERR,CRC`` (or ``LENGTH``, ``FORMAT``); more than 16 commands waiting -> the
   newest are discarded and ``$QRA,?,ERR,OVERFLOW,<n>`` follows once the queue drains.
@@ -31,6 +32,7 @@ source other than a live camera is SIM, else AMBIG when any frame's flip was unr
 from __future__ import annotations
 
 import collections
+import dataclasses
 import re
 import threading
 import time
@@ -38,6 +40,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
+from qrfield.handeye.frames import InFrame, PoseFrame
+from qrfield.handeye.setups import CAMERA
+from qrfield.seams import BaseSink
 from qrfield.serial import codec
 from qrfield.serial.link import LinkStatus, SerialLink, SerialLinkSettings, publish_result
 from qrfield.status import ResultStatus, WireStatus, pose_reported, usable_pose, wire_status
@@ -49,8 +54,8 @@ MEAS_BASE_S = 2.0
 MEAS_PER_FRAME_S = 0.2
 #: More commands than this waiting (queued or answered but not yet written): the newest are discarded.
 MAX_WAITING = 16
-#: The frame HELLO reports poses in until hand-eye (docs/conventions.md, "Hand-eye").
-CAMERA_FRAME = "camera"
+#: The camera frame (qrfield.handeye.CAMERA): HELLO's frame when poses are reported as measured.
+CAMERA_FRAME = CAMERA
 _RATE = re.compile(r"(?:0|[1-9][0-9]{0,3})(?:\.[0-9]{1,3})?")
 
 
@@ -108,9 +113,11 @@ class CommandHandler:
     """Answers the controller's commands in order (see the module docstring); no I/O of its own.
 
     :meth:`handle` takes each item the link decodes (the link's thread), :meth:`on_result` each frame
-    result (the frame loop's thread), :meth:`poll` runs often (MEAS deadlines). ``handlers`` maps a
-    command's name to its :data:`Handler`: hand-eye (issue 28) puts TOOL and HANDEYE there, and
-    ``frame_listeners`` receives ``(result, simulated)`` for every frame. Thread-safe.
+    result (the frame loop's thread: :meth:`notify` then :meth:`measure`), :meth:`poll` runs often
+    (MEAS deadlines, then each of ``pollers``). ``handlers`` maps a command's name to its
+    :data:`Handler` (hand-eye puts TOOL and HANDEYE there), ``frame_listeners`` receives
+    ``(result, simulated)`` for every frame (in the camera frame: :class:`GripperLink` calls
+    :meth:`notify` before it takes poses into the tool or base frame). Thread-safe.
     """
 
     def __init__(self, link: LinkControl, clock: Callable[[], float] = time.monotonic) -> None:
@@ -129,6 +136,7 @@ class CommandHandler:
         self.handled = 0
         self.last_command = ""
         self.frame_listeners: list[Callable[[Any, bool], None]] = []
+        self.pollers: list[Callable[[], None]] = []
         self.handlers: dict[str, Handler] = {
             "PING": self._ping,
             "HELLO": self._hello,
@@ -164,7 +172,12 @@ class CommandHandler:
         self._advance()
 
     def poll(self) -> None:
-        """Answer a MEAS whose deadline has passed."""
+        """Answer a MEAS whose deadline has passed; then run each of ``pollers`` (other deadlines)."""
+        self._poll_meas()
+        for poller in list(self.pollers):
+            poller()
+
+    def _poll_meas(self) -> None:
         with self._lock:
             meas = self._meas
             if meas is None or self._clock() < meas.deadline:
@@ -281,9 +294,18 @@ class CommandHandler:
 
     # ----- the frame loop's thread
     def on_result(self, result: Any, simulated: bool) -> None:
-        """One frame result (qrfield.pipeline.FrameResult) of a source; ``simulated``: not a live camera."""
+        """One frame result (qrfield.pipeline.FrameResult) of a source; ``simulated``: not a live
+        camera. :meth:`notify` and :meth:`measure` with the same result."""
+        self.notify(result, simulated)
+        self.measure(result, simulated)
+
+    def notify(self, result: Any, simulated: bool) -> None:
+        """Hand one frame result to each of ``frame_listeners``."""
         for listener in list(self.frame_listeners):
             listener(result, simulated)
+
+    def measure(self, result: Any, simulated: bool) -> None:
+        """Feed one frame result (in the frame the poses are reported in) to a running MEAS."""
         done = None
         with self._lock:
             t_ms = getattr(result, "t_ms", None)
@@ -300,7 +322,9 @@ class CommandHandler:
             except ValueError:
                 meas.last_status = WireStatus.NOCONV
             if status == ResultStatus.OK and usable_pose(pose):
-                meas.frames.append(pose)
+                # A pipeline FrameResult itself, so that the mean knows which frames the stream
+                # filter made (their sigma is then the mean's: qrfield.sessions.averaging).
+                meas.frames.append(result if hasattr(result, "poses") else pose)
                 meas.simulated = meas.simulated or simulated
                 meas.ambiguous = meas.ambiguous or bool(getattr(result, "ambiguous", False))
             if len(meas.frames) >= meas.n:
@@ -337,6 +361,17 @@ class CommandHandler:
             return codec.encode_measurement(self._next_seq(), meas.last_t_ms or 0, WireStatus.NOCONV)
 
 
+class _Stream(BaseSink):
+    """The link's part of a frame result in the reported frame: a running MEAS and the $QRF line."""
+
+    def __init__(self, commands: CommandHandler, link: SerialLink) -> None:
+        self.commands, self.link = commands, link
+
+    def on_result(self, result: Any, simulated: bool) -> bool:
+        self.commands.measure(result, simulated)
+        return publish_result(self.link, result, simulated)
+
+
 class GripperLink:
     """A serial link to the gripper controller with its commands; a frame loop's sink.
 
@@ -344,6 +379,10 @@ class GripperLink:
     :class:`~qrfield.serial.port.PortBusyError`); :meth:`on_result`, :meth:`on_source_down` and
     :meth:`on_source_up` are called by the frame loop and never block; ``close()`` stops it.
     ``on_status``, ``opener`` and ``clock`` go to :class:`~qrfield.serial.link.SerialLink`.
+
+    ``pose_frame`` (:class:`~qrfield.handeye.PoseFrame`, default the camera frame): the frame of
+    the ``$QRF`` and ``$QRM`` poses and their sigmas (through :class:`~qrfield.handeye.InFrame`),
+    which HELLO reports; the commands' frame listeners (hand-eye pairs) get the camera's poses.
     """
 
     def __init__(
@@ -353,6 +392,7 @@ class GripperLink:
         on_status: Callable[[LinkStatus], None] | None = None,
         opener: Any = None,
         clock: Callable[[], float] = time.monotonic,
+        pose_frame: PoseFrame | None = None,
     ) -> None:
         self.link = SerialLink(
             settings,
@@ -363,6 +403,9 @@ class GripperLink:
             clock=clock,
         )
         self.commands = CommandHandler(self.link, clock)
+        self._stream = InFrame(_Stream(self.commands, self.link), pose_frame or PoseFrame())
+        self.commands.context.frame = self._stream.pose_frame.frame
+        self.handeye: Any = None  # qrfield.serial.handeye.HandEyeCommands, once add_handeye is called
 
     def _receive(self, item: Any) -> None:
         self.commands.handle(item)
@@ -375,16 +418,48 @@ class GripperLink:
         return self.link.settings
 
     def set_context(
-        self, *, side_mm: float | None = None, camera: str = "", frame: str = CAMERA_FRAME
+        self, *, side_mm: float | None = None, camera: str = "", frame: str | None = None
     ) -> None:
-        """What HELLO reports: QR side (mm), camera model name, the frame of the poses."""
-        self.commands.context = Context(side_mm, camera, frame)
+        """What HELLO reports: QR side (mm), camera model name (the frame is the pose frame's, see
+        :meth:`set_pose_frame`; ``frame`` is accepted for compatibility and must be that one)."""
+        own = self._stream.pose_frame.frame
+        if frame is not None and frame != own:
+            raise ValueError(f"frame {frame!r}: the link reports poses in the {own} frame (set_pose_frame)")
+        self.commands.context = Context(side_mm, camera, own)
+
+    @property
+    def pose_frame(self) -> PoseFrame:
+        """The frame of the $QRF and $QRM poses."""
+        return self._stream.pose_frame
+
+    def set_pose_frame(self, pose_frame: PoseFrame) -> None:
+        """Report the poses of the frames from now on in ``pose_frame`` (any thread); HELLO says its
+        frame. A $QRF line already waiting for the port keeps the frame it was made in."""
+        self._stream.pose_frame = pose_frame
+        self.commands.context = dataclasses.replace(self.commands.context, frame=pose_frame.frame)
+
+    def add_handeye(self, handeye: Any) -> Any:
+        """Answer TOOL and HANDEYE with ``handeye`` (:class:`qrfield.serial.handeye.HandEyeCommands`);
+        a calibration it makes for the set-up of this link's pose frame replaces that frame's
+        calibration at once (docs/serial.md). Returns ``handeye``."""
+        handeye.attach(self.commands)
+        handeye.calibrated.append(self._calibrated)
+        self.handeye = handeye
+        return handeye
+
+    def _calibrated(self, done: Any) -> None:
+        calibration = done.calibration
+        if self.pose_frame.frame == calibration.target_frame:
+            self.set_pose_frame(PoseFrame(calibration.target_frame, calibration))
 
     def start(self, *, open_first: bool = False) -> GripperLink:
         self.link.start(open_first=open_first)
         return self
 
     def close(self, timeout: float = 2.0) -> None:
+        """Stop: a hand-eye solve under way is waited for (its answer goes out), then the link closes."""
+        if self.handeye is not None:
+            self.handeye.close(timeout)
         self.link.close(timeout)
 
     def status(self) -> LinkStatus:
@@ -397,10 +472,10 @@ class GripperLink:
 
     # ----- the frame loop's sink
     def on_result(self, result: Any, simulated: bool) -> bool:
-        """Publish one frame result (see :func:`~qrfield.serial.link.publish_result`) and feed a
-        running MEAS."""
-        self.commands.on_result(result, simulated)
-        return publish_result(self.link, result, simulated)
+        """Hand one frame result (camera frame) to the commands' frame listeners, then, in the pose
+        frame, feed a running MEAS and publish it (see :func:`~qrfield.serial.link.publish_result`)."""
+        self.commands.notify(result, simulated)
+        return bool(self._stream.on_result(result, simulated))
 
     def on_source_down(self, reason: str = "") -> None:
         self.link.set_source_down(True)

@@ -14,7 +14,16 @@ Angles are averaged one by one (not as rotations): fine for the small spreads of
 Two kinds of spread, kept apart: ``std_*`` is the frame-to-frame sample standard deviation (what
 the frames did); ``sigma_*`` is the mean of the frames' own uncertainty (what each frame's image
 evidence allowed, docs/conventions.md "Pose uncertainty"), over the converged frames that have one.
-``sem_*`` is the standard uncertainty of the mean (a MEAS answer's sigmas; see :func:`_sem`).
+The mean's standard uncertainty ``sem_*`` (what a row or a ``MEAS`` answer reports as its sigma):
+frames of a still card share most of their error (the corner fit's error is fixed by the view, not
+drawn afresh each frame), so it is not the spread / sqrt(n). With rho the share of a frame's
+variance that the frames share (``qrfield.solvers.uncertainty.FRAME_SHARED_SHARE``, measured on
+still cards: docs/uncertainty.md) and sigma the frames' RMS own uncertainty,
+sem^2 = rho sigma^2 + max(s^2, (1 - rho) sigma^2) / n (s the frames' sample std; the frames' own
+part is never taken as smaller than the share sigma gives it). Frames that are the stream filter's
+output (``filtered``) have already averaged their own part, and their sigma holds the shared part:
+then sem = their RMS sigma. Without a per-frame sigma: sem^2 = s^2 (rho / (1 - rho) + 1 / n)
+(the spread is the frames' own part), and sigma alone for one frame.
 Errors: err_pos = |mean position - truth| (Euclidean, mm); err_alpha/beta/gamma = mean minus
 truth, wrapped to (-180, 180] (signed, degrees).
 """
@@ -31,6 +40,7 @@ import numpy as np
 from qrfield.geometry import angle_difference, wrap_degrees
 from qrfield.sessions.criteria import AcceptanceCriteria, pose_errors
 from qrfield.sessions.groundtruth import GroundTruth
+from qrfield.solvers.uncertainty import FRAME_SHARED_SHARE
 
 
 def _get(frame: Any, key: str, default: Any = None) -> Any:
@@ -66,6 +76,13 @@ class AveragedPose:
     sigma_angles_deg: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
     sem_position_mm: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
     sem_angles_deg: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    n_filtered: int = 0
+    n_resolved_by_history: int = 0
+
+    @property
+    def filtered(self) -> bool:
+        """Some averaged frame was the stream filter's output (``--filter-s`` was on)."""
+        return self.n_filtered > 0
 
     @property
     def has_pose(self) -> bool:
@@ -84,8 +101,50 @@ def method_result(frame: Any, method: str = "") -> Any:
     return frame
 
 
+def stream_mark(frame: Any, method: str = "") -> tuple[bool, bool]:
+    """(filtered, resolved by history) of a frame's result of ``method`` (its first method when
+    empty): from a pipeline FrameResult's ``stream`` marks, or a dict's "filtered" and
+    "resolved_by" keys; (False, False) for anything else."""
+    if isinstance(frame, Mapping):
+        return bool(frame.get("filtered", False)), frame.get("resolved_by") == "history"
+    marks = getattr(frame, "stream", None)
+    poses = getattr(frame, "poses", None)
+    if not isinstance(marks, Mapping) or not isinstance(poses, Mapping):
+        return False, False
+    mark = marks.get(method or next(iter(poses), ""))
+    if mark is None:
+        return False, False
+    return bool(getattr(mark, "filtered", False)), getattr(mark, "resolved_by", "") == "history"
+
+
+def mean_uncertainty(
+    sigma: np.ndarray,
+    spread: np.ndarray,
+    n: int,
+    filtered: bool,
+    shared: Sequence[float] = FRAME_SHARED_SHARE,
+) -> np.ndarray:
+    """(6,) the standard uncertainty of the mean of ``n`` frames (x, y, z mm; alpha, beta, gamma
+    deg) from the frames' RMS own uncertainty ``sigma`` (6,) (NaN where unknown), their sample std
+    ``spread`` (6,) (NaN below two frames) and whether they were filtered; ``shared`` (6,) the
+    share of a frame's variance the frames share (the rule of the module doc)."""
+    rho = np.asarray(shared, dtype=float)
+    sigma = np.asarray(sigma, dtype=float)
+    spread = np.asarray(spread, dtype=float)
+    if n < 1:
+        return np.full(6, np.nan)
+    with np.errstate(invalid="ignore"):
+        own = np.where(
+            np.isfinite(spread), np.fmax(spread**2, (1.0 - rho) * sigma**2), (1.0 - rho) * sigma**2
+        )
+        with_sigma = np.sqrt(sigma**2 if filtered else rho * sigma**2 + own / n)
+        without = np.sqrt(spread**2 * (rho / (1.0 - rho) + 1.0 / n))
+    return np.where(np.isfinite(sigma), with_sigma, without)
+
+
 def average_frames(frames: Iterable[Any], method: str = "") -> AveragedPose:
-    """Means and standard deviations of the converged frames (see the module doc).
+    """Means, standard deviations and the mean's standard uncertainty of the converged frames (see
+    the module doc).
 
     ``method`` picks the solver's result out of pipeline frames (see :func:`method_result`).
     """
@@ -94,7 +153,7 @@ def average_frames(frames: Iterable[Any], method: str = "") -> AveragedPose:
     iterations: list[float] = []
     reprojections: list[float] = []
     sigmas: list[np.ndarray] = []
-    n_frames = 0
+    n_frames = n_filtered = n_history = 0
     for index, item in enumerate(frames):
         n_frames += 1
         frame = method_result(item, method)
@@ -118,6 +177,9 @@ def average_frames(frames: Iterable[Any], method: str = "") -> AveragedPose:
         if rp is not None and math.isfinite(float(rp)):
             reprojections.append(float(rp))
         sigmas.append(_frame_sigma(frame, index))
+        filtered, by_history = stream_mark(item, method)
+        n_filtered += filtered
+        n_history += by_history
     n = len(positions)
     nan3 = np.full(3, np.nan)
     if n == 0:
@@ -136,7 +198,10 @@ def average_frames(frames: Iterable[Any], method: str = "") -> AveragedPose:
     known = np.isfinite(sigma)
     with np.errstate(invalid="ignore", divide="ignore"):
         mean_sigma = np.where(known.any(axis=0), np.nansum(sigma, axis=0) / known.sum(axis=0), np.nan)
-    sem = _sem(np.concatenate([std_pos, std_ang]), sigma, n)
+        rms_sigma = np.where(
+            known.any(axis=0), np.sqrt(np.nansum(sigma**2, axis=0) / known.sum(axis=0)), np.nan
+        )
+    sem = mean_uncertainty(rms_sigma, np.concatenate([std_pos, std_ang]), n, n_filtered > 0)
     return AveragedPose(
         n_frames=n_frames,
         n_converged=n,
@@ -150,35 +215,9 @@ def average_frames(frames: Iterable[Any], method: str = "") -> AveragedPose:
         sigma_angles_deg=mean_sigma[3:],
         sem_position_mm=sem[:3],
         sem_angles_deg=sem[3:],
+        n_filtered=n_filtered,
+        n_resolved_by_history=n_history,
     )
-
-
-#: Frames of a still card share most of their error (the same corners' bias, the same lens), so
-#: their own sigmas average down as if there were at most this many independent frames.
-SEM_EFFECTIVE_FRAMES = 2
-
-
-def _sem(spread: np.ndarray, sigmas: np.ndarray, n: int) -> np.ndarray:
-    """(6,) standard uncertainty of the mean of x, y, z (mm), alpha, beta, gamma (deg): the larger of
-    spread / sqrt(n) and the frames' median sigma / sqrt(min(n, SEM_EFFECTIVE_FRAMES)); NaN where
-    neither is known.
-
-    A conservative stand-in until it is calibrated on still cards (issue 25 owns that): frames of a
-    still card share their error, so the spread / sqrt(n) alone claims far too much (docs/conventions.md,
-    MEAS: over many MEAS, (mean - truth) / s should have an RMS near 1).
-    """
-    with np.errstate(invalid="ignore"):
-        by_spread = spread / math.sqrt(n) if n >= 2 else np.full(6, np.nan)
-        known = np.isfinite(sigmas).any(axis=0)
-        median = np.full(6, np.nan)
-        if known.any():
-            median[known] = np.nanmedian(sigmas[:, known], axis=0)
-        by_frames = median / math.sqrt(min(n, SEM_EFFECTIVE_FRAMES))
-        both = np.vstack([by_spread, by_frames])
-        out = np.full(6, np.nan)
-        some = np.isfinite(both).any(axis=0)
-        out[some] = np.nanmax(both[:, some], axis=0)
-    return out
 
 
 def _frame_sigma(frame: Any, index: int) -> np.ndarray:

@@ -97,8 +97,13 @@ REQUIRED_COLUMNS = (
 #: Our extra columns: ``std_*`` the frame-to-frame sample standard deviations over the converged
 #: frames (mm, deg: how much the frames scattered), mean solver iterations, mean RMS reprojection
 #: error (px), the solver method, ``withdraws`` (set only on withdrawal records: the number of the
-#: row they withdraw), and ``sigma_*`` the mean per-frame uncertainty (mm, deg: each frame's
-#: propagated std from its corners, docs/conventions.md "Pose uncertainty"; empty when unknown).
+#: row they withdraw), ``sigma_*`` the mean per-frame uncertainty (mm, deg: each frame's
+#: propagated std from its corners, docs/conventions.md "Pose uncertainty"; empty when unknown),
+#: ``sem_*`` the standard uncertainty of the row's mean (mm, deg: calibrated on still cards, whose
+#: frames share most of their error: qrfield.sessions.averaging, docs/uncertainty.md), ``filtered``
+#: 1 when the row's frames were the stream filter's (``--filter-s`` on), else 0, and
+#: ``resolved_by_history`` the number of its frames whose flip the stream's history resolved
+#: (docs/conventions.md, "The live stream").
 EXTRA_COLUMNS = (
     "std_x",
     "std_y",
@@ -116,6 +121,14 @@ EXTRA_COLUMNS = (
     "sigma_alpha",
     "sigma_beta",
     "sigma_gamma",
+    "sem_x",
+    "sem_y",
+    "sem_z",
+    "sem_alpha",
+    "sem_beta",
+    "sem_gamma",
+    "filtered",
+    "resolved_by_history",
 )
 COLUMNS = REQUIRED_COLUMNS + EXTRA_COLUMNS
 SESSION_FILE = "session.json"
@@ -329,15 +342,19 @@ def measurement_values(measurement: Measurement, number: int, time_text: str) ->
         "reprojection_px": _fmt(a.mean_reprojection_px),
         "method": _one_line(measurement.method),
         "withdraws": "",
+        "filtered": "1" if a.filtered else "0",
+        "resolved_by_history": str(a.n_resolved_by_history),
     }
     for k, axis in enumerate("xyz"):
         values[axis] = _fmt(a.position_mm[k])
         values[f"std_{axis}"] = _fmt(a.std_position_mm[k])
         values[f"sigma_{axis}"] = _fmt(a.sigma_position_mm[k])
+        values[f"sem_{axis}"] = _fmt(a.sem_position_mm[k])
     for k, angle in enumerate(("alpha", "beta", "gamma")):
         values[angle] = _fmt(a.angles_deg[k])
         values[f"std_{angle}"] = _fmt(a.std_angles_deg[k])
         values[f"sigma_{angle}"] = _fmt(a.sigma_angles_deg[k])
+        values[f"sem_{angle}"] = _fmt(a.sem_angles_deg[k])
         values[f"err_{angle}"] = _fmt(j.err_angles_deg[k])
     return values
 

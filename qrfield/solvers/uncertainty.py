@@ -53,6 +53,12 @@ FLIP_DELTA_CHI2 = 9.0
 #: Without a corner covariance the test falls back on the ratio of the two candidates' RMS
 #: reprojection errors (``PoseResult.ambiguity``): at or above this the mirror counts as fitting.
 AMBIGUITY_FALLBACK = 0.5
+#: The share of a frame's pose variance (x, y, z, alpha, beta, gamma) that the frames of a still
+#: card share: the corner fit's error is mostly fixed by the view (the card's pixels, its blur, its
+#: lighting), not drawn afresh each frame, so averaging N frames leaves this share of each frame's
+#: variance. Measured on rendered still cards with fresh sensor noise per frame (``qrfield benchmark
+#: stream``, section 1; docs/uncertainty.md, "Frames of a still card share their error").
+FRAME_SHARED_SHARE = (0.67, 0.68, 0.68, 0.57, 0.61, 0.52)
 #: Relative asymmetry tolerated in a 2x2 corner covariance block.
 SYMMETRY_RTOL = 1e-6
 

@@ -20,6 +20,7 @@ from qrfield.sources.kinds import (
     SOURCE_HELP,
     SOURCE_KINDS,
     is_live_camera,
+    may_be_live_camera,
     source_kind,
 )
 from qrfield.sources.latest import LatestFrameReader
@@ -54,6 +55,7 @@ __all__ = [
     "VirtualBenchSource",
     "is_live_camera",
     "make_source",
+    "may_be_live_camera",
     "open_source",
     "source_kind",
     "stream_camera",

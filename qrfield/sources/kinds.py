@@ -41,6 +41,12 @@ def source_kind(spec: str) -> str:
     return "folder" if Path(spec).expanduser().is_dir() else "video"
 
 
+def may_be_live_camera(spec: str) -> bool:
+    """A ``--source`` value that may open a live camera: picamera2, usb:N, or auto (it tries them
+    first). Checked before a source is opened (a calibration made from simulated frames is refused)."""
+    return source_kind(spec) in ("auto", *LIVE_CAMERA_KINDS)
+
+
 def is_live_camera(source: Any) -> bool:
     """True when ``source`` (an opened FrameSource) is a camera looking at the world now: a live
     picamera2 or USB camera that is not a stand-in (a ``simulated`` attribute set true)."""

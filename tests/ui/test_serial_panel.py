@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from PySide6 import QtCore
+from PySide6 import QtCore, QtWidgets
 from serial_truth import command_line, frames_and_answers, parse_frame_line, split_lines
 
 from qrfield.geometry import Pose, angle_difference
@@ -260,3 +260,136 @@ def test_panel_screenshot(make_window, qtbot, tmp_path: Path) -> None:
     if out:
         window.grab().save(str(Path(out) / "serial_window.png"))
         panel.grab().save(str(Path(out) / "serial_panel.png"))
+
+
+def choose(qtbot, panel: SerialPanel, name: str, value: str) -> None:
+    """Pick ``value`` in the hand-eye form's chooser ``name`` (as a click on the list would)."""
+    box = panel.handeye_form.widgets[name]
+    box.setCurrentIndex(box.findText(value))
+    assert box.currentText() == value
+
+
+def test_the_serial_tab_records_pairs_and_shows_the_calibration_made_over_the_link(
+    make_window, qtbot, tmp_path: Path
+) -> None:
+    # The controller moves a simulated robot (the app's virtual bench follows it), sends TOOL at
+    # each pose and then HANDEYE: the tab lists the pairs and shows the result; the transform found
+    # is the robot's, composed by hand here.
+    import json
+
+    from qrfield.handeye import SimulatedRobot
+    from qrfield.handeye.rigid import difference, transform_from_pose
+    from qrfield.serial.robot_demo import tool_arguments
+
+    window = make_window({"source": "virtual", "method": "numerical"})
+    panel = window.serial_panel
+    assert "stay in the camera frame" in panel.findChild(QtWidgets.QLabel, "frame_note").text()
+    choose(qtbot, panel, "handeye_setup", "eye-in-hand")
+    robot = SimulatedRobot(
+        "eye-in-hand",
+        transform_from_pose([60.0, -15.0, 40.0], [2.0, -3.0, 90.0]),
+        transform_from_pose([450.0, 30.0, 0.0], [180.0, 0.0, 0.0]),
+    )
+    camera = window._run_config().camera  # the model the bench renders with
+    tools = robot.viewing_tool_poses(camera, 50.0, 7, seed=2)
+    pty = Pty(tmp_path / "ttyQRF")
+    try:
+        type_port(qtbot, panel, str(pty.path))
+        click(qtbot, panel.connect_button)
+        assert not panel.handeye_form.isEnabled()  # applied at Connect, like the link's settings
+        qtbot.waitUntil(lambda: len(pty.frames()) >= 3, timeout=WAIT_MS)
+        for k, tool in enumerate(tools):
+            window.virtual_form.set_value(window.virtual_form.value().with_pose(robot.code_pose(tool)))
+            pose = window.virtual_form.value().pose  # as the form's widgets round it (0.1 mm, 0.01 deg)
+            window.virtual_form.changed.emit(window.virtual_form.value())
+            qtbot.waitUntil(  # the bench shows the robot's new pose
+                lambda p=pose: (
+                    window.last is not None
+                    and window.last.result.truth is not None
+                    and np.allclose(window.last.result.truth.position_mm, p.position_mm)
+                ),
+                timeout=WAIT_MS,
+            )
+            os.write(pty.master, command_line("TOOL", *tool_arguments(tool)))
+            qtbot.waitUntil(lambda n=k + 1: len(frames_and_answers(pty.drain())[1]) >= n, timeout=WAIT_MS)
+        answers = frames_and_answers(pty.drain())[1]
+        ok = [a for a in answers if a["result"] == "OK"]
+        assert len(ok) >= 5 and all(a["values"][-1] == "SIM" for a in ok), answers
+        qtbot.waitUntil(lambda: panel.pairs_list.count() == len(ok), timeout=WAIT_MS)
+        assert panel.pairs_label.text().startswith(f"pairs recorded: {len(ok)} from a simulated source")
+        os.write(pty.master, command_line("HANDEYE"))
+        qtbot.waitUntil(lambda: len(frames_and_answers(pty.drain())[1]) > len(tools), timeout=WAIT_MS)
+        handeye = frames_and_answers(pty.drain())[1][-1]
+        assert (handeye["command"], handeye["result"]) == ("HANDEYE", "OK"), handeye
+        saved_path = tmp_path / "config" / "handeye-simulated.json"  # beside the app's settings
+        qtbot.waitUntil(lambda: "last calibration" in panel.handeye_result.text(), timeout=WAIT_MS)
+        text = panel.handeye_result.text()
+        assert f"eye-in-hand from simulated frames from {len(ok)} pairs" in text
+        assert f"residuals {handeye['values'][0]} mm, {handeye['values'][1]} deg" in text
+        assert str(saved_path) in text and panel.pairs_list.count() == 0  # a new set begins
+        saved = json.loads(saved_path.read_text())
+        err = difference(np.array(saved["camera_to_tool"]), robot.transform)
+        assert np.linalg.norm(err[:3]) < 2.0 and np.degrees(np.linalg.norm(err[3:])) < 0.3
+        # Clear pairs: the next TOOL starts again at 1.
+        os.write(pty.master, command_line("TOOL", *tool_arguments(tools[-1])))
+        qtbot.waitUntil(lambda: panel.pairs_list.count() == 1, timeout=WAIT_MS)
+        click(qtbot, panel.clear_pairs_button)
+        assert panel.pairs_list.count() == 0 and panel.pairs_label.text().startswith("pairs recorded: 0")
+    finally:
+        pty.vanish()
+
+
+def test_the_link_reports_poses_in_the_tool_frame_chosen_in_the_serial_tab(
+    make_window, qtbot, tmp_path: Path
+) -> None:
+    from qrfield.geometry import angles_from_rotation, rotation_matrix
+    from qrfield.handeye import HandEyeCalibration
+    from qrfield.handeye.rigid import transform_from_pose
+
+    x = transform_from_pose([60.0, -15.0, 40.0], [2.0, -3.0, 90.0])
+    (tmp_path / "config").mkdir(exist_ok=True)
+    HandEyeCalibration("eye-in-hand", x, 0.1, 0.02, 15, "test").save(tmp_path / "config" / "handeye.json")
+    window = make_window({"source": "virtual", "method": "numerical"})
+    panel = window.serial_panel
+    truth = window.virtual_form.value().pose
+    choose(qtbot, panel, "frame", "tool")
+    pty = Pty(tmp_path / "ttyQRF")
+    try:
+        type_port(qtbot, panel, str(pty.path))
+        click(qtbot, panel.connect_button)
+        assert "poses in the tool frame through the eye-in-hand calibration" in panel.note.text()
+        qtbot.waitUntil(lambda: sum(f["status"] == "SIM" for f in pty.frames()) >= 3, timeout=WAIT_MS)
+        os.write(pty.master, command_line("HELLO"))
+        qtbot.waitUntil(lambda: len(frames_and_answers(pty.drain())[1]) >= 1, timeout=WAIT_MS)
+        frames, answers = frames_and_answers(pty.drain())
+        assert answers[0]["values"][-1] == "tool"
+        p = x[:3, :3] @ truth.position_mm + x[:3, 3]  # by hand: the bench's pose through X
+        a = angles_from_rotation(x[:3, :3] @ rotation_matrix(truth.angles_deg))
+        sim = [f for f in frames if f["status"] == "SIM"]
+        assert all(meets_seed_criteria(f["pose"], Pose(p, a)) for f in sim), sim[:2]
+        # The app itself stays in the camera frame.
+        assert np.allclose(window.last.result.truth.position_mm, truth.position_mm)
+    finally:
+        pty.vanish()
+    click(qtbot, panel.connect_button)  # Disconnect: the form is editable again
+    assert panel.handeye_form.isEnabled()
+
+
+def test_the_hand_eye_settings_persist_and_a_bad_file_refuses_the_connect(qtbot, tmp_path: Path) -> None:
+    store_dir = tmp_path / "config"
+    window = MainWindow(ConfigStore(store_dir), {"source": "virtual"})
+    qtbot.addWidget(window)
+    panel = window.serial_panel
+    choose(qtbot, panel, "frame", "base")
+    type_port(qtbot, panel, "loop://")
+    click(qtbot, panel.connect_button)  # no hand-eye file in the config folder
+    assert (
+        not panel.connected and "cannot connect" in panel.note.text() and "handeye.json" in panel.note.text()
+    )
+    window.shutdown()
+    again = MainWindow(ConfigStore(store_dir), {"source": "virtual"})
+    qtbot.addWidget(again)
+    try:
+        assert again.serial_panel.handeye_settings().frame == "base"
+    finally:
+        again.shutdown()

@@ -338,3 +338,34 @@ def test_a_row_on_a_wobbling_bench_compares_with_its_mean_true_pose(session_wind
     # degrees; the row passes only if it is compared with where the card was while measured.
     assert row["pass"] == "1", {k: row[k] for k in DESIGN_COLUMNS}
     assert 15.0 - 20.0 <= float(row["gt_alpha"]) <= 15.0 + 20.0 and float(row["gt_gamma"]) == 10.0
+
+
+def test_a_session_in_the_tool_frame_is_not_resumed_by_the_app(session_window, tmp_path: Path) -> None:
+    # The app measures in the camera frame: rows it logged into a tool-frame session would be
+    # mislabelled, so it says how such a session is logged instead.
+    from qrfield.camera import resolve_camera
+    from qrfield.handeye import HandEyeCalibration
+    from qrfield.handeye.rigid import transform_from_pose
+    from qrfield.sessions import Session
+
+    calibration = HandEyeCalibration(
+        "eye-in-hand", transform_from_pose([60, -15, 40], [2, -3, 90]), 0.1, 0.02, 15, "t"
+    )
+    made = Session.create(
+        tmp_path / "sessions",
+        "gripper",
+        camera=resolve_camera("picam-v2@640x480"),
+        side_mm=50.0,
+        solver="numerical",
+        pose_frame="tool",
+        handeye=calibration.to_dict(),
+    )
+    path = made.path
+    made.close()
+    window = session_window()
+    panel = window.session_panel
+    assert panel.open_session(path) is None and panel.session is None
+    assert (
+        "rows are in the tool frame" in panel.status.text() and "qrfield session log" in panel.status.text()
+    )
+    assert (path / "rows.csv").read_text().count("\n") == 1  # untouched: the header only

@@ -1,0 +1,314 @@
+"""Branch continuity: an ambiguous frame takes the branch of the planar ambiguity its history points to.
+
+docs/conventions.md, "The live stream". A frame is ambiguous when the mirror pose explains its
+corners about as well as the answer (``PoseResult.ambiguous``: the chi-square of the mirror's branch
+exceeds the answer's by less than ``FLIP_DELTA_CHI2``, docs/uncertainty.md). A stream has more
+evidence than the frame: the pose it measured a moment ago. Per method, :class:`BranchHistory`
+keeps the last resolved pose (unambiguous, or resolved by history) and decides an ambiguous frame:
+
+1. the history must be usable: at most HISTORY_S (0.5 s) old, of the same code (text) and the same
+   card in view (the tracker's corners: the code's centre moved less than MAX_SHIFT_SIDES code sides
+   plus MAX_SHIFT_SIDES_PER_S per second, its size changed by less than MAX_SIZE_RATIO);
+2. the history's rotation is moved on to the frame's time (at the turn rate between its last two
+   resolved poses when it has two, else held) and each branch is compared with it by the rotation
+   between them, as a chi-square m = w^T (C_branch + C_history)^-1 w of the small rotation w (rad)
+   from the prediction to the branch (each pose's covariance scaled to its own part, OWN_SHARE:
+   the error neighbouring frames of a card share cancels between them; C_history also holds the
+   motion it allows: a change of turn rate of TURN_ACCEL_DEG_S2, or a turn of TURN_RATE_DEG_S
+   without a rate);
+3. the frame's own evidence (mirror_chi2 - chi2) and the history's (m_mirror - m_answer) add up,
+   as two independent log-likelihood ratios; the frame is resolved when the sum reaches
+   FLIP_DELTA_CHI2 for one branch (the bar a single frame must clear to be unambiguous) and that
+   branch is consistent with the history (m below CONSISTENT_CHI2); or when the two branches are
+   one pose within their uncertainty (m between them below SAME_POSE_CHI2, or no distinct mirror
+   candidate at all) and the history agrees with it;
+4. otherwise the frame stays ambiguous (AMBIG on a live camera) and the history is kept as it was.
+
+An unambiguous frame resets the history to itself; so does a resolved one. A frame without a pose
+leaves the history to age. What the history chose is the mirror's own full result
+(:func:`qrfield.solvers.mirror.mirror_result`: its pose, std and reprojection), never the answer's
+numbers under the mirror's name.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from qrfield.geometry import rotation_from_vector, rotation_vector
+from qrfield.solvers.result import PoseResult
+from qrfield.solvers.uncertainty import FLIP_DELTA_CHI2, FRAME_SHARED_SHARE
+from qrfield.status import usable_pose
+from qrfield.stream.poses import vector_cov
+
+#: The history decides a frame only when it is at most this old (docs/conventions.md), s.
+HISTORY_S = 0.5
+#: How fast a card may turn between the history and the frame, 1 sigma per axis, degrees per
+#: second, when the history has one resolved pose (a hand turning a card); and how fast its turn
+#: rate may change when it has two (a turn rate is then known). Tuned on the stream benchmark's
+#: tuning seeds 1 and 2 (``qrfield benchmark stream --seeds 1,2``; docs/uncertainty.md).
+TURN_RATE_DEG_S = 90.0
+TURN_ACCEL_DEG_S2 = 150.0
+#: The part of a frame's rotation variance that is its own: frames of one card share the rest
+#: (``FRAME_SHARED_SHARE``, the angles' mean), and a branch and the history's prediction from
+#: neighbouring frames share it too, so it cancels between them.
+OWN_SHARE = 1.0 - float(np.mean(FRAME_SHARED_SHARE[3:]))
+#: The chosen branch must be consistent with the history: m below the 0.999 quantile of
+#: chi-square with 3 degrees of freedom.
+CONSISTENT_CHI2 = 16.27
+#: Two branches closer than this (chi-square of the rotation between them, under their
+#: covariance) are one pose: whichever is reported, it moves by less than its own std.
+SAME_POSE_CHI2 = 1.0
+#: The same card: its centre moved by at most MAX_SHIFT_SIDES + MAX_SHIFT_SIDES_PER_S * dt code
+#: sides (mean side of V1..V4 in px) since the history's frame, and its size changed by less than
+#: the ratio MAX_SIZE_RATIO.
+MAX_SHIFT_SIDES = 0.5
+MAX_SHIFT_SIDES_PER_S = 10.0
+MAX_SIZE_RATIO = 1.5
+
+#: How a reported pose was decided (``resolved_by``, docs/conventions.md).
+BY_FRAME, BY_HISTORY = "frame", "history"
+
+
+@dataclass(frozen=True)
+class Decision:
+    """What continuity made of one frame's pose for one method.
+
+    Attributes:
+        pose: the pose to report (the answer, or the mirror's full result), ``ambiguous`` set to
+            whether the flip is still unresolved after the history.
+        resolved_by: BY_FRAME (the frame alone decided, or nothing was decided) or BY_HISTORY.
+        ambiguous: the flip is unresolved after the history (= ``pose.ambiguous``).
+        flipped: the history chose the mirror branch.
+    """
+
+    pose: PoseResult
+    resolved_by: str
+    ambiguous: bool
+    flipped: bool = False
+
+
+@dataclass(frozen=True)
+class _Record:
+    """A resolved pose of the history: rotation (3, 3), its rotation covariance (3, 3) rad^2 (None
+    when unknown), capture time (ms), code text, code centre (px) and size (mean side, px)."""
+
+    rotation: np.ndarray
+    rotation_cov: np.ndarray | None
+    t_ms: int
+    text: str | None
+    centre_px: np.ndarray
+    side_px: float
+
+
+def _outline(corners_px: np.ndarray) -> tuple[np.ndarray, float]:
+    """The centre (2,) and mean side (px) of corners V1..V4 (4, 2)."""
+    corners = np.asarray(corners_px, dtype=float).reshape(4, 2)
+    sides = np.linalg.norm(np.roll(corners, -1, axis=0) - corners, axis=1)
+    return corners.mean(axis=0), float(sides.mean())
+
+
+def _rotation_cov(pose: PoseResult) -> np.ndarray | None:
+    cov = vector_cov(pose)
+    return None if cov is None else cov[3:, 3:]
+
+
+def rotation_chi2(rotation: np.ndarray, reference: np.ndarray, cov: np.ndarray) -> float:
+    """w^T cov^-1 w for the small rotation w (rad, camera frame) that turns ``reference`` into
+    ``rotation`` (R = exp([w]x) R_reference; both (3, 3)); ``cov`` (3, 3) rad^2. inf for a
+    singular ``cov``."""
+    w = rotation_vector(np.asarray(rotation, dtype=float) @ np.asarray(reference, dtype=float).T)
+    try:
+        return float(w @ np.linalg.solve(cov, w))
+    except np.linalg.LinAlgError:
+        return math.inf
+
+
+def widened(pose: PoseResult, other_rotation: np.ndarray) -> PoseResult:
+    """``pose`` (a branch of an ambiguous frame) with its covariance widened along the rotation that
+    leads to the other branch (``other_rotation``, (3, 3)): the corners' chi-square rises by only
+    d = |mirror_chi2 - chi2| over that turn of D radians, so along it the pose is known to about
+    D / sqrt(max(d, 1)), whatever the linearised covariance says (docs/uncertainty.md: the std of
+    an ambiguous pose does not describe its error). The variance along that direction is raised to
+    that, the rest of ``pose_cov`` kept; the std fields follow."""
+    from qrfield.solvers.uncertainty import pose_std
+    from qrfield.stream.poses import angles_cov
+
+    cov = vector_cov(pose)
+    if cov is None:
+        return pose
+    turn = rotation_vector(np.asarray(other_rotation, dtype=float) @ np.asarray(pose.rotation, dtype=float).T)
+    angle = float(np.linalg.norm(turn))
+    if angle < 1e-12:
+        return pose
+    axis = turn / angle
+    rise = abs(float(pose.mirror_chi2) - float(pose.chi2))
+    wanted = angle * angle / max(rise if math.isfinite(rise) else 1.0, 1.0)
+    have = float(axis @ cov[3:, 3:] @ axis)
+    if have >= wanted:
+        return pose
+    cov[3:, 3:] += (wanted - have) * np.outer(axis, axis)
+    pose_cov = angles_cov(cov, pose.angles_deg)
+    position_std, angles_std = pose_std(pose_cov)
+    return replace(pose, pose_cov=pose_cov, position_std_mm=position_std, angles_std_deg=angles_std)
+
+
+class BranchHistory:
+    """The last resolved pose of one method in one stream, and the rule of the module doc.
+
+    ``enabled`` False: every frame is decided by itself (single-frame solving), the history unused.
+    """
+
+    def __init__(self, enabled: bool = True) -> None:
+        self.enabled = enabled
+        self._last: _Record | None = None
+        self._before: _Record | None = None  # the resolved pose before the last (for the turn rate)
+        self._other: PoseResult | None = None  # the mirror of the frame being decided
+
+    def reset(self) -> None:
+        """Forget the history (a new source, a new stream)."""
+        self._last = self._before = None
+
+    def decide(
+        self,
+        pose: PoseResult,
+        t_ms: int,
+        text: str | None,
+        mirror: Callable[[PoseResult], PoseResult | None],
+        reflected: Callable[[PoseResult], np.ndarray | None] | None = None,
+    ) -> Decision:
+        """Decide one frame's pose (see the module doc).
+
+        Args:
+            pose: the frame's solver result for this method (its ``ambiguous`` is the frame's).
+            t_ms: the frame's capture time, ms since the stream started.
+            text: the code's text (None when not read).
+            mirror: makes the mirror's full result from ``pose`` (None when it has no converged
+                mirror candidate); called only for an ambiguous frame with a usable history.
+            reflected: the rotation (3, 3) of the reflected plane the mirror search starts from,
+                for a pose without a distinct mirror candidate (None: unknown).
+        """
+        if not usable_pose(pose):
+            return Decision(pose, BY_FRAME, bool(pose.ambiguous))
+        if not pose.ambiguous:
+            if self.enabled:
+                self._remember(pose, t_ms, text)
+            return Decision(pose, BY_FRAME, False)
+        last = self._usable(pose, t_ms, text) if self.enabled else None
+        if last is None:
+            return Decision(pose, BY_FRAME, True)
+        chosen, flipped = self._choose(pose, last, mirror, reflected)
+        if chosen is None:
+            return Decision(pose, BY_FRAME, True)
+        # The history predicts from the branch's linearised covariance (what the frames before an
+        # ambiguous run had); the pose reported carries the covariance widened towards the other branch.
+        self._remember(chosen, t_ms, text)
+        other = pose if flipped else self._other
+        if other is not None:
+            chosen = widened(chosen, other.rotation)
+        elif reflected is not None and (plane := reflected(chosen)) is not None:
+            chosen = widened(chosen, plane)
+        return Decision(replace(chosen, ambiguous=False), BY_HISTORY, False, flipped)
+
+    # ------------------------------------------------------------------ the rule
+    def _usable(self, pose: PoseResult, t_ms: int, text: str | None) -> _Record | None:
+        """The history as a prediction at ``t_ms`` (rotation and its covariance, see :meth:`_predict`)
+        when it is usable for this frame (the module doc's rule 1), else None."""
+        last = self._last
+        if last is None or last.rotation_cov is None:
+            return None
+        dt = (t_ms - last.t_ms) / 1000.0
+        if not 0.0 <= dt <= HISTORY_S or text != last.text:
+            return None
+        centre, side = _outline(pose.corners_px)
+        shift = float(np.linalg.norm(centre - last.centre_px))
+        if shift > (MAX_SHIFT_SIDES + MAX_SHIFT_SIDES_PER_S * dt) * last.side_px:
+            return None
+        if not 1.0 / MAX_SIZE_RATIO < side / last.side_px < MAX_SIZE_RATIO:
+            return None
+        return self._predict(last, t_ms)
+
+    def _predict(self, last: _Record, t_ms: int) -> _Record:
+        """The history's rotation moved on to ``t_ms``, with its covariance (3, 3) rad^2.
+
+        With the resolved pose before the last (at most HISTORY_S old, the same code), at the turn
+        rate between the two: R = exp(k w) R_last with w the rotation from the one before to the
+        last and k = dt / dt_between, covariance (1 + k)^2 C_last + k^2 C_before (the two taken as
+        independent: larger than it is, as their shared error cancels in the rate) plus a change
+        of rate of up to TURN_ACCEL_DEG_S2 (1 sigma per axis). Without it: the last rotation, plus
+        a turn of up to TURN_RATE_DEG_S."""
+        assert last.rotation_cov is not None
+        dt = (t_ms - last.t_ms) / 1000.0
+        before = self._before
+        if (
+            before is not None
+            and before.rotation_cov is not None
+            and before.text == last.text
+            and last.t_ms - before.t_ms > 0
+            and (t_ms - before.t_ms) / 1000.0 <= HISTORY_S
+        ):
+            between = (last.t_ms - before.t_ms) / 1000.0
+            k = dt / between
+            turn = rotation_vector(last.rotation @ before.rotation.T)
+            rotation = rotation_from_vector(k * turn) @ last.rotation
+            allowance = math.radians(TURN_ACCEL_DEG_S2) * dt * (dt + between) / 2.0
+            cov = OWN_SHARE * ((1.0 + k) ** 2 * last.rotation_cov + k * k * before.rotation_cov)
+            return _Record(
+                rotation, cov + allowance**2 * np.eye(3), t_ms, last.text, last.centre_px, last.side_px
+            )
+        allowance = math.radians(TURN_RATE_DEG_S) * dt
+        cov = OWN_SHARE * last.rotation_cov + allowance**2 * np.eye(3)
+        return _Record(last.rotation, cov, t_ms, last.text, last.centre_px, last.side_px)
+
+    def _choose(
+        self,
+        pose: PoseResult,
+        last: _Record,
+        mirror: Callable[[PoseResult], PoseResult | None],
+        reflected: Callable[[PoseResult], np.ndarray | None] | None,
+    ) -> tuple[PoseResult | None, bool]:
+        """(the branch the history decides for, whether it is the mirror), or (None, False)."""
+        own = _rotation_cov(pose)
+        if own is None:
+            return None, False
+        assert last.rotation_cov is not None
+        prior = last.rotation_cov  # the prediction's, motion included (_predict)
+        m_answer = rotation_chi2(pose.rotation, last.rotation, OWN_SHARE * own + prior)
+        other = mirror(pose)
+        self._other = other
+        if other is None:
+            # No distinct mirror minimum: the answer is the one branch the corners have; the
+            # history confirms it unless it points at the reflected plane rather than the answer.
+            if m_answer > CONSISTENT_CHI2:
+                return None, False
+            plane = reflected(pose) if reflected is not None else None
+            if plane is not None and rotation_chi2(plane, last.rotation, OWN_SHARE * own + prior) < m_answer:
+                return None, False
+            return pose, False
+        other_cov = _rotation_cov(other)
+        if other_cov is None:
+            return None, False
+        m_mirror = rotation_chi2(other.rotation, last.rotation, OWN_SHARE * other_cov + prior)
+        if rotation_chi2(other.rotation, pose.rotation, own + other_cov) <= SAME_POSE_CHI2:
+            # One pose within its uncertainty: report the one nearer the history, if it agrees.
+            nearer, flipped, m = (pose, False, m_answer) if m_answer <= m_mirror else (other, True, m_mirror)
+            return (nearer, flipped) if m <= CONSISTENT_CHI2 else (None, False)
+        frame_evidence = float(pose.mirror_chi2) - float(pose.chi2)
+        if not math.isfinite(frame_evidence):
+            frame_evidence = 0.0  # no covariance: the frame says nothing beyond "ambiguous"
+        evidence = frame_evidence + (m_mirror - m_answer)  # for the answer, against the mirror
+        if evidence >= FLIP_DELTA_CHI2 and m_answer <= CONSISTENT_CHI2:
+            return pose, False
+        if evidence <= -FLIP_DELTA_CHI2 and m_mirror <= CONSISTENT_CHI2:
+            return other, True
+        return None, False
+
+    def _remember(self, pose: PoseResult, t_ms: int, text: str | None) -> None:
+        centre, side = _outline(pose.corners_px)
+        self._before = self._last
+        self._last = _Record(
+            np.array(pose.rotation, dtype=float), _rotation_cov(pose), t_ms, text, centre, side
+        )

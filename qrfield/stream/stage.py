@@ -1,0 +1,138 @@
+"""The stream stage: after each frame's solve, branch continuity and the optional filter, per method.
+
+:class:`StreamStage` is what a :class:`qrfield.pipeline.Pipeline` runs after the solvers
+(docs/conventions.md, "The live stream"). Per method it keeps a
+:class:`~qrfield.stream.continuity.BranchHistory` (on unless ``continuity`` is off) and, with
+``filter_s`` > 0, a :class:`~qrfield.stream.kalman.PoseFilter`. For each frame it replaces each
+method's PoseResult in ``FrameResult.poses`` by the one to report:
+
+- the frame's answer, or the mirror's full result when the history chose the mirror branch, with
+  ``ambiguous`` the flag after history (so ``FrameResult.ambiguous``, the status AMBIG and the
+  serial link follow the history's decision);
+- then, with the filter on and the flip resolved, the filtered pose (its position, rotation,
+  angles, std, vertices and reprojection), ``filtered`` True once earlier frames were used. A frame
+  still ambiguous after the history is reported as it is and is not given to the filter.
+
+It records per method a :class:`StreamMark` in ``FrameResult.stream`` (``resolved_by``,
+``filtered``) and keeps the frame's own solver results in ``FrameResult.frame_poses``. A single
+frame (no history, filter off or just started) comes out exactly as the solvers made it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from qrfield.solvers.mirror import mirror_result, reflected_rotation
+from qrfield.solvers.registry import uses_depth_model
+from qrfield.solvers.result import PoseResult
+from qrfield.status import usable_pose
+from qrfield.stream.continuity import BY_FRAME, BranchHistory
+from qrfield.stream.kalman import PoseFilter
+from qrfield.stream.poses import moved_result, vector_cov
+from qrfield.stream.settings import StreamSettings
+
+
+@dataclass(frozen=True)
+class StreamMark:
+    """What the stream stage did to one method's pose of one frame.
+
+    Attributes:
+        resolved_by: "frame" (the frame alone decided its branch, or nothing decided it) or
+            "history" (the stream's recent resolved pose did).
+        filtered: the pose reported is the filter's (earlier frames were used).
+        frame_ambiguous: the frame alone was ambiguous (its solver's ``ambiguous``).
+        flipped: the history chose the mirror branch (the reported pose is the mirror's).
+        reset: why the filter started again at this frame ("" when it did not or is off).
+    """
+
+    resolved_by: str
+    filtered: bool
+    frame_ambiguous: bool
+    flipped: bool = False
+    reset: str = ""
+
+
+class _MethodStream:
+    """One method's history and filter."""
+
+    def __init__(self, settings: StreamSettings) -> None:
+        self.history = BranchHistory(enabled=settings.continuity)
+        self.filter = PoseFilter(settings.filter_s) if settings.filter_s > 0 else None
+
+    def reset(self) -> None:
+        self.history.reset()
+        if self.filter is not None:
+            self.filter.reset()
+
+
+class StreamStage:
+    """Continuity and the filter for one stream (see the module doc); not thread-safe (one frame
+    loop owns it)."""
+
+    def __init__(self, settings: StreamSettings | None = None) -> None:
+        self.settings = settings if settings is not None else StreamSettings()
+        self._methods: dict[str, _MethodStream] = {}
+
+    def reset(self) -> None:
+        """Forget every method's history and filter (a new source)."""
+        for state in self._methods.values():
+            state.reset()
+
+    def apply(self, result: Any, side_mm: float, corners_cov: np.ndarray | None) -> None:
+        """Replace ``result.poses`` (a qrfield.pipeline.FrameResult of this stream, solved with
+        ``corners_cov`` (4, 2, 2) px^2 for a QR side of ``side_mm``) by the poses to report, and
+        fill ``result.stream`` and ``result.frame_poses`` (see the module doc)."""
+        result.frame_poses = dict(result.poses)
+        detection = result.detection
+        text = None if detection is None else detection.text
+        camera = result.camera
+        for name, pose in result.frame_poses.items():
+            if not (isinstance(pose, PoseResult) and usable_pose(pose)) or camera is None:
+                continue  # no pose (or a stand-in solver's result): reported as the frame made it
+            state = self._methods.get(name)
+            if state is None:
+                state = self._methods[name] = _MethodStream(self.settings)
+            try:
+                self._apply_one(result, name, pose, state, text, camera, side_mm, corners_cov)
+            except Exception as exc:  # the frame's own pose stands; the stage must not lose it
+                result.poses[name] = pose
+                result.stream[name] = StreamMark(BY_FRAME, False, bool(pose.ambiguous))
+                note = f"stream stage ({name}): {type(exc).__name__}: {exc}"
+                result.reason = f"{result.reason}; {note}" if result.reason else note
+
+    def _apply_one(
+        self,
+        result: Any,
+        name: str,
+        pose: PoseResult,
+        state: _MethodStream,
+        text: str | None,
+        camera: Any,
+        side_mm: float,
+        corners_cov: np.ndarray | None,
+    ) -> None:
+        """Continuity, then the filter, for one method's pose of one frame."""
+        decision = state.history.decide(
+            pose,
+            result.t_ms,
+            text,
+            mirror=lambda p: mirror_result(p, camera, side_mm, corners_cov),
+            reflected=(lambda p: reflected_rotation(p, camera)) if uses_depth_model(name) else None,
+        )
+        out, filtered, reset = decision.pose, False, ""
+        if state.filter is not None and not decision.ambiguous:
+            cov = vector_cov(out)
+            if cov is not None:
+                estimate = state.filter.update(out.rotation, out.position_mm, cov, result.t_ms, text)
+                if estimate.filtered:
+                    out = moved_result(
+                        out, estimate.rotation, estimate.position_mm, estimate.cov, camera, side_mm
+                    )
+                filtered, reset = estimate.filtered, estimate.reset
+        result.poses[name] = out
+        result.stream[name] = StreamMark(
+            decision.resolved_by, filtered, bool(pose.ambiguous), decision.flipped, reset
+        )

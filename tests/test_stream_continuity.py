@@ -1,0 +1,146 @@
+"""Branch continuity (qrfield/stream/continuity.py through the stream stage): an ambiguous frame takes
+the branch its recent history points to, against the truth of cv2.projectPoints (tests/stream_cases.py)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from stream_cases import SIDE_MM, TEXT, TRUTH, frame_result, solved, wrong_branch_seeds
+
+from qrfield.geometry import Pose, rotation_angle_deg
+from qrfield.status import Reported
+from qrfield.stream import StreamSettings, StreamStage
+
+NOISE = 0.15
+QUIET = 0.005  # corner noise of the history's frame: unambiguous
+
+
+def _history_then(
+    stage: StreamStage, seed: int, *, dt_ms: int = 33, text: str = TEXT, method: str = "numerical"
+):
+    """Two unambiguous frames of the still card at t = -33 and 0 ms, then the ambiguous frame of
+    ``seed`` dt_ms later; its result."""
+    for index, t_ms in enumerate((-33, 0)):
+        quiet = frame_result(solved(10_000 + 7 * seed + index, QUIET, method), index, t_ms, noise_px=QUIET)
+        stage.apply(quiet, SIDE_MM, quiet.detection.pose_cov)
+        assert not quiet.ambiguous and quiet.resolved_by == "frame"
+    result = frame_result(solved(seed, NOISE, method), 2, dt_ms, text=text, noise_px=NOISE)
+    stage.apply(result, SIDE_MM, result.detection.pose_cov)
+    return result
+
+
+def _rms_reprojection(pose: Pose, corners: np.ndarray) -> float:
+    from stream_cases import true_corners
+
+    return float(np.sqrt(np.mean(np.sum((true_corners(pose) - corners) ** 2, axis=1))))
+
+
+@pytest.mark.parametrize("method", ["numerical", "ippe"])
+def test_an_ambiguous_frame_on_the_wrong_branch_takes_the_mirror_its_history_points_to(method: str) -> None:
+    seeds = wrong_branch_seeds(4, method, NOISE)
+    assert len(seeds) == 4
+    for seed in seeds:
+        frame = solved(seed, NOISE, method)
+        result = _history_then(StreamStage(), seed, method=method)
+        pose, mark = result.poses[method], result.stream[method]
+        assert mark.frame_ambiguous and mark.resolved_by == "history" and mark.flipped
+        assert not result.ambiguous and result.reported_status(simulated=False) == Reported.OK
+        # The mirror's own numbers, nearer the truth than the frame's answer.
+        assert np.allclose(pose.position_mm, frame.alternative.position_mm)
+        assert np.allclose(pose.rotation, frame.alternative.rotation)
+        assert (
+            rotation_angle_deg(pose.rotation, TRUTH.rotation)
+            < rotation_angle_deg(frame.rotation, TRUTH.rotation) - 3
+        )
+        # Consistent: angles of the rotation, reprojection of that pose against the corners (cv2).
+        assert np.allclose(Pose(pose.position_mm, pose.angles_deg).rotation, pose.rotation, atol=1e-9)
+        reported = Pose(pose.position_mm, pose.angles_deg)
+        assert pose.reprojection_px == pytest.approx(_rms_reprojection(reported, frame.corners_px), rel=1e-6)
+        assert np.all(np.isfinite(pose.angles_std_deg)) and np.all(np.isfinite(pose.position_std_mm))
+        # What the frame alone said is kept beside it.
+        assert result.frame_poses[method] is not pose and result.frame_poses[method].ambiguous
+        line = json.loads(json.dumps(result.to_json_dict(simulated=False)))
+        assert line["resolved_by"] == "history" and line["ambiguous"] is False and line["status"] == "OK"
+        assert line["filtered"] is False
+
+
+def test_without_history_an_ambiguous_frame_stays_ambiguous() -> None:
+    seed = wrong_branch_seeds(1)[0]
+    result = frame_result(solved(seed, NOISE), 0, 0, noise_px=NOISE)
+    StreamStage().apply(result, SIDE_MM, result.detection.pose_cov)
+    assert result.ambiguous and result.resolved_by == "frame"
+    assert result.reported_status(simulated=False) == Reported.AMBIG
+    assert result.poses["numerical"] is result.frame_poses["numerical"]  # reported as the frame made it
+
+
+@pytest.mark.parametrize(
+    ("dt_ms", "text"),
+    [(600, TEXT), (33, "another code")],
+    ids=["history older than 0.5 s", "another code"],
+)
+def test_history_too_old_or_of_another_code_does_not_decide(dt_ms: int, text: str) -> None:
+    seed = wrong_branch_seeds(1)[0]
+    result = _history_then(StreamStage(), seed, dt_ms=dt_ms, text=text)
+    assert result.ambiguous and result.resolved_by == "frame"
+    assert not result.stream["numerical"].flipped
+
+
+def test_continuity_off_solves_every_frame_alone() -> None:
+    seed = wrong_branch_seeds(1)[0]
+    result = _history_then(StreamStage(StreamSettings(continuity=False)), seed)
+    frame = solved(seed, NOISE)
+    assert result.ambiguous and result.resolved_by == "frame"
+    assert np.array_equal(result.poses["numerical"].rotation, frame.rotation)
+
+
+def test_an_unambiguous_frame_is_reported_as_it_is() -> None:
+    stage = StreamStage()
+    for index in range(3):
+        result = frame_result(solved(20_000 + index, QUIET), index, 33 * index, noise_px=QUIET)
+        frame = result.poses["numerical"]
+        stage.apply(result, SIDE_MM, result.detection.pose_cov)
+        assert result.poses["numerical"] is frame and result.resolved_by == "frame" and not result.filtered
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    seeds=st.lists(st.integers(0, 10**6), min_size=2, max_size=8),
+    noise=st.floats(0.03, 0.25),
+    method=st.sampled_from(["numerical", "ippe"]),
+)
+def test_a_stream_reports_one_of_each_frames_branches_and_flags_what_it_did_not_decide(
+    seeds: list[int], noise: float, method: str
+) -> None:
+    stage = StreamStage()
+    for index, seed in enumerate(seeds):
+        result = frame_result(solved(seed, noise, method), index, 33 * index, noise_px=noise)
+        frame = result.frame_poses.get(method) or result.poses[method]
+        stage.apply(result, SIDE_MM, result.detection.pose_cov)
+        if not frame.converged:
+            continue
+        pose, mark = result.poses[method], result.stream[method]
+        branches = [frame.rotation] + ([frame.alternative.rotation] if frame.alternative is not None else [])
+        assert min(float(np.abs(pose.rotation - b).max()) for b in branches) < 1e-12
+        assert mark.frame_ambiguous == frame.ambiguous
+        assert pose.ambiguous == (frame.ambiguous and mark.resolved_by == "frame")
+        assert mark.flipped == (not np.array_equal(pose.rotation, frame.rotation))
+
+
+def test_the_mirror_chosen_is_widened_towards_the_answer_it_was_confused_with() -> None:
+    """The frame was ambiguous: along the turn between its two branches the corners' chi-square
+    rises by only d, so the reported std there is at least that turn / sqrt(d)."""
+    from qrfield.geometry import rotation_vector
+    from qrfield.stream.poses import vector_cov
+
+    for seed in wrong_branch_seeds(3):
+        frame = solved(seed, NOISE)
+        pose = _history_then(StreamStage(), seed).poses["numerical"]
+        turn = rotation_vector(frame.rotation @ pose.rotation.T)
+        axis = turn / np.linalg.norm(turn)
+        rise = max(abs(pose.mirror_chi2 - pose.chi2), 1.0)
+        along = float(axis @ vector_cov(pose)[3:, 3:] @ axis)
+        assert along >= 0.999 * float(turn @ turn) / rise
