@@ -9,7 +9,7 @@ section     settings                     command-line options (override the file
 =========== ============================ ======================================================
 run         :class:`RunSettings`         ``--source --camera --side-mm --method --loop --pace
                                          --retry-s`` (and ``--focal-px/--size`` for the camera)
-detector    DetectorSettings             ``--detect-NAME`` (``--select-text`` = the code selection)
+detector    DetectorSettings             ``--detect-NAME`` (``--select-text``, ``--max-codes``: short forms)
 numerical   NumericalSettings            ``--numerical-NAME``
 ippe        IppeSettings                 ``--ippe-NAME``
 virtual     VirtualBenchSettings         ``--virtual-NAME``
@@ -343,6 +343,9 @@ def add_run_arguments(
             if section.name == "detector":
                 group.add_argument(
                     "--select-text", dest="detect_select_text", metavar="TEXT", help="= --detect-select-text"
+                )
+                group.add_argument(
+                    "--max-codes", dest="detect_max_codes", metavar="N", type=int, help="= --detect-max-codes"
                 )
 
 

@@ -20,6 +20,9 @@
    backend alone (its own answer, unchecked) and through the pipeline, and false detections on
    photos without any code (the chessboards in ../shared/data/calibration) and blank frames.
 4. Detection rate on the rendered views of (1).
+5-7. A cold detection beside zxing-cpp (QR only) and OpenCV Aruco, CPU time, interleaved, with the
+   machine's load and where the time goes; several codes in one 1280x720 frame; the share found by
+   foreshortened module size on the steep set (qrfield/benchmarks/_cold.py).
 """
 
 from __future__ import annotations
@@ -84,6 +87,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help=f"timing rounds per resolution (default {REPEATS})",
     )
     parser.add_argument("--data", type=Path, default=None, help="shared data folder (default ../shared/data)")
+    parser.add_argument(
+        "--cold-rounds", type=int, default=5, help="interleaved rounds of the cold detection (5; 0 skips 5-6)"
+    )
+    parser.add_argument(
+        "--multi-frames", type=int, default=6, help="frames per code count of section 6 (default 6; 0 skips)"
+    )
+    parser.add_argument(
+        "--steep-views", type=int, default=300, help="views of the steep set (default 300; 0 skips)"
+    )
+    parser.add_argument("--steep-seed", type=int, default=2026, help="seed of the steep set (default 2026)")
+    parser.add_argument(
+        "--sections",
+        default="0,1,2,2b,3,4,5,6,7",
+        help="sections to run, comma-separated (default all: 0,1,2,2b,3,4,5,6,7)",
+    )
 
 
 def _shared_data(path: Path | None) -> Path | None:
@@ -100,24 +118,28 @@ def _shared_data(path: Path | None) -> Path | None:
     return None
 
 
-def _hard_set(count: int, seed: int) -> None:
-    """Section 0: the hard set through the default pipeline and through the edge lines alone."""
-    from qrfield.benchmarks import _corners
-    from qrfield.detect import Detector, DetectorSettings
-    from qrfield.testing.hardset import hard_views
-
+def _made(make, label: str) -> list:
+    """``make()``'s views (a list), or an empty list with a note when segno is missing."""
     try:
         import segno  # noqa: F401
     except ImportError:
-        print("\n0. hard set: needs the segno package (pip install segno, or the dev extra); skipped")
-        return
-    print(
-        f"\n0. hard set: {count} views (seed {seed}; qrfield benchmark hardset describes it), per corner "
-        "error against cv2.projectPoints' truth"
-    )
+        print(f"\n{label}: needs the segno package (pip install segno, or the dev extra); skipped")
+        return []
     t0 = time.perf_counter()
-    views = list(hard_views(count, seed))
-    print(f"   made in {time.perf_counter() - t0:.0f} s")
+    views = list(make())
+    print(f"\n({label}: {len(views)} views made in {time.perf_counter() - t0:.0f} s)")
+    return views
+
+
+def _hard_set(views: list, seed: int) -> None:
+    """Section 0: the hard set through the default pipeline and through the edge lines alone."""
+    from qrfield.benchmarks import _corners
+    from qrfield.detect import Detector, DetectorSettings
+
+    print(
+        f"\n0. hard set: {len(views)} views (seed {seed}; qrfield benchmark hardset describes it), "
+        "per corner error against cv2.projectPoints' truth"
+    )
     methods = {
         "default pipeline (whole-symbol fit)": DetectorSettings(),
         "edge lines only (symbol_fit off: the previous default)": DetectorSettings(symbol_fit=False),
@@ -196,20 +218,12 @@ def _hard_sequences(count: int, seed: int) -> None:
             print(f"{lens:<10}{name:<26}{len(e):>5}/{frames:<3}   {figures:<49}{calibration}")
 
 
-def _time_sequence(cam, side: float, count: int, repeats: int) -> bool:
-    """Print ms per frame of each method on a seeded moving sequence seen by ``cam``, measured in
-    ``repeats`` rounds (each round times every method once, the baseline first, so that each
-    round's ratio compares like with like); returns whether the default pipeline is >= 10x."""
-    import cv2
+def _sequence(cam, side: float, count: int) -> tuple[list, list]:
+    """The moving sequence of section 2 (BGR frames and their true corners)."""
     import numpy as np
 
-    from qrfield.benchmarks._corners import calibration_text, whiten
-    from qrfield.detect import Detector, DetectorSettings, Tracker
     from qrfield.geometry import Pose
-    from qrfield.methods import METHODS
-    from qrfield.pipeline import Pipeline
     from qrfield.render import render_view
-    from qrfield.sources.base import Frame
 
     frames, truth = [], []
     for i in range(count):
@@ -221,6 +235,23 @@ def _time_sequence(cam, side: float, count: int, repeats: int) -> bool:
         )
         frames.append(view.image)
         truth.append(view.corners_px)
+    return frames, truth
+
+
+def _time_sequence(cam, side: float, count: int, repeats: int) -> bool:
+    """Print ms per frame of each method on a seeded moving sequence seen by ``cam``, measured in
+    ``repeats`` rounds (each round times every method once, the baseline first, so that each
+    round's ratio compares like with like); returns whether the default pipeline is >= 10x."""
+    import cv2
+    import numpy as np
+
+    from qrfield.benchmarks._corners import calibration_text, whiten
+    from qrfield.detect import Detector, DetectorSettings, Tracker
+    from qrfield.methods import METHODS
+    from qrfield.pipeline import Pipeline
+    from qrfield.sources.base import Frame
+
+    frames, truth = _sequence(cam, side, count)
     full = Detector(DetectorSettings(refine=False))
     refined = Detector(DetectorSettings(), camera=cam)
     tracker = Tracker(DetectorSettings(), camera=cam)
@@ -310,38 +341,25 @@ def _time_sequence(cam, side: float, count: int, repeats: int) -> bool:
     return ratios["pipeline: tracked + refine + numerical"] >= 10.0
 
 
-def run(args: argparse.Namespace) -> int:
+def _rendered(args: argparse.Namespace, show: bool) -> tuple[int, dict]:
+    """Sections 1 and 4: views of qrfield's renderer; which method found which (and section 1's
+    table of corner errors when ``show``). Returns the view count and the views found per method."""
     import cv2
     import numpy as np
 
     from qrfield.camera import resolve_camera
     from qrfield.detect import Detector, DetectorSettings
     from qrfield.detect.backends import BACKEND_NAMES, find_candidates
-    from qrfield.detect.detector import as_grey
     from qrfield.render import render_view
     from qrfield.sampling import random_visible_poses
 
     side = args.side_mm
-    default = DetectorSettings()
-    print(
-        f"qrfield benchmark detect: default backends {default.backends!r}, refine {default.refine}, "
-        f"whole-symbol fit {default.symbol_fit}"
-    )
-    print("(the machine is shared with other work: times are noisy; ratios come from the same run)")
-    if args.hard_views > 0:
-        _hard_set(args.hard_views, args.hard_seed)
-
-    # ------------------------------------------------------------------ 1 + 4: rendered views
     camera = resolve_camera("picam-v2@640x480")
     poses = random_visible_poses(camera, side, args.views, seed=args.seed)
     views = [
         render_view(camera, side, p, noise_sigma=2.0, blur_px=0.6, seed=args.seed * 100003 + i)
         for i, p in enumerate(poses)
     ]
-    print(
-        f"\n1. corner accuracy: {len(views)} seeded views, {camera.name}, {side:g} mm code, z 150-800 mm, "
-        "tilt <= 50 deg, noise 2, blur 0.6 px"
-    )
 
     def plain_opencv(grey):
         ok, pts = cv2.QRCodeDetector().detect(grey)
@@ -352,7 +370,7 @@ def run(args: argparse.Namespace) -> int:
         methods[f"{name} (own corners)"] = lambda g, name=name: [
             c.corners_px for c in find_candidates(g, name)
         ]
-    pipeline = Detector(default)
+    pipeline = Detector(DetectorSettings())
     methods["default pipeline, refined"] = lambda g: [d.corners_px for d in pipeline.detect(g) if d.refined]
     methods["default pipeline, all"] = lambda g: [d.corners_px for d in pipeline.detect(g)]
     errors: dict[str, list[np.ndarray]] = {name: [] for name in methods}
@@ -364,6 +382,12 @@ def run(args: argparse.Namespace) -> int:
                 best = min(corners, key=lambda c: np.abs(c - view.corners_px).max())
                 errors[name].append(np.linalg.norm(best - view.corners_px, axis=1))
                 found_by[name].add(i)
+    if not show:
+        return len(views), found_by
+    print(
+        f"\n1. corner accuracy: {len(views)} seeded views, {camera.name}, {side:g} mm code, z 150-800 mm, "
+        "tilt <= 50 deg, noise 2, blur 0.6 px"
+    )
     refined_idx = sorted(found_by["default pipeline, refined"])
     print(f"{'method':<34}{'found':>9}{'RMS px':>9}{'max px':>9}")
     for name in methods:
@@ -373,13 +397,7 @@ def run(args: argparse.Namespace) -> int:
         )
     common = sorted(found_by["plain OpenCV detect"] & set(refined_idx))
     if common:
-        ref_lookup = dict(
-            zip(
-                sorted(found_by["default pipeline, refined"]),
-                errors["default pipeline, refined"],
-                strict=True,
-            )
-        )
+        ref_lookup = dict(zip(refined_idx, errors["default pipeline, refined"], strict=True))
         cv_lookup = dict(
             zip(sorted(found_by["plain OpenCV detect"]), errors["plain OpenCV detect"], strict=True)
         )
@@ -389,8 +407,14 @@ def run(args: argparse.Namespace) -> int:
             f"on the {len(common)} views both found: plain OpenCV {cv_rms:.3f} px, refined {ref_rms:.3f} px"
         )
         print("target: refined <= 0.15 px")
+    return len(views), found_by
 
-    # ------------------------------------------------------------------ 2: speed
+
+def _speed(args: argparse.Namespace) -> None:
+    """Section 2."""
+    from qrfield.camera import resolve_camera
+
+    side = args.side_mm
     print(
         f"\n2. ms per frame, moving sequence ({args.frames} BGR frames, {side:g} mm code, noise 2, blur 0.6),"
         f" {args.repeats} rounds: the best round's ms (wall clock), its ratio to the best baseline round,"
@@ -412,59 +436,74 @@ def run(args: argparse.Namespace) -> int:
         f"throughput at 640x480: {'met' if met['picam-v2@640x480'] else 'NOT met'} (the numerical row)"
     )
 
-    if args.hard_sequences > 0:
-        _hard_sequences(args.hard_sequences, args.hard_seed)
 
-    # ------------------------------------------------------------------ 3: real photos
-    data = _shared_data(args.data)
+def _photo_paths(data: Path | None) -> list[Path]:
+    """The real photos in ``data``/qr-photos (each with its label beside it), [] without."""
     if data is None or not (data / "qr-photos").is_dir():
-        print("\n3. real photos: ../shared/data/qr-photos not found (give --data); skipped")
-    else:
-        photos = sorted(p for p in (data / "qr-photos").glob("*/*") if p.suffix in (".png", ".jpg"))
-        print(f"\n3. real photos: {len(photos)} in {data / 'qr-photos'} (label = payload text)")
-        print(f"{'method':<40}{'right':>7}{'other text':>12}{'none':>6}{'located':>9}")
-        # A backend's own answer: the texts it decoded (a code located but not read counts as none).
-        runs = {}
-        for name in BACKEND_NAMES:
-            runs[f"{name} alone, unchecked"] = lambda g, name=name: find_candidates(g, name)
-        for name in BACKEND_NAMES:
-            det = Detector(DetectorSettings(backends=name))
-            runs[f"{name} alone, through the pipeline"] = det.detect
-        runs["default pipeline"] = pipeline.detect
-        for name, fn in runs.items():
-            right = other = none = located = 0
-            others = []
-            for photo in photos:
-                label = photo.with_suffix(".txt").read_bytes().decode("utf-8", errors="replace")
-                grey = as_grey(cv2.imread(str(photo), cv2.IMREAD_COLOR))
-                found = fn(grey)
-                texts = [f.text for f in found if f.text]
-                located += bool(found)
-                right += label in texts
-                if any(t != label for t in texts):
-                    other += 1
-                    others.append(photo.name)
-                none += not texts
-            note = f"  ({', '.join(others[:3])}{', ...' if len(others) > 3 else ''})" if others else ""
-            print(f"{name:<40}{right:>4}/{len(photos):<3}{other:>8}{none:>8}{located:>7}{note}")
-        print(
-            "right: the label's text was read; none: no text read; located: any code reported (read or not)"
-        )
-        print("other text: qrcode-2/16.png holds two codes (an inner one, the label, inside an outer one);")
-        print("  elsewhere a wrong or differently decoded text (OpenCV: Shift-JIS payloads read as bytes)")
-        empty = sorted((data / "calibration").glob("*/*.jpg")) if (data / "calibration").is_dir() else []
-        blanks = [
-            np.zeros((480, 640), np.uint8),
-            np.full((480, 640), 255, np.uint8),
-            np.random.default_rng(0).integers(0, 256, (480, 640), dtype=np.uint8),
-        ]
-        false = sum(len(pipeline.detect(cv2.imread(str(p), cv2.IMREAD_COLOR))) for p in empty) + sum(
-            len(pipeline.detect(b)) for b in blanks
-        )
-        print(f"codes reported on {len(empty)} photos without a code (chessboards) + 3 blank frames: {false}")
+        return []
+    return sorted(p for p in (data / "qr-photos").glob("*/*") if p.suffix in (".png", ".jpg"))
 
-    # ------------------------------------------------------------------ 4: detection rate, rendered
-    total = len(views)
+
+def _photos(data: Path | None) -> None:
+    """Section 3."""
+    import cv2
+    import numpy as np
+
+    from qrfield.detect import Detector, DetectorSettings
+    from qrfield.detect.backends import BACKEND_NAMES, find_candidates
+    from qrfield.detect.detector import as_grey
+
+    photos = _photo_paths(data)
+    if not photos:
+        print("\n3. real photos: ../shared/data/qr-photos not found (give --data); skipped")
+        return
+    assert data is not None
+    pipeline = Detector(DetectorSettings())
+    print(f"\n3. real photos: {len(photos)} in {data / 'qr-photos'} (label = payload text)")
+    print(f"{'method':<40}{'right':>7}{'other text':>12}{'none':>6}{'located':>9}")
+    # A backend's own answer: the texts it decoded (a code located but not read counts as none).
+    runs = {}
+    for name in BACKEND_NAMES:
+        runs[f"{name} alone, unchecked"] = lambda g, name=name: find_candidates(g, name)
+    for name in BACKEND_NAMES:
+        det = Detector(DetectorSettings(backends=name))
+        runs[f"{name} alone, through the pipeline"] = det.detect
+    runs["default pipeline"] = pipeline.detect
+    for name, fn in runs.items():
+        right = other = none = located = 0
+        others = []
+        for photo in photos:
+            label = photo.with_suffix(".txt").read_bytes().decode("utf-8", errors="replace")
+            grey = as_grey(cv2.imread(str(photo), cv2.IMREAD_COLOR))
+            found = fn(grey)
+            texts = [f.text for f in found if f.text]
+            located += bool(found)
+            right += label in texts
+            if any(t != label for t in texts):
+                other += 1
+                others.append(photo.name)
+            none += not texts
+        note = f"  ({', '.join(others[:3])}{', ...' if len(others) > 3 else ''})" if others else ""
+        print(f"{name:<40}{right:>4}/{len(photos):<3}{other:>8}{none:>8}{located:>7}{note}")
+    print("right: the label's text was read; none: no text read; located: any code reported (read or not)")
+    print("other text: qrcode-2/16.png holds two codes (an inner one, the label, inside an outer one);")
+    print("  elsewhere a wrong or differently decoded text (OpenCV: Shift-JIS payloads read as bytes)")
+    empty = sorted((data / "calibration").glob("*/*.jpg")) if (data / "calibration").is_dir() else []
+    blanks = [
+        np.zeros((480, 640), np.uint8),
+        np.full((480, 640), 255, np.uint8),
+        np.random.default_rng(0).integers(0, 256, (480, 640), dtype=np.uint8),
+    ]
+    false = sum(len(pipeline.detect(cv2.imread(str(p), cv2.IMREAD_COLOR))) for p in empty) + sum(
+        len(pipeline.detect(b)) for b in blanks
+    )
+    print(f"codes reported on {len(empty)} photos without a code (chessboards) + 3 blank frames: {false}")
+
+
+def _rates(total: int, found_by: dict) -> None:
+    """Section 4."""
+    from qrfield.detect.backends import BACKEND_NAMES
+
     print(f"\n4. detection rate on the {total} rendered views of (1):")
     for name in [
         "default pipeline, all",
@@ -474,4 +513,89 @@ def run(args: argparse.Namespace) -> int:
         hits = len(found_by[name])
         print(f"{name:<34}{hits:>5}/{total:<5}{100.0 * hits / total:6.1f} %")
     print("target >= 99 %")
+
+
+def _cold_sections(args: argparse.Namespace, hard: list, sections: set[str]) -> None:
+    """Sections 5-7 (qrfield/benchmarks/_cold.py) and their targets."""
+    import cv2
+
+    from qrfield.benchmarks import _cold
+    from qrfield.camera import resolve_camera
+    from qrfield.detect.detector import as_grey
+    from qrfield.testing.hardset import steep_views
+
+    targets = []
+    if "5" in sections and args.cold_rounds > 0:
+        sets: dict[str, tuple[list, object]] = {}
+        for lens in ("pinhole", "distorted"):
+            chosen = [v for v in hard if v.distorted == (lens == "distorted")]
+            if chosen:
+                sets[f"hard set, {lens} (640x480)"] = ([v.image for v in chosen], chosen[0].camera)
+        read = []
+        zxing = _cold._zxing()
+        for v in hard:
+            if any(b.valid and b.text == v.text for b in zxing(v.image)):
+                read.append(v)
+        for lens in ("pinhole", "distorted"):
+            chosen = [v for v in read if v.distorted == (lens == "distorted")]
+            if chosen:
+                sets[f"  the views zxing-cpp reads, {lens}"] = ([v.image for v in chosen], chosen[0].camera)
+        camera = resolve_camera("picam-v2@640x480")
+        frames, _ = _sequence(camera, args.side_mm, args.frames)
+        sets["moving sequence of (2), 640x480"] = ([as_grey(f) for f in frames], camera)
+        photos = _photo_paths(_shared_data(args.data))
+        sets["real photos (qr-photos, their own sizes)"] = (
+            [as_grey(cv2.imread(str(p), cv2.IMREAD_COLOR)) for p in photos],
+            None,
+        )
+        ratios = _cold.cold(sets, args.cold_rounds)
+        if hard:
+            pinhole = [v for v in hard if not v.distorted]
+            _cold.where_time_goes([v.image for v in pinhole], pinhole[0].camera, "the hard set, pinhole")
+        _cold.where_time_goes(sets["moving sequence of (2), 640x480"][0], camera, "the moving sequence")
+        for name, ratio in ratios.items():
+            if "640x480" in name or "zxing-cpp reads" in name:
+                targets.append(f"cold detection, {name.strip()}: {ratio:.1f}x zxing-cpp (target <= 5x)")
+    if "6" in sections and args.multi_frames > 0 and args.cold_rounds > 0:
+        try:
+            import segno  # noqa: F401
+        except ImportError:
+            print("\n6. several codes: needs the segno package; skipped")
+        else:
+            cost = _cold.several_codes(args.multi_frames, args.hard_seed, args.cold_rounds)
+            targets.append(f"four codes in one frame: {cost[4]:.2f}x one code (target <= 3x, all four found)")
+    if "7" in sections and args.steep_views > 0:
+        steep = _made(lambda: steep_views(args.steep_views, args.steep_seed), "the steep set")
+        if steep:
+            _cold.by_module_size(steep)
+    for line in targets:
+        print(f"target: {line}")
+
+
+def run(args: argparse.Namespace) -> int:
+    from qrfield.detect import DetectorSettings
+    from qrfield.testing.hardset import hard_views
+
+    sections = {s.strip() for s in args.sections.split(",") if s.strip()}
+    default = DetectorSettings()
+    print(
+        f"qrfield benchmark detect: default backends {default.backends!r}, refine {default.refine}, "
+        f"whole-symbol fit {default.symbol_fit}; sections {','.join(sorted(sections))}"
+    )
+    print("(the machine is shared with other work: times are noisy; ratios come from the same run)")
+    hard: list = []
+    if args.hard_views > 0 and sections & {"0", "5"}:
+        hard = _made(lambda: hard_views(args.hard_views, args.hard_seed), "the hard set")
+    if "0" in sections and hard:
+        _hard_set(hard, args.hard_seed)
+    total, found_by = _rendered(args, "1" in sections) if sections & {"1", "4"} else (0, {})
+    if "2" in sections:
+        _speed(args)
+    if "2b" in sections and args.hard_sequences > 0:
+        _hard_sequences(args.hard_sequences, args.hard_seed)
+    if "3" in sections:
+        _photos(_shared_data(args.data))
+    if "4" in sections:
+        _rates(total, found_by)
+    _cold_sections(args, hard, sections)
     return 0

@@ -8,7 +8,9 @@ Vertex order V1..V4 and pixel convention: docs/conventions.md. Modules: backends
 finders (finder patterns by contours, for strong perspective), small (finder patterns in busy
 regions upscaled and sharpened, for modules of 1.2-3 px), patterns (checks against the symbol's
 fixed patterns), refine (sub-pixel edges), symbol_fit and symbol_track (the whole-symbol fit, and
-kept warm), reading (the modules of a located code by least squares), detector, tracking, select.
+kept warm), symbol_cold (the whole-symbol fit from a backend's corners by inverse composition, a
+cold detection's refinement), reading (the modules of a located code by least squares), detector,
+tracking, select.
 
 Names are imported on first use, so that declaring settings (``DetectorSettings``, e.g. for CLI
 options) does not load OpenCV or zxing-cpp.

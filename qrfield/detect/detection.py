@@ -223,7 +223,16 @@ class DetectorSettings:
     select_text: str = setting(
         "",
         label="code text to follow",
-        help="with several codes in view, use the one with this text (none if absent); empty = the largest",
+        help="with several codes in view, use the one with this text (none if absent); empty = the largest. "
+        "Codes read with another text are reported with the backend's corners, unrefined (no pose)",
+    )
+    max_codes: int = setting(
+        0,
+        label="most codes per frame",
+        minimum=0,
+        maximum=64,
+        help="refine and report at most this many codes per frame, the largest first (0 = every code "
+        "in view); the costly refinement is skipped for the others",
     )
     track: bool = setting(
         True,

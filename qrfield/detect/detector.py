@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -11,7 +11,7 @@ from qrfield.detect.backends import Candidate, find_candidates, parse_backends
 from qrfield.detect.bilinear import sample_bilinear
 from qrfield.detect.detection import Detection, DetectorSettings, quality_of
 from qrfield.detect.lens import Lens, module_points_px
-from qrfield.detect.patterns import best_module_count, check_patterns
+from qrfield.detect.patterns import PatternCheck, best_module_count, check_patterns
 from qrfield.detect.refine import refine_corners
 from qrfield.detect.symbol import decoded_cells, fixed_cells, verified_matrix
 from qrfield.detect.symbol_fit import FitState, fit_symbol
@@ -85,19 +85,39 @@ def matrix_agrees(
     offset: tuple[int, int] = (0, 0),
 ) -> bool:
     """True when the (n, n) module matrix (bool, or float with NaN for unknown) shows its colours at
-    ``corners`` V1..V4 in ``grey``."""
+    ``corners`` V1..V4 in ``grey`` (see :func:`confirmed_matrix`)."""
+    return confirmed_matrix(grey, corners, matrix, inverted, lens, offset) is not None
+
+
+def confirmed_matrix(
+    grey: np.ndarray,
+    corners: np.ndarray,
+    matrix: np.ndarray,
+    inverted: bool,
+    lens: Lens | None = None,
+    offset: tuple[int, int] = (0, 0),
+) -> np.ndarray | None:
+    """The decoded (n, n) ``matrix`` (bool, or float with NaN for unknown) as the image at
+    ``corners`` V1..V4 confirms it (float: 1 dark, 0 light, NaN where a module's centre reads the
+    other colour or too near the middle: :func:`qrfield.detect.symbol.verified_matrix`), or None
+    when it does not agree with the image: fewer than :data:`MATRIX_AGREEMENT` of its known
+    modules on the right side of the middle between the dark and light modules' medians (the
+    levels of the confirmation too). One sampling of the module centres for both."""
     n = matrix.shape[0]
     values = sample_bilinear(grey, module_points_px(lens, corners, n, _module_centres(n), offset))
     m = np.asarray(matrix, dtype=np.float64).reshape(-1)
     known = np.isfinite(m) & np.isfinite(values)
     if known.mean() < 0.5:
-        return False
-    values, dark = values[known], m[known] > 0.5
+        return None
+    seen, dark = values[known], m[known] > 0.5
     if dark.all() or not dark.any():
-        return False
-    threshold = 0.5 * (np.median(values[dark]) + np.median(values[~dark]))
-    seen_dark = values > threshold if inverted else values < threshold
-    return float(np.mean(seen_dark == dark)) >= MATRIX_AGREEMENT
+        return None
+    dark_level, light_level = float(np.median(seen[dark])), float(np.median(seen[~dark]))
+    threshold = 0.5 * (dark_level + light_level)
+    seen_dark = seen > threshold if inverted else seen < threshold
+    if float(np.mean(seen_dark == dark)) < MATRIX_AGREEMENT:
+        return None
+    return verified_matrix(values.reshape(n, n), matrix, dark_level, light_level)
 
 
 def symbol_cells(
@@ -117,6 +137,12 @@ def symbol_cells(
     ):
         return decoded_cells(matrix)
     return fixed_cells(modules)
+
+
+def _area(corners: np.ndarray) -> float:
+    """Area (px^2) of the quadrilateral V1..V4 (shoelace)."""
+    x, y = corners[:, 0], corners[:, 1]
+    return 0.5 * abs(float(x @ np.roll(y, -1) - y @ np.roll(x, -1)))
 
 
 def same_code(a: np.ndarray, b: np.ndarray) -> bool:
@@ -165,15 +191,25 @@ class Detector:
         if grey.shape[0] < 21 or grey.shape[1] < 21:
             return []
         found: list[Detection] = []
+        settings = self.settings
+        most = settings.max_codes or None
         for backend in self.backends:
             skipped = False
-            for candidate in find_candidates(grey, backend):
+            candidates = find_candidates(grey, backend)
+            if len(candidates) > 1 and most is not None:  # the largest first: they are the ones kept
+                candidates.sort(key=lambda c: -_area(c.corners_px))
+            for candidate in candidates:
+                if most is not None and len(found) >= most:
+                    break
                 if any(same_code(candidate.corners_px, d.corners_px) for d in found):
                     continue  # the same code seen again
                 if known and any(same_code(candidate.corners_px, k) for k in known):
                     skipped = True
                     continue
-                detection = self.accept(grey, candidate)
+                # A code read with another text than the one selected is not refined (its corners
+                # could give no pose the pipeline would use): reported with the backend's corners.
+                other = bool(settings.select_text) and candidate.text not in (None, settings.select_text)
+                detection = self.accept(grey, candidate, refine=not other)
                 if detection is not None:
                     found.append(detection)
             if found or skipped:
@@ -199,14 +235,22 @@ class Detector:
             if same_code(located + offset, corners):
                 yield located + offset
 
-    def accept(self, grey: np.ndarray, candidate: Candidate, backend: str | None = None) -> Detection | None:
-        """Check and refine one backend candidate on a grey image; None when it does not hold up."""
+    def accept(
+        self, grey: np.ndarray, candidate: Candidate, backend: str | None = None, refine: bool = True
+    ) -> Detection | None:
+        """Check and refine one backend candidate on a grey image; None when it does not hold up.
+        ``refine`` False: checked only, the backend's corners kept (quality at most half the
+        pattern score, not refined)."""
         settings = self.settings
+        if not refine:
+            settings = replace(settings, refine=False)
         corners = candidate.corners_px
         if corners.shape != (4, 2) or not np.all(np.isfinite(corners)):
             return None
         if not candidate.text and candidate.modules and settings.refine and settings.symbol_fit:
-            candidate = self.read(grey, candidate) or candidate
+            read = self.read(grey, candidate)
+            if read is not None:  # from the read fit's corners: a backend's V3 can be modules off
+                candidate, corners = read, read.corners_px
         if settings.require_text and not candidate.text:
             return None
         if candidate.modules:
@@ -218,8 +262,12 @@ class Detector:
         modules = rough.modules
         result = Refined(corners, None, np.full(4, np.nan), rough.score, False)
         if settings.refine:
-            seeds = self._seeds(grey, corners)
-            result = self.refine(grey, corners, modules, rough.score, rough.inverted, candidate.symbol, seeds)
+            symbol = candidate.symbol
+            decoded = symbol is not None and settings.symbol_fit
+            result = self.refine_cold(grey, corners, modules, rough, symbol) if decoded else None
+            if result is None:  # the edge lines and the full fit, from each seed in turn
+                seeds = self._seeds(grey, corners)
+                result = self.refine(grey, corners, modules, rough.score, rough.inverted, symbol, seeds)
             if result is None:
                 result = Refined(corners, None, np.full(4, np.nan), rough.score, False)
         score, refined = result.score, result.refined
@@ -254,6 +302,8 @@ class Detector:
         rough = check_patterns(grey, candidate.corners_px, n, self.lens)
         if rough.reason and rough.score == 0.0:
             return None
+        # (The edge lines and the full fit: with the fixed patterns alone, at modules of 1.2-2 px, the
+        # inverse-compositional fit left V3 a few px off where these do not: measured.)
         fit = self.refine(
             grey,
             candidate.corners_px,
@@ -278,6 +328,69 @@ class Detector:
         if text is None:
             return None
         return Candidate(fit.corners_px, text, candidate.backend, n, matrix)
+
+    def refine_cold(
+        self,
+        grey: np.ndarray,
+        corners: np.ndarray,
+        modules: int,
+        rough: PatternCheck,
+        matrix: np.ndarray | None,
+    ) -> Refined | None:
+        """Sub-pixel corners from a backend's ``corners`` by the inverse-compositional fits of
+        qrfield.detect.symbol_cold (a third of :meth:`refine`'s cost): the blurred model, the
+        decoded matrix confirmed there (``matrix``: the backend's, None when not decoded: then the
+        fixed patterns alone, which hold V3 less well), the sharp model at the pixel centres. None
+        when that does not hold (then :meth:`refine` runs): a corner that moved more than max(3 px,
+        2 modules), a matrix the image does not confirm, another polarity than the pattern
+        check's (``rough``), a residual above a fifth of the contrast, or patterns that fit worse
+        than at ``corners`` (by 0.02)."""
+        from qrfield.detect.symbol_cold import coarse_fit, crop_around, fine_fit
+
+        lens = self.lens
+        region = crop_around(grey.shape, corners, modules)
+        if region is None or not lens.fits(grey.shape) or not np.isfinite(rough.light - rough.dark):
+            return None
+        x0, y0, x1, y1 = region
+        crop, offset = grey[y0:y1, x0:x1], (x0, y0)
+        shift = np.array(offset, dtype=np.float64)
+        decoded = matrix is not None and matrix.shape == (modules, modules)
+        cells = decoded_cells(matrix) if decoded else fixed_cells(modules)
+        coarse = coarse_fit(crop, corners - shift, cells, lens, rough.light, rough.dark, offset)
+        if not coarse.ok or coarse.state is None:
+            return None
+        confirmed = None
+        if decoded:
+            confirmed = confirmed_matrix(grey, coarse.corners_px + shift, matrix, rough.inverted, lens)
+            if confirmed is None:
+                return None
+            cells = decoded_cells(confirmed)
+        fine = fine_fit(crop, coarse.corners_px, cells, lens, coarse.state, offset)
+        if not fine.ok or fine.state is None or fine.corners_cov is None:
+            return None
+        fitted = fine.corners_px + shift
+        module_px = float(np.ptp(corners, axis=0).max()) / modules
+        moved = float(np.linalg.norm(fitted - corners, axis=1).max())
+        if (
+            moved > max(3.0, 2.0 * module_px)
+            or (fine.contrast < 0) != rough.inverted
+            or not fine.residual < 0.2 * abs(fine.contrast)
+        ):
+            return None
+        check = check_patterns(grey, fitted, modules, lens)
+        if check.score < rough.score - 0.02:
+            return None
+        return Refined(
+            fitted,
+            fine.corners_cov,
+            fine.corners_std_px,
+            check.score,
+            True,
+            fine.state,
+            fine.residual,
+            cells,
+            confirmed,
+        )
 
     def refine(
         self,

@@ -30,6 +30,25 @@ MAX_ROUGHNESS = 40.0
 MIN_CONTRAST = 40.0
 
 
+#: Tolerances of the polygon fitted to a finder's outline, as shares of its perimeter, tried in
+#: turn until one gives a convex quadrilateral: the first suits a square seen nearly face on; a
+#: finder foreshortened to a thin parallelogram (a code tilted 50-70 deg: its short sides are a
+#: few px) collapses to 2 or 3 vertices at it, and keeps its 4 at the smaller ones.
+QUAD_TOLERANCES = (0.08, 0.05, 0.03, 0.02)
+
+
+def _quadrilateral(contour: np.ndarray) -> np.ndarray | None:
+    """The convex quadrilateral (4, 2) fitted to a contour (cv2.approxPolyDP), or None."""
+    perimeter = cv2.arcLength(contour, True)
+    for tolerance in QUAD_TOLERANCES:
+        approx = cv2.approxPolyDP(contour, tolerance * perimeter, True)
+        if len(approx) == 4 and cv2.isContourConvex(approx):
+            return approx.reshape(4, 2).astype(np.float64)
+        if len(approx) > 4:
+            return None  # smaller tolerances only add vertices
+    return None
+
+
 def _finder_quads(binary: np.ndarray) -> list[np.ndarray]:
     """Outer quadrilaterals (4, 2) of nested dark-light-dark contours in a binary image (255 = dark)."""
     contours, hierarchy = cv2.findContours(binary, cv2.RETR_TREE, cv2.CHAIN_APPROX_SIMPLE)
@@ -48,10 +67,10 @@ def _finder_quads(binary: np.ndarray) -> list[np.ndarray]:
         core = cv2.contourArea(contours[grandchild])
         if outer < 30 or core <= 0 or not 2.0 < outer / core < 14.0:
             continue
-        approx = cv2.approxPolyDP(contour, 0.08 * cv2.arcLength(contour, True), True)
-        if len(approx) != 4 or not cv2.isContourConvex(approx):
+        quad = _quadrilateral(contour)
+        if quad is None:
             continue
-        quads.append(approx.reshape(4, 2).astype(np.float64))
+        quads.append(quad)
     quads.sort(key=lambda q: -cv2.contourArea(q.astype(np.float32)))
     return quads[:MAX_FINDERS]
 

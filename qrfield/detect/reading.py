@@ -31,7 +31,7 @@ WINDOW = 2
 #: Pull of each unknown module towards 1/2 (Tikhonov weight, relative to one pixel's share).
 RIDGE = 0.05
 #: Conjugate-gradient iterations.
-ITERATIONS = 40
+ITERATIONS = 12
 #: Pixels of the clean symbol per module, and its quiet zone, for the decoder.
 DRAWN_PX = 4
 DRAWN_QUIET = 4
@@ -114,26 +114,36 @@ def _read(
     colour = np.where(known, cells, 0.5)
     spread = np.sqrt(blur_px**2 + 1.0 / 12.0) * per_px  # (k, 2), in modules
     base = np.floor(uv).astype(np.int64)
-    rows, cols, weights = [], [], []
+    k = len(values)
+    # The operator K as (window cells, pixels) arrays: each pixel's share of each cell of the
+    # window around it and that cell's index (share 0 off the map), so that K d is one gather and
+    # one sum, and K^T r one weighted bincount.
+    width = 2 * WINDOW + 1
+    share = np.empty((width * width, k))
+    col = np.empty((width * width, k), dtype=np.int64)
+    ku_all = []
+    for du in range(-WINDOW, WINDOW + 1):
+        mu = base[:, 0] + du
+        ku = _gauss_cdf((mu + 1 - uv[:, 0]) / spread[:, 0]) - _gauss_cdf((mu - uv[:, 0]) / spread[:, 0])
+        ku_all.append((mu, ku))
+    j = 0
     for dv in range(-WINDOW, WINDOW + 1):
         mv = base[:, 1] + dv
         kv = _gauss_cdf((mv + 1 - uv[:, 1]) / spread[:, 1]) - _gauss_cdf((mv - uv[:, 1]) / spread[:, 1])
-        for du in range(-WINDOW, WINDOW + 1):
-            mu = base[:, 0] + du
-            ku = _gauss_cdf((mu + 1 - uv[:, 0]) / spread[:, 0]) - _gauss_cdf((mu - uv[:, 0]) / spread[:, 0])
-            share = ku * kv
-            ok = (mu >= -q) & (mv >= -q) & (mu < n + q) & (mv < n + q) & (share > 1e-4)
-            rows.append(np.flatnonzero(ok))
-            cols.append((mv[ok] + q) * size + mu[ok] + q)
-            weights.append(share[ok])
-    row, col, share = np.concatenate(rows), np.concatenate(cols), np.concatenate(weights)
-    k = len(values)
+        on_v = (mv >= -q) & (mv < n + q)
+        for mu, ku in ku_all:
+            np.multiply(ku, kv, out=share[j])
+            ok = on_v & (mu >= -q) & (mu < n + q) & (share[j] > 1e-4)
+            share[j][~ok] = 0.0
+            col[j] = np.where(ok, (mv + q) * size + mu + q, 0)
+            j += 1
+    flat_col = col.ravel()
 
     def forward(d: np.ndarray) -> np.ndarray:
-        return np.bincount(row, weights=share * d[col], minlength=k)
+        return (share * d[col]).sum(axis=0)
 
     def backward(r: np.ndarray) -> np.ndarray:
-        return np.bincount(col, weights=share * r[row], minlength=size * size)
+        return np.bincount(flat_col, weights=(share * r).ravel(), minlength=size * size)
 
     # Lighting A, B linear across the code, from the pixels that see mostly known cells.
     unknown_mass = forward((~known).astype(np.float64))
@@ -156,20 +166,25 @@ def _read(
     def normal(d: np.ndarray) -> np.ndarray:
         return (backward(forward(d * free)) + RIDGE * d) * free
 
+    # Conjugate gradients preconditioned by the normal matrix's diagonal (Jacobi): sum_p K(p, m)^2.
+    diagonal = np.bincount(flat_col, weights=(share * share).ravel(), minlength=size * size) + RIDGE
+    inverse = free / diagonal
     d = 0.5 * free
     residual = (backward(target) + RIDGE * 0.5) * free - normal(d)
-    step = residual.copy()
-    rr = float(residual @ residual)
+    z = inverse * residual
+    step = z.copy()
+    rz = float(residual @ z)
     for _ in range(ITERATIONS):
-        if rr < 1e-12:
+        if rz < 1e-12:
             break
         ap = normal(step)
-        alpha = rr / float(step @ ap)
+        alpha = rz / float(step @ ap)
         d += alpha * step
         residual -= alpha * ap
-        new_rr = float(residual @ residual)
-        step = residual + (new_rr / rr) * step
-        rr = new_rr
+        z = inverse * residual
+        new_rz = float(residual @ z)
+        step = z + (new_rz / rz) * step
+        rz = new_rz
     read = np.where(known, cells, d).reshape(size, size)[q:-q, q:-q] > 0.5
     return _decode(read)
 

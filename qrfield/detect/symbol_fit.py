@@ -36,6 +36,7 @@ floor (MODEL_FLOOR_PX).
 from __future__ import annotations
 
 import copy
+import functools
 import math
 from dataclasses import dataclass
 
@@ -44,6 +45,7 @@ import numpy as np
 
 from qrfield.detect.lens import Lens
 from qrfield.detect.symbol import QUIET_RINGS
+from qrfield.linalg import small_solve
 
 #: Module coordinates of V1..V4.
 _UNIT_SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
@@ -159,9 +161,14 @@ class _Layout:
         m = 2 * r + 1
         known = np.isfinite(cells)
         self.colour = np.where(known, cells, 0.0).ravel()
+        # Windows of m x m cells with no unknown cell: an integral image of the unknown ones.
+        unknown = np.zeros((size + 1, size + 1), dtype=np.int32)
+        np.cumsum(np.cumsum(~known, axis=0, dtype=np.int32), axis=1, out=unknown[1:, 1:])
         full = np.zeros((size, size), dtype=bool)
-        counts = np.lib.stride_tricks.sliding_window_view(known, (m, m)).all(axis=(2, 3))
-        full[: size - m + 1, : size - m + 1] = counts
+        span = size - m + 1
+        full[:span, :span] = (
+            unknown[m:, m:] - unknown[:span, m:] - unknown[m:, :span] + unknown[:span, :span]
+        ) == 0
         self.safe = full.ravel()
         self.window = (np.arange(m)[:, None] * size + np.arange(m)[None, :]).ravel()
         q = QUIET_RINGS
@@ -173,7 +180,7 @@ class _Layout:
         horizontal = np.column_stack([cols2 - q + 0.5, rows2 + 1 - q])
         mids = np.concatenate([vertical, horizontal]).astype(np.float64)
         kinds = np.concatenate([np.zeros(len(vertical)), np.ones(len(horizontal))]).astype(np.int8)
-        order = np.random.default_rng(len(mids)).permutation(len(mids))
+        order = _shuffle(len(mids))
         self.mids, self.kinds = mids[order], kinds[order]
         self._candidates: dict[tuple[int, int, int], np.ndarray] = {}
 
@@ -189,8 +196,7 @@ class _Layout:
         across = np.arange(-band_px, band_px + 1e-9, 0.7) / module_px
         wanted = math.ceil(2.0 * budget / max(len(along) * len(across) * 0.6, 1.0))
         mids, kinds = self.mids[:wanted], self.kinds[:wanted]
-        a, c = np.meshgrid(along, across)
-        a, c = a.ravel(), c.ravel()
+        a, c = np.tile(along, len(across)), np.repeat(across, len(along))  # np.meshgrid's order
         vertical = kinds[:, None] == 0  # an edge along v: across it is u
         du = np.where(vertical, c[None, :], a[None, :])
         dv = np.where(vertical, a[None, :], c[None, :])
@@ -199,6 +205,14 @@ class _Layout:
             self._candidates.clear()
         self._candidates[key] = pts
         return pts
+
+
+@functools.lru_cache(maxsize=256)
+def _shuffle(count: int) -> np.ndarray:
+    """The fixed shuffled order of ``count`` edges (seeded by the count; a Generator costs 50 us)."""
+    order = np.random.default_rng(count).permutation(count)
+    order.setflags(write=False)
+    return order
 
 
 def _windows(layout: _Layout, uv: np.ndarray, r: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -366,6 +380,8 @@ class _Problem:
         n = size - 2 * QUIET_RINGS
         origin, scale = norm
         self.scale = scale
+        #: modules per side, and the geometry (homography parameters, normalisation) it was made at
+        self.n, self.geo, self.norm = n, geo, norm
         h, w = grey.shape
         g = _g_from_params(geo)
         inv = np.linalg.inv(g)
@@ -406,11 +422,22 @@ class _Problem:
         self.ph_t[1:] = self.p_t
         self.corner_t = np.ascontiguousarray(corner.T)
         self.colour_t = np.ascontiguousarray(colour.transpose(1, 2, 0))
-        # px per module unit across u and across v edges (k, 2): 1 / |du/dp|, 1 / |dv/dp|.
-        duv = (g[None, :2, :2] - uv[ok][:, :, None] * g[None, 2:3, :2]) / (uvw[ok, 2:3, None] * scale)
+        # px per module unit across u and across v edges (2, k): 1 / |du/dp|, 1 / |dv/dp|, with
+        # d(u, v)/d(normalised ideal) = (G[:2, :2] - (u, v) G[2, :2]) / w and the lens' d ideal /
+        # d pixel, component by component (whole (k, 2, 2) arrays cost several times as much).
+        u_ok, v_ok = uv[ok, 0], uv[ok, 1]
+        inv_w = 1.0 / (uvw[ok, 2] * scale)
+        ux, uy = (g[0, 0] - u_ok * g[2, 0]) * inv_w, (g[0, 1] - u_ok * g[2, 1]) * inv_w
+        vx, vy = (g[1, 0] - v_ok * g[2, 0]) * inv_w, (g[1, 1] - v_ok * g[2, 1]) * inv_w
         if lens.distorted:
-            duv = duv @ jl[ok]
-        self.inv_grad_t = np.ascontiguousarray((1.0 / np.sqrt((duv * duv).sum(axis=2))).T)
+            j = jl[ok]
+            j00, j01, j10, j11 = j[:, 0, 0], j[:, 0, 1], j[:, 1, 0], j[:, 1, 1]
+            ux, uy = ux * j00 + uy * j10, ux * j01 + uy * j11
+            vx, vy = vx * j00 + vy * j10, vx * j01 + vy * j11
+        self.inv_grad_t = np.empty((2, len(u_ok)))
+        np.hypot(ux, uy, out=self.inv_grad_t[0])
+        np.hypot(vx, vy, out=self.inv_grad_t[1])
+        np.divide(1.0, self.inv_grad_t, out=self.inv_grad_t)
         self.radius = r
 
     def __len__(self) -> int:
@@ -681,35 +708,65 @@ def fit_symbol(
             if stage_edge is None:
                 edge = use_edge
         assert problem is not None and resid is not None and jac is not None
+        start_geo = _params_from_g(g0) if warm is None else None
+    return _finish(
+        problem, start, geo, edge, light, (resid, jac, robust), lens, shift, iterations, start_geo, module_px
+    )
+
+
+def _finish(
+    problem: _Problem,
+    start: np.ndarray,
+    geo: np.ndarray,
+    edge: float,
+    light: np.ndarray,
+    last: tuple[np.ndarray, np.ndarray, float],
+    lens: Lens,
+    shift: np.ndarray,
+    iterations: int,
+    start_geo: np.ndarray | None,
+    module_px: float,
+) -> SymbolFit:
+    """A fit's result from its last state on ``problem`` (``last``: its residuals, Jacobian and
+    robust scale): corners, checks and covariance (see :func:`fit_symbol`); ``start_geo``: the
+    parameters of the starting corners, to measure the start's residual on the same pixels (None:
+    not measured, NaN); ``module_px``: the module size a corner's move is measured against."""
+    n, norm = problem.n, problem.norm
+    resid, jac, robust = last
+
+    def fail(reason: str) -> SymbolFit:
+        return SymbolFit(False, start.copy(), None, reason, iterations=iterations)
+
+    with np.errstate(all="ignore"):
         corners_ideal = _corners_ideal(geo, n, norm)
         if not np.all(np.isfinite(corners_ideal)):
-            return fail("the fit diverged", iterations)
+            return fail("the fit diverged")
         corners = lens.distort(corners_ideal) - shift
         contrast = float(light[3])
         moved = float(np.linalg.norm(corners - start, axis=1).max())
         if abs(contrast) < MIN_CONTRAST:
-            return fail(f"too little contrast ({abs(contrast):.0f} grey levels)", iterations)
+            return fail(f"too little contrast ({abs(contrast):.0f} grey levels)")
         # The starting corners on the same pixels (lighting refitted): the fallback's measure
         # (not for a warm start, where the start is a prediction, not a competing answer).
         start_scale = math.nan
-        if warm is None:
-            _, start_resid = _solve_lighting(problem, _params_from_g(g0), edge)
+        if start_geo is not None:
+            _, start_resid = _solve_lighting(problem, start_geo, edge)
             start_scale = _Solver.robust_scale(start_resid)
         # A corner far from its start is trusted only when the fit explains the image much better
         # there (a backend may miss V3 by many pixels; a fit may also wander off a code).
         if moved > max(3.0, 2.0 * module_px) and not robust < 0.5 * start_scale:
-            return fail(f"a corner moved {moved:.1f} px from its start", iterations)
+            return fail(f"a corner moved {moved:.1f} px from its start")
         # Covariance: robust scale^2 (J^T W J)^-1, its homography block taken to the corners.
         w = _Solver.weights(resid, robust)
         normal = (jac * w[:, None]).T @ jac
         try:
             cov = robust**2 * np.linalg.inv(normal)[:8, :8]
         except np.linalg.LinAlgError:
-            return fail("the fit is singular", iterations)
+            return fail("the fit is singular")
         dc = _corners_jacobian(geo, n, norm).reshape(4, 2, 8)
         corners_cov = corner_covariance(dc, cov, corners_ideal, lens)
         if not np.all(np.isfinite(corners_cov)):
-            return fail("the fit is singular", iterations)
+            return fail("the fit is singular")
     return SymbolFit(
         True,
         corners,
@@ -723,3 +780,52 @@ def fit_symbol(
         iterations,
         FitState(edge, light.copy(), robust),
     )
+
+
+def polish(
+    problem: _Problem,
+    corners_px: np.ndarray,
+    state: FitState,
+    lens: Lens,
+    offset: tuple[int, int] = (0, 0),
+) -> SymbolFit:
+    """One Gauss-Newton step of the full fit's model (edge width free) on ``problem``'s pixels from
+    corners V1..V4 (4, 2) px of its image (a crop at ``offset``) a few hundredths of a pixel from
+    the answer, with ``state``'s edge width and lighting (in the problem's basis: normalised ideal
+    pixels); the covariance as :func:`fit_symbol`'s, from the model's Jacobian and the robust
+    scale of the residuals where the step starts. Never raises for image content (ok False).
+
+    For a cold fit by inverse composition (qrfield.detect.symbol_cold), whose template's points are
+    these pixels (so its lighting carries over): the step from its answer is the full fit's own
+    (its model at the pixel centres exactly), without the Levenberg-Marquardt trials that would
+    evaluate the model again."""
+    start = np.asarray(corners_px, dtype=np.float64)
+    shift = np.asarray(offset, dtype=np.float64)
+    n, (origin, scale) = problem.n, problem.norm
+    if lens.distorted:
+        from qrfield.detect.lens import undistort_pixels
+
+        ideal = undistort_pixels(lens.camera, start + shift)
+    else:
+        ideal = start + shift
+    try:
+        geo = _params_from_g(_homography((ideal - origin) / scale, _UNIT_SQUARE * n))
+    except np.linalg.LinAlgError:
+        return SymbolFit(False, start.copy(), None, "degenerate corners")
+    light = np.asarray(state.lighting, dtype=np.float64)
+    with np.errstate(all="ignore"):
+        resid, at = problem.residuals(geo, state.edge_px, light)
+        jac = problem.jacobian(at, True)
+        robust = _Solver.robust_scale(resid)
+        jw = jac * _Solver.weights(resid, robust)[:, None]
+        normal = jw.T @ jac
+        normal.flat[:: len(normal) + 1] += 1e-9
+        try:
+            delta = -small_solve(normal, jw.T @ resid, symmetric=True)  # J = d resid / d parameters
+        except np.linalg.LinAlgError:
+            return SymbolFit(False, start.copy(), None, "the fit is singular")
+        geo = geo + delta[:8]
+        edge = float(np.clip(state.edge_px + delta[8], MIN_EDGE_PX, 6.0))
+        light = light + delta[9:15]
+    last = (resid, jac, robust)
+    return _finish(problem, start, geo, edge, light, last, lens, shift, 1, None, problem.module_px)

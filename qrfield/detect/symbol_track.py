@@ -35,12 +35,16 @@ from qrfield.detect.symbol import QUIET_RINGS
 from qrfield.detect.symbol_fit import (
     HUBER_K,
     MIN_CONTRAST,
+    MIN_EDGE_PX,
     FitState,
     SymbolFit,
+    _Darkness,
+    _g_from_params,
     _layout,
+    _params_from_g,
+    _Problem,
     _windows,
     corner_covariance,
-    darkness_at,
 )
 from qrfield.linalg import small_inverse, small_solve
 
@@ -52,6 +56,11 @@ TEMPLATE_TOLERANCE = 0.15
 #: Module coordinates of V1..V4 per module of the symbol.
 _SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
 _FLT_EPSILON = float(np.finfo(np.float32).eps)
+#: How the image is sampled between pixel centres: Lanczos at the layout's points (the tracker's:
+#: better than cubic there, issue 13h), cubic at pixel centres (Lanczos, whose cv2.remap weights
+#: come from a table at 1/32 px, drifted there by 0.02-0.03 px over a few steps: measured).
+LAYOUT_INTERPOLATION = cv2.INTER_LANCZOS4
+PIXEL_INTERPOLATION = cv2.INTER_CUBIC
 
 
 def _scales(h: list[float], n: int) -> tuple[float, float]:
@@ -71,64 +80,145 @@ def _scales(h: list[float], n: int) -> tuple[float, float]:
     return math.hypot(xu - x0, yu - y0), math.hypot(xv - x0, yv - y0)
 
 
+def _inv_grad(uv: np.ndarray, h: np.ndarray, lens: Lens | None) -> np.ndarray:
+    """(2, k) px per module unit across u and across v edges at module points ``uv`` (k, 2) for
+    the homography ``h`` (3, 3, module -> ideal px), through the lens: the edges are blurred in the
+    image's pixels, not the ideal ones (as the full fit's samples). Component by component: the
+    rows of the inverse of d px / d uv are the gradients of u and v."""
+    u, v = uv[:, 0], uv[:, 1]
+    w = 1.0 / (h[2, 0] * u + h[2, 1] * v + h[2, 2])
+    x = (h[0, 0] * u + h[0, 1] * v + h[0, 2]) * w
+    y = (h[1, 0] * u + h[1, 1] * v + h[1, 2]) * w
+    a, b = (h[0, 0] - x * h[2, 0]) * w, (h[0, 1] - x * h[2, 1]) * w  # d x / d (u, v)
+    c, d = (h[1, 0] - y * h[2, 0]) * w, (h[1, 1] - y * h[2, 1]) * w  # d y / d (u, v)
+    if lens is not None and lens.distorted:
+        j = lens.distort_jacobian(np.column_stack([x, y]))
+        j00, j01, j10, j11 = j[:, 0, 0], j[:, 0, 1], j[:, 1, 0], j[:, 1, 1]
+        a, b, c, d = j00 * a + j01 * c, j00 * b + j01 * d, j10 * a + j11 * c, j10 * b + j11 * d
+    det = np.abs(a * d - b * c)
+    # grad u = (d, -b) / det, grad v = (-c, a) / det: their lengths' inverses.
+    out = np.empty((2, len(u)))
+    np.divide(det, np.hypot(d, b), out=out[0])
+    np.divide(det, np.hypot(c, a), out=out[1])
+    return out
+
+
+def pixel_samples(
+    cells: np.ndarray,
+    h: np.ndarray,
+    edge_px: float,
+    budget: int,
+    lens: Lens,
+    grey: np.ndarray,
+    offset: tuple[int, int],
+) -> _Problem:
+    """The full fit's samples at homography ``h`` (3, 3, module -> ideal camera px) for edge width
+    ``edge_px``: at most ``budget`` pixel centres of ``grey`` (a crop at ``offset``) near the known
+    edges of ``cells`` (qrfield.detect.symbol_fit._Problem, in its normalisation: the code's
+    centre and half diagonal in ideal pixels)."""
+    n = cells.shape[0] - 2 * QUIET_RINGS
+    corners = cv2.perspectiveTransform((_SQUARE * n).reshape(1, 4, 2), h).reshape(4, 2)
+    origin = corners.mean(axis=0)
+    scale = float(np.linalg.norm(corners[2] - corners[0])) / 2.0
+    # The full fit's parameters: module coordinates of normalised ideal pixels (x - origin) / scale.
+    g = np.linalg.inv(h) @ np.array([[scale, 0.0, origin[0]], [0.0, scale, origin[1]], [0.0, 0.0, 1.0]])
+    band = 1.5 * edge_px + 1.0
+    return _Problem(grey, lens, cells, _params_from_g(g), (origin, scale), edge_px, band, budget, offset)
+
+
 class _Template:
-    """The model evaluated at fixed symbol points for one scale and edge width."""
+    """The model evaluated at fixed symbol points for one scale and edge width.
+
+    The points are module coordinates near the known edges: spread by the layout
+    (:meth:`_Layout.candidates`, the tracker's), or, with ``samples`` (a cold fit's last stage,
+    :mod:`qrfield.detect.symbol_cold`), the module coordinates of those pixel centres of the image
+    at the samples' own geometry (:func:`pixel_samples`, the full fit's samples): the first step
+    then samples the image exactly at its pixels, later ones within the steps' move of them; the
+    lighting basis is then the full fit's (normalised image coordinates: a light ramp across the
+    image is linear there, not in the module coordinates of a tilted code; that left fits 0.02-0.03
+    px off the full fit's). ``free_edge`` adds the model's derivative with respect to the edge width
+    (the edge width is then fitted, to first order about ``edge_px``).
+    """
 
     def __init__(
-        self, cells: np.ndarray, h: np.ndarray, edge_px: float, points: int, lens: Lens | None = None
+        self,
+        cells: np.ndarray,
+        h: np.ndarray,
+        edge_px: float,
+        points: int,
+        lens: Lens | None = None,
+        samples: _Problem | None = None,
+        free_edge: bool = False,
     ) -> None:
         size = cells.shape[0]
         n = size - 2 * QUIET_RINGS
         self.scales = _scales(h.ravel().tolist(), n)
         self.edge_px = edge_px
+        self.free_edge = free_edge
         module_px = 0.5 * (self.scales[0] + self.scales[1])
         r = 1 if edge_px / max(module_px, 1e-6) < 0.4 else 2
-        layout = _layout(cells, r)
         band = 1.5 * edge_px + 1.0
-        pts = layout.candidates(max(1, min(8, round(module_px))), max(module_px, 0.05), band, points)
-        if len(pts) > points:
-            pts = pts[np.linspace(0, len(pts) - 1, points).astype(np.int64)]
-        ok, colour, corner = _windows(layout, pts, r)
-        uv = pts[ok]
-        # px per module unit across u and v edges at each point, from the homography's Jacobian.
-        one = np.ones(len(uv))
-        q = uv @ h[:2, :2].T + h[:2, 2]
-        w = uv @ h[2, :2] + h[2, 2]
-        px = q / w[:, None]
-        jac = (h[None, :2, :2] - px[:, :, None] * h[None, 2:3, :2]) / w[:, None, None]  # d px / d uv
-        if lens is not None and lens.distorted:
-            # The edges are blurred in the image's pixels, not the ideal ones: the model's distances
-            # across them go through the lens (as in the full fit's samples).
-            jac = lens.distort_jacobian(px) @ jac
-        det = jac[:, 0, 0] * jac[:, 1, 1] - jac[:, 0, 1] * jac[:, 1, 0]
-        grad_u = np.column_stack([jac[:, 1, 1], -jac[:, 0, 1]]) / det[:, None]  # rows of the inverse
-        grad_v = np.column_stack([-jac[:, 1, 0], jac[:, 0, 0]]) / det[:, None]
-        inv_grad = 1.0 / np.column_stack([np.hypot(*grad_u.T), np.hypot(*grad_v.T)])
-        t, dt, _ = darkness_at(uv, corner, inv_grad, colour, edge_px, edge_derivative=False)
-        self.uv = uv
+        # Per-point terms with the points on the last axis (as the full fit's: every operation on
+        # contiguous runs; the Jacobian is filled row by row, transposed).
+        if samples is not None:
+            g = _g_from_params(samples.geo)
+            uvw = g[:, :2] @ samples.p_t + g[:, 2:3]
+            uv_t = uvw[:2] / uvw[2]
+            dark = _Darkness(uv_t - samples.corner_t, samples.inv_grad_t, samples.colour_t, edge_px)
+            xy_t = samples.p_t
+        else:
+            layout = _layout(cells, r)
+            pts = layout.candidates(max(1, min(8, round(module_px))), max(module_px, 0.05), band, points)
+            if len(pts) > points:
+                pts = pts[np.linspace(0, len(pts) - 1, points).astype(np.int64)]
+            ok, colour, corner = _windows(layout, pts, r)
+            uv = pts[ok]
+            uv_t = np.ascontiguousarray(uv.T)
+            dark = _Darkness(
+                np.ascontiguousarray((uv - corner).T),
+                _inv_grad(uv, h, lens),
+                np.ascontiguousarray(colour.transpose(1, 2, 0)),
+                edge_px,
+            )
+            xy_t = uv_t / (n / 2.0) - 1.0
+        t = dark.value
+        (du, dv), dts = dark.derivatives(free_edge)
+        k = len(t)
         self.t = t
-        u, v = uv[:, 0], uv[:, 1]
-        # d W(x; dH) / d dH at the identity, for dH = I + [[d0 d1 d2], [d3 d4 d5], [d6 d7 0]]
-        dwu = np.column_stack([u, v, one, 0 * one, 0 * one, 0 * one, -u * u, -u * v])
-        dwv = np.column_stack([0 * one, 0 * one, 0 * one, u, v, one, -u * v, -v * v])
-        self.geo = dt[:, :1] * dwu + dt[:, 1:] * dwv  # dT / d dH, (k, 8)
-        # lighting basis: 1, x, y over the symbol (normalised module coordinates)
-        xy = uv / (n / 2.0) - 1.0
-        self.basis = np.column_stack([one, xy])
-        self.light_cols = np.concatenate([self.basis, -self.basis * t[:, None]], axis=1)
+        #: dT/ds at the points (the edge width's derivative), None without ``free_edge``
+        self.dts = dts
+        u, v = uv_t
+        # -dT / d dH, dH = I + [[d0 d1 d2], [d3 d4 d5], [d6 d7 0]] at the identity: dT/du (u, v, 1,
+        # 0, 0, 0, -u u, -u v) + dT/dv (0, 0, 0, u, v, 1, -u v, -v v).
+        radial = du * u + dv * v
+        self.neg_geo_t = neg = np.empty((8, k))
+        np.multiply(du, u, out=neg[0])
+        np.multiply(du, v, out=neg[1])
+        neg[2] = du
+        np.multiply(dv, u, out=neg[3])
+        np.multiply(dv, v, out=neg[4])
+        neg[5] = dv
+        np.multiply(radial, -u, out=neg[6])
+        np.multiply(radial, -v, out=neg[7])
+        np.negative(neg, out=neg)
         self.n = n
-        # The Jacobian's buffer: its lighting columns do not change, the geometry's are -B dT/d dH.
-        # Kept transposed, (14, k): each parameter's column is one contiguous row, so filling
-        # the geometry's rows and forming J^T W J cost half as much as on (k, 14) (measured).
-        self.neg_geo_t = np.ascontiguousarray(-self.geo.T)
-        self.jac_t = np.empty((14, len(t)))
-        self.jac_t[8:] = self.light_cols.T
-        self.uv_cv = np.ascontiguousarray(uv.reshape(1, -1, 2))
+        # Lighting basis 1, x, y as rows (3, k): normalised module coordinates, or the samples'
+        # (see above); (A, B) = light.reshape(2, 3) @ basis_t in one product.
+        self.basis_t = basis = np.empty((3, k))
+        basis[0] = 1.0
+        basis[1:] = xy_t
+        # The Jacobian's buffer, transposed (14, k): each parameter's column is one contiguous row,
+        # so filling the geometry's rows (-B dT/d dH, each step) and forming J^T W J cost half as
+        # much as on (k, 14) (measured). The lighting's rows (basis, -T basis) do not change; with
+        # the edge width free its row is the 9th (15 rows).
+        self.light_row = 9 if free_edge else 8
+        self.jac_t = np.empty((self.light_row + 6, k))
+        self.jac_t[self.light_row : self.light_row + 3] = basis
+        np.multiply(basis, -t, out=self.jac_t[self.light_row + 3 :])
+        self.uv = uv_t.T
+        self.uv_cv = np.ascontiguousarray(self.uv.reshape(1, -1, 2))
         # float32 points: cv2.perspectiveTransform then gives the float32 map cv2.remap takes.
         self.uv_cv32 = self.uv_cv.astype(np.float32)
-        # The lighting basis as rows: (A, B) = light.reshape(2, 3) @ basis_t in one product (a
-        # (k, 3) @ (3,) matvec costs twice as much as this (2, 3) @ (3, k), measured).
-        self.basis_t = np.ascontiguousarray(self.basis.T)
         # The points' box in module coordinates: where a homography keeps w > 0 over it, the box's
         # image is the convex quad of its mapped corners, so those four inside the crop put every
         # point inside (a test in floats instead of two passes over the (k, 2) pixels).
@@ -251,13 +341,30 @@ def _shifted(h: list[float], sx: float, sy: float) -> list[float]:
 
 
 class WarmFit:
-    """The warm whole-symbol fit of one tracked code (its cell map and lens fixed)."""
+    """The warm whole-symbol fit of one tracked code (its cell map and lens fixed).
 
-    def __init__(self, cells: np.ndarray, lens: Lens | None = None, points: int = TEMPLATE_POINTS) -> None:
+    ``pixel_centred``: the template's points are the image's pixel centres near the edges where
+    the template is made (a cold fit's last stage: :func:`pixel_samples`, kept as ``samples``); that
+    template belongs to that image and crop and is not made again until :meth:`forget_template`.
+    ``free_edge``: the edge width is fitted too (else it stays the state's).
+    """
+
+    def __init__(
+        self,
+        cells: np.ndarray,
+        lens: Lens | None = None,
+        points: int = TEMPLATE_POINTS,
+        pixel_centred: bool = False,
+        free_edge: bool = False,
+    ) -> None:
         self.cells = cells
         self.n = cells.shape[0] - 2 * QUIET_RINGS
         self.lens = lens or Lens(None)
         self.points = points
+        self.pixel_centred = pixel_centred
+        self.free_edge = free_edge
+        #: the pixel-centred template's samples (qrfield.detect.symbol_fit._Problem), else None
+        self.samples: _Problem | None = None
         self._template: _Template | None = None
         m = _SQUARE * self.n
         self._corner_modules = np.ascontiguousarray(m.reshape(1, 4, 2))
@@ -276,6 +383,7 @@ class WarmFit:
     def forget_template(self) -> None:
         """Make the template again at the next fit (whatever its scale)."""
         self._template = None
+        self.samples = None
 
     def fit(
         self,
@@ -317,9 +425,14 @@ class WarmFit:
             return fail("degenerate corners")
         edge = state.edge_px
         template = self._template
-        if template is None or not template.fits(h, edge):
+        if template is None or not (self.pixel_centred or template.fits(h, edge)):
+            hm = np.array(h).reshape(3, 3)
+            if self.pixel_centred:
+                self.samples = pixel_samples(
+                    self.cells, hm, edge, self.points, lens, grey, (int(sx), int(sy))
+                )
             template = self._template = _Template(
-                self.cells, np.array(h).reshape(3, 3), edge, self.points, lens
+                self.cells, hm, edge, self.points, lens, self.samples, self.free_edge
             )
         if len(template.t) < 60:
             return fail("too few template points")
@@ -331,6 +444,9 @@ class WarmFit:
         k = len(template.t)
         jac_t = template.jac_t
         t = template.t
+        free = template.free_edge
+        interpolation = PIXEL_INTERPOLATION if self.pixel_centred else LAYOUT_INTERPOLATION
+        first_light = template.light_row  # the lighting's first row of the Jacobian
         # Through a pinhole the iteration runs on the crop's pixels directly (T o H); through a
         # lens on the ideal pixels, distorted and shifted at each step.
         if not distorted:
@@ -358,9 +474,13 @@ class WarmFit:
                 if inside is not None and inside.mean() < 0.9:
                     return fail("the code leaves the region")
                 values = cv2.remap(
-                    image, grid.reshape(1, -1, 2), None, cv2.INTER_LANCZOS4, borderMode=cv2.BORDER_REPLICATE
+                    image, grid.reshape(1, -1, 2), None, interpolation, borderMode=cv2.BORDER_REPLICATE
                 ).reshape(-1)
                 level, b = light.reshape(2, 3) @ template.basis_t  # lighting A and contrast B, (k,) each
+                if free:  # the template at this edge width, to first order
+                    t = template.t + template.dts * (edge - template.edge_px)
+                    np.multiply(template.basis_t, -t, out=jac_t[12:])
+                    np.multiply(template.dts, -b, out=jac_t[8])
                 resid = values - level + b * t
                 # Huber weights (1 within HUBER_K robust scales), none outside the region.
                 w = huber / np.maximum(np.abs(resid), huber)
@@ -370,7 +490,7 @@ class WarmFit:
                 np.multiply(template.neg_geo_t, b, out=jac_t[:8])
                 jw_t = jac_t * w
                 normal = jw_t @ jac_t.T
-                normal.flat[::15] += 1e-9
+                normal.flat[:: len(normal) + 1] += 1e-9
                 try:
                     delta = small_solve(normal, jw_t @ resid, symmetric=True)
                 except np.linalg.LinAlgError:
@@ -379,7 +499,9 @@ class WarmFit:
                 h = _compose_inverse(h, delta)
                 if h is None:
                     return fail("the fit diverged")
-                light = light + delta[8:]
+                if free:
+                    edge = min(max(edge + float(delta[8]), MIN_EDGE_PX), 6.0)
+                light = light + delta[first_light:]
                 if settle_px > 0.0 and done < iterations and _largest_move(before, h, n) < settle_px:
                     break
             half = k // 2

@@ -282,8 +282,6 @@ def true_corners(camera: CameraModel, pose: Pose, side_mm: float) -> np.ndarray:
 
 def hard_view(index: int, seed: int = 2024) -> HardView:
     """View ``index`` of the hard set with ``seed``: the same view every time."""
-    import cv2
-
     from qrfield.sampling import random_visible_poses
 
     rng = np.random.default_rng([seed, index])
@@ -308,6 +306,31 @@ def hard_view(index: int, seed: int = 2024) -> HardView:
         max_tilt_deg=MAX_TILT_DEG,
         tilt_from="line_of_sight",
     )[0]
+    image, corners, noise, blur, gradient = _picture(rng, camera, pose, side, matrix)
+    return HardView(
+        index,
+        image,
+        corners,
+        camera,
+        side,
+        pose,
+        text,
+        version,
+        n,
+        _module_px(corners, n),
+        noise,
+        blur,
+        gradient,
+    )
+
+
+def _picture(
+    rng: np.random.Generator, camera: CameraModel, pose: Pose, side: float, matrix: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, float, float, float]:
+    """The view of one card: (image (H, W) uint8, true corners (4, 2), noise sigma, blur sigma px,
+    lighting gradient): grey levels, blur, lighting ramp and noise drawn from ``rng`` in this order."""
+    import cv2
+
     light = float(rng.uniform(170.0, 240.0))
     dark = float(rng.uniform(10.0, 70.0))
     background = float(rng.uniform(40.0, 200.0))
@@ -329,21 +352,122 @@ def hard_view(index: int, seed: int = 2024) -> HardView:
     image = np.clip(np.round(image), 0, 255).astype(np.uint8)
     image.setflags(write=False)
     corners.setflags(write=False)
-    return HardView(
-        index,
-        image,
-        corners,
-        camera,
-        side,
-        pose,
-        text,
-        version,
-        n,
-        _module_px(corners, n),
-        noise,
-        blur,
-        gradient,
-    )
+    return image, corners, noise, blur, gradient
+
+
+#: The steep set (issue 26): codes tilted about both X and Y, alpha and beta each up to this (deg),
+#: at z in STEEP_Z_RANGE_MM (mm), anywhere in view: foreshortened modules of 1-2 px along the
+#: code's short side where the other side's are 2-4 px.
+STEEP_TILT_DEG = 55.0
+STEEP_Z_RANGE_MM = (150.0, 600.0)
+
+
+def steep_view(index: int, seed: int = 2026) -> HardView:
+    """View ``index`` of the steep set with ``seed`` (the same view every time): a segno symbol as in
+    the hard set (30/50/100 mm, versions 1-10), alpha and beta uniform in +-STEEP_TILT_DEG and gamma
+    over the full turn (R = Rx Ry Rz, docs/conventions.md), z uniform in STEEP_Z_RANGE_MM, the
+    symbol and its quiet zone in view; drawn, blurred, lit and noised like the hard set's views
+    (even indices pinhole, odd the distorted lens). ``module_px`` is the foreshortened module along
+    the code's shortest side."""
+    from qrfield.visibility import view_of
+
+    rng = np.random.default_rng([seed, 7_000_001, index])
+    camera = DISTORTED_CAMERA if index % 2 else _pinhole()
+    side = float(SIDES_MM[int(rng.integers(len(SIDES_MM)))])
+    text = _payload(rng)
+    matrix, version = symbol_matrix(text, "LMQH"[int(rng.integers(4))])
+    n = matrix.shape[0]
+    quiet_side = side * (n + 2 * QUIET_MODULES) / n  # the symbol with its quiet zone
+    w, h = camera.size
+    while True:
+        z = float(rng.uniform(*STEEP_Z_RANGE_MM))
+        x = (rng.uniform(-0.5, 0.5) * w + w / 2 - 0.5 - camera.cx) * z / camera.fx
+        y = (rng.uniform(-0.5, 0.5) * h + h / 2 - 0.5 - camera.cy) * z / camera.fy
+        angles = (
+            float(rng.uniform(-STEEP_TILT_DEG, STEEP_TILT_DEG)),
+            float(rng.uniform(-STEEP_TILT_DEG, STEEP_TILT_DEG)),
+            float(rng.uniform(-180.0, 180.0)),
+        )
+        pose = Pose(np.array([x, y, z]), angles)
+        if bool(view_of(camera, quiet_side, pose.rotation, pose.position_mm, margin_px=2.0).in_view):
+            break
+    image, corners, noise, blur, gradient = _picture(rng, camera, pose, side, matrix)
+    small = _module_px(corners, n)
+    return HardView(index, image, corners, camera, side, pose, text, version, n, small, noise, blur, gradient)
+
+
+def steep_views(count: int, seed: int = 2026, start: int = 0) -> Iterator[HardView]:
+    """Views ``start`` .. ``start + count - 1`` of the steep set (see :func:`steep_view`)."""
+    for index in range(start, start + count):
+        yield steep_view(index, seed)
+
+
+#: The camera of the frames with several codes, its grid of cells (columns, rows) and the codes' side.
+MULTI_CAMERA_SPEC = "webcam-60@1280x720"
+MULTI_GRID = (4, 2)
+MULTI_SIDE_MM = 40.0
+
+
+@dataclass(frozen=True)
+class MultiView:
+    """A frame holding several codes (:func:`multi_view`): image (H, W) uint8 grey; per code its
+    true corners V1..V4 (4, 2) px, text, modules per side and smallest module side (px)."""
+
+    image: np.ndarray
+    camera: CameraModel
+    corners_px: tuple[np.ndarray, ...]
+    texts: tuple[str, ...]
+    modules: tuple[int, ...]
+    module_px: tuple[float, ...]
+
+
+def multi_view(index: int, count: int, seed: int = 2024) -> MultiView:
+    """Frame ``index`` with ``count`` codes (1 .. 8, the cells of a MULTI_GRID over the view, in a
+    seeded order), each a segno symbol of 5-60 bytes and MULTI_SIDE_MM at z 330-420 mm, tilted up
+    to 35 deg from the line of sight, any in-plane turn, drawn by :func:`rasterise` (the cards do
+    not overlap) on one background, then one blur (0.4-0.9 px) and noise (0-3 grey levels)."""
+    import cv2
+
+    from qrfield.camera import resolve_camera
+    from qrfield.geometry import angles_from_rotation
+    from qrfield.sampling import _align_z, random_tilted_rotation
+
+    columns, rows = MULTI_GRID
+    if not 1 <= count <= columns * rows:
+        raise ValueError(f"a frame holds 1 to {columns * rows} codes, got {count}")
+
+    camera = resolve_camera(MULTI_CAMERA_SPEC)
+    rng = np.random.default_rng([seed, 9_000_011, index, count])
+    light, dark = float(rng.uniform(180.0, 235.0)), float(rng.uniform(15.0, 60.0))
+    background = float(rng.uniform(60.0, 160.0))
+    image = np.full((camera.height, camera.width), background)
+    w, h = camera.size
+    corners, texts, modules, module_px = [], [], [], []
+    for cell in rng.permutation(columns * rows)[:count]:
+        column, row = divmod(int(cell), rows)
+        length = int(rng.integers(5, 61))
+        text = "".join(rng.choice(list(string.ascii_letters + string.digits), length))
+        matrix, _ = symbol_matrix(text, "LMQH"[int(rng.integers(4))])
+        z = float(rng.uniform(330.0, 420.0))
+        u = (column + 0.5 + rng.uniform(-0.1, 0.1)) * w / columns
+        v = (row + 0.5 + rng.uniform(-0.1, 0.1)) * h / rows
+        position = np.array([(u - camera.cx) * z / camera.fx, (v - camera.cy) * z / camera.fy, z])
+        rotation = _align_z(position) @ random_tilted_rotation(rng, 35.0)
+        pose = Pose(position, angles_from_rotation(rotation))
+        card = rasterise(camera, pose, MULTI_SIDE_MM, matrix, background, light, dark)
+        drawn = card != background
+        image[drawn] = card[drawn]
+        true = true_corners(camera, pose, MULTI_SIDE_MM)
+        corners.append(true)
+        texts.append(text)
+        modules.append(matrix.shape[0])
+        module_px.append(_module_px(true, matrix.shape[0]))
+    blur = float(rng.uniform(0.4, 0.9))
+    image = cv2.GaussianBlur(image, (0, 0), sigmaX=blur, borderType=cv2.BORDER_REPLICATE)
+    image = np.clip(np.round(image + rng.normal(0.0, float(rng.uniform(0.0, 3.0)), image.shape)), 0, 255)
+    out = image.astype(np.uint8)
+    out.setflags(write=False)
+    return MultiView(out, camera, tuple(corners), tuple(texts), tuple(modules), tuple(module_px))
 
 
 def hard_views(count: int, seed: int = 2024, start: int = 0) -> Iterator[HardView]:

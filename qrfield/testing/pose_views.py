@@ -137,5 +137,21 @@ def hard_set(count: int, seed: int) -> list[BenchView]:
     ]
 
 
+def steep_set(count: int, seed: int) -> list[BenchView]:
+    """The steep set of ``qrfield benchmark detect`` (qrfield.testing.hardset.steep_view: the hard
+    set's symbols and degradations, alpha and beta each up to 55 deg, z 150-600 mm; module size its
+    views' shortest side over the modules)."""
+    from qrfield.testing.hardset import steep_views
+
+    return [
+        BenchView(v.camera, v.side_mm, v.pose, v.corners_px, v.image, v.modules, v.text, v.module_px)
+        for v in steep_views(count, seed)
+    ]
+
+
 #: View sets with pictures, by name (``qrfield benchmark pose --view-set NAME``).
-VIEW_SETS: dict[str, Callable[[int, int], list[BenchView]]] = {"hard": hard_set, "render": render_set}
+VIEW_SETS: dict[str, Callable[[int, int], list[BenchView]]] = {
+    "hard": hard_set,
+    "render": render_set,
+    "steep": steep_set,
+}
