@@ -18,6 +18,8 @@ from __future__ import annotations
 import glob
 import os
 import struct
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -248,16 +250,22 @@ def png_data_size(width: int, height: int, depth: int, colour: int, interlace: i
 
 
 def check_png_data(path: str | os.PathLike[str], where: str) -> None:
-    """ImageError when a PNG's compressed data inflates to more than its header's pixels need.
+    """ImageError when a PNG's data is not what its header's pixels need: more (a crafted stream),
+    less, damaged compressed data, or a chunk that fails its CRC.
 
     The pixel limit bounds what the header declares, not what its IDAT chunks inflate to: a 50 MP
     PNG whose stream goes on to 900 MB of zeros kept libpng inflating for 23 s (and it warns "Too
     much image data" on stderr). So the stream is inflated here first, a few MB at a time and
     discarded, and stopped one byte beyond what the header allows: the CPU spent is at most that
     of decoding a legitimate image of that size. Chunks are read by their headers, the data
-    never held whole.
+    never held whole. A damaged PNG is refused here too, in one line: libpng would print its own
+    "libpng error: Not enough image data" or "IDAT: CRC error" on stderr (OpenCV keeps libpng's
+    default handlers) before OpenCV gives up on it.
     """
     import zlib
+
+    def damaged(why: str) -> ImageError:
+        return ImageError(f"{where}: cannot read image: {why} (a damaged or truncated PNG)")
 
     with open(path, "rb") as handle:
         head = handle.read(33)
@@ -266,26 +274,30 @@ def check_png_data(path: str | os.PathLike[str], where: str) -> None:
         width, height, depth, colour, _method, _filter, interlace = struct.unpack(">IIBBBBB", head[16:29])
         if colour not in _PNG_CHANNELS or depth not in (1, 2, 4, 8, 16):
             return  # a damaged header: OpenCV says it cannot decode it
+        if struct.unpack(">I", head[29:33])[0] != zlib.crc32(head[12:29]):
+            raise damaged("its IHDR chunk fails its CRC")
         allowed = png_data_size(width, height, depth, colour, interlace)
         inflater = zlib.decompressobj()
         produced = 0
-        handle.seek(33)
         while True:
             header = handle.read(8)
             if len(header) < 8:
-                return  # truncated: OpenCV reports it
+                if produced < allowed:  # libpng: "Not enough image data"
+                    raise damaged(
+                        f"it ends after {produced} of the {allowed} bytes its {width}x{height} pixels need"
+                    )
+                return  # all the pixels, no IEND: OpenCV decodes it
             length, kind = struct.unpack(">I4s", header)
-            if kind == b"IEND":
-                return
-            if kind != b"IDAT":
-                handle.seek(length + 4, os.SEEK_CUR)  # skip the chunk and its CRC
-                continue
+            crc = zlib.crc32(kind)
             left = length
             while left > 0:
                 data = handle.read(min(left, _INFLATE_STEP))
                 if not data:
-                    return
+                    raise damaged(f"it ends inside its {kind.decode('latin-1')!r} chunk")
                 left -= len(data)
+                crc = zlib.crc32(data, crc)
+                if kind != b"IDAT":
+                    continue
                 try:
                     while data:
                         produced += len(inflater.decompress(data, _INFLATE_STEP))
@@ -297,8 +309,18 @@ def check_png_data(path: str | os.PathLike[str], where: str) -> None:
                                 "or crafted PNG); refused before decoding"
                             )
                 except zlib.error:
-                    return  # damaged data: OpenCV reports it
-            handle.seek(4, os.SEEK_CUR)  # the CRC
+                    raise damaged("its compressed data is damaged") from None
+            stored = handle.read(4)
+            if len(stored) < 4:
+                raise damaged(f"it ends inside its {kind.decode('latin-1')!r} chunk")
+            if struct.unpack(">I", stored)[0] != crc:
+                raise damaged(f"its {kind.decode('latin-1')!r} chunk fails its CRC")
+            if kind == b"IEND":
+                break
+        if produced < allowed:
+            raise damaged(
+                f"its data inflates to {produced} of the {allowed} bytes its {width}x{height} pixels need"
+            )
 
 
 def check_pixels(width: int, height: int, settings: ImageSettings, where: str) -> None:
@@ -309,6 +331,24 @@ def check_pixels(width: int, height: int, settings: ImageSettings, where: str) -
             f"{where}: {width}x{height} is {megapixels:.1f} MP, above the limit of "
             f"{settings.max_megapixels:g} MP; refused before decoding (--max-megapixels raises the limit)"
         )
+
+
+@contextmanager
+def opencv_quiet() -> Iterator[None]:
+    """OpenCV's own log lines (``[ WARN:0@1.2] global grfmt_png.cpp ...``) held back while inside:
+    the caller reports the failure once, in words. Its errors still raise ``cv2.error``."""
+    import cv2
+
+    logging = getattr(getattr(cv2, "utils", None), "logging", None)
+    if logging is None:
+        yield
+        return
+    level = logging.getLogLevel()
+    logging.setLogLevel(logging.LOG_LEVEL_ERROR)
+    try:
+        yield
+    finally:
+        logging.setLogLevel(level)
 
 
 def read_image(
@@ -349,12 +389,8 @@ def read_image(
     if width <= 0 or height <= 0:
         raise ImageError(f"{text}: cannot read image: its header says {width}x{height} pixels")
     check_pixels(width, height, settings, text)
-    try:
-        if _is_png(file):
-            check_png_data(file, text)  # the pixel limit caps the CPU too
-    except OSError as exc:
-        raise ImageError(f"{text}: cannot read image: {exc.strerror or exc}") from None
-    # The whole file is read only now; it cannot be much larger than its pixels uncompressed.
+    # The whole file is read only after these checks; it cannot be much larger than its pixels
+    # uncompressed.
     limit = int(settings.max_megapixels * 1e6 * 4) + (16 << 20)
     try:
         if file.stat().st_size > limit:
@@ -362,12 +398,15 @@ def read_image(
                 f"{text}: cannot read image: {file.stat().st_size} bytes is too large "
                 f"for {width}x{height} pixels"
             )
+        if _is_png(file):
+            check_png_data(file, text)  # the pixel limit caps the CPU too
         data = np.fromfile(file, dtype=np.uint8)  # also copes with non-ASCII paths
     except OSError as exc:
         raise ImageError(f"{text}: cannot read image: {exc.strerror or exc}") from None
     flags = {"color": cv2.IMREAD_COLOR, "grey": cv2.IMREAD_GRAYSCALE, "any": cv2.IMREAD_ANYCOLOR}[mode]
     try:
-        image = cv2.imdecode(data, flags) if data.size else None
+        with opencv_quiet():  # its "[ WARN ] ... input buffer is incomplete": the error below says it
+            image = cv2.imdecode(data, flags) if data.size else None
     except cv2.error as exc:
         raise ImageError(
             f"{text}: cannot read image: OpenCV cannot decode it ({(exc.err or str(exc)).strip()})"

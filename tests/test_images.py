@@ -11,6 +11,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from qrfield.cli import main
 from qrfield.images import ImageError, ImageSettings, expand_image_paths, probe_size, read_image
@@ -222,3 +224,87 @@ def test_a_png_whose_data_inflates_beyond_its_pixels_is_refused_before_decoding(
     monkeypatch.setattr(cv2, "imdecode", lambda *a: pytest.fail("decoded the bomb"))
     with pytest.raises(ImageError, match=r"inflates to more than the 10100 bytes its 100x100 pixels need"):
         read_image(bomb)
+
+
+def _noise_png(path: Path, seed: int = 0) -> tuple[Path, np.ndarray]:
+    """A 64 x 48 grey PNG of seeded noise written by OpenCV (its deflate stream does not compress
+    away, so a cut anywhere lands in the pixel data)."""
+    image = np.random.default_rng(seed).integers(0, 256, (48, 64), dtype=np.uint8)
+    assert cv2.imwrite(str(path), image)
+    return path, image
+
+
+def _chunks(data: bytes) -> list[tuple[int, bytes]]:
+    """(offset, kind) of each chunk of a PNG, by its length fields (the independent reading)."""
+    found, at = [], 8
+    while at + 8 <= len(data):
+        length, kind = struct.unpack(">I4s", data[at : at + 8])
+        found.append((at, kind))
+        at += 12 + length
+    return found
+
+
+@pytest.mark.parametrize("damage", ["cut in IDAT", "short data", "IDAT CRC", "bad deflate"])
+def test_a_damaged_png_is_refused_in_one_line_with_nothing_from_libpng(tmp_path, capfd, damage):
+    """Issue 23: a damaged PNG made libpng print "libpng error: Not enough image data" (or "IDAT:
+    CRC error") and OpenCV "[ WARN:0@1.2] global grfmt_png.cpp ... incomplete" on stderr, then the
+    message said only "OpenCV cannot decode it". It is refused with its cause and stderr stays
+    empty (capfd reads the file descriptor, where the C libraries write)."""
+    path, _ = _noise_png(tmp_path / "good.png")
+    data = path.read_bytes()
+    (idat_at, _kind) = next(c for c in _chunks(data) if c[1] == b"IDAT")
+    length = struct.unpack(">I", data[idat_at : idat_at + 4])[0]
+    body = data[idat_at + 8 : idat_at + 8 + length]
+    if damage == "cut in IDAT":
+        broken, why = data[: idat_at + 8 + length // 2], "ends inside its 'IDAT' chunk"
+    elif damage == "short data":  # a whole, valid zlib stream of fewer rows than the header says
+        stream = zlib.compress(zlib.decompress(body)[: 20 * 65])
+        idat = (
+            struct.pack(">I", len(stream))
+            + b"IDAT"
+            + stream
+            + struct.pack(">I", zlib.crc32(b"IDAT" + stream))
+        )
+        broken, why = data[:idat_at] + idat + data[idat_at + 12 + length :], "1300 of the 3120 bytes"
+    elif damage == "IDAT CRC":
+        at = idat_at + 8 + length  # its CRC
+        broken, why = data[:at] + bytes([data[at] ^ 1]) + data[at + 1 :], "'IDAT' chunk fails its CRC"
+    else:  # the deflate stream's bytes changed and the CRC made to match: only zlib sees it
+        stream = body[:2] + bytes([0xFF] * 8) + body[10:]
+        idat = (
+            struct.pack(">I", len(stream))
+            + b"IDAT"
+            + stream
+            + struct.pack(">I", zlib.crc32(b"IDAT" + stream))
+        )
+        broken, why = data[:idat_at] + idat + data[idat_at + 12 + length :], "damaged"
+    bad = tmp_path / "bad.png"
+    bad.write_bytes(broken)
+    capfd.readouterr()
+    with pytest.raises(ImageError, match="damaged or truncated PNG") as caught:
+        read_image(bad, mode="grey")
+    assert why in str(caught.value) and "\n" not in str(caught.value)
+    assert capfd.readouterr().err == ""
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(cut=st.floats(0.0, 1.0), flip=st.integers(0, 10_000), bit=st.integers(0, 7))
+def test_any_cut_or_flipped_bit_of_a_png_decodes_right_or_is_refused_silently(
+    tmp_path, capfd, cut, flip, bit
+):
+    """A PNG cut anywhere, or with any one bit changed, is either decoded to its own pixels or
+    refused with an ImageError; nothing is printed by libpng or OpenCV."""
+    path, image = _noise_png(tmp_path / "good.png", seed=flip % 7)
+    data = bytearray(path.read_bytes())
+    data[flip % len(data)] ^= 1 << bit
+    data = bytes(data[: max(1, round(cut * len(data)))])
+    bad = tmp_path / "bad.png"
+    bad.write_bytes(data)
+    capfd.readouterr()
+    try:
+        decoded = read_image(bad, mode="grey")
+    except ImageError as exc:
+        assert "\n" not in str(exc)
+    else:
+        assert np.array_equal(decoded, image)
+    assert capfd.readouterr().err == ""
