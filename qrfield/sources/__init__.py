@@ -15,7 +15,7 @@ from pathlib import Path
 from qrfield.camera import DEFAULT_CAMERA, CameraModel, resolve_camera
 from qrfield.limits import MAX_USB_INDEX
 from qrfield.sources.base import EndOfStream, Frame, FrameSource, Pacer, SourceError
-from qrfield.sources.folder import ImageFolderSource
+from qrfield.sources.folder import ImageFolderSource, is_image_file
 from qrfield.sources.kinds import (
     AUTO_CANDIDATES,
     LIVE_CAMERA_KINDS,
@@ -124,6 +124,8 @@ def make_source(
         raise SourceError("source 'auto' is resolved by open_source(), not make_source()")
     path = Path(spec).expanduser()
     if kind == "folder":
+        return ImageFolderSource(path, loop=loop, fps=2.0 if pace else 0.0)
+    if is_image_file(path):  # one photo: the image reader's limits and reasons, not a video decoder's
         return ImageFolderSource(path, loop=loop, fps=2.0 if pace else 0.0)
     if path.is_file():
         return VideoFileSource(path, loop=loop, pace=pace)
