@@ -442,14 +442,7 @@ def check_target(path: str | os.PathLike[str], what: str = "") -> Path:
     path = Path(path)
     label = f"{what} {path}" if what else str(path)
     folder = path.parent
-    longest = name_max(folder if folder.is_dir() else ".")
-    size = max((len(os.fsencode(part)) for part in path.parts), default=0)
-    if size > longest:  # before is_dir(), which raises for such a name
-        raise OSError(
-            errno.ENAMETOOLONG,
-            f"cannot write {label}: a name in it is {size} bytes long, more than the {longest} the "
-            "file system allows; choose a shorter name",
-        )
+    check_name_lengths(path, f"cannot write {label}")
     if path.is_dir():
         raise IsADirectoryError(f"{label} is a folder; give a file name")
     if not folder.is_dir():
@@ -458,6 +451,36 @@ def check_target(path: str | os.PathLike[str], what: str = "") -> Path:
             "did not name; make it first)"
         )
     return path
+
+
+def describe_error(exc: BaseException) -> str:
+    """The message of an error for the user: an OS error the system raised (``[Errno 36] File
+    name too long: 'x'``) as ``x: file name too long``, one qrfield raised with an errno
+    (``OSError(errno.ENAMETOOLONG, "cannot write x: ...")``) as its words alone; any other as it is."""
+    text = str(exc)
+    if isinstance(exc, OSError) and exc.strerror and text.startswith("[Errno"):
+        where = exc.filename if exc.filename is not None else ""
+        if where == "" and not exc.strerror[:1].isupper():  # qrfield's own words, not the system's
+            return exc.strerror
+        return f"{where}: {exc.strerror.lower()}" if where != "" else exc.strerror.lower()
+    return text
+
+
+def check_name_lengths(path: Path, where: str) -> None:
+    """OSError (ENAMETOOLONG) saying so in words when a name in ``path`` is longer than its file
+    system takes; called before is_dir() and friends, which raise ``[Errno 36]`` for such a name."""
+    folder = path.parent
+    try:
+        longest = name_max(folder if folder.is_dir() else ".")
+    except OSError:  # the folder's own name is too long: measured against the current folder's
+        longest = name_max(".")
+    size = max((len(os.fsencode(part)) for part in path.parts), default=0)
+    if size > longest:
+        raise OSError(
+            errno.ENAMETOOLONG,
+            f"{where}: a name in it is {size} bytes long, more than the {longest} the file system "
+            "allows; choose a shorter name",
+        )
 
 
 def name_max(folder: str | os.PathLike[str]) -> int:
@@ -588,9 +611,10 @@ def make_folder(folder: str | os.PathLike[str], what: str = "folder") -> Path:
     the folders above it). FileNotFoundError / NotADirectoryError say which.
     """
     folder = Path(folder)
+    where = f"{what} {folder}: cannot create the folder"
+    check_name_lengths(folder, where)
     if folder.is_dir():
         return folder
-    where = f"{what} {folder}: cannot create the folder"
     if os.path.lexists(folder):
         raise NotADirectoryError(f"{where}: a file of that name exists")
     try:
