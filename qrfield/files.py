@@ -271,7 +271,9 @@ def loads_json(text: str, where: str, *, max_depth: int = MAX_DEPTH, max_chars: 
             f"{where}: nested {depth} levels deep, more than {max_depth}; not a qrfield file"
         )
     try:
-        data = json.loads(text, parse_constant=_no_constant)
+        data = json.loads(text, parse_constant=_no_constant, parse_int=_parse_int)
+    except _LongInteger as exc:
+        raise FileFormatError(f"{where}: {exc.describe(text)}") from None
     except json.JSONDecodeError as exc:
         raise FileFormatError(
             f"{where}: not JSON ({exc.msg} at line {exc.lineno} column {exc.colno})"
@@ -282,6 +284,31 @@ def loads_json(text: str, where: str, *, max_depth: int = MAX_DEPTH, max_chars: 
         raise FileFormatError(f"{where}: nested too deeply") from None
     _check_values(data, where, max_chars)
     return data
+
+
+class _LongInteger(ValueError):
+    """An integer in JSON text longer than Python's int() takes (4300 digits, sys.int_info)."""
+
+    def __init__(self, digits: str) -> None:
+        super().__init__(digits[:20])
+        self.digits = digits
+
+    def describe(self, text: str) -> str:
+        """Where it is (the line and the key before it) and why, in qrfield's words for numbers."""
+        at = text.find(self.digits)
+        line = text.count("\n", 0, at) + 1
+        key = re.search(r'"([^"\\]{1,80})"\s*:\s*-?$', text[max(0, at - 200) : at])
+        digits = len(self.digits.lstrip("-"))
+        why = f"the number is an integer of {digits} digits, too large for a number"
+        return f"value {key.group(1)}: {why} (line {line})" if key else f"line {line}: {why}"
+
+
+def _parse_int(digits: str) -> int:
+    """int(), except that a digit run too long for it is refused in words, not with Python's advice
+    to call sys.set_int_max_str_digits()."""
+    if len(digits) > 4000:  # below sys.int_info.default_max_str_digits (4300), far above any float
+        raise _LongInteger(digits)
+    return int(digits)
 
 
 def _no_constant(name: str) -> Any:
