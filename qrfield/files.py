@@ -297,8 +297,11 @@ class _LongInteger(ValueError):
         """Where it is (the line and the key before it) and why, in qrfield's words for numbers."""
         at = text.find(self.digits)
         line = text.count("\n", 0, at) + 1
-        key = re.search(r'"([^"\\]{1,80})"\s*:\s*-?$', text[max(0, at - 200) : at])
-        digits = len(self.digits.lstrip("-"))
+        before = text[max(0, at - 200) : at]
+        key = re.search(r'"([^"\\]{1,80})"\s*:\s*$', before) or re.search(
+            r"(?m)^\s*([\w.\-\"]{1,80})\s*=\s*$", before
+        )
+        digits = sum(ch.isdigit() for ch in self.digits)
         why = f"the number is an integer of {digits} digits, too large for a number"
         return f"value {key.group(1)}: {why} (line {line})" if key else f"line {line}: {why}"
 
@@ -345,6 +348,11 @@ def loads_toml(
         raise FileFormatError(f"{where}: not valid TOML ({exc})") from None
     except RecursionError:  # e.g. dotted keys a.b.c... thousands deep, which the scan cannot see
         raise FileFormatError(f"{where}: nested too deeply") from None
+    except ValueError:  # int() refused a decimal integer of more than 4300 digits
+        run = re.search(r"[-+]?[0-9][0-9_]{4000,}", text)
+        if run is None:
+            raise
+        raise FileFormatError(f"{where}: {_LongInteger(run.group()).describe(text)}") from None
     _check_values(data, where, max_chars)
     return data
 

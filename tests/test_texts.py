@@ -185,6 +185,21 @@ def test_any_integer_in_a_json_file_is_read_or_refused_naming_the_file_and_key(d
             loads_json(text, "camera file c.json")
 
 
+@FEW
+@given(digits=st.integers(1, 20000), sign=st.sampled_from(["", "-", "+"]))
+@example(digits=5000, sign="")  # beyond int()'s 4300 digits: a bare ValueError came out of loads_toml
+def test_any_integer_in_a_toml_file_is_read_or_refused_naming_the_file(digits, sign):
+    text = f"[grid]\nz = {sign}{'9' * digits}\n"
+    if digits <= 308:
+        assert loads_toml(text, "study s.toml")["grid"]["z"] == int(sign + "9" * digits)
+    else:
+        with pytest.raises(
+            FileFormatError, match=rf"^study s\.toml: value (grid\.)?z: .* {digits} digits"
+        ) as err:
+            loads_toml(text, "study s.toml")
+        assert "\n" not in str(err.value)
+
+
 def test_overflowing_numbers_in_json_and_toml_are_named():
     with pytest.raises(FileFormatError, match=r"study s\.toml: value grid\.z: the number must be a finite"):
         loads_toml("[grid]\nz = 1e400\n", "study s.toml")
