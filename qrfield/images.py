@@ -274,6 +274,10 @@ def check_png_data(path: str | os.PathLike[str], where: str) -> None:
         width, height, depth, colour, _method, _filter, interlace = struct.unpack(">IIBBBBB", head[16:29])
         if colour not in _PNG_CHANNELS or depth not in (1, 2, 4, 8, 16):
             return  # a damaged header: OpenCV says it cannot decode it
+        if head[8:12] != b"\x00\x00\x00\x0d":  # an IHDR is 13 bytes long
+            raise damaged(
+                f"its IHDR chunk says it is {struct.unpack('>I', head[8:12])[0]} bytes long, not 13"
+            )
         if struct.unpack(">I", head[29:33])[0] != zlib.crc32(head[12:29]):
             raise damaged("its IHDR chunk fails its CRC")
         allowed = png_data_size(width, height, depth, colour, interlace)
@@ -335,8 +339,9 @@ def check_pixels(width: int, height: int, settings: ImageSettings, where: str) -
 
 @contextmanager
 def opencv_quiet() -> Iterator[None]:
-    """OpenCV's own log lines (``[ WARN:0@1.2] global grfmt_png.cpp ...``) held back while inside:
-    the caller reports the failure once, in words. Its errors still raise ``cv2.error``."""
+    """OpenCV's own log lines (``[ WARN:0@1.2] global grfmt_png.cpp ...``, ``[ERROR:0@3.3] ...
+    IHDR chunk shall be first``) held back while inside: the caller reports the failure once, in
+    words. Its errors still raise ``cv2.error``."""
     import cv2
 
     logging = getattr(getattr(cv2, "utils", None), "logging", None)
@@ -344,7 +349,7 @@ def opencv_quiet() -> Iterator[None]:
         yield
         return
     level = logging.getLogLevel()
-    logging.setLogLevel(logging.LOG_LEVEL_ERROR)
+    logging.setLogLevel(logging.LOG_LEVEL_SILENT)
     try:
         yield
     finally:

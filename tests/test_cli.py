@@ -254,6 +254,7 @@ def test_an_output_name_as_long_as_the_file_system_allows_is_written(tmp_path, c
     assert "a name in it is 256 bytes long, more than the 255 the file system allows" in line
 
 
+@pytest.mark.slow
 def test_a_name_too_long_is_said_in_words_with_the_name_as_typed(tmp_path, capsys):
     """``session new ROOT`` with a 256-byte ROOT said "[Errno 36] File name too long: '...'" (its
     is_dir() raised before the name was measured), and the words of a too-long --out were

@@ -166,6 +166,7 @@ def test_on_a_frame_loop_it_sees_every_processed_frame_and_measures_the_bench() 
     assert measurement.judgement.passed, measurement.judgement.reason
 
 
+@pytest.mark.slow
 def test_a_terminal_row_waits_through_a_pause_in_the_frames_up_to_its_frame_timeout() -> None:
     """Issue 23 (audit): ``session log`` gave a row up at the loop's first "source down" (1 s
     without a frame: a loaded machine, an 8 MP virtual frame, a slow camera) and said "the source

@@ -229,6 +229,7 @@ def test_folder_of_only_broken_images_raises(tmp_path: Path) -> None:
         ImageFolderSource(tmp_path / "notes.txt").open()
 
 
+@pytest.mark.slow
 def test_one_image_file_as_a_source_goes_through_the_image_reader(tmp_path: Path, capfd) -> None:
     """Issue 23: ``--source photo.png`` went to OpenCV's video decoder (FFmpeg): no pixel limit,
     no PNG inflation cap (a 100x100 PNG inflating to 60 MB cost 8 s of CPU), and FFmpeg's
