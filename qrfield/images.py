@@ -18,6 +18,9 @@ from __future__ import annotations
 import glob
 import os
 import struct
+import sys
+import tempfile
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -356,6 +359,36 @@ def opencv_quiet() -> Iterator[None]:
         logging.setLogLevel(level)
 
 
+#: One decode at a time holds the process's stderr (file descriptor 2): see :func:`_decoder_output`.
+_STDERR_LOCK = threading.Lock()
+
+
+@contextmanager
+def _decoder_output() -> Iterator[list[str]]:
+    """The lines a C decoder writes on stderr while inside, taken off it (libjpeg prints "Corrupt
+    JPEG data: 303 extraneous bytes before marker 0xd9" there itself and decodes on, pixels
+    damaged). File descriptor 2 is pointed at a temporary file for the decode (milliseconds), one
+    decode at a time; where stderr cannot be redirected the decode runs as it is."""
+    lines: list[str] = []
+    with _STDERR_LOCK, tempfile.TemporaryFile() as sink:
+        try:
+            sys.stderr.flush()
+            saved = os.dup(2)
+        except (OSError, ValueError, AttributeError):
+            yield lines
+            return
+        os.dup2(sink.fileno(), 2)
+        try:
+            yield lines
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            sink.seek(0)
+            lines.extend(
+                line for line in sink.read(4096).decode("utf-8", "replace").splitlines() if line.strip()
+            )
+
+
 def read_image(
     path: str | os.PathLike[str], settings: ImageSettings | None = None, *, mode: str = "color"
 ) -> Any:
@@ -410,12 +443,14 @@ def read_image(
         raise ImageError(f"{text}: cannot read image: {exc.strerror or exc}") from None
     flags = {"color": cv2.IMREAD_COLOR, "grey": cv2.IMREAD_GRAYSCALE, "any": cv2.IMREAD_ANYCOLOR}[mode]
     try:
-        with opencv_quiet():  # its "[ WARN ] ... input buffer is incomplete": the error below says it
+        with opencv_quiet(), _decoder_output() as said:  # the errors below say it, once
             image = cv2.imdecode(data, flags) if data.size else None
     except cv2.error as exc:
         raise ImageError(
             f"{text}: cannot read image: OpenCV cannot decode it ({(exc.err or str(exc)).strip()})"
         ) from None
+    if said:  # a decoder that complains has decoded damaged data: its pixels are not the photo's
+        raise ImageError(f"{text}: cannot read image: the decoder says {said[0].strip()!r} (a damaged file)")
     if image is None:
         raise ImageError(
             f"{text}: cannot read image: OpenCV cannot decode it (damaged, or a format OpenCV cannot decode)"
