@@ -99,7 +99,10 @@ def test_a_stopped_run_continues_where_it_was(tmp_path: Path, config_dir) -> Non
     session = new_session(tmp_path, "stopped", frames=3)
     command = [sys.executable, "-m", "qrfield", "session", "run-plan", str(session), "--plan", str(plan)]
     process = subprocess.Popen(
-        [*command, "--source", "virtual", "--hold-s", "0.3"],
+        # A hold of 2 s a target: the three targets after row 1 take 6 s or more, so the SIGINT sent
+        # on reading "logged row 1" lands mid-run even when this process waits a second or two for
+        # the CPU (at 0.3 s the run once ended first at load 8).
+        [*command, "--source", "virtual", "--hold-s", "2"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
