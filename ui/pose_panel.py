@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 from PySide6 import QtCore, QtGui, QtWidgets
 
+from qrfield.methods import NUMERICAL
 from qrfield.sessions.criteria import AcceptanceCriteria
 from qrfield.status import Reported, WireStatus
 from ui.text import fixed
@@ -146,7 +147,7 @@ class PosePanel(QtWidgets.QWidget):
         self.state = NOSRC
         self.compact = False
         self.has_pose = False  # a real pose has been shown (only then can values be stale)
-        self._methods: tuple[str, ...] = ("numerical",)
+        self._methods: tuple[str, ...] = (NUMERICAL,)
         #: What the verdict against the true pose judges by (the session's; the seed's by default).
         self.criteria = AcceptanceCriteria()
         self._build_labels()

@@ -28,6 +28,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from qrfield.methods import NUMERICAL
+
 HELP = "peak memory and CPU of calibrate, solve and the session commands at their input limits"
 PARTS = ("images", "png", "sessions")
 #: The image of part 1: 8100 x 6050 = 49.0 MP, under the 50 MP default limit.
@@ -122,7 +124,7 @@ def _session(root: Path, name: str, rows_mib: float) -> Path:
     from qrfield.sessions import GroundTruth, Session, measure
 
     session = Session.create(
-        root, name, camera=resolve_camera("picam-v2@640x480"), side_mm=50.0, solver="numerical"
+        root, name, camera=resolve_camera("picam-v2@640x480"), side_mm=50.0, solver=NUMERICAL
     )
     truth = GroundTruth(10.0, -5.0, 300.0, 15.0, -20.0, 10.0, "alpha+beta-gamma+")
     frame = {"position_mm": [10.2, -5.1, 300.4], "angles_deg": [15.1, -19.8, 10.0], "converged": True}

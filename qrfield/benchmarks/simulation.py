@@ -149,12 +149,12 @@ def _compare_ippe(args: argparse.Namespace) -> None:
     for label, corners in (("exact", exact), (f"{args.noise_px:g} px", noisy)):
         keep = check_corners_batch(corners)[1]  # noise can make a corner set unusable (concave)
         corners, rows = corners[keep], np.flatnonzero(keep)
-        solve_batch(corners[:50], camera, 50.0, method="ippe")  # warm caches
+        solve_batch(corners[:50], camera, 50.0, method=IPPE)  # warm caches
         t0 = time.perf_counter()
-        batch = solve_batch(corners, camera, 50.0, method="ippe")
+        batch = solve_batch(corners, camera, 50.0, method=IPPE)
         batch_s = time.perf_counter() - t0
         t0 = time.perf_counter()
-        single = [solve(c, camera, 50.0, method="ippe") for c in corners]
+        single = [solve(c, camera, 50.0, method=IPPE) for c in corners]
         single_s = time.perf_counter() - t0
         pos = np.array([r.position_mm for r in single])
         ang = np.array([r.angles_deg for r in single])

@@ -22,6 +22,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from qrfield.geometry import POSE_NAMES
+
 HELP = "make experiment sessions and log rows without the app (new, log, run-plan, undo, list, show, export)"
 DESCRIPTION = (
     "Experiment sessions on disk, as the app's Session tab makes them: 'new' creates one, 'log' "
@@ -489,8 +491,8 @@ def _run_show(args: argparse.Namespace) -> int:
     print(head)
     for row in content.rows:
         v = row.values
-        truth = " ".join(v.get(f"gt_{k}", "") for k in ("x", "y", "z", "alpha", "beta", "gamma"))
-        measured = " ".join(v.get(k, "") or "-" for k in ("x", "y", "z", "alpha", "beta", "gamma"))
+        truth = " ".join(v.get(f"gt_{k}", "") for k in POSE_NAMES)
+        measured = " ".join(v.get(k, "") or "-" for k in POSE_NAMES)
         verdict = "withdrawn" if row.withdrawn else ("pass" if row.passed else "fail")
         conv = f"{v.get('n_converged', '')}/{v.get('n_frames', '')}"
         print(f"{row.number:>4} {row.combo:<18} {truth:<44} {measured:<44} {conv:<5} {verdict}")

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 from qrfield.camera import DEFAULT_CAMERA
 from qrfield.limits import SIDE_MM
-from qrfield.methods import METHOD_CHOICES
+from qrfield.methods import BOTH, METHOD_CHOICES
 from qrfield.settings import setting
 
 
@@ -31,7 +31,7 @@ class RunSettings:
         help="side of the QR symbol without its quiet zone",
     )
     method: str = setting(
-        "both",
+        BOTH,
         label="method",
         choices=METHOD_CHOICES,
         help="the thesis' numerical model, OpenCV IPPE, or both side by side (numerical gives the status)",

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from qrfield.methods import IPPE, NUMERICAL
 from qrfield.runconfig.run_settings import RunSettings
 
 
@@ -30,8 +31,8 @@ def sections() -> dict[str, Section]:
     table = [
         Section("run", RunSettings, "", "source, camera, QR side, methods"),
         Section("detector", DetectorSettings, "detect_", "QR detection and code selection"),
-        Section("numerical", solvers["numerical"], "numerical_", "the thesis' numerical model"),
-        Section("ippe", solvers["ippe"], "ippe_", "OpenCV IPPE"),
+        Section(NUMERICAL, solvers[NUMERICAL], "numerical_", "the thesis' numerical model"),
+        Section(IPPE, solvers[IPPE], "ippe_", "OpenCV IPPE"),
         Section("virtual", VirtualBenchSettings, "virtual_", "the virtual bench (--source virtual)"),
         Section("picamera", Picamera2Settings, "picamera_", "Raspberry Pi camera (--source picamera2)"),
         Section("usb", UsbCameraSettings, "usb_", "USB camera (--source usb:N)"),

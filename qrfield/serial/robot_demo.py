@@ -29,6 +29,7 @@ import numpy as np
 
 from qrfield.handeye import HandEyeCalibration, SimulatedRobot
 from qrfield.handeye.rigid import difference, quaternion_from_rotation
+from qrfield.methods import NUMERICAL
 from qrfield.serial import codec
 
 #: The demo's defaults: 15 tool poses, a 50 mm code, 30 frames a second, 115200 baud.
@@ -130,7 +131,7 @@ def run_robot_demo(
     folder = Path(folder)
     out = RobotDemoResult(robot)
     bench = VirtualBenchSource(camera, side_mm, VirtualBenchSettings(fps=fps))
-    config = RunConfig(source="virtual", camera=camera, side_mm=side_mm, methods=("numerical",))
+    config = RunConfig(source="virtual", camera=camera, side_mm=side_mm, methods=(NUMERICAL,))
     relay = UartRelay(baud / 10.0)
     controller = _Controller(relay)
     relay.on_line = controller.on_line
@@ -139,7 +140,7 @@ def run_robot_demo(
     info = {
         "camera": camera.name,
         "side_mm": float(side_mm),
-        "pose_method": "numerical",
+        "pose_method": NUMERICAL,
         "demo": "serial-demo",
     }
     link.add_handeye(HandEyeCommands(setup, folder / "handeye.json", info=info))

@@ -56,6 +56,7 @@ from qrfield.files import (
     make_folder,
     read_json,
 )
+from qrfield.geometry import ANGLE_NAMES
 from qrfield.handeye.setups import FRAMES
 from qrfield.limits import SIDE_MM, LimitError
 from qrfield.methods import METHODS
@@ -358,7 +359,7 @@ def measurement_values(measurement: Measurement, number: int, time_text: str) ->
         values[f"std_{axis}"] = _fmt(a.std_position_mm[k])
         values[f"sigma_{axis}"] = _fmt(a.sigma_position_mm[k])
         values[f"sem_{axis}"] = _fmt(a.sem_position_mm[k])
-    for k, angle in enumerate(("alpha", "beta", "gamma")):
+    for k, angle in enumerate(ANGLE_NAMES):
         values[angle] = _fmt(a.angles_deg[k])
         values[f"std_{angle}"] = _fmt(a.std_angles_deg[k])
         values[f"sigma_{angle}"] = _fmt(a.sigma_angles_deg[k])

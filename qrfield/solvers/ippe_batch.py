@@ -40,6 +40,7 @@ import numpy as np
 from qrfield.camera import CameraModel
 from qrfield.geometry import angles_from_rotation, marker_vertices, project_points
 from qrfield.homography import square_to_quad
+from qrfield.methods import IPPE
 from qrfield.solvers.ippe import checked_settings
 from qrfield.solvers.rays import normalised_batch
 from qrfield.solvers.result import BatchResult, SolverError
@@ -376,7 +377,7 @@ def solve_ippe_vectorised(
 
         arrays.update(
             batch_uncertainty(
-                "ippe",
+                IPPE,
                 corners,
                 cov,
                 camera,
@@ -388,7 +389,7 @@ def solve_ippe_vectorised(
                 arrays["converged"],
             )
         )
-    return BatchResult(method="ippe", **arrays)
+    return BatchResult(method=IPPE, **arrays)
 
 
 def _candidate_errors(
@@ -447,7 +448,7 @@ def _solve_chunk(
         reproj[rows] = best_err[found]
         residual[rows] = _line_of_sight_distance(best_rot[found], best_t[found], xn[found], yn[found], side)
     return BatchResult(
-        method="ippe",
+        method=IPPE,
         position_mm=position,
         angles_deg=angles,
         rotation=rotation_out,
