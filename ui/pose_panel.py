@@ -26,6 +26,7 @@ from PySide6 import QtCore, QtGui, QtWidgets
 
 from qrfield.methods import NUMERICAL
 from qrfield.sessions.criteria import AcceptanceCriteria
+from qrfield.sources.kinds import FOLDER, PICAMERA2_SIM, VIDEO, VIRTUAL
 from qrfield.status import Reported, WireStatus
 from ui.text import fixed
 
@@ -57,10 +58,10 @@ BADGE_STYLE = f"color: white; background: {SIM_COLOUR}; font-weight: bold; paddi
 
 #: What the simulated-source badge calls a source, by the start of its name (FrameSource.name).
 SIMULATED_SOURCE_NAMES = {
-    "virtual": "virtual bench",
-    "picamera2-sim": "picamera2 stand-in",
-    "video": "video file",
-    "folder": "image folder",
+    VIRTUAL: "virtual bench",
+    PICAMERA2_SIM: "picamera2 stand-in",
+    VIDEO: "video file",
+    FOLDER: "image folder",
 }
 
 

@@ -39,14 +39,14 @@ class RunConfig:
 
     def source_key(self) -> tuple[Any, ...]:
         """What requires reopening the source when it changes."""
-        from qrfield.sources import source_kind
+        from qrfield.sources.kinds import AUTO, PICAMERA2, PICAMERA2_SIM, USB, VIRTUAL, source_kind
 
         kind = source_kind(self.source)
-        bench = (self.camera, self.side_mm) if kind in ("virtual", "auto") else ()
-        usb = (self.camera.size, self.usb) if kind in ("usb", "auto") else ()
+        bench = (self.camera, self.side_mm) if kind in (VIRTUAL, AUTO) else ()
+        usb = (self.camera.size, self.usb) if kind in (USB, AUTO) else ()
         # picamera2 derives the stream's model from the profile at open: a new profile reopens it.
-        pi = (self.camera, self.picamera) if kind in ("picamera2", "picamera2-sim", "auto") else ()
-        sim = (self.virtual, self.side_mm) if kind == "picamera2-sim" else ()
+        pi = (self.camera, self.picamera) if kind in (PICAMERA2, PICAMERA2_SIM, AUTO) else ()
+        sim = (self.virtual, self.side_mm) if kind == PICAMERA2_SIM else ()
         return (self.source, self.loop, self.pace, self.allow_virtual, *bench, *usb, *pi, *sim)
 
     def pipeline_key(self) -> tuple[Any, ...]:
