@@ -14,10 +14,10 @@ on a small input, measured in the same run, with the load average:
    list``, ``show``, ``export``, ``undo`` and ``log`` (one frame of the virtual bench) beside the
    same commands on a session of one row.
 
-Targets (issue 23): images under 600 MB; sessions under 100 MB (``session log``, whose frame loop
-alone takes some 115 MB: no more than 15 MB over its one-row baseline); the inflating PNG no more
-CPU than the plain one. The baseline's peak is mostly the interpreter with numpy and OpenCV loaded (some
-85 MB): the figures to compare are the peaks and the differences.
+Targets (docs/benchmarks.md, "memory"): images under 600 MB; sessions under 100 MB (``session
+log``, whose frame loop alone takes some 115 MB: no more than 15 MB over its one-row baseline); the
+inflating PNG no more CPU than the plain one. The baseline's peak is mostly the interpreter with
+numpy and OpenCV loaded (some 85 MB): the figures to compare are the peaks and the differences.
 """
 
 from __future__ import annotations

@@ -38,7 +38,7 @@ HELP = "pose uncertainty calibration, flip flag recall/precision, end to end vs 
 
 #: Angle error beyond which a pose counts as a flip (the issue's definition), degrees.
 FLIP_DEG = 10.0
-#: The calibration targets (docs/conventions.md "Pose uncertainty"; issue 13).
+#: The calibration targets (docs/conventions.md "Pose uncertainty"; docs/benchmarks.md, "pose").
 RMS_RANGE = (0.7, 1.4)
 WITHIN_2_RANGE = (0.90, 0.99)
 #: Module-size bands of the end-to-end table, px.

@@ -21,7 +21,8 @@ card), so no conversion to OpenCV's IPPE frame and no rotation vector is ever ma
 6. candidates behind the camera or facing away dropped; the answer is the one with the smaller
    RMS reprojection error on the corners as given (distortion included).
 
-Why not OpenCV: it has no vectorised IPPE, and one call costs about 0.7 ms per pose through Python.
+Why not OpenCV: it has no vectorised IPPE, and one call per pose through Python costs many times a
+batch row (the figures: docs/benchmarks.md, "simulation").
 OpenCV 5.0's IPPE also returns wrong poses whenever its rotation is a half turn (its ``rot2vec``
 divides by sin(pi)); its frame is ours turned 180 degrees about X, so that is every pose whose
 rotation axis lies in the marker's Y-Z plane: a square-on card, a tilt about Y alone, a turn in
