@@ -114,35 +114,8 @@ def effective_settings(
     groups: dict[str, Any] = {}
     values: list[Value] = []
     for section in sections().values():
-        saved = store.group(section.name, section.cls)
-        in_file = store.saved_keys(section.name)
-        data = to_dict(saved)
-        origins = {}
-        for spec in specs(section.cls):
-            option = "--" + (section.prefix + spec.name).replace("_", "-")
-            given = getattr(args, f"{section.prefix}{spec.name}", None) if args is not None else None
-            if given is not None:
-                try:
-                    data[spec.name] = spec.validate(given)
-                except SettingError as exc:
-                    raise SettingError(f"{option} {given}: {exc}") from None
-                origins[spec.name] = (FROM_COMMAND_LINE, option)
-            elif spec.name in in_file and _saved_ok(store, section, spec):
-                origins[spec.name] = (FROM_FILE, option)
-            elif spec.name in in_file and strict:
-                try:
-                    spec.validate(store.value(section.name)[spec.name])
-                except SettingError as exc:
-                    raise SettingError(f"{store.path}: key {section.name}.{spec.name}: {exc}") from None
-            else:
-                origins[spec.name] = (FROM_DEFAULT, option)
-        instance = from_dict(section.cls, data)
-        groups[section.name] = instance
-        for spec in specs(section.cls):
-            origin, option = origins[spec.name]
-            values.append(
-                Value(section.name, spec.name, getattr(instance, spec.name), origin, option, spec.unit)
-            )
+        groups[section.name], section_values = _section_settings(section, store, args, strict)
+        values += section_values
     camera: Any = None
     focal_given = args is not None and (
         getattr(args, "focal_px", None) is not None or getattr(args, "size", None) is not None
@@ -160,6 +133,41 @@ def effective_settings(
         if port:
             _set_origin(values, "serial", "port", port, FROM_COMMAND_LINE, "--serial")
     return Effective(store, groups, values, camera, serial_port)
+
+
+def _section_settings(
+    section: Section, store: ConfigStore, args: argparse.Namespace | None, strict: bool
+) -> tuple[Any, list[Value]]:
+    """One section's settings (command line over the file over the default) and each value's origin;
+    SettingError as :func:`effective_settings` says."""
+    saved = store.group(section.name, section.cls)
+    in_file = store.saved_keys(section.name)
+    data = to_dict(saved)
+    origins = {}
+    for spec in specs(section.cls):
+        option = "--" + (section.prefix + spec.name).replace("_", "-")
+        given = getattr(args, f"{section.prefix}{spec.name}", None) if args is not None else None
+        if given is not None:
+            try:
+                data[spec.name] = spec.validate(given)
+            except SettingError as exc:
+                raise SettingError(f"{option} {given}: {exc}") from None
+            origins[spec.name] = (FROM_COMMAND_LINE, option)
+        elif spec.name in in_file and _saved_ok(store, section, spec):
+            origins[spec.name] = (FROM_FILE, option)
+        elif spec.name in in_file and strict:
+            try:
+                spec.validate(store.value(section.name)[spec.name])
+            except SettingError as exc:
+                raise SettingError(f"{store.path}: key {section.name}.{spec.name}: {exc}") from None
+        else:
+            origins[spec.name] = (FROM_DEFAULT, option)
+    instance = from_dict(section.cls, data)
+    values = []
+    for spec in specs(section.cls):
+        origin, option = origins[spec.name]
+        values.append(Value(section.name, spec.name, getattr(instance, spec.name), origin, option, spec.unit))
+    return instance, values
 
 
 def _saved_ok(store: ConfigStore, section: Section, spec: Any) -> bool:
