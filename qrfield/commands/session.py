@@ -141,10 +141,24 @@ def _run_new(args: argparse.Namespace) -> int:
 
 
 # ------------------------------------------------------------------------------------ log
-def _add_log(parser: argparse.ArgumentParser) -> None:
-    from qrfield.arguments import count, text
-    from qrfield.runconfig import add_run_arguments
+def add_frames_argument(parser: argparse.ArgumentParser) -> None:
+    """``--frames N``: the frames averaged per row, 1..MAX_FRAMES_PER_ROW (default: the session's);
+    ``session log`` and ``session run-plan`` share it."""
+    from qrfield.arguments import count
     from qrfield.sessions.criteria import MAX_FRAMES_PER_ROW
+
+    parser.add_argument(
+        "--frames",
+        type=count("--frames", 1, MAX_FRAMES_PER_ROW),
+        default=None,
+        metavar="N",
+        help="frames averaged (default: the session's)",
+    )
+
+
+def _add_log(parser: argparse.ArgumentParser) -> None:
+    from qrfield.arguments import text
+    from qrfield.runconfig import add_run_arguments
 
     parser.add_argument("folder", metavar="FOLDER", help="the session folder")
     parser.add_argument(
@@ -165,13 +179,7 @@ def _add_log(parser: argparse.ArgumentParser) -> None:
         help="log a row whose --combo the signs of its angles contradict (refused otherwise, as the "
         "app asks first)",
     )
-    parser.add_argument(
-        "--frames",
-        type=count("--frames", 1, MAX_FRAMES_PER_ROW),
-        default=None,
-        metavar="N",
-        help="frames averaged (default: the session's)",
-    )
+    add_frames_argument(parser)
     # Camera, QR side and solver are the session's own: only the source and detection are chosen here.
     add_run_arguments(
         parser, only=("run", "detector", "virtual", "picamera"), run_skip=("camera", "side_mm", "method")
