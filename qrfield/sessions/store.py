@@ -40,7 +40,7 @@ import os
 import re
 import stat
 from array import array
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -656,23 +656,7 @@ def _scan_rows(source: _Source, size: int, where: str) -> RowsContent:
             more += 1
 
     lines = _lines(source, good_size, where)
-    first = next(lines, None)
-    if first is None:
-        raise SessionError(f"{where}: no header row")
-    offset, data = first
-    if data is None:
-        raise SessionError(f"{where}: the header row is longer than {MAX_LINE_BYTES} bytes")
-    head = _decode_line(data, offset, where)
-    head = head[1:] if head.startswith("\ufeff") else head  # a spreadsheet's "CSV UTF-8"
-    try:
-        header = next(csv_text_reader(head), [])  # an empty first line has no fields
-    except csv.Error as exc:
-        raise SessionError(f"{where}: the header row is not CSV ({exc})") from None
-    header = [name.strip() for name in header]
-    if tuple(header[: len(REQUIRED_COLUMNS)]) != REQUIRED_COLUMNS:
-        raise SessionError(
-            f"{where}: the header does not start with the required columns {','.join(REQUIRED_COLUMNS)}"
-        )
+    header = _read_header(lines, where)
     withdrawn: set[int] = set()
     rows = RowList(source, header, where, withdrawn)
     # Only these three columns matter to the scan (the first of equal names, as dict(zip()) keeps the
@@ -739,6 +723,29 @@ def _scan_rows(source: _Source, size: int, where: str) -> RowsContent:
         )
     partial = source.read(good_size, min(size - good_size, MAX_PARTIAL_KEPT)) if size > good_size else b""
     return RowsContent(header, rows, warnings, good_size, partial, withdrawn, size - good_size)
+
+
+def _read_header(lines: Iterator[tuple[int, bytes | None]], where: str) -> list[str]:
+    """The header of rows.csv from the first of ``lines`` ((offset, bytes or None when too long)),
+    its names stripped; SessionError when there is none or it does not start with REQUIRED_COLUMNS."""
+    first = next(lines, None)
+    if first is None:
+        raise SessionError(f"{where}: no header row")
+    offset, data = first
+    if data is None:
+        raise SessionError(f"{where}: the header row is longer than {MAX_LINE_BYTES} bytes")
+    head = _decode_line(data, offset, where)
+    head = head[1:] if head.startswith("\ufeff") else head  # a spreadsheet's "CSV UTF-8"
+    try:
+        header = next(csv_text_reader(head), [])  # an empty first line has no fields
+    except csv.Error as exc:
+        raise SessionError(f"{where}: the header row is not CSV ({exc})") from None
+    header = [name.strip() for name in header]
+    if tuple(header[: len(REQUIRED_COLUMNS)]) != REQUIRED_COLUMNS:
+        raise SessionError(
+            f"{where}: the header does not start with the required columns {','.join(REQUIRED_COLUMNS)}"
+        )
+    return header
 
 
 def _complete_size(source: _Source, size: int) -> int:
