@@ -48,6 +48,7 @@ def _zxing_candidate(image, text):
     return candidate
 
 
+@pytest.mark.slow
 def test_a_cold_detection_is_refined_by_inverse_composition(scenes):
     """The backend's corners (about a pixel off) refined by the inverse-compositional fits: within
     0.08 px of the truth and within 4 std; the detector reports those corners as good."""
