@@ -208,6 +208,7 @@ def test_png_data_size_of_an_interlaced_image_by_hand():
     assert png_data_size(10, 1, 1, 0, 0) == 1 + 2  # 10 one-bit pixels fill two bytes
 
 
+@pytest.mark.slow
 def test_a_png_whose_data_inflates_beyond_its_pixels_is_refused_before_decoding(tmp_path, monkeypatch):
     """Issue 23: a 50 MP PNG whose stream went on to 900 MB cost 23 s of libpng's CPU (and printed
     "libpng warning: IDAT: Too much image data"). Its pixels are within the limit; its data is

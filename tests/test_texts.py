@@ -83,6 +83,7 @@ def _cli(argv: list[str]) -> tuple[int, str]:
     return code, err.getvalue()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "argv",
     [
@@ -129,6 +130,7 @@ def test_a_settings_file_text_that_is_not_utf8_is_set_aside_and_run_goes_on(tmp_
     assert list(config.glob("app.json.bad-*"))
 
 
+@pytest.mark.slow
 @FEW
 @given(command=st.sampled_from(["marker", "render"]), text=st.tuples(any_text, surrogate).map("".join))
 def test_any_qr_text_that_is_not_utf8_is_refused_in_one_line(command, text, tmp_path):

@@ -22,6 +22,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from qrfield.geometry import POSE_NAMES
+
 HELP = "make experiment sessions and log rows without the app (new, log, run-plan, undo, list, show, export)"
 DESCRIPTION = (
     "Experiment sessions on disk, as the app's Session tab makes them: 'new' creates one, 'log' "
@@ -139,10 +141,24 @@ def _run_new(args: argparse.Namespace) -> int:
 
 
 # ------------------------------------------------------------------------------------ log
-def _add_log(parser: argparse.ArgumentParser) -> None:
-    from qrfield.arguments import count, text
-    from qrfield.runconfig import add_run_arguments
+def add_frames_argument(parser: argparse.ArgumentParser) -> None:
+    """``--frames N``: the frames averaged per row, 1..MAX_FRAMES_PER_ROW (default: the session's);
+    ``session log`` and ``session run-plan`` share it."""
+    from qrfield.arguments import count
     from qrfield.sessions.criteria import MAX_FRAMES_PER_ROW
+
+    parser.add_argument(
+        "--frames",
+        type=count("--frames", 1, MAX_FRAMES_PER_ROW),
+        default=None,
+        metavar="N",
+        help="frames averaged (default: the session's)",
+    )
+
+
+def _add_log(parser: argparse.ArgumentParser) -> None:
+    from qrfield.arguments import text
+    from qrfield.runconfig import add_run_arguments
 
     parser.add_argument("folder", metavar="FOLDER", help="the session folder")
     parser.add_argument(
@@ -163,13 +179,7 @@ def _add_log(parser: argparse.ArgumentParser) -> None:
         help="log a row whose --combo the signs of its angles contradict (refused otherwise, as the "
         "app asks first)",
     )
-    parser.add_argument(
-        "--frames",
-        type=count("--frames", 1, MAX_FRAMES_PER_ROW),
-        default=None,
-        metavar="N",
-        help="frames averaged (default: the session's)",
-    )
+    add_frames_argument(parser)
     # Camera, QR side and solver are the session's own: only the source and detection are chosen here.
     add_run_arguments(
         parser, only=("run", "detector", "virtual", "picamera"), run_skip=("camera", "side_mm", "method")
@@ -506,8 +516,8 @@ def _run_show(args: argparse.Namespace) -> int:
     print(head)
     for row in content.rows:
         v = row.values
-        truth = " ".join(v.get(f"gt_{k}", "") for k in ("x", "y", "z", "alpha", "beta", "gamma"))
-        measured = " ".join(v.get(k, "") or "-" for k in ("x", "y", "z", "alpha", "beta", "gamma"))
+        truth = " ".join(v.get(f"gt_{k}", "") for k in POSE_NAMES)
+        measured = " ".join(v.get(k, "") or "-" for k in POSE_NAMES)
         verdict = "withdrawn" if row.withdrawn else ("pass" if row.passed else "fail")
         conv = f"{v.get('n_converged', '')}/{v.get('n_frames', '')}"
         print(f"{row.number:>4} {row.combo:<18} {truth:<44} {measured:<44} {conv:<5} {verdict}")

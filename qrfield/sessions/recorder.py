@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from qrfield.mailbox import Handoff
+from qrfield.methods import NUMERICAL
 from qrfield.runconfig import RunConfig
 from qrfield.seams import BaseSink
 from qrfield.sessions.averaging import FrameCollector, Measurement, circular_mean_deg
@@ -175,7 +176,7 @@ class RowRecorder(BaseSink):
         request = RowRequest(
             truth=truth,
             frames=frames,
-            method=method or (info.solver if info is not None else "numerical"),
+            method=method or (info.solver if info is not None else NUMERICAL),
             criteria=criteria or (info.criteria if info is not None else AcceptanceCriteria()),
             note=note,
             follow_bench=follow_bench,
