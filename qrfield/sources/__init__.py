@@ -86,7 +86,7 @@ def make_source(
 
     Args:
         spec: ``virtual``, ``picamera2``, ``picamera2-sim[:SENSOR]``, ``usb:N`` or a path (video
-            file or folder).
+            file, image file or folder).
         camera: the virtual bench's camera model (default picam-v2@640x480); for real cameras,
             its size is the resolution requested; picamera2 maps it through the stream's sensor
             crop, a USB camera's frames must have its size.
