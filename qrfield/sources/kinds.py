@@ -2,9 +2,10 @@
 
 Kinds: ``auto``, ``virtual``, ``picamera2``, ``picamera2-sim`` (``picamera2-sim[:SENSOR]``, the
 picamera2 stand-in: SIMULATED), ``usb`` (``usb:N``), ``folder`` (a folder of images) and ``video``
-(any other path: a video file, or one image file, read as a folder of one image). Only a live
-camera (``picamera2``, ``usb``) measures the world: a pose from any other source (the virtual
-bench's rendering, a recording) is marked SIM on the serial link, never OK (docs/conventions.md), so a gripper that acts only on OK never moves on it.
+(any other path: a video file, or one image file, read as a folder of one image). Only a live camera
+(``picamera2``, ``usb``) measures the world: a pose from any other source (the virtual bench's
+rendering, a recording) is marked SIM on the serial link, never OK (docs/conventions.md), so a
+gripper that acts only on OK never moves on it.
 """
 
 from __future__ import annotations
