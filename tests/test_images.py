@@ -245,6 +245,11 @@ def _chunks(data: bytes) -> list[tuple[int, bytes]]:
     return found
 
 
+def _idat(stream: bytes) -> bytes:
+    """An IDAT chunk of ``stream`` with its right CRC."""
+    return struct.pack(">I", len(stream)) + b"IDAT" + stream + struct.pack(">I", zlib.crc32(b"IDAT" + stream))
+
+
 @pytest.mark.parametrize("damage", ["cut in IDAT", "short data", "IDAT CRC", "bad deflate"])
 def test_a_damaged_png_is_refused_in_one_line_with_nothing_from_libpng(tmp_path, capfd, damage):
     """Issue 23: a damaged PNG made libpng print "libpng error: Not enough image data" (or "IDAT:
@@ -260,25 +265,13 @@ def test_a_damaged_png_is_refused_in_one_line_with_nothing_from_libpng(tmp_path,
         broken, why = data[: idat_at + 8 + length // 2], "ends inside its 'IDAT' chunk"
     elif damage == "short data":  # a whole, valid zlib stream of fewer rows than the header says
         stream = zlib.compress(zlib.decompress(body)[: 20 * 65])
-        idat = (
-            struct.pack(">I", len(stream))
-            + b"IDAT"
-            + stream
-            + struct.pack(">I", zlib.crc32(b"IDAT" + stream))
-        )
-        broken, why = data[:idat_at] + idat + data[idat_at + 12 + length :], "1300 of the 3120 bytes"
+        broken, why = data[:idat_at] + _idat(stream) + data[idat_at + 12 + length :], "1300 of the 3120 bytes"
     elif damage == "IDAT CRC":
         at = idat_at + 8 + length  # its CRC
         broken, why = data[:at] + bytes([data[at] ^ 1]) + data[at + 1 :], "'IDAT' chunk fails its CRC"
     else:  # the deflate stream's bytes changed and the CRC made to match: only zlib sees it
         stream = body[:2] + bytes([0xFF] * 8) + body[10:]
-        idat = (
-            struct.pack(">I", len(stream))
-            + b"IDAT"
-            + stream
-            + struct.pack(">I", zlib.crc32(b"IDAT" + stream))
-        )
-        broken, why = data[:idat_at] + idat + data[idat_at + 12 + length :], "damaged"
+        broken, why = data[:idat_at] + _idat(stream) + data[idat_at + 12 + length :], "damaged"
     bad = tmp_path / "bad.png"
     bad.write_bytes(broken)
     capfd.readouterr()
