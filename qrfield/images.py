@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import glob
 import os
+import re
 import struct
 import sys
 import tempfile
@@ -362,6 +363,16 @@ def opencv_quiet() -> Iterator[None]:
 #: One decode at a time holds the process's stderr (file descriptor 2): see :func:`_decoder_output`.
 _STDERR_LOCK = threading.Lock()
 
+#: What libjpeg (jerror.h's messages that a decode may emit and go on) and libpng print on stderr
+#: themselves. Only such a line makes an image damaged; any other line written in the decode's
+#: window (another thread's) is written back to stderr, so it is neither lost nor taken for the
+#: decoder's.
+DECODER_LINE = re.compile(
+    r"^(Corrupt JPEG data|Premature end of JPEG file|Invalid (JPEG|SOS)|Bogus|Huffman|"
+    r"Inconsistent progression|Warning: thumbnail|JPEG datastream|Not a JPEG file|Unsupported JPEG|"
+    r"libpng (warning|error)|libjpeg)"
+)
+
 
 @contextmanager
 def _decoder_output() -> Iterator[list[str]]:
@@ -384,9 +395,15 @@ def _decoder_output() -> Iterator[list[str]]:
             os.dup2(saved, 2)
             os.close(saved)
             sink.seek(0)
-            lines.extend(
-                line for line in sink.read(4096).decode("utf-8", "replace").splitlines() if line.strip()
-            )
+            for line in sink.read().decode("utf-8", "replace").splitlines():
+                if DECODER_LINE.match(line):
+                    lines.append(line)
+                elif line.strip():  # another thread's words in that window: back where they belong
+                    try:
+                        sys.stderr.write(line + "\n")
+                        sys.stderr.flush()
+                    except (OSError, ValueError, AttributeError):
+                        pass
 
 
 def read_image(

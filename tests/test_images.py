@@ -4,6 +4,7 @@ files/folders/globs, and ``qrfield solve`` over many images in one process."""
 from __future__ import annotations
 
 import json
+import os
 import struct
 import zlib
 from pathlib import Path
@@ -336,3 +337,24 @@ def test_any_damaged_image_of_another_format_is_read_or_refused_with_nothing_on_
     else:
         assert decoded.shape == image.shape
     assert capfd.readouterr().err == ""
+
+
+def test_words_of_another_thread_during_a_decode_reach_stderr_and_do_not_refuse_the_image(
+    tmp_path, capfd, monkeypatch
+):
+    """stderr is taken off file descriptor 2 while a decoder runs (to catch libjpeg's own lines):
+    a line that is not a decoder's, written there in that window (as another thread's log would
+    be), is written back to stderr and leaves the image read, not refused."""
+    image = np.random.default_rng(3).integers(0, 256, (48, 64, 3), dtype=np.uint8)
+    good = tmp_path / "good.png"
+    assert cv2.imwrite(str(good), image)
+    real = cv2.imdecode
+
+    def decode_while_another_thread_writes(data, flags):
+        os.write(2, b"qrfield serial: port /dev/ttyUSB0 gone, retrying\n")
+        return real(data, flags)
+
+    monkeypatch.setattr(cv2, "imdecode", decode_while_another_thread_writes)
+    capfd.readouterr()
+    assert np.array_equal(read_image(good), image)
+    assert capfd.readouterr().err == "qrfield serial: port /dev/ttyUSB0 gone, retrying\n"
