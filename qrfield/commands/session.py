@@ -208,7 +208,7 @@ def _run_log(args: argparse.Namespace) -> int:
     from qrfield.engine import FrameLoop, SayEvents
     from qrfield.handeye import InFrame, PoseFrame
     from qrfield.runconfig import effective_settings
-    from qrfield.sessions import Session, known_combinations, validate_field
+    from qrfield.sessions import Session, SessionSettings, known_combinations, validate_field
     from qrfield.sessions.recorder import RowRecorder, session_run_config
     from qrfield.sources import may_be_live_camera
 
@@ -233,6 +233,9 @@ def _run_log(args: argparse.Namespace) -> int:
         effective = effective_settings(args, resolve_camera=False)  # the session's camera is used
         for problem in effective.store.problems:
             say(f"settings: {problem}")
+        # The app's rule for a row whose frames pause (a loaded machine, a slow camera): it waits
+        # up to the frame timeout of app.json's 'session' section, not the loop's 1 s "source down".
+        args.frame_timeout_s = effective.store.group("session", SessionSettings).frame_timeout_s
         config = session_run_config(effective.run_config(camera=session.info.camera), session.info)
         recorder = RowRecorder(session.info)  # the one row recorder, a sink fed every frame
         pose_frame = PoseFrame.from_saved(session.info.pose_frame, session.info.handeye, session.info.name)
@@ -271,10 +274,16 @@ def _log_one(session: Any, recorder: Any, truth: Any, args: Any, follow: bool, e
     frames = args.frames or session.info.frames_per_row
     say(f"measuring row {session.next_row}: {frames} frames, solver {session.info.solver}")
     measurement = recorder.measure(
-        truth, frames, note=args.note, follow_bench=follow, until=ended, combo=args.combo
+        truth,
+        frames,
+        note=args.note,
+        follow_bench=follow,
+        until=ended,
+        combo=args.combo,
+        frame_timeout_s=args.frame_timeout_s,
     )
     if measurement is None:
-        say("stopped before the frames were in: nothing logged")
+        say(f"nothing logged: {recorder.last_problem}")
         return 1
     return _log(session, measurement, args.force_combo)
 
@@ -337,8 +346,10 @@ def _ask(prompt: str) -> str | None:
 
 def _log_interactive(session: Any, recorder: Any, args: Any, combinations: Any, ended: Any) -> int:
     """Ask each field (the app's form's validation), measure, log; again until 'q' or end of input."""
+    from qrfield.files import MAX_FIELD_CHARS
     from qrfield.sessions import FIELDS, GroundTruth, validate_field
     from qrfield.sessions.groundtruth import UNITS
+    from qrfield.texts import TextError, check_text
 
     last: dict[str, Any] = {}
     # The defaults offered are the last row still in force: a withdrawn row's values were wrong.
@@ -364,9 +375,13 @@ def _log_interactive(session: Any, recorder: Any, args: Any, combinations: Any, 
                 if text is None or text.strip().lower() == "q":
                     return code
                 text = text.strip() or str(default)
-                if name == "note":
-                    values[name] = text
-                    break
+                if name == "note":  # checked here, as --note is: not after the row is measured
+                    try:
+                        values[name] = check_text(text, "note", max_chars=MAX_FIELD_CHARS)
+                        break
+                    except TextError as exc:
+                        print(f"  {exc}; type it again", flush=True)
+                        continue
                 value, message = validate_field(name, text, combinations)
                 if not message:
                     values[name] = value
@@ -381,9 +396,11 @@ def _log_interactive(session: Any, recorder: Any, args: Any, combinations: Any, 
             continue
         frames = args.frames or session.info.frames_per_row
         print(f"measuring row {session.next_row}: {frames} frames…", flush=True)
-        measurement = recorder.measure(truth, frames, note=values["note"], until=ended)
+        measurement = recorder.measure(
+            truth, frames, note=values["note"], until=ended, frame_timeout_s=args.frame_timeout_s
+        )
         if measurement is None:
-            say("the source stopped before the frames were in: nothing logged")
+            say(f"nothing logged: {recorder.last_problem}")
             return 1
         code = _log(session, measurement, args.force_combo) or code
         if _ask("Enter for the next row, q to quit: ") in (None, "q", "Q"):

@@ -53,6 +53,7 @@ from qrfield.files import (
     FileFormatError,
     check_field_sizes,
     csv_text_reader,
+    describe_error,
     make_folder,
     read_json,
 )
@@ -888,7 +889,7 @@ def _new_session_folder(root_path: Path, safe: str, now: dt.datetime | None) -> 
     try:
         make_folder(root_path, "sessions folder")  # never the folders above one the user named
     except OSError as exc:
-        raise SessionError(str(exc)) from None
+        raise SessionError(describe_error(exc)) from None
     stamp_time = now or dt.datetime.now()
     for _ in range(3600):
         folder = root_path / f"{stamp_time.strftime(_STAMP)}-{safe}"

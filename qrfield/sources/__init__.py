@@ -15,7 +15,7 @@ from pathlib import Path
 from qrfield.camera import DEFAULT_CAMERA, CameraModel, resolve_camera
 from qrfield.limits import MAX_USB_INDEX
 from qrfield.sources.base import EndOfStream, Frame, FrameSource, Pacer, SourceError
-from qrfield.sources.folder import ImageFolderSource
+from qrfield.sources.folder import ImageFolderSource, is_image_file
 from qrfield.sources.kinds import (
     AUTO,
     AUTO_CANDIDATES,
@@ -86,7 +86,7 @@ def make_source(
 
     Args:
         spec: ``virtual``, ``picamera2``, ``picamera2-sim[:SENSOR]``, ``usb:N`` or a path (video
-            file or folder).
+            file, image file or folder).
         camera: the virtual bench's camera model (default picam-v2@640x480); for real cameras,
             its size is the resolution requested; picamera2 maps it through the stream's sensor
             crop, a USB camera's frames must have its size.
@@ -130,6 +130,8 @@ def make_source(
         raise SourceError("source 'auto' is resolved by open_source(), not make_source()")
     path = Path(spec).expanduser()
     if kind == FOLDER:
+        return ImageFolderSource(path, loop=loop, fps=2.0 if pace else 0.0)
+    if is_image_file(path):  # one photo: the image reader's limits and reasons, not a video decoder's
         return ImageFolderSource(path, loop=loop, fps=2.0 if pace else 0.0)
     if path.is_file():
         return VideoFileSource(path, loop=loop, pace=pace)

@@ -2,9 +2,10 @@
 
 Kinds: ``auto``, ``virtual``, ``picamera2``, ``picamera2-sim`` (``picamera2-sim[:SENSOR]``, the
 picamera2 stand-in: SIMULATED), ``usb`` (``usb:N``), ``folder`` (a folder of images) and ``video``
-(any other path). Only a live camera (``picamera2``, ``usb``) measures the world: a
-pose from any other source (the virtual bench's rendering, a recording) is marked SIM on the serial
-link, never OK (docs/conventions.md), so a gripper that acts only on OK never moves on it.
+(any other path: a video file, or one image file, read as a folder of one image). Only a live camera
+(``picamera2``, ``usb``) measures the world: a pose from any other source (the virtual bench's
+rendering, a recording) is marked SIM on the serial link, never OK (docs/conventions.md), so a
+gripper that acts only on OK never moves on it.
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ SOURCE_CHOICES = ("auto", "virtual", "picamera2", "usb:0", "usb:1")
 
 SOURCE_HELP = (
     "camera source: auto (picamera2, then USB camera 0, then the virtual bench), virtual, picamera2, "
-    "usb:N (OpenCV camera index N), a path to a video file or a folder of images, or "
+    "usb:N (OpenCV camera index N), a path to a video file, an image or a folder of images, or "
     "picamera2-sim[:imx219|imx708|imx477] (a SIMULATED Pi camera: the picamera2 stand-in)"
 )
 
