@@ -733,3 +733,40 @@ def test_latest_frame_reader_reads_an_on_request_source_one_frame_ahead_only() -
     assert reader.read_count <= 3
     assert reader.stop()
     source.close()
+
+
+def test_a_damaged_video_file_prints_nothing_from_ffmpeg(tmp_path: Path) -> None:
+    """A video whose MJPEG frames are damaged: FFmpeg printed "[mjpeg @ 0x...] huffman table decode
+    error" on the console (issue 23's audit); the source says it in one line (SourceError) and
+    nothing else reaches stderr. In a fresh process: FFmpeg reads its log level once."""
+    import os
+    import subprocess
+
+    good = tmp_path / "good.avi"
+    writer = cv2.VideoWriter(str(good), cv2.VideoWriter_fourcc(*"MJPG"), 10, (64, 48))
+    for k in range(20):
+        writer.write(np.full((48, 64, 3), k * 10, np.uint8))
+    writer.release()
+    data = bytearray(good.read_bytes())
+    for k in range(200, len(data), 97):
+        data[k] ^= 0x55
+    bad = tmp_path / "bad.avi"
+    bad.write_bytes(bytes(data))
+    script = (
+        "import sys\n"
+        "from qrfield.sources import VideoFileSource, SourceError, EndOfStream\n"
+        "source = VideoFileSource(sys.argv[1])\n"
+        "try:\n"
+        "    source.open()\n"
+        "    while True:\n"
+        "        source.read()\n"
+        "except (SourceError, EndOfStream) as exc:\n"
+        "    print(type(exc).__name__, exc)\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k != "OPENCV_FFMPEG_LOGLEVEL"}
+    done = subprocess.run(
+        [sys.executable, "-c", script, str(bad)], capture_output=True, text=True, timeout=120, env=env
+    )
+    assert done.returncode == 0, done.stderr
+    assert "SourceError" in done.stdout or "EndOfStream" in done.stdout, done.stdout
+    assert done.stderr == ""

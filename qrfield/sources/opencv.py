@@ -16,6 +16,12 @@ from qrfield.settings import setting, validated
 from qrfield.sources.base import SETTLE_FRAMES, EndOfStream, Frame, FrameSource, Pacer, SourceError
 from qrfield.texts import TextError, check_path_for_library
 
+#: OpenCV's FFmpeg backend reads this once, at its first capture: -8 is AV_LOG_QUIET, so a damaged
+#: video file's decoder lines ("[mjpeg @ 0x...] huffman table decode error") never reach the console;
+#: the source says what went wrong in one line instead (cap_ffmpeg_impl.hpp: without the variable
+#: OpenCV sets AV_LOG_ERROR). A value the user set is kept.
+FFMPEG_LOG_LEVEL = ("OPENCV_FFMPEG_LOGLEVEL", "-8")
+
 #: Consecutive failed grabs after which a USB camera counts as gone.
 USB_MAX_FAILED_READS = 5
 
@@ -267,6 +273,7 @@ class VideoFileSource(FrameSource):
             name = check_path_for_library(self.path, f"video file {self.path}")
         except TextError as exc:
             raise SourceError(str(exc)) from None
+        os.environ.setdefault(*FFMPEG_LOG_LEVEL)
         cap = cv2.VideoCapture(name)
         if not cap.isOpened():
             cap.release()
