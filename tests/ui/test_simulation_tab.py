@@ -117,7 +117,10 @@ def test_run_shows_the_coverage_of_run_study_and_stays_responsive(make_tab, qtbo
     tab.progressed.connect(progress.append)
     run_by_click(qtbot, tab)
     timer.stop()
-    assert len(ticks) >= 2  # the GUI thread handled timer events while the study ran
+    # The GUI thread handled a timer event while the study ran (a study run on the GUI thread
+    # shows none: it sets and clears tab.run before the event loop runs again). One, not two:
+    # on a loaded machine the 756-pose study may end within two 5 ms ticks.
+    assert len(ticks) >= 1
     assert progress and progress[-1].done_poses == progress[-1].total_poses == 9 * 12 * 7
 
     expected = run_study(expected_config)  # the same study, run directly
