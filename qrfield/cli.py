@@ -19,6 +19,7 @@ import qrfield
 from qrfield import commands
 from qrfield.arguments import NEGATIVE_VALUES_HELP, ArgumentParser, one_line, stdout_closed
 from qrfield.camera import CameraModelError
+from qrfield.files import describe_error
 
 
 def command_names() -> list[str]:
@@ -51,16 +52,6 @@ def build_parser() -> argparse.ArgumentParser:
         module.add_arguments(sp)
         sp.set_defaults(_run=module.run)
     return parser
-
-
-def describe_error(exc: BaseException) -> str:
-    """The message of an error for the user: an OS error the system raised (``[Errno 36] File
-    name too long: 'x'``) as ``x: file name too long``; any other as it is."""
-    text = str(exc)
-    if isinstance(exc, OSError) and exc.strerror and text.startswith("[Errno"):
-        where = exc.filename if exc.filename is not None else ""
-        return f"{where}: {exc.strerror.lower()}" if where != "" else exc.strerror.lower()
-    return text
 
 
 def main(argv: Sequence[str] | None = None) -> int:

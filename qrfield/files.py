@@ -271,7 +271,9 @@ def loads_json(text: str, where: str, *, max_depth: int = MAX_DEPTH, max_chars: 
             f"{where}: nested {depth} levels deep, more than {max_depth}; not a qrfield file"
         )
     try:
-        data = json.loads(text, parse_constant=_no_constant)
+        data = json.loads(text, parse_constant=_no_constant, parse_int=_parse_int)
+    except _LongInteger as exc:
+        raise FileFormatError(f"{where}: {exc.describe(text)}") from None
     except json.JSONDecodeError as exc:
         raise FileFormatError(
             f"{where}: not JSON ({exc.msg} at line {exc.lineno} column {exc.colno})"
@@ -282,6 +284,34 @@ def loads_json(text: str, where: str, *, max_depth: int = MAX_DEPTH, max_chars: 
         raise FileFormatError(f"{where}: nested too deeply") from None
     _check_values(data, where, max_chars)
     return data
+
+
+class _LongInteger(ValueError):
+    """An integer in JSON text longer than Python's int() takes (4300 digits, sys.int_info)."""
+
+    def __init__(self, digits: str) -> None:
+        super().__init__(digits[:20])
+        self.digits = digits
+
+    def describe(self, text: str) -> str:
+        """Where it is (the line and the key before it) and why, in qrfield's words for numbers."""
+        at = text.find(self.digits)
+        line = text.count("\n", 0, at) + 1
+        before = text[max(0, at - 200) : at]
+        key = re.search(r'"([^"\\]{1,80})"\s*:\s*$', before) or re.search(
+            r"(?m)^\s*([\w.\-\"]{1,80})\s*=\s*$", before
+        )
+        digits = sum(ch.isdigit() for ch in self.digits)
+        why = f"the number is an integer of {digits} digits, too large for a number"
+        return f"value {key.group(1)}: {why} (line {line})" if key else f"line {line}: {why}"
+
+
+def _parse_int(digits: str) -> int:
+    """int(), except that a digit run too long for it is refused in words, not with Python's advice
+    to call sys.set_int_max_str_digits()."""
+    if len(digits) > 4000:  # below sys.int_info.default_max_str_digits (4300), far above any float
+        raise _LongInteger(digits)
+    return int(digits)
 
 
 def _no_constant(name: str) -> Any:
@@ -318,6 +348,11 @@ def loads_toml(
         raise FileFormatError(f"{where}: not valid TOML ({exc})") from None
     except RecursionError:  # e.g. dotted keys a.b.c... thousands deep, which the scan cannot see
         raise FileFormatError(f"{where}: nested too deeply") from None
+    except ValueError:  # int() refused a decimal integer of more than 4300 digits
+        run = re.search(r"[-+]?[0-9][0-9_]{4000,}", text)
+        if run is None:
+            raise
+        raise FileFormatError(f"{where}: {_LongInteger(run.group()).describe(text)}") from None
     _check_values(data, where, max_chars)
     return data
 
@@ -442,14 +477,7 @@ def check_target(path: str | os.PathLike[str], what: str = "") -> Path:
     path = Path(path)
     label = f"{what} {path}" if what else str(path)
     folder = path.parent
-    longest = name_max(folder if folder.is_dir() else ".")
-    size = max((len(os.fsencode(part)) for part in path.parts), default=0)
-    if size > longest:  # before is_dir(), which raises for such a name
-        raise OSError(
-            errno.ENAMETOOLONG,
-            f"cannot write {label}: a name in it is {size} bytes long, more than the {longest} the "
-            "file system allows; choose a shorter name",
-        )
+    check_name_lengths(path, f"cannot write {label}")
     if path.is_dir():
         raise IsADirectoryError(f"{label} is a folder; give a file name")
     if not folder.is_dir():
@@ -458,6 +486,36 @@ def check_target(path: str | os.PathLike[str], what: str = "") -> Path:
             "did not name; make it first)"
         )
     return path
+
+
+def describe_error(exc: BaseException) -> str:
+    """The message of an error for the user: an OS error the system raised (``[Errno 36] File
+    name too long: 'x'``) as ``x: file name too long``, one qrfield raised with an errno
+    (``OSError(errno.ENAMETOOLONG, "cannot write x: ...")``) as its words alone; any other as it is."""
+    text = str(exc)
+    if isinstance(exc, OSError) and exc.strerror and text.startswith("[Errno"):
+        where = exc.filename if exc.filename is not None else ""
+        if where == "" and not exc.strerror[:1].isupper():  # qrfield's own words, not the system's
+            return exc.strerror
+        return f"{where}: {exc.strerror.lower()}" if where != "" else exc.strerror.lower()
+    return text
+
+
+def check_name_lengths(path: Path, where: str) -> None:
+    """OSError (ENAMETOOLONG) saying so in words when a name in ``path`` is longer than its file
+    system takes; called before is_dir() and friends, which raise ``[Errno 36]`` for such a name."""
+    folder = path.parent
+    try:
+        longest = name_max(folder if folder.is_dir() else ".")
+    except OSError:  # the folder's own name is too long: measured against the current folder's
+        longest = name_max(".")
+    size = max((len(os.fsencode(part)) for part in path.parts), default=0)
+    if size > longest:
+        raise OSError(
+            errno.ENAMETOOLONG,
+            f"{where}: a name in it is {size} bytes long, more than the {longest} the file system "
+            "allows; choose a shorter name",
+        )
 
 
 def name_max(folder: str | os.PathLike[str]) -> int:
@@ -588,9 +646,10 @@ def make_folder(folder: str | os.PathLike[str], what: str = "folder") -> Path:
     the folders above it). FileNotFoundError / NotADirectoryError say which.
     """
     folder = Path(folder)
+    where = f"{what} {folder}: cannot create the folder"
+    check_name_lengths(folder, where)
     if folder.is_dir():
         return folder
-    where = f"{what} {folder}: cannot create the folder"
     if os.path.lexists(folder):
         raise NotADirectoryError(f"{where}: a file of that name exists")
     try:

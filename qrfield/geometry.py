@@ -22,6 +22,14 @@ import numpy as np
 from qrfield.camera import CameraModel
 from qrfield.lens import distort_normalised
 
+#: The names of a pose's six values, in order (docs/conventions.md): the position x, y, z of the QR
+#: centre in the camera frame (mm), then the angles alpha, beta, gamma of R = Rx Ry Rz (degrees).
+POSITION_NAMES = ("x", "y", "z")
+ANGLE_NAMES = ("alpha", "beta", "gamma")
+POSE_NAMES = (*POSITION_NAMES, *ANGLE_NAMES)
+#: The names of the QR symbol's vertices, in the order every (4, ...) array of corners holds them:
+#: top-left, top-right, bottom-right, bottom-left as printed (docs/conventions.md).
+VERTEX_NAMES = ("V1", "V2", "V3", "V4")
 #: Below this distance of |R[0,2]| from 1 the extraction treats beta as +-90 (gimbal lock).
 GIMBAL_EPS = 1e-9
 #: Maps marker-frame coordinates to OpenCV IPPE_SQUARE coordinates and back (its own inverse).

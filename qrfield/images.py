@@ -17,7 +17,13 @@ from __future__ import annotations
 
 import glob
 import os
+import re
 import struct
+import sys
+import tempfile
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -248,16 +254,22 @@ def png_data_size(width: int, height: int, depth: int, colour: int, interlace: i
 
 
 def check_png_data(path: str | os.PathLike[str], where: str) -> None:
-    """ImageError when a PNG's compressed data inflates to more than its header's pixels need.
+    """ImageError when a PNG's data is not what its header's pixels need: more (a crafted stream),
+    less, damaged compressed data, or a chunk that fails its CRC.
 
     The pixel limit bounds what the header declares, not what its IDAT chunks inflate to: a 50 MP
     PNG whose stream goes on to 900 MB of zeros kept libpng inflating for 23 s (and it warns "Too
     much image data" on stderr). So the stream is inflated here first, a few MB at a time and
     discarded, and stopped one byte beyond what the header allows: the CPU spent is at most that
     of decoding a legitimate image of that size. Chunks are read by their headers, the data
-    never held whole.
+    never held whole. A damaged PNG is refused here too, in one line: libpng would print its own
+    "libpng error: Not enough image data" or "IDAT: CRC error" on stderr (OpenCV keeps libpng's
+    default handlers) before OpenCV gives up on it.
     """
     import zlib
+
+    def damaged(why: str) -> ImageError:
+        return ImageError(f"{where}: cannot read image: {why} (a damaged or truncated PNG)")
 
     with open(path, "rb") as handle:
         head = handle.read(33)
@@ -266,26 +278,34 @@ def check_png_data(path: str | os.PathLike[str], where: str) -> None:
         width, height, depth, colour, _method, _filter, interlace = struct.unpack(">IIBBBBB", head[16:29])
         if colour not in _PNG_CHANNELS or depth not in (1, 2, 4, 8, 16):
             return  # a damaged header: OpenCV says it cannot decode it
+        if head[8:12] != b"\x00\x00\x00\x0d":  # an IHDR is 13 bytes long
+            raise damaged(
+                f"its IHDR chunk says it is {struct.unpack('>I', head[8:12])[0]} bytes long, not 13"
+            )
+        if struct.unpack(">I", head[29:33])[0] != zlib.crc32(head[12:29]):
+            raise damaged("its IHDR chunk fails its CRC")
         allowed = png_data_size(width, height, depth, colour, interlace)
         inflater = zlib.decompressobj()
         produced = 0
-        handle.seek(33)
         while True:
             header = handle.read(8)
             if len(header) < 8:
-                return  # truncated: OpenCV reports it
+                if produced < allowed:  # libpng: "Not enough image data"
+                    raise damaged(
+                        f"it ends after {produced} of the {allowed} bytes its {width}x{height} pixels need"
+                    )
+                return  # all the pixels, no IEND: OpenCV decodes it
             length, kind = struct.unpack(">I4s", header)
-            if kind == b"IEND":
-                return
-            if kind != b"IDAT":
-                handle.seek(length + 4, os.SEEK_CUR)  # skip the chunk and its CRC
-                continue
+            crc = zlib.crc32(kind)
             left = length
             while left > 0:
                 data = handle.read(min(left, _INFLATE_STEP))
                 if not data:
-                    return
+                    raise damaged(f"it ends inside its {kind.decode('latin-1')!r} chunk")
                 left -= len(data)
+                crc = zlib.crc32(data, crc)
+                if kind != b"IDAT":
+                    continue
                 try:
                     while data:
                         produced += len(inflater.decompress(data, _INFLATE_STEP))
@@ -297,8 +317,18 @@ def check_png_data(path: str | os.PathLike[str], where: str) -> None:
                                 "or crafted PNG); refused before decoding"
                             )
                 except zlib.error:
-                    return  # damaged data: OpenCV reports it
-            handle.seek(4, os.SEEK_CUR)  # the CRC
+                    raise damaged("its compressed data is damaged") from None
+            stored = handle.read(4)
+            if len(stored) < 4:
+                raise damaged(f"it ends inside its {kind.decode('latin-1')!r} chunk")
+            if struct.unpack(">I", stored)[0] != crc:
+                raise damaged(f"its {kind.decode('latin-1')!r} chunk fails its CRC")
+            if kind == b"IEND":
+                break
+        if produced < allowed:
+            raise damaged(
+                f"its data inflates to {produced} of the {allowed} bytes its {width}x{height} pixels need"
+            )
 
 
 def check_pixels(width: int, height: int, settings: ImageSettings, where: str) -> None:
@@ -309,6 +339,71 @@ def check_pixels(width: int, height: int, settings: ImageSettings, where: str) -
             f"{where}: {width}x{height} is {megapixels:.1f} MP, above the limit of "
             f"{settings.max_megapixels:g} MP; refused before decoding (--max-megapixels raises the limit)"
         )
+
+
+@contextmanager
+def opencv_quiet() -> Iterator[None]:
+    """OpenCV's own log lines (``[ WARN:0@1.2] global grfmt_png.cpp ...``, ``[ERROR:0@3.3] ...
+    IHDR chunk shall be first``) held back while inside: the caller reports the failure once, in
+    words. Its errors still raise ``cv2.error``."""
+    import cv2
+
+    logging = getattr(getattr(cv2, "utils", None), "logging", None)
+    if logging is None:
+        yield
+        return
+    level = logging.getLogLevel()
+    logging.setLogLevel(logging.LOG_LEVEL_SILENT)
+    try:
+        yield
+    finally:
+        logging.setLogLevel(level)
+
+
+#: One decode at a time holds the process's stderr (file descriptor 2): see :func:`_decoder_output`.
+_STDERR_LOCK = threading.Lock()
+
+#: What libjpeg (jerror.h's messages that a decode may emit and go on) and libpng print on stderr
+#: themselves. Only such a line makes an image damaged; any other line written in the decode's
+#: window (another thread's) is written back to stderr, so it is neither lost nor taken for the
+#: decoder's.
+DECODER_LINE = re.compile(
+    r"^(Corrupt JPEG data|Premature end of JPEG file|Invalid (JPEG|SOS)|Bogus|Huffman|"
+    r"Inconsistent progression|Warning: thumbnail|JPEG datastream|Not a JPEG file|Unsupported JPEG|"
+    r"libpng (warning|error)|libjpeg)"
+)
+
+
+@contextmanager
+def _decoder_output() -> Iterator[list[str]]:
+    """The lines a C decoder writes on stderr while inside, taken off it (libjpeg prints "Corrupt
+    JPEG data: 303 extraneous bytes before marker 0xd9" there itself and decodes on, pixels
+    damaged). File descriptor 2 is pointed at a temporary file for the decode (milliseconds), one
+    decode at a time; where stderr cannot be redirected the decode runs as it is."""
+    lines: list[str] = []
+    with _STDERR_LOCK, tempfile.TemporaryFile() as sink:
+        try:
+            sys.stderr.flush()
+            saved = os.dup(2)
+        except (OSError, ValueError, AttributeError):
+            yield lines
+            return
+        os.dup2(sink.fileno(), 2)
+        try:
+            yield lines
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            sink.seek(0)
+            for line in sink.read().decode("utf-8", "replace").splitlines():
+                if DECODER_LINE.match(line):
+                    lines.append(line)
+                elif line.strip():  # another thread's words in that window: back where they belong
+                    try:
+                        sys.stderr.write(line + "\n")
+                        sys.stderr.flush()
+                    except (OSError, ValueError, AttributeError):
+                        pass
 
 
 def read_image(
@@ -349,12 +444,8 @@ def read_image(
     if width <= 0 or height <= 0:
         raise ImageError(f"{text}: cannot read image: its header says {width}x{height} pixels")
     check_pixels(width, height, settings, text)
-    try:
-        if _is_png(file):
-            check_png_data(file, text)  # the pixel limit caps the CPU too
-    except OSError as exc:
-        raise ImageError(f"{text}: cannot read image: {exc.strerror or exc}") from None
-    # The whole file is read only now; it cannot be much larger than its pixels uncompressed.
+    # The whole file is read only after these checks; it cannot be much larger than its pixels
+    # uncompressed.
     limit = int(settings.max_megapixels * 1e6 * 4) + (16 << 20)
     try:
         if file.stat().st_size > limit:
@@ -362,16 +453,21 @@ def read_image(
                 f"{text}: cannot read image: {file.stat().st_size} bytes is too large "
                 f"for {width}x{height} pixels"
             )
+        if _is_png(file):
+            check_png_data(file, text)  # the pixel limit caps the CPU too
         data = np.fromfile(file, dtype=np.uint8)  # also copes with non-ASCII paths
     except OSError as exc:
         raise ImageError(f"{text}: cannot read image: {exc.strerror or exc}") from None
     flags = {"color": cv2.IMREAD_COLOR, "grey": cv2.IMREAD_GRAYSCALE, "any": cv2.IMREAD_ANYCOLOR}[mode]
     try:
-        image = cv2.imdecode(data, flags) if data.size else None
+        with opencv_quiet(), _decoder_output() as said:  # the errors below say it, once
+            image = cv2.imdecode(data, flags) if data.size else None
     except cv2.error as exc:
         raise ImageError(
             f"{text}: cannot read image: OpenCV cannot decode it ({(exc.err or str(exc)).strip()})"
         ) from None
+    if said:  # a decoder that complains has decoded damaged data: its pixels are not the photo's
+        raise ImageError(f"{text}: cannot read image: the decoder says {said[0].strip()!r} (a damaged file)")
     if image is None:
         raise ImageError(
             f"{text}: cannot read image: OpenCV cannot decode it (damaged, or a format OpenCV cannot decode)"

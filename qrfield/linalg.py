@@ -4,7 +4,7 @@ np.linalg.solve and np.linalg.inv spend 5-20 us per call on their checks and dis
 sizes; cv2.solve and cv2.invert (LAPACK-free LU or Cholesky in C++) take a quarter to a half of
 that. The per-frame paths (the tracker's warm fit, one corner set's uncertainty) call these a few
 times per frame. Where cv2 reports a singular (or, for Cholesky, not positive definite) matrix,
-numpy.linalg does the work, so a singular matrix raises np.linalg.LinAlgError exactly as before.
+numpy.linalg does the work, so a singular matrix raises np.linalg.LinAlgError as numpy's own call would.
 """
 
 from __future__ import annotations

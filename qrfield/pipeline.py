@@ -36,7 +36,8 @@ import numpy as np
 
 from qrfield.camera import CameraModel, CameraModelError
 from qrfield.geometry import Pose
-from qrfield.methods import METHODS
+from qrfield.methods import METHODS, NUMERICAL
+from qrfield.solvers.result import POSE_JSON_KEYS
 from qrfield.sources.base import Frame
 from qrfield.status import Reported, ResultStatus, reported_status, usable_pose
 
@@ -45,24 +46,6 @@ OK, NOQR, NOCONV, ERROR = ResultStatus.OK, ResultStatus.NOQR, ResultStatus.NOCON
 SIM = Reported.SIM
 #: The statuses of a FrameResult (qrfield.status.ResultStatus).
 RESULT_STATUSES = tuple(ResultStatus)
-
-#: Keys of a pose result's JSON (those of ``qrfield solve --json``), null when there is no pose.
-POSE_JSON_KEYS = (
-    "method",
-    "position_mm",
-    "angles_deg",
-    "converged",
-    "iterations",
-    "reprojection_px",
-    "corners",
-    "reason",
-    "ambiguity",
-    "residual_mm",
-    "corners_std_px",
-    "position_std_mm",
-    "angles_std_deg",
-    "ambiguous",
-)
 
 
 @dataclass
@@ -241,7 +224,7 @@ class Pipeline:
         self,
         camera: CameraModel,
         side_mm: float,
-        methods: Sequence[str] = ("numerical",),
+        methods: Sequence[str] = (NUMERICAL,),
         *,
         solver_settings: dict[str, Any] | None = None,
         detector_settings: Any = None,

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from qrfield.camera import CameraModel
-from qrfield.geometry import marker_vertices, project_points, transform_points
+from qrfield.geometry import VERTEX_NAMES, marker_vertices, project_points, transform_points
 from qrfield.lens import undistort_points
 
 #: Vertices must be this far in front of the camera (mm).
@@ -151,14 +151,14 @@ def view_problem(
         return ""
     reasons = []
     outside = [
-        f"V{i + 1} at ({u:.1f}, {v:.1f})"
+        f"{VERTEX_NAMES[i]} at ({u:.1f}, {v:.1f})"
         for i, (u, v) in enumerate(view.corners_px[0])
         if not view.in_image[0, i]
     ]
     if outside:
         reasons.append(f"{', '.join(outside)} outside the {camera.width}x{camera.height} image")
     beyond = [
-        f"V{i + 1} {math.degrees(math.atan(math.hypot(x / z, y / z))):.1f} deg off the optical axis"
+        f"{VERTEX_NAMES[i]} {math.degrees(math.atan(math.hypot(x / z, y / z))):.1f} deg off the optical axis"
         for i, (x, y, z) in enumerate(view.vertices_mm[0])
         if not view.in_field[0, i]
     ]

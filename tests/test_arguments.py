@@ -128,6 +128,7 @@ def _commands(parser):
                     yield name, sub
 
 
+@pytest.mark.slow
 def test_every_command_suggests_the_option_it_was_mistyped_for(capsys):
     """One implementation for all subcommands: a swapped pair of letters in a long option of each
     command gets "did you mean" with that option, in one line, exit 2 (before this, "unrecognized

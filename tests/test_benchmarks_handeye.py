@@ -9,6 +9,7 @@ from qrfield.cli import main
 pytestmark = pytest.mark.timeout(120)
 
 
+@pytest.mark.slow
 def test_bench_handeye_runs_and_prints_its_figures(capsys):
     assert main(["benchmark", "handeye", "--sets", "1", "--views", "8"]) == 0
     out = capsys.readouterr().out

@@ -9,6 +9,7 @@ from qrfield.cli import main
 pytestmark = pytest.mark.timeout(60)
 
 
+@pytest.mark.slow
 def test_bench_serial_runs_and_prints_its_figures(capsys):
     args = ["--frames", "200", "--seconds", "0.05", "--latency-frames", "5", "--relay-seconds", "0.6"]
     assert main(["benchmark", "serial", *args, "--baseline-seconds", "0.6"]) == 0

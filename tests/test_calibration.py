@@ -194,6 +194,7 @@ def test_sector_detector_takes_over(synthetic_views: list, monkeypatch: pytest.M
     assert gaps < 0.3
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("megapixels", "expected"), [(0.08, 2), (0.035, 3)])
 def test_a_board_searched_at_the_working_resolution_is_refined_on_the_full_image(
     synthetic_views: list, megapixels: float, expected: int, monkeypatch: pytest.MonkeyPatch
@@ -504,6 +505,7 @@ def test_cli_records_the_sensor_crop_and_lens_position(
 # ---------------------------------------------------------------------- one camera or several
 
 
+@pytest.mark.slow
 def test_calibrate_refuses_the_shared_stereo_frames_unless_allowed(
     shared_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture
 ) -> None:
@@ -576,6 +578,7 @@ def _views(camera: CameraModel, count: int, seed: int, prefix: str) -> list:
     return out
 
 
+@pytest.mark.slow
 def test_views_of_two_sizes_or_two_cameras_are_named(synthetic_views: list) -> None:
     from qrfield.calibration import mixed_cameras
 

@@ -254,6 +254,23 @@ def test_an_output_name_as_long_as_the_file_system_allows_is_written(tmp_path, c
     assert "a name in it is 256 bytes long, more than the 255 the file system allows" in line
 
 
+@pytest.mark.slow
+def test_a_name_too_long_is_said_in_words_with_the_name_as_typed(tmp_path, capsys):
+    """``session new ROOT`` with a 256-byte ROOT said "[Errno 36] File name too long: '...'" (its
+    is_dir() raised before the name was measured), and the words of a too-long --out were
+    lower-cased, its name with them ("cannot write --out MyScan.png" became "myscan.png")."""
+    folder = tmp_path / "Bench"
+    folder.mkdir()
+    name = "Scan" + "B" * 252 + ".png"
+    argv = ["render", "--side-mm", "30", "--pose", "0,0,300,0,0,0", "--out", str(folder / name)]
+    line = _one_line_error(argv, capsys)
+    assert f"cannot write --out {folder / name}: a name in it is 260 bytes long" in line
+    root = tmp_path / ("Root" + "R" * 252)
+    line = _one_line_error(["session", "new", str(root), "--name", "x", "--camera", "picam-v2"], capsys)
+    assert "[Errno" not in line
+    assert f"sessions folder {root}: cannot create the folder: a name in it is 256 bytes long" in line
+
+
 def test_render_never_overwrites_a_file_without_force(tmp_path, capsys):
     """Issue 23: render --out replaced an existing file silently."""
     out = tmp_path / "view.png"

@@ -20,7 +20,8 @@ from qrfield.detect.lens import Lens, undistort_pixels
 from qrfield.detect.patterns import check_patterns
 from qrfield.detect.symbol import decoded_cells
 from qrfield.detect.symbol_fit import START_EDGE_PX, FitState, _Problem
-from qrfield.detect.symbol_track import WarmFit, _square_homography
+from qrfield.detect.symbol_track import WarmFit
+from qrfield.homography import square_to_quad_floats
 
 PINHOLE = resolve_camera("picam-v2@640x480")
 #: (camera, text, side mm, position mm, tilt about X and Y, turn, blur px): modules of 2-5 px,
@@ -48,6 +49,7 @@ def _zxing_candidate(image, text):
     return candidate
 
 
+@pytest.mark.slow
 def test_a_cold_detection_is_refined_by_inverse_composition(scenes):
     """The backend's corners (about a pixel off) refined by the inverse-compositional fits: within
     0.08 px of the truth and within 4 std; the detector reports those corners as good."""
@@ -123,7 +125,7 @@ def test_a_pixel_centred_template_is_the_full_model_at_the_pixels(scenes):
     assert isinstance(samples, _Problem) and len(samples) == len(template.t) > 500
     # The template's points mapped by the homography they were made at are the pixel centres.
     ideal = undistort_pixels(camera, drawn.corners[0])
-    h = np.array(_square_homography(float(n), ideal.tolist())).reshape(3, 3)
+    h = np.array(square_to_quad_floats(float(n), ideal.tolist())).reshape(3, 3)
     uvw = template.uv @ h[:2, :2].T + h[:2, 2]
     px = lens.distort(uvw / (template.uv @ h[2, :2] + h[2, 2])[:, None])
     assert np.abs(px - np.column_stack([samples.xs, samples.ys])).max() < 1e-6

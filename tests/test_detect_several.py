@@ -43,6 +43,7 @@ def _area(corners: np.ndarray) -> float:
     return 0.5 * abs(float(ax * by - ay * bx))
 
 
+@pytest.mark.slow
 def test_four_codes_are_all_found_and_refined(frame):
     found = Detector(camera=CAMERA).detect(frame.image)
     assert sorted(d.text for d in found) == sorted(c[0] for c in CARDS)

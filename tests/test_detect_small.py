@@ -42,6 +42,7 @@ def test_small_blurred_codes_are_found_read_and_refined(views):
         assert np.all(error < 4.0 * d.corners_std_px + 0.02), f"view {view.index}: error beyond its std"
 
 
+@pytest.mark.slow
 def test_reading_a_located_code_from_its_corners(views):
     """The least-squares reading gives the payload from the true corners; a module off, nothing."""
     view = views[2]  # 82: the one only the reading reads

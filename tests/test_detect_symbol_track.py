@@ -6,7 +6,8 @@ import cv2
 import numpy as np
 import pytest
 
-from qrfield.detect.symbol_track import _maps_inside, _shifted, _square_homography
+from qrfield.detect.symbol_track import _maps_inside, _shifted
+from qrfield.homography import square_to_quad_floats
 
 
 def _random_quad(rng: np.random.Generator) -> np.ndarray:
@@ -26,7 +27,7 @@ def test_the_closed_form_homography_is_opencvs(n: int) -> None:
     square = np.array([[0, 0], [n, 0], [n, n], [0, n]], dtype=np.float64)
     for _ in range(200):
         quad = _random_quad(rng)
-        h = np.array(_square_homography(float(n), quad.tolist())).reshape(3, 3)
+        h = np.array(square_to_quad_floats(float(n), quad.tolist())).reshape(3, 3)
         # The homography through four points is unique: it maps them exactly, and the square's
         # centre to where the quad's diagonals cross (lines stay lines).
         mapped = cv2.perspectiveTransform(square.reshape(1, 4, 2), h).reshape(4, 2)
@@ -41,16 +42,16 @@ def test_the_closed_form_homography_is_opencvs(n: int) -> None:
 
 def test_a_parallelogram_is_affine_and_collinear_points_have_none() -> None:
     quad = [[10.0, 20.0], [110.0, 30.0], [120.0, 130.0], [20.0, 120.0]]
-    h = _square_homography(25.0, quad)
+    h = square_to_quad_floats(25.0, quad)
     assert h is not None and h[6] == 0.0 and h[7] == 0.0
     np.testing.assert_allclose(h[:6], [4.0, 0.4, 10.0, 0.4, 4.0, 20.0])
-    assert _square_homography(25.0, [[0.0, 0.0], [10.0, 0.0], [20.0, 0.0], [30.0, 0.0]]) is None
+    assert square_to_quad_floats(25.0, [[0.0, 0.0], [10.0, 0.0], [20.0, 0.0], [30.0, 0.0]]) is None
 
 
 def test_the_shift_moves_the_mapped_pixels_into_the_crop() -> None:
     rng = np.random.default_rng(3)
     quad = _random_quad(rng)
-    h = _square_homography(25.0, quad.tolist())
+    h = square_to_quad_floats(25.0, quad.tolist())
     assert h is not None
     uv = rng.uniform(-4, 29, (1, 50, 2))
     full = cv2.perspectiveTransform(uv, np.array(h).reshape(3, 3))
@@ -66,7 +67,7 @@ def test_the_box_test_agrees_with_every_point_inside() -> None:
     said_inside = said_outside = 0
     for _ in range(400):
         quad = _random_quad(rng)
-        h = _square_homography(25.0, quad.tolist())
+        h = square_to_quad_floats(25.0, quad.tolist())
         assert h is not None
         width, height = rng.uniform(150, 640), rng.uniform(150, 480)
         shifted = _shifted(h, *rng.uniform(0, 200, 2))

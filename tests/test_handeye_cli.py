@@ -97,6 +97,7 @@ def test_a_pairs_file_gives_the_calibration_and_bad_rows_are_left_out(tmp_path, 
     assert json.loads((tmp_path / "he.json.previous").read_text())["n_pairs"] == data["n_pairs"]
 
 
+@pytest.mark.slow
 def test_a_degenerate_set_is_refused_in_one_line_naming_what_to_add(tmp_path, camera_vga, capsys):
     # The gripper turns only about the camera's optical axis (base z here): degenerate.
     tools = []

@@ -95,6 +95,7 @@ def test_fifteen_drawn_views_give_the_transform_within_2_mm_and_0_3_deg_honestly
     assert all(0.5 < r < 1.2 for r in ratios), ratios
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("setup", SETUPS)
 def test_views_turned_only_about_the_optical_axis_are_refused(setup, camera_vga):
     robot = SimulatedRobot.example(setup)
@@ -113,6 +114,7 @@ def test_views_turned_only_about_the_optical_axis_are_refused(setup, camera_vga)
         solve_handeye(pairs, setup)
 
 
+@pytest.mark.slow
 def test_the_robot_drives_the_virtual_bench_and_a_collector_records_pairs_from_the_frame_loop(camera_vga):
     # The workflow of $QRC,TOOL (protocol 2) without the serial line: move, expect, wait; then solve.
     from qrfield.engine import FrameLoop

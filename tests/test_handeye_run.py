@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from qrfield.geometry import angles_from_rotation, rotation_matrix
 from qrfield.handeye import HandEyeCalibration
@@ -29,6 +30,7 @@ def qrfield(*args: str, config: Path) -> subprocess.CompletedProcess:
     )
 
 
+@pytest.mark.slow
 def test_json_lines_in_the_tool_frame_carry_the_bench_pose_through_the_calibration(tmp_path):
     x = transform_from_pose([60.0, -15.0, 40.0], [2.0, -3.0, 90.0])
     cov = np.diag([0.2, 0.2, 0.2, 0.05, 0.05, 0.05]) ** 2
@@ -53,6 +55,7 @@ def test_json_lines_in_the_tool_frame_carry_the_bench_pose_through_the_calibrati
     np.testing.assert_allclose(line["truth"]["position_mm"], [20.0, -10.0, 320.0])
 
 
+@pytest.mark.slow
 def test_a_file_that_does_not_fit_the_frame_or_is_missing_is_one_line(tmp_path):
     x = transform_from_pose([400.0, 0.0, 900.0], [180.0, 0.0, 0.0])
     HandEyeCalibration("eye-to-hand", x, 0.1, 0.02, 15, "test").save(tmp_path / "handeye.json")
@@ -66,6 +69,7 @@ def test_a_file_that_does_not_fit_the_frame_or_is_missing_is_one_line(tmp_path):
     assert done.returncode == 2 and len(err) == 1 and "nothing.json" in err[0] and "qrfield handeye" in err[0]
 
 
+@pytest.mark.slow
 def test_serial_poses_hello_and_the_hand_eye_commands_in_the_tool_frame(tmp_path):
     # `qrfield run --serial --frame tool`: $QRF carries the bench's pose through the calibration
     # (by hand), HELLO says tool, and TOOL / HANDEYE are answered (the bench is simulated: SIM).
@@ -113,6 +117,7 @@ def test_serial_poses_hello_and_the_hand_eye_commands_in_the_tool_frame(tmp_path
     assert "in the tool frame" in err and "HANDEYE solves eye-in-hand" in err and "Traceback" not in err
 
 
+@pytest.mark.slow
 def test_a_set_up_that_does_not_fit_the_frame_and_a_simulated_file_for_a_camera_are_refused(tmp_path):
     x = transform_from_pose([60.0, -15.0, 40.0], [2.0, -3.0, 90.0])
     HandEyeCalibration("eye-in-hand", x, 0.1, 0.02, 15, "test").save(tmp_path / "handeye.json")

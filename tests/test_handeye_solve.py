@@ -97,6 +97,7 @@ def test_any_diverse_exact_set_gives_the_truth(seed, setup, count):
     assert np.abs(difference(result.transform, x)).max() < 1e-6
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("setup", SETUPS)
 def test_the_reported_uncertainty_describes_the_error_monte_carlo(setup):
     # 200 draws of the same cell, each pair's noise from its stated covariance: the error of X over
@@ -118,6 +119,7 @@ def test_the_reported_uncertainty_describes_the_error_monte_carlo(setup):
     assert 0.9 < np.mean(ratios) < 1.1
 
 
+@pytest.mark.slow
 def test_robot_pose_noise_is_carried_to_the_uncertainty():
     # The tool poses wobble by 0.2 mm / 0.05 deg: given those, the std still describes the error;
     # ignored, the std is too small (chi2/dof scales it up, but by one factor for all components).
@@ -146,6 +148,7 @@ def test_robot_pose_noise_is_carried_to_the_uncertainty():
     assert untold.max() > 1.3 * told.max(), (told, untold)
 
 
+@pytest.mark.slow
 def test_without_pose_covariances_the_residuals_set_the_uncertainty():
     setup = "eye-to-hand"
     rng = np.random.default_rng(8)

@@ -4,6 +4,7 @@ files/folders/globs, and ``qrfield solve`` over many images in one process."""
 from __future__ import annotations
 
 import json
+import os
 import struct
 import zlib
 from pathlib import Path
@@ -11,6 +12,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, example, given, settings
+from hypothesis import strategies as st
 
 from qrfield.cli import main
 from qrfield.images import ImageError, ImageSettings, expand_image_paths, probe_size, read_image
@@ -206,6 +209,7 @@ def test_png_data_size_of_an_interlaced_image_by_hand():
     assert png_data_size(10, 1, 1, 0, 0) == 1 + 2  # 10 one-bit pixels fill two bytes
 
 
+@pytest.mark.slow
 def test_a_png_whose_data_inflates_beyond_its_pixels_is_refused_before_decoding(tmp_path, monkeypatch):
     """Issue 23: a 50 MP PNG whose stream went on to 900 MB cost 23 s of libpng's CPU (and printed
     "libpng warning: IDAT: Too much image data"). Its pixels are within the limit; its data is
@@ -222,3 +226,135 @@ def test_a_png_whose_data_inflates_beyond_its_pixels_is_refused_before_decoding(
     monkeypatch.setattr(cv2, "imdecode", lambda *a: pytest.fail("decoded the bomb"))
     with pytest.raises(ImageError, match=r"inflates to more than the 10100 bytes its 100x100 pixels need"):
         read_image(bomb)
+
+
+def _noise_png(path: Path, seed: int = 0) -> tuple[Path, np.ndarray]:
+    """A 64 x 48 grey PNG of seeded noise written by OpenCV (its deflate stream does not compress
+    away, so a cut anywhere lands in the pixel data)."""
+    image = np.random.default_rng(seed).integers(0, 256, (48, 64), dtype=np.uint8)
+    assert cv2.imwrite(str(path), image)
+    return path, image
+
+
+def _chunks(data: bytes) -> list[tuple[int, bytes]]:
+    """(offset, kind) of each chunk of a PNG, by its length fields (the independent reading)."""
+    found, at = [], 8
+    while at + 8 <= len(data):
+        length, kind = struct.unpack(">I4s", data[at : at + 8])
+        found.append((at, kind))
+        at += 12 + length
+    return found
+
+
+def _idat(stream: bytes) -> bytes:
+    """An IDAT chunk of ``stream`` with its right CRC."""
+    return struct.pack(">I", len(stream)) + b"IDAT" + stream + struct.pack(">I", zlib.crc32(b"IDAT" + stream))
+
+
+@pytest.mark.parametrize("damage", ["cut in IDAT", "short data", "IDAT CRC", "bad deflate"])
+def test_a_damaged_png_is_refused_in_one_line_with_nothing_from_libpng(tmp_path, capfd, damage):
+    """Issue 23: a damaged PNG made libpng print "libpng error: Not enough image data" (or "IDAT:
+    CRC error") and OpenCV "[ WARN:0@1.2] global grfmt_png.cpp ... incomplete" on stderr, then the
+    message said only "OpenCV cannot decode it". It is refused with its cause and stderr stays
+    empty (capfd reads the file descriptor, where the C libraries write)."""
+    path, _ = _noise_png(tmp_path / "good.png")
+    data = path.read_bytes()
+    (idat_at, _kind) = next(c for c in _chunks(data) if c[1] == b"IDAT")
+    length = struct.unpack(">I", data[idat_at : idat_at + 4])[0]
+    body = data[idat_at + 8 : idat_at + 8 + length]
+    if damage == "cut in IDAT":
+        broken, why = data[: idat_at + 8 + length // 2], "ends inside its 'IDAT' chunk"
+    elif damage == "short data":  # a whole, valid zlib stream of fewer rows than the header says
+        stream = zlib.compress(zlib.decompress(body)[: 20 * 65])
+        broken, why = data[:idat_at] + _idat(stream) + data[idat_at + 12 + length :], "1300 of the 3120 bytes"
+    elif damage == "IDAT CRC":
+        at = idat_at + 8 + length  # its CRC
+        broken, why = data[:at] + bytes([data[at] ^ 1]) + data[at + 1 :], "'IDAT' chunk fails its CRC"
+    else:  # the deflate stream's bytes changed and the CRC made to match: only zlib sees it
+        stream = body[:2] + bytes([0xFF] * 8) + body[10:]
+        broken, why = data[:idat_at] + _idat(stream) + data[idat_at + 12 + length :], "damaged"
+    bad = tmp_path / "bad.png"
+    bad.write_bytes(broken)
+    capfd.readouterr()
+    with pytest.raises(ImageError, match="damaged or truncated PNG") as caught:
+        read_image(bad, mode="grey")
+    assert why in str(caught.value) and "\n" not in str(caught.value)
+    assert capfd.readouterr().err == ""
+
+
+@pytest.mark.slow
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(cut=st.floats(0.0, 1.0), flip=st.integers(0, 10_000), bit=st.integers(0, 7))
+@example(cut=1.0, flip=8, bit=0)  # IHDR's length field: OpenCV logged "[ERROR] IHDR chunk shall be first"
+def test_any_cut_or_flipped_bit_of_a_png_decodes_right_or_is_refused_silently(
+    tmp_path, capfd, cut, flip, bit
+):
+    """A PNG cut anywhere, or with any one bit changed, is either decoded to its own pixels or
+    refused with an ImageError; nothing is printed by libpng or OpenCV."""
+    path, image = _noise_png(tmp_path / "good.png", seed=flip % 7)
+    data = bytearray(path.read_bytes())
+    data[flip % len(data)] ^= 1 << bit
+    data = bytes(data[: max(1, round(cut * len(data)))])
+    bad = tmp_path / "bad.png"
+    bad.write_bytes(data)
+    capfd.readouterr()
+    try:
+        decoded = read_image(bad, mode="grey")
+    except ImageError as exc:
+        assert "\n" not in str(exc)
+    else:
+        assert np.array_equal(decoded, image)
+    assert capfd.readouterr().err == ""
+
+
+@pytest.mark.slow
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(
+    suffix=st.sampled_from([".jpg", ".bmp", ".webp", ".tif"]),
+    cut=st.floats(0.0, 1.0),
+    flip=st.integers(0, 10_000),
+    bit=st.integers(0, 7),
+)
+@example(suffix=".jpg", cut=1.0, flip=419, bit=3)  # libjpeg: "Corrupt JPEG data: ... extraneous bytes"
+def test_any_damaged_image_of_another_format_is_read_or_refused_with_nothing_on_stderr(
+    tmp_path, capfd, suffix, cut, flip, bit
+):
+    """Issue 23 (audit): libjpeg printed "Corrupt JPEG data: 303 extraneous bytes before marker
+    0xd9" on stderr itself and decoded on (36 of 150 damaged JPEGs); such an image is refused
+    with the decoder's words as the reason, and nothing reaches stderr for any format."""
+    image = np.random.default_rng(flip % 5).integers(0, 256, (48, 64, 3), dtype=np.uint8)
+    good = tmp_path / f"good{suffix}"
+    assert cv2.imwrite(str(good), image)
+    data = bytearray(good.read_bytes())
+    data[flip % len(data)] ^= 1 << bit
+    bad = tmp_path / f"bad{suffix}"
+    bad.write_bytes(bytes(data[: max(1, round(cut * len(data)))]))
+    capfd.readouterr()
+    try:
+        decoded = read_image(bad)
+    except ImageError as exc:
+        assert "\n" not in str(exc)
+    else:
+        assert decoded.shape == image.shape
+    assert capfd.readouterr().err == ""
+
+
+def test_words_of_another_thread_during_a_decode_reach_stderr_and_do_not_refuse_the_image(
+    tmp_path, capfd, monkeypatch
+):
+    """stderr is taken off file descriptor 2 while a decoder runs (to catch libjpeg's own lines):
+    a line that is not a decoder's, written there in that window (as another thread's log would
+    be), is written back to stderr and leaves the image read, not refused."""
+    image = np.random.default_rng(3).integers(0, 256, (48, 64, 3), dtype=np.uint8)
+    good = tmp_path / "good.png"
+    assert cv2.imwrite(str(good), image)
+    real = cv2.imdecode
+
+    def decode_while_another_thread_writes(data, flags):
+        os.write(2, b"qrfield serial: port /dev/ttyUSB0 gone, retrying\n")
+        return real(data, flags)
+
+    monkeypatch.setattr(cv2, "imdecode", decode_while_another_thread_writes)
+    capfd.readouterr()
+    assert np.array_equal(read_image(good), image)
+    assert capfd.readouterr().err == "qrfield serial: port /dev/ttyUSB0 gone, retrying\n"

@@ -196,6 +196,7 @@ def test_pdf_cross_reference_is_exact() -> None:
 
 
 # Independent renderers, where installed (apt: poppler-utils, librsvg2-bin).
+@pytest.mark.slow
 @pytest.mark.skipif(shutil.which("pdftoppm") is None, reason="pdftoppm (poppler-utils) is not installed")
 def test_pdf_rasterised_by_poppler(tmp_path: Path) -> None:
     write_marker(tmp_path / "m.pdf", "qrfield", 50.0)
@@ -206,6 +207,7 @@ def test_pdf_rasterised_by_poppler(tmp_path: Path) -> None:
     _check_raster(image, 300, 50.0, L50["symbol"], "qrfield")
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(
     shutil.which("rsvg-convert") is None, reason="rsvg-convert (librsvg2-bin) is not installed"
 )
@@ -258,6 +260,7 @@ def test_bad_dpi_and_paths(tmp_path: Path) -> None:
     assert (tmp_path / "m.svg").read_bytes() != before
 
 
+@pytest.mark.slow
 def test_cli(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     out = tmp_path / "card.pdf"
     assert main(["marker", "--text", "qrfield", "--side-mm", "50", "--out", str(out)]) == 0

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+import pytest
 
 from qrfield.cli import main
 from qrfield.detect import DetectorSettings
@@ -153,6 +154,7 @@ def test_options_override_the_file_which_overrides_the_defaults(tmp_path: Path, 
     assert data["serial"]["baud"]["value"] == 9600 and data["camera_model"]["width"] == 640
 
 
+@pytest.mark.slow
 def test_serial_without_a_port_takes_the_configured_one(tmp_path: Path) -> None:
     import argparse
 

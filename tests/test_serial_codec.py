@@ -127,6 +127,7 @@ def test_encode_rejects_bad_input_with_a_clear_message(kwargs, message):
 finite = st.floats(allow_nan=False, allow_infinity=False)
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(
     st.tuples(*[finite.filter(lambda v: abs(v) < 999999.9)] * 3),

@@ -439,6 +439,7 @@ def test_the_link_streams_in_the_tool_frame_and_a_handeye_switches_it_to_the_new
     assert link.pose_frame.calibration.path == tmp_path / "handeye.json"
 
 
+@pytest.mark.slow
 def test_a_frame_seen_while_the_next_tool_is_armed_never_answers_it(tmp_path) -> None:
     # The frame loop's thread hands a frame over at the moment the next TOOL is being armed (here:
     # from inside the arming, on another thread): it must not answer that TOOL with the previous

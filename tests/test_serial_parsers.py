@@ -233,6 +233,7 @@ def test_a_hundred_thousand_corruptions_are_never_accepted_as_a_wrong_line(real_
     assert accepted["c"] == accepted["mpy"] > 10_000  # truncated at CR, concatenated: some are whole
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "body",
     [

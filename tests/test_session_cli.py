@@ -167,23 +167,25 @@ def test_undo_list_and_show(tmp_path: Path, capsys) -> None:
 
 def test_interactive_log_asks_each_field_with_the_forms_checks(tmp_path: Path, capsys) -> None:
     folder = new_session(tmp_path, capsys)
-    # Row 1: z and combo typed wrong once each; then Enter for the next row, Enter x 8 (keep
+    # Row 1: z, combo and the note (bytes that are not UTF-8: it was refused only after the
+    # row was measured) typed wrong once each; then Enter for the next row, Enter x 8 (keep
     # every value) for row 2, and q.
-    first = ["10", "-5", "3o0", "300", "15", "-20", "10", "nope", "alpha+beta-gamma+", "typed by hand"]
-    answers = [*first, "", *[""] * 8, "q"]
-    env = dict(os.environ, PYTHONPATH=str(REPO))
+    first = ["10", "-5", "3o0", "300", "15", "-20", "10", "nope", "alpha+beta-gamma+", "bad \udcff note"]
+    answers = [*first, "typed by hand", "", *[""] * 8, "q"]
+    env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONIOENCODING="utf-8:surrogateescape")
     done = subprocess.run(
         [sys.executable, "-m", "qrfield", *log_args(folder, tmp_path, "--frames", "2")],
-        input="\n".join(answers) + "\n",
+        input=("\n".join(answers) + "\n").encode("utf-8", "surrogateescape"),
         capture_output=True,
-        text=True,
         timeout=90,
         env=env,
     )
+    done.stdout, done.stderr = (out.decode("utf-8", "replace") for out in (done.stdout, done.stderr))
     assert done.returncode == 0, done.stderr
     assert (
         "z: '3o0' is not a number" in done.stdout
         and "combo: 'nope' is not a known combination" in done.stdout
+        and "note: not UTF-8 text (character 5 is U+DCFF, the byte 0xFF" in done.stdout
     )
     assert done.stdout.count("logged row") == 2  # the second row kept every value (Enter), then q
     rows = rows_of(folder)

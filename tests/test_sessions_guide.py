@@ -109,6 +109,7 @@ def test_within_the_noise_band_is_still() -> None:
     assert states[-1].still and detector.moves == 0
 
 
+@pytest.mark.slow
 @settings(max_examples=30, deadline=None)
 @given(hold=st.floats(min_value=0.2, max_value=2.0), fast=st.booleans(), share=st.floats(0.0, 1.0))
 def test_a_steady_turn_is_still_only_below_the_documented_rate(hold: float, fast: bool, share: float) -> None:

@@ -74,6 +74,7 @@ def test_generation_refuses_what_no_target_can_be(combos, angles, z, words) -> N
     assert words in str(info.value)
 
 
+@pytest.mark.slow
 @settings(max_examples=40, deadline=None)
 @given(
     combos=st.lists(st.sampled_from(sorted(DESIGN_COMBINATIONS)), min_size=1, max_size=12, unique=True),
@@ -149,6 +150,7 @@ def test_a_plan_without_a_usable_header_or_targets_is_refused(text, words) -> No
         parse_plan(text, "p.csv")
 
 
+@pytest.mark.slow
 def test_the_command_writes_checks_and_refuses_to_overwrite(tmp_path: Path) -> None:
     out = tmp_path / "plan.csv"
 

@@ -164,3 +164,36 @@ def test_on_a_frame_loop_it_sees_every_processed_frame_and_measures_the_bench() 
     assert (truth.x, truth.y, truth.z) == pytest.approx((10.0, -5.0, 300.0))
     assert (truth.alpha, truth.beta, truth.gamma) == pytest.approx((15.0, -20.0, 10.0))
     assert measurement.judgement.passed, measurement.judgement.reason
+
+
+@pytest.mark.slow
+def test_a_terminal_row_waits_through_a_pause_in_the_frames_up_to_its_frame_timeout() -> None:
+    """Issue 23 (audit): ``session log`` gave a row up at the loop's first "source down" (1 s
+    without a frame: a loaded machine, an 8 MP virtual frame, a slow camera) and said "the source
+    stopped before the frames were in". With the app's frame timeout it waits, as the app does,
+    and a row given up says why."""
+
+    def feed(recorder: RowRecorder, pause_s: float) -> None:
+        while not recorder.collecting:
+            time.sleep(0.01)
+        recorder.on_result(result([10, -5, 300, 15, -20, 10]))
+        recorder.on_source_down("no frame for 1.0 s")  # what the frame loop says after 1 s
+        time.sleep(pause_s)
+        recorder.on_result(result([10, -5, 302, 15, -20, 10]))
+
+    recorder = RowRecorder()
+    feeder = threading.Thread(target=feed, args=(recorder, 0.3))
+    feeder.start()
+    measurement = recorder.measure(TRUTH, 2, frame_timeout_s=3.0)
+    feeder.join()
+    assert measurement is not None and recorder.last_problem == ""
+    assert measurement.average.position_mm[2] == pytest.approx(301.0)  # (300 + 302) / 2
+    # No frame for longer than the timeout: given up, and the reason is kept for the message.
+    recorder = RowRecorder()
+    feeder = threading.Thread(target=feed, args=(recorder, 1.5))
+    feeder.start()
+    assert recorder.measure(TRUTH, 2, frame_timeout_s=0.5) is None
+    feeder.join()
+    assert recorder.last_problem.startswith("no frame for 0.")
+    # The loop ending (the source failed for good) is said as such.
+    assert RowRecorder().measure(TRUTH, 2, until=lambda: True) is None

@@ -202,6 +202,7 @@ def _criteria():
     return AcceptanceCriteria()
 
 
+@pytest.mark.slow
 def test_the_command_prints_the_summary_and_uses_the_studys_noise(session_dir: Path) -> None:
     done = subprocess.run(
         [sys.executable, "-m", "qrfield", "report", str(session_dir), "--set", "degradation=round"],
@@ -237,6 +238,7 @@ def run_browser(browser: str, profile: Path, *args: str) -> subprocess.Completed
     )  # fmt: skip
 
 
+@pytest.mark.slow
 def test_a_real_browser_draws_the_page_and_loads_every_image(session_dir: Path, tmp_path: Path) -> None:
     browser = chromium()
     report = write_report(session_dir).path

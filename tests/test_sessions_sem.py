@@ -65,6 +65,7 @@ def test_frames_resolved_by_history_are_counted() -> None:
     assert mean.n_resolved_by_history == 2 and not mean.filtered
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("n", [1, 5, 20])
 def test_on_still_cards_the_mean_uncertainty_covers_the_error_and_the_naive_one_does_not(n: int) -> None:
     """3000 seeded still cards: each has a sigma per component (0.05-2, log-uniform), an error shared

@@ -535,6 +535,7 @@ def test_rows_read_one_by_one_are_what_csv_reads_from_the_file(tmp_path, camera_
     assert sum(r.withdrawn for r in content.rows) == 2 and content.rows == list(content.rows)
 
 
+@pytest.mark.slow
 def test_reading_a_large_session_holds_a_few_bytes_a_row_not_the_file(tmp_path, camera_vga):
     """Issue 23: a 50 MB rows.csv made every session command peak at 858 MB (17 times the file):
     each row was a dict of 39 texts. Now a row is a line's offset and its number."""

@@ -56,6 +56,7 @@ def test_a_stop_keeps_the_finished_tasks_and_marks_the_result_partial():
     assert np.all(result.status[:, ~done] == -1)
 
 
+@pytest.mark.slow
 def test_workers_run_one_thread_of_each_library():
     # The workers start with WORKER_ENVIRONMENT, and this process keeps its own environment.
     before = {name: os.environ.get(name) for name in parallel.WORKER_ENVIRONMENT}

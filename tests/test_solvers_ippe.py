@@ -89,6 +89,7 @@ def test_agrees_with_a_direct_opencv_solvepnp_in_our_frame_exact():
         assert pos_err < 1e-4 and ang_err < 1e-4
 
 
+@pytest.mark.slow
 def test_agrees_with_a_direct_opencv_solvepnp_in_our_frame_noisy():
     camera, _, corners, _, _ = cases(150, seed=22)
     rng = np.random.default_rng(5)
@@ -170,6 +171,7 @@ def test_batch_agrees_with_the_single_path():
         assert b.converged[i] and b.iterations[i] == 0
 
 
+@pytest.mark.slow
 def test_rendered_view_through_a_distorted_lens():
     from qrfield.render import render_view
 

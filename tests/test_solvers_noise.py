@@ -17,6 +17,7 @@ worse, but not much (measured medians within 10 % for position and equal for til
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from solver_cases import SIDE_MM, cases
 
 from qrfield.geometry import rotation_matrix
@@ -31,6 +32,7 @@ def _normal_error_deg(rotation, true_angles):
     return np.degrees(np.arccos(np.clip(np.sum(n_est * n_true, axis=1), -1.0, 1.0)))
 
 
+@pytest.mark.slow
 def test_noise_errors_are_bounded():
     camera, _, corners, positions, angles = cases(300, seed=41)
     noisy = corners + np.random.default_rng(41).normal(0.0, SIGMA_PX, corners.shape)

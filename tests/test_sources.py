@@ -224,8 +224,51 @@ def test_folder_of_only_broken_images_raises(tmp_path: Path) -> None:
     (tmp_path / "empty").mkdir()
     with pytest.raises(SourceError, match="no image files"):
         ImageFolderSource(tmp_path / "empty").open()
+    (tmp_path / "notes.txt").write_text("not an image", encoding="utf-8")
     with pytest.raises(SourceError, match="no such folder"):
-        ImageFolderSource(tmp_path / "x.jpg").open()
+        ImageFolderSource(tmp_path / "notes.txt").open()
+
+
+@pytest.mark.slow
+def test_one_image_file_as_a_source_goes_through_the_image_reader(tmp_path: Path, capfd) -> None:
+    """Issue 23: ``--source photo.png`` went to OpenCV's video decoder (FFmpeg): no pixel limit,
+    no PNG inflation cap (a 100x100 PNG inflating to 60 MB cost 8 s of CPU), and FFmpeg's
+    "[png @ 0x...] chunk too big" lines on stderr. It is read as an image now."""
+    import struct
+    import zlib
+
+    photo = tmp_path / "photo.png"
+    image = np.random.default_rng(3).integers(0, 256, (48, 64, 3), dtype=np.uint8)
+    assert cv2.imwrite(str(photo), image)
+    source = make_source(str(photo))
+    assert isinstance(source, ImageFolderSource)
+    with source:
+        assert np.array_equal(source.read().image, image)  # the file's own pixels
+        with pytest.raises(EndOfStream):
+            source.read()
+
+    def chunk(kind: bytes, body: bytes) -> bytes:
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
+
+    def png(name: str, width: int, height: int, data: bytes) -> str:
+        header = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
+        body = b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", data) + chunk(b"IEND", b"")
+        (tmp_path / name).write_bytes(body)
+        return str(tmp_path / name)
+
+    compressor = zlib.compressobj(9)
+    bomb = b"".join(compressor.compress(bytes(1 << 20)) for _ in range(60)) + compressor.flush()
+    cases = {
+        png("huge.png", 10000, 6000, zlib.compress(bytes(6001))): "above the limit of 50 MP",
+        png("bomb.png", 100, 100, bomb): "inflates to more than the 10100 bytes",
+        png("short.png", 100, 100, zlib.compress(bytes(101 * 50))): "damaged or truncated PNG",
+    }
+    capfd.readouterr()
+    for path, why in cases.items():
+        with pytest.raises(SourceError, match=why) as caught, make_source(path) as source:
+            source.read()
+        assert str(caught.value).startswith(f"image {path}: ") and "\n" not in str(caught.value)
+    assert capfd.readouterr().err == ""
 
 
 def test_picamera2_missing_gives_the_install_hint(no_picamera2) -> None:

@@ -104,6 +104,7 @@ def _qrfield(*args: str, tmp_path: Path) -> subprocess.CompletedProcess:
     )
 
 
+@pytest.mark.slow
 def test_filter_s_on_the_command_line_and_in_app_json(tmp_path: Path) -> None:
     bench = [
         "run",
@@ -135,6 +136,7 @@ def test_filter_s_on_the_command_line_and_in_app_json(tmp_path: Path) -> None:
     assert bad.returncode != 0 and "filter_s" in bad.stderr and "Traceback" not in bad.stderr
 
 
+@pytest.mark.slow
 def test_the_stream_benchmark_runs_and_prints_every_mode(tmp_path: Path) -> None:
     args = [
         "benchmark",

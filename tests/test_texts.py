@@ -83,6 +83,7 @@ def _cli(argv: list[str]) -> tuple[int, str]:
     return code, err.getvalue()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "argv",
     [
@@ -129,6 +130,7 @@ def test_a_settings_file_text_that_is_not_utf8_is_set_aside_and_run_goes_on(tmp_
     assert list(config.glob("app.json.bad-*"))
 
 
+@pytest.mark.slow
 @FEW
 @given(command=st.sampled_from(["marker", "render"]), text=st.tuples(any_text, surrogate).map("".join))
 def test_any_qr_text_that_is_not_utf8_is_refused_in_one_line(command, text, tmp_path):
@@ -173,8 +175,9 @@ def test_a_number_is_taken_exactly_when_it_is_a_finite_float(value):
 
 
 @FEW
-@given(digits=st.integers(1, 2000), sign=st.sampled_from(["", "-"]), key=st.sampled_from(["fx", "width"]))
+@given(digits=st.integers(1, 20000), sign=st.sampled_from(["", "-"]), key=st.sampled_from(["fx", "width"]))
 @example(digits=400, sign="", key="fx")
+@example(digits=5000, sign="-", key="fx")  # beyond int()'s 4300 digits: Python's advice was shown
 def test_any_integer_in_a_json_file_is_read_or_refused_naming_the_file_and_key(digits, sign, key):
     text = json.dumps({key: 0}).replace("0", sign + "9" * digits)
     if digits <= 308:
@@ -182,6 +185,21 @@ def test_any_integer_in_a_json_file_is_read_or_refused_naming_the_file_and_key(d
     else:
         with pytest.raises(FileFormatError, match=rf"^camera file c\.json: value {key}: .* {digits} digits"):
             loads_json(text, "camera file c.json")
+
+
+@FEW
+@given(digits=st.integers(1, 20000), sign=st.sampled_from(["", "-", "+"]))
+@example(digits=5000, sign="")  # beyond int()'s 4300 digits: a bare ValueError came out of loads_toml
+def test_any_integer_in_a_toml_file_is_read_or_refused_naming_the_file(digits, sign):
+    text = f"[grid]\nz = {sign}{'9' * digits}\n"
+    if digits <= 308:
+        assert loads_toml(text, "study s.toml")["grid"]["z"] == int(sign + "9" * digits)
+    else:
+        with pytest.raises(
+            FileFormatError, match=rf"^study s\.toml: value (grid\.)?z: .* {digits} digits"
+        ) as err:
+            loads_toml(text, "study s.toml")
+        assert "\n" not in str(err.value)
 
 
 def test_overflowing_numbers_in_json_and_toml_are_named():

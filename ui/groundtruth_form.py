@@ -31,6 +31,7 @@ from typing import Any
 
 from PySide6 import QtCore, QtGui, QtWidgets
 
+from qrfield.geometry import ANGLE_NAMES
 from qrfield.sessions import GroundTruth, check_ground_truth, truth_fields, validate_field
 from qrfield.sessions.combo_signs import combination_mismatch, suggest_combination
 from ui.touch import TOUCH_PX, TouchCheckBox
@@ -44,7 +45,7 @@ POSE_FIELDS = (
     ("beta", "β", "deg"),
     ("gamma", "γ", "deg"),
 )
-ANGLES = ("alpha", "beta", "gamma")
+ANGLES = ANGLE_NAMES
 #: How a field is named in messages.
 FIELD_NAMES = {name: name for name, _, _ in POSE_FIELDS} | {"combo": "combination"}
 #: The narrowest a pose field gets (px): on one line of six, "-123.45" and its frame; on two lines.

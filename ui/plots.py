@@ -13,8 +13,10 @@ import numpy as np
 import pyqtgraph as pg
 from PySide6 import QtCore, QtGui
 
+from qrfield.methods import IPPE, NUMERICAL
+
 TITLES = ("x [mm]", "y [mm]", "z [mm]", "α [°]", "β [°]", "γ [°]")
-COLOURS = {"numerical": "#ff8c1a", "ippe": "#1a9cff", "true": "#aaaaaa"}
+COLOURS = {NUMERICAL: "#ff8c1a", IPPE: "#1a9cff", "true": "#aaaaaa"}
 MAX_POINTS = 20_000
 #: Below this width (px) the six plots stand in two columns, not three.
 NARROW_PX = 640

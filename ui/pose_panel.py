@@ -24,7 +24,9 @@ from typing import Any
 import numpy as np
 from PySide6 import QtCore, QtGui, QtWidgets
 
+from qrfield.methods import NUMERICAL
 from qrfield.sessions.criteria import AcceptanceCriteria
+from qrfield.sources.kinds import FOLDER, PICAMERA2_SIM, VIDEO, VIRTUAL
 from qrfield.status import Reported, WireStatus
 from ui.text import fixed
 
@@ -56,10 +58,10 @@ BADGE_STYLE = f"color: white; background: {SIM_COLOUR}; font-weight: bold; paddi
 
 #: What the simulated-source badge calls a source, by the start of its name (FrameSource.name).
 SIMULATED_SOURCE_NAMES = {
-    "virtual": "virtual bench",
-    "picamera2-sim": "picamera2 stand-in",
-    "video": "video file",
-    "folder": "image folder",
+    VIRTUAL: "virtual bench",
+    PICAMERA2_SIM: "picamera2 stand-in",
+    VIDEO: "video file",
+    FOLDER: "image folder",
 }
 
 
@@ -146,7 +148,7 @@ class PosePanel(QtWidgets.QWidget):
         self.state = NOSRC
         self.compact = False
         self.has_pose = False  # a real pose has been shown (only then can values be stale)
-        self._methods: tuple[str, ...] = ("numerical",)
+        self._methods: tuple[str, ...] = (NUMERICAL,)
         #: What the verdict against the true pose judges by (the session's; the seed's by default).
         self.criteria = AcceptanceCriteria()
         self._build_labels()

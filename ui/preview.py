@@ -16,7 +16,7 @@ import pyqtgraph as pg
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from qrfield.camera import CameraModel
-from qrfield.geometry import project_points, transform_points
+from qrfield.geometry import VERTEX_NAMES, project_points, transform_points
 
 VERTEX_COLOURS = ("#ff3030", "#30c0ff", "#ffd000", "#40ff60")
 AXIS_COLOURS = ("#ff2020", "#20e020", "#3070ff")
@@ -63,7 +63,7 @@ class PreviewView(pg.GraphicsLayoutWidget):
         self.view.addItem(self.vertices)
         self.labels = []
         for i, colour in enumerate(VERTEX_COLOURS):
-            label = pg.TextItem(f"V{i + 1}", color=colour, anchor=(0.5, 0.5))
+            label = pg.TextItem(VERTEX_NAMES[i], color=colour, anchor=(0.5, 0.5))
             label.setFont(QtGui.QFont("Sans", 11, QtGui.QFont.Weight.Bold))
             label.setVisible(False)  # until a code is found
             self.view.addItem(label)

@@ -12,6 +12,7 @@ from typing import Any
 
 from PySide6 import QtCore, QtGui, QtWidgets
 
+from qrfield.geometry import ANGLE_NAMES, POSITION_NAMES
 from qrfield.sessions import LoggedRow
 
 PASS_COLOUR = QtGui.QColor("#c8f0c8")
@@ -31,8 +32,8 @@ COLUMNS: tuple[tuple[str, Callable[[LoggedRow], str]], ...] = (
     ("combo", lambda r: r.combo),
     ("truth x, y, z\nmm", lambda r: _triple(r, ("gt_x", "gt_y", "gt_z"))),
     ("truth α, β, γ\ndeg", lambda r: _triple(r, ("gt_alpha", "gt_beta", "gt_gamma"))),
-    ("measured x, y, z\nmm", lambda r: _triple(r, ("x", "y", "z"))),
-    ("measured α, β, γ\ndeg", lambda r: _triple(r, ("alpha", "beta", "gamma"))),
+    ("measured x, y, z\nmm", lambda r: _triple(r, POSITION_NAMES)),
+    ("measured α, β, γ\ndeg", lambda r: _triple(r, ANGLE_NAMES)),
     ("err pos\nmm", lambda r: r.values.get("err_pos", "") or "–"),
     ("err α, β, γ\ndeg", lambda r: _triple(r, ("err_alpha", "err_beta", "err_gamma"))),
     ("frames", lambda r: f"{r.values.get('n_converged', '')}/{r.values.get('n_frames', '')}"),

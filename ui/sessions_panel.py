@@ -47,6 +47,7 @@ from PySide6 import QtCore, QtWidgets
 
 from qrfield.camera import CameraModel
 from qrfield.handeye.setups import CAMERA
+from qrfield.methods import NUMERICAL
 from qrfield.sessions import (
     LogOutcome,
     Session,
@@ -124,7 +125,7 @@ class SessionPanel(QtWidgets.QWidget):
         #: result), the open session's plan and the target shown (None without a plan).
         self.stillness_settings = store.group("stillness", StillnessSettings)
         self.guide_settings = store.group("guide", GuideSettings)
-        self.guide = Guide("numerical", stillness=self.stillness_settings, settings=self.guide_settings)
+        self.guide = Guide(NUMERICAL, stillness=self.stillness_settings, settings=self.guide_settings)
         self.plan: PlanProgress | None = None
         self.target: PlanTarget | None = None
         self._guide_row = 0  # the row number a guided row being collected will get
@@ -301,7 +302,7 @@ class SessionPanel(QtWidgets.QWidget):
     def set_default_solver(self, methods: tuple[str, ...]) -> None:
         """Preselect the solver of a new session: the thesis' model when it runs, else the one that runs."""
         self.new_dialog.solver_combo.setCurrentText(
-            "numerical" if "numerical" in methods or not methods else methods[0]
+            NUMERICAL if NUMERICAL in methods or not methods else methods[0]
         )
 
     # ---------------------------------------------------------------- dialogs (tests replace these)

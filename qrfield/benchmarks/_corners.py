@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from qrfield.detect.detection import GOOD_QUALITY
+from qrfield.geometry import VERTEX_NAMES
 from qrfield.testing.hardset import BANDS, HardView
 
 #: A corner further off than this, px, must not be reported with a good quality.
@@ -123,8 +124,8 @@ def print_tables(title: str, results: list[CornerResult]) -> None:
             bad = e.max(axis=1) > BAD_CORNER_PX
             good = np.array([r.good for r in hits])
             corners = "  ".join(
-                f"V{k + 1} {np.median(e[:, k]):.3f}/{np.percentile(e[:, k], 90):.3f}/{e[:, k].max():.3f}"
-                for k in range(4)
+                f"{name} {np.median(e[:, k]):.3f}/{np.percentile(e[:, k], 90):.3f}/{e[:, k].max():.3f}"
+                for k, name in enumerate(VERTEX_NAMES)
             )
             right = sum(r.text_right for r in hits)
             wrong = sum(r.text_wrong for r in hits)

@@ -31,6 +31,7 @@ import argparse
 import time
 from pathlib import Path
 
+from qrfield.methods import BOTH, NUMERICAL
 from qrfield.status import ResultStatus
 
 #: Timing rounds per resolution; the fastest round counts (the same rule for the baseline).
@@ -256,8 +257,8 @@ def _time_sequence(cam, side: float, count: int, repeats: int) -> bool:
     refined = Detector(DetectorSettings(), camera=cam)
     tracker = Tracker(DetectorSettings(), camera=cam)
     pipelines = {
-        "numerical": Pipeline(cam, side, METHODS[:1]),
-        "both": Pipeline(cam, side, METHODS),
+        NUMERICAL: Pipeline(cam, side, METHODS[:1]),
+        BOTH: Pipeline(cam, side, METHODS),
     }
 
     def naive(frame) -> bool:
@@ -277,10 +278,10 @@ def _time_sequence(cam, side: float, count: int, repeats: int) -> bool:
         ("tracked + refine", lambda f, i: bool(tracker.update(f)), tracker.reset),
         (
             "pipeline: tracked + refine + numerical",
-            through(pipelines["numerical"]),
-            pipelines["numerical"].reset,
+            through(pipelines[NUMERICAL]),
+            pipelines[NUMERICAL].reset,
         ),
-        ("pipeline, both methods (the app's)", through(pipelines["both"]), pipelines["both"].reset),
+        ("pipeline, both methods (the app's)", through(pipelines[BOTH]), pipelines[BOTH].reset),
     ]
     for _, method, _ in rows:
         method(frames[0], 0)  # warm caches

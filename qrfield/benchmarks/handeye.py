@@ -26,6 +26,8 @@ import math
 import os
 import time
 
+from qrfield.methods import NUMERICAL
+
 HELP = "hand-eye calibration: accuracy against the known transform and honesty of its uncertainty"
 
 
@@ -49,7 +51,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--side-mm", type=limited(SIDE_MM, "--side-mm"), default=50.0, help="QR side, mm (default 50)"
     )
-    parser.add_argument("--method", default="numerical", help="pose method (default numerical)")
+    parser.add_argument("--method", default=NUMERICAL, help="pose method (default numerical)")
     parser.add_argument(
         "--tool-std-mm",
         type=number("--tool-std-mm", 0.0, 100.0, "mm"),

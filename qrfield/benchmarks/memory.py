@@ -14,10 +14,10 @@ on a small input, measured in the same run, with the load average:
    list``, ``show``, ``export``, ``undo`` and ``log`` (one frame of the virtual bench) beside the
    same commands on a session of one row.
 
-Targets (issue 23): images under 600 MB; sessions under 100 MB (``session log``, whose frame loop
-alone takes some 115 MB: no more than 15 MB over its one-row baseline); the inflating PNG no more
-CPU than the plain one. The baseline's peak is mostly the interpreter with numpy and OpenCV loaded (some
-85 MB): the figures to compare are the peaks and the differences.
+Targets (docs/benchmarks.md, "memory"): images under 600 MB; sessions under 100 MB (``session
+log``, whose frame loop alone takes some 115 MB: no more than 15 MB over its one-row baseline); the
+inflating PNG no more CPU than the plain one. The baseline's peak is mostly the interpreter with
+numpy and OpenCV loaded (some 85 MB): the figures to compare are the peaks and the differences.
 """
 
 from __future__ import annotations
@@ -27,6 +27,8 @@ import os
 import sys
 from pathlib import Path
 from typing import Any
+
+from qrfield.methods import NUMERICAL
 
 HELP = "peak memory and CPU of calibrate, solve and the session commands at their input limits"
 PARTS = ("images", "png", "sessions")
@@ -122,7 +124,7 @@ def _session(root: Path, name: str, rows_mib: float) -> Path:
     from qrfield.sessions import GroundTruth, Session, measure
 
     session = Session.create(
-        root, name, camera=resolve_camera("picam-v2@640x480"), side_mm=50.0, solver="numerical"
+        root, name, camera=resolve_camera("picam-v2@640x480"), side_mm=50.0, solver=NUMERICAL
     )
     truth = GroundTruth(10.0, -5.0, 300.0, 15.0, -20.0, 10.0, "alpha+beta-gamma+")
     frame = {"position_mm": [10.2, -5.1, 300.4], "angles_deg": [15.1, -19.8, 10.0], "converged": True}

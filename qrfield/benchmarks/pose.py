@@ -30,18 +30,20 @@ from typing import Any
 
 import numpy as np
 
+from qrfield.geometry import POSE_NAMES
+from qrfield.methods import IPPE, NUMERICAL
 from qrfield.testing.corner_noise import draw_noise, random_corner_cov
 
 HELP = "pose uncertainty calibration, flip flag recall/precision, end to end vs OpenCV and zxing, real optics"
 
 #: Angle error beyond which a pose counts as a flip (the issue's definition), degrees.
 FLIP_DEG = 10.0
-#: The calibration targets (docs/conventions.md "Pose uncertainty"; issue 13).
+#: The calibration targets (docs/conventions.md "Pose uncertainty"; docs/benchmarks.md, "pose").
 RMS_RANGE = (0.7, 1.4)
 WITHIN_2_RANGE = (0.90, 0.99)
 #: Module-size bands of the end-to-end table, px.
 BANDS = ((0.0, 1.2), (1.2, 2.0), (2.0, 3.0), (3.0, math.inf))
-COMPONENTS = ("x", "y", "z", "alpha", "beta", "gamma")
+COMPONENTS = POSE_NAMES
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -126,10 +128,10 @@ def _methods() -> list[tuple[str, str, Any]]:
     from qrfield.solvers import SEED_SETTINGS, IppeSettings
 
     return [
-        ("numerical (defaults)", "numerical", None),
-        ("ippe (LM refined)", "ippe", None),
-        ("numerical, thesis settings", "numerical", SEED_SETTINGS),
-        ("ippe, not refined", "ippe", IppeSettings(refine="none")),
+        ("numerical (defaults)", NUMERICAL, None),
+        ("ippe (LM refined)", IPPE, None),
+        ("numerical, thesis settings", NUMERICAL, SEED_SETTINGS),
+        ("ippe, not refined", IPPE, IppeSettings(refine="none")),
     ]
 
 

@@ -10,6 +10,8 @@ from __future__ import annotations
 import argparse
 import time
 
+from qrfield.methods import NUMERICAL
+
 HELP = "time logging one session row (with fsync) against a raw write + fsync"
 
 
@@ -43,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
     camera = resolve_camera("picam-v2@640x480")
     rng = np.random.default_rng(1)
     with tempfile.TemporaryDirectory(dir=args.dir) as root:
-        session = Session.create(root, "bench", camera=camera, side_mm=60.0, solver="numerical")
+        session = Session.create(root, "bench", camera=camera, side_mm=60.0, solver=NUMERICAL)
         truth = GroundTruth(10.0, -5.0, 350.0, 20.0, -10.0, 5.0, "alpha+beta-")
         frames = [
             {
@@ -57,14 +59,14 @@ def run(args: argparse.Namespace) -> int:
         ]
         # The first row gives the line length for the baseline; then log and baseline alternate
         # so that both see the same state of the disk and its caches.
-        session.log(measure(frames, truth, method="numerical"))
+        session.log(measure(frames, truth, method=NUMERICAL))
         line = session.rows_path.read_bytes().split(b"\n")[1] + b"\n"
         fd = os.open(os.path.join(root, "baseline.csv"), os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
         log_s = base_s = 0.0
         try:
             for _ in range(args.rows):
                 t0 = time.perf_counter()
-                outcome = session.log(measure(frames, truth, method="numerical"))
+                outcome = session.log(measure(frames, truth, method=NUMERICAL))
                 t1 = time.perf_counter()
                 os.write(fd, line)
                 os.fsync(fd)

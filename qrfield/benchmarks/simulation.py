@@ -6,15 +6,17 @@ Measured in this run, on this machine (wall time: the new path uses several proc
       new:    batch solvers (numerical and IPPE vectorised in numpy), tasks over every core
               (auto: the app's small study stays in one process);
       serial: the same batch solvers in this process only (workers = 1);
-      old:    the path before issue 17: numerical batch, IPPE one pose at a time through OpenCV
-              (qrfield.solvers.ippe.solve_ippe_batch), this process only, 2048-pose tasks;
+      old:    the per-pose path (docs/benchmarks.md, "simulation"): numerical batch, IPPE one pose
+              at a time through OpenCV (qrfield.solvers.ippe.solve_ippe_batch), this process
+              only, 2048-pose tasks;
     with the ratio old / new, both readings of the mean coverage per solver for each path, and
     the samples whose verdict differs between the paths (the batch IPPE's LM stops elsewhere than
     OpenCV's: a sample right on a criterion's edge may change side);
   - the batch IPPE against the single path (qrfield.solvers.solve, method "ippe") on seeded
     visible poses, exact and with Gaussian corner noise: the largest differences and poses/s.
 The load average is printed before and after: other work on the machine slows every figure.
-Targets (issue 17): the default study under 5 s on a 2-core machine; the app's small study under 1 s.
+Targets (docs/benchmarks.md, "simulation"): the default study under 5 s on a 2-core machine; the
+app's small study under 1 s.
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ from qrfield.methods import IPPE
 
 HELP = "time the simulation study: batch solvers on every core beside the old per-pose IPPE path"
 
-#: Poses per task of the old path (runner.CHUNK_POSES before issue 17).
+#: Poses per task of the old, per-pose path (docs/benchmarks.md, "simulation").
 OLD_CHUNK_POSES = 2048
 
 
@@ -55,7 +57,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def old_solve(spec: Any, corners: Any, camera: Any, side_mm: float) -> Any:
-    """The study's solvers before issue 17: IPPE loops over OpenCV one pose at a time."""
+    """The old path's solvers (docs/benchmarks.md, "simulation"): IPPE one pose at a time through OpenCV."""
     from qrfield.solvers import solve_batch
     from qrfield.solvers.checks import check_corners_batch
     from qrfield.solvers.ippe import solve_ippe_batch
@@ -149,12 +151,12 @@ def _compare_ippe(args: argparse.Namespace) -> None:
     for label, corners in (("exact", exact), (f"{args.noise_px:g} px", noisy)):
         keep = check_corners_batch(corners)[1]  # noise can make a corner set unusable (concave)
         corners, rows = corners[keep], np.flatnonzero(keep)
-        solve_batch(corners[:50], camera, 50.0, method="ippe")  # warm caches
+        solve_batch(corners[:50], camera, 50.0, method=IPPE)  # warm caches
         t0 = time.perf_counter()
-        batch = solve_batch(corners, camera, 50.0, method="ippe")
+        batch = solve_batch(corners, camera, 50.0, method=IPPE)
         batch_s = time.perf_counter() - t0
         t0 = time.perf_counter()
-        single = [solve(c, camera, 50.0, method="ippe") for c in corners]
+        single = [solve(c, camera, 50.0, method=IPPE) for c in corners]
         single_s = time.perf_counter() - t0
         pos = np.array([r.position_mm for r in single])
         ang = np.array([r.angles_deg for r in single])

@@ -15,6 +15,7 @@ import argparse
 import time
 
 from qrfield.camera import DEFAULT_CAMERA
+from qrfield.methods import IPPE, NUMERICAL
 
 HELP = "time the numerical and IPPE solvers (single and batch) against a raw cv2.solvePnP call"
 
@@ -82,35 +83,35 @@ def run(args: argparse.Namespace) -> int:
         ("raw cv2.solvePnP IPPE_SQUARE (baseline)", base),
         (
             "numerical single, defaults (+ mirror search)",
-            _per_call_us(lambda c: solve(c, camera, side, "numerical", default), corners),
+            _per_call_us(lambda c: solve(c, camera, side, NUMERICAL, default), corners),
         ),
         (
             "numerical single, no mirror search",
-            _per_call_us(lambda c: solve(c, camera, side, "numerical", no_mirror), corners),
+            _per_call_us(lambda c: solve(c, camera, side, NUMERICAL, no_mirror), corners),
         ),
         (
             "numerical single, thesis settings",
-            _per_call_us(lambda c: solve(c, camera, side, "numerical", seed_single), corners),
+            _per_call_us(lambda c: solve(c, camera, side, NUMERICAL, seed_single), corners),
         ),
         (
             "numerical single, defaults, 0.5 px noise",
-            _per_call_us(lambda c: solve(c, camera, side, "numerical", default), noisy),
+            _per_call_us(lambda c: solve(c, camera, side, NUMERICAL, default), noisy),
         ),
         (
             "numerical single, no mirror search, 0.5 px noise",
-            _per_call_us(lambda c: solve(c, camera, side, "numerical", no_mirror), noisy),
+            _per_call_us(lambda c: solve(c, camera, side, NUMERICAL, no_mirror), noisy),
         ),
         (
             "ippe single (both candidates, LM refined)",
-            _per_call_us(lambda c: solve(c, camera, side, "ippe"), corners),
+            _per_call_us(lambda c: solve(c, camera, side, IPPE), corners),
         ),
         (
             "ippe single (both candidates, VVS refined)",
-            _per_call_us(lambda c: solve(c, camera, side, "ippe", IppeSettings(refine="vvs")), corners),
+            _per_call_us(lambda c: solve(c, camera, side, IPPE, IppeSettings(refine="vvs")), corners),
         ),
         (
             "ippe single (both candidates, not refined)",
-            _per_call_us(lambda c: solve(c, camera, side, "ippe", IppeSettings(refine="none")), corners),
+            _per_call_us(lambda c: solve(c, camera, side, IPPE, IppeSettings(refine="none")), corners),
         ),
     ]
     reps = -(-args.batch // len(corners))
@@ -152,7 +153,7 @@ def run(args: argparse.Namespace) -> int:
                 f"{label:<48}{data_label:<10}{b.converged.mean():>10.4f}{b.iterations.mean():>7.2f}{ok.mean():>8.4f}"
             )
     for data_label, data in (("exact", corners), ("0.5 px", noisy)):
-        b = solve_batch(data, camera, side, method="ippe")
+        b = solve_batch(data, camera, side, method=IPPE)
         ok = b.converged & criteria.judge(b.position_mm, b.angles_deg, truth_pos, truth_ang)[0]
         label = "ippe (LM refined)"
         print(f"{label:<48}{data_label:<10}{b.converged.mean():>10.4f}{0.0:>7.2f}{ok.mean():>8.4f}")

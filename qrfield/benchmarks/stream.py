@@ -44,6 +44,9 @@ from typing import Any
 
 import numpy as np
 
+from qrfield.geometry import POSE_NAMES
+from qrfield.methods import METHODS
+
 HELP = (
     "the live stream on drawn video sequences: flips resolved by history, the filter, never "
     "confidently wrong; still cards' shared error and the session mean's uncertainty"
@@ -58,7 +61,7 @@ STILL_TUNING_SEEDS = (101, 102)
 ANGLE_DEG, POSITION_MM, WRONG_SIGMA = 2.0, 5.0, 4.0
 #: Filter time constants of the benchmark, s.
 FILTER_S = (0.2, 0.5)
-COMPONENTS = ("x", "y", "z", "alpha", "beta", "gamma")
+COMPONENTS = POSE_NAMES
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -240,7 +243,6 @@ def make_sequence(name: str, seed: int, count: int) -> Sequence:
 
 def solve_sequence(sequence: Sequence) -> list[Any]:
     """Each frame through the default pipeline (both methods) with the stream stage off."""
-    from qrfield.methods import METHODS
     from qrfield.pipeline import Pipeline
     from qrfield.sources.base import Frame
     from qrfield.stream import StreamSettings
@@ -428,7 +430,7 @@ def _sequences(args: argparse.Namespace) -> None:
         "unflagged; jitter: frame-to-frame std of the angles, worst; lag: frames behind the truth"
     )
     all_modes = modes()
-    totals = {(m, label): Score() for m in ("numerical", "ippe") for label, _ in all_modes}
+    totals = {(m, label): Score() for m in METHODS for label, _ in all_modes}
     for name in names:
         started = time.perf_counter()
         for seed in seeds:
@@ -436,7 +438,7 @@ def _sequences(args: argparse.Namespace) -> None:
             solved = solve_sequence(sequence)
             runs = [(label, replay(solved, settings, sequence.side_mm)) for label, settings in all_modes]
             print(f"\n   {name}, seed {seed}: {corner_calibration(sequence, solved)}")
-            for method in ("numerical", "ippe"):
+            for method in METHODS:
                 print(
                     f"\n   {name}, seed {seed}, {method} (modules {sequence.modules}, "
                     f"{sequence.module_px:.2f} px facing the camera)"
@@ -457,7 +459,7 @@ def _sequences(args: argparse.Namespace) -> None:
         print(f"   ({time.perf_counter() - started:.0f} s)")
     print("\n   all sequences and seeds above")
     print(_HEADER.rstrip().removesuffix("z").rstrip())
-    for method in ("numerical", "ippe"):
+    for method in METHODS:
         for label, _ in all_modes:
             print(_row(f"{method[:3]} {label}", totals[(method, label)], "").rstrip().replace("    nan", ""))
 
@@ -471,7 +473,6 @@ def still_cards(seed: int, views: int, frames: int) -> list[tuple[list[Any], Any
     results with continuity on, the truth)."""
     import cv2
 
-    from qrfield.methods import METHODS
     from qrfield.pipeline import Pipeline
     from qrfield.sampling import random_visible_poses
     from qrfield.sources.base import Frame
@@ -526,7 +527,7 @@ def _still(args: argparse.Namespace) -> None:
     cards = [card for seed in seeds for card in still_cards(seed, args.still_views, args.still_frames)]
     elapsed = time.perf_counter() - started
     print(f"   made and solved in {elapsed:.0f} s; FRAME_SHARED_SHARE = {FRAME_SHARED_SHARE}")
-    for method in ("numerical", "ippe"):
+    for method in METHODS:
         shared, within, used = [], [], 0
         for results, truth in cards:
             errors, sigmas = [], []

@@ -27,9 +27,8 @@ from typing import Any
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from qrfield.arguments import count
+    from qrfield.commands.session import add_frames_argument
     from qrfield.runconfig import add_run_arguments
-    from qrfield.sessions.criteria import MAX_FRAMES_PER_ROW
     from qrfield.sessions.guide import GuideSettings
     from qrfield.sessions.stillness import StillnessSettings
     from qrfield.settings import add_arguments as add_setting_arguments
@@ -46,13 +45,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="FILE",
         help="the combinations file the plan's names come from (default: the study's)",
     )
-    parser.add_argument(
-        "--frames",
-        type=count("--frames", 1, MAX_FRAMES_PER_ROW),
-        default=None,
-        metavar="N",
-        help="frames averaged (default: the session's)",
-    )
+    add_frames_argument(parser)
     parser.add_argument("--retry-skipped", action="store_true", help="offer the targets skipped before again")
     group = parser.add_argument_group("stillness (section 'stillness' of app.json)")
     add_setting_arguments(group, StillnessSettings)

@@ -16,6 +16,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from qrfield.methods import NUMERICAL
+
 HELP = "hand-eye calibration: the camera-to-tool (or camera-to-base) transform from robot poses and images"
 DESCRIPTION = (
     "Solve the hand-eye calibration from PAIRS.csv (columns x,y,z,qw,qx,qy,qz,image: the robot's tool "
@@ -49,7 +51,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--method",
         choices=METHODS,
-        default="numerical",
+        default=NUMERICAL,
         help="the pose solver for each image (default numerical)",
     )
     parser.add_argument(

@@ -8,6 +8,7 @@ import sys
 
 from qrfield.arguments import add_side_argument, number, refuse_existing, seed, text
 from qrfield.camera import DEFAULT_CAMERA, add_camera_arguments
+from qrfield.geometry import VERTEX_NAMES
 
 HELP = "render a QR card at a known pose through a camera model (test images with exact corners)"
 
@@ -99,6 +100,6 @@ def run(args: argparse.Namespace) -> int:
         print()
     else:
         print(f"wrote {args.out} ({camera.width}x{camera.height}, camera {camera.name})")
-        for i, (u, v) in enumerate(corners, start=1):
-            print(f"V{i}: u={u:.3f} v={v:.3f} px")
+        for name, (u, v) in zip(VERTEX_NAMES, corners, strict=True):
+            print(f"{name}: u={u:.3f} v={v:.3f} px")
     return 0

@@ -24,6 +24,8 @@ import sys
 import time
 from typing import Any
 
+from qrfield.geometry import ANGLE_NAMES, POSITION_NAMES
+
 HELP = "print decoded pose frames arriving on a serial port and count bad checksums and garbage"
 
 
@@ -60,7 +62,7 @@ def _triplet(values: tuple[float | None, ...] | None, names: tuple[str, str, str
     return " ".join(f"{n}={t}" for n, t in zip(names, texts, strict=True))
 
 
-XYZ, ANGLES = ("x", "y", "z"), ("alpha", "beta", "gamma")
+XYZ, ANGLES = POSITION_NAMES, ANGLE_NAMES
 
 
 def arrival_age_ms(item: Any, baud: float) -> float | None:

@@ -22,6 +22,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from qrfield.geometry import POSE_NAMES
+
 HELP = "make experiment sessions and log rows without the app (new, log, run-plan, undo, list, show, export)"
 DESCRIPTION = (
     "Experiment sessions on disk, as the app's Session tab makes them: 'new' creates one, 'log' "
@@ -139,10 +141,24 @@ def _run_new(args: argparse.Namespace) -> int:
 
 
 # ------------------------------------------------------------------------------------ log
-def _add_log(parser: argparse.ArgumentParser) -> None:
-    from qrfield.arguments import count, text
-    from qrfield.runconfig import add_run_arguments
+def add_frames_argument(parser: argparse.ArgumentParser) -> None:
+    """``--frames N``: the frames averaged per row, 1..MAX_FRAMES_PER_ROW (default: the session's);
+    ``session log`` and ``session run-plan`` share it."""
+    from qrfield.arguments import count
     from qrfield.sessions.criteria import MAX_FRAMES_PER_ROW
+
+    parser.add_argument(
+        "--frames",
+        type=count("--frames", 1, MAX_FRAMES_PER_ROW),
+        default=None,
+        metavar="N",
+        help="frames averaged (default: the session's)",
+    )
+
+
+def _add_log(parser: argparse.ArgumentParser) -> None:
+    from qrfield.arguments import text
+    from qrfield.runconfig import add_run_arguments
 
     parser.add_argument("folder", metavar="FOLDER", help="the session folder")
     parser.add_argument(
@@ -163,13 +179,7 @@ def _add_log(parser: argparse.ArgumentParser) -> None:
         help="log a row whose --combo the signs of its angles contradict (refused otherwise, as the "
         "app asks first)",
     )
-    parser.add_argument(
-        "--frames",
-        type=count("--frames", 1, MAX_FRAMES_PER_ROW),
-        default=None,
-        metavar="N",
-        help="frames averaged (default: the session's)",
-    )
+    add_frames_argument(parser)
     # Camera, QR side and solver are the session's own: only the source and detection are chosen here.
     add_run_arguments(
         parser, only=("run", "detector", "virtual", "picamera"), run_skip=("camera", "side_mm", "method")
@@ -198,7 +208,7 @@ def _run_log(args: argparse.Namespace) -> int:
     from qrfield.engine import FrameLoop, SayEvents
     from qrfield.handeye import InFrame, PoseFrame
     from qrfield.runconfig import effective_settings
-    from qrfield.sessions import Session, known_combinations, validate_field
+    from qrfield.sessions import Session, SessionSettings, known_combinations, validate_field
     from qrfield.sessions.recorder import RowRecorder, session_run_config
     from qrfield.sources import may_be_live_camera
 
@@ -223,6 +233,9 @@ def _run_log(args: argparse.Namespace) -> int:
         effective = effective_settings(args, resolve_camera=False)  # the session's camera is used
         for problem in effective.store.problems:
             say(f"settings: {problem}")
+        # The app's rule for a row whose frames pause (a loaded machine, a slow camera): it waits
+        # up to the frame timeout of app.json's 'session' section, not the loop's 1 s "source down".
+        args.frame_timeout_s = effective.store.group("session", SessionSettings).frame_timeout_s
         config = session_run_config(effective.run_config(camera=session.info.camera), session.info)
         recorder = RowRecorder(session.info)  # the one row recorder, a sink fed every frame
         pose_frame = PoseFrame.from_saved(session.info.pose_frame, session.info.handeye, session.info.name)
@@ -261,10 +274,16 @@ def _log_one(session: Any, recorder: Any, truth: Any, args: Any, follow: bool, e
     frames = args.frames or session.info.frames_per_row
     say(f"measuring row {session.next_row}: {frames} frames, solver {session.info.solver}")
     measurement = recorder.measure(
-        truth, frames, note=args.note, follow_bench=follow, until=ended, combo=args.combo
+        truth,
+        frames,
+        note=args.note,
+        follow_bench=follow,
+        until=ended,
+        combo=args.combo,
+        frame_timeout_s=args.frame_timeout_s,
     )
     if measurement is None:
-        say("stopped before the frames were in: nothing logged")
+        say(f"nothing logged: {recorder.last_problem}")
         return 1
     return _log(session, measurement, args.force_combo)
 
@@ -327,8 +346,10 @@ def _ask(prompt: str) -> str | None:
 
 def _log_interactive(session: Any, recorder: Any, args: Any, combinations: Any, ended: Any) -> int:
     """Ask each field (the app's form's validation), measure, log; again until 'q' or end of input."""
+    from qrfield.files import MAX_FIELD_CHARS
     from qrfield.sessions import FIELDS, GroundTruth, validate_field
     from qrfield.sessions.groundtruth import UNITS
+    from qrfield.texts import TextError, check_text
 
     last: dict[str, Any] = {}
     # The defaults offered are the last row still in force: a withdrawn row's values were wrong.
@@ -354,9 +375,13 @@ def _log_interactive(session: Any, recorder: Any, args: Any, combinations: Any, 
                 if text is None or text.strip().lower() == "q":
                     return code
                 text = text.strip() or str(default)
-                if name == "note":
-                    values[name] = text
-                    break
+                if name == "note":  # checked here, as --note is: not after the row is measured
+                    try:
+                        values[name] = check_text(text, "note", max_chars=MAX_FIELD_CHARS)
+                        break
+                    except TextError as exc:
+                        print(f"  {exc}; type it again", flush=True)
+                        continue
                 value, message = validate_field(name, text, combinations)
                 if not message:
                     values[name] = value
@@ -371,9 +396,11 @@ def _log_interactive(session: Any, recorder: Any, args: Any, combinations: Any, 
             continue
         frames = args.frames or session.info.frames_per_row
         print(f"measuring row {session.next_row}: {frames} frames…", flush=True)
-        measurement = recorder.measure(truth, frames, note=values["note"], until=ended)
+        measurement = recorder.measure(
+            truth, frames, note=values["note"], until=ended, frame_timeout_s=args.frame_timeout_s
+        )
         if measurement is None:
-            say("the source stopped before the frames were in: nothing logged")
+            say(f"nothing logged: {recorder.last_problem}")
             return 1
         code = _log(session, measurement, args.force_combo) or code
         if _ask("Enter for the next row, q to quit: ") in (None, "q", "Q"):
@@ -489,8 +516,8 @@ def _run_show(args: argparse.Namespace) -> int:
     print(head)
     for row in content.rows:
         v = row.values
-        truth = " ".join(v.get(f"gt_{k}", "") for k in ("x", "y", "z", "alpha", "beta", "gamma"))
-        measured = " ".join(v.get(k, "") or "-" for k in ("x", "y", "z", "alpha", "beta", "gamma"))
+        truth = " ".join(v.get(f"gt_{k}", "") for k in POSE_NAMES)
+        measured = " ".join(v.get(k, "") or "-" for k in POSE_NAMES)
         verdict = "withdrawn" if row.withdrawn else ("pass" if row.passed else "fail")
         conv = f"{v.get('n_converged', '')}/{v.get('n_frames', '')}"
         print(f"{row.number:>4} {row.combo:<18} {truth:<44} {measured:<44} {conv:<5} {verdict}")

@@ -10,6 +10,7 @@ import sys
 
 from qrfield.arguments import add_side_argument, number, parse_numbers
 from qrfield.camera import add_camera_arguments
+from qrfield.geometry import VERTEX_NAMES
 from qrfield.methods import BOTH, METHOD_CHOICES, methods_from_choice
 
 HELP = "compute a QR code's position (mm) and orientation (degrees) from images or its four corner pixels"
@@ -91,8 +92,8 @@ def parse_corners(text: str) -> list[list[float]]:
             f"separated by commas; got {len(pairs)} pairs: {text!r}"
         )
     return [
-        parse_numbers(pair, "--corners", names=(f"V{i} u", f"V{i} v"))
-        for i, pair in enumerate(pairs, start=1)
+        parse_numbers(pair, "--corners", names=(f"{name} u", f"{name} v"))
+        for name, pair in zip(VERTEX_NAMES, pairs, strict=True)
     ]
 
 

@@ -13,11 +13,11 @@ from __future__ import annotations
 import functools
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
 from qrfield.detect.bilinear import sample_bilinear
 from qrfield.detect.lens import Lens, module_points_px
+from qrfield.homography import square_to_quad
 
 #: Smallest contrast (grey levels between the dark and light pattern modules) a code may have.
 MIN_CONTRAST = 12.0
@@ -77,9 +77,10 @@ def fixed_modules(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def module_homography(corners_px: np.ndarray, n: int) -> np.ndarray:
-    """(3, 3) homography from module coordinates (0..n) to pixels for corners V1..V4."""
-    src = np.array([[0, 0], [n, 0], [n, n], [0, n]], dtype=np.float32)
-    return cv2.getPerspectiveTransform(src, np.asarray(corners_px, dtype=np.float32))
+    """(3, 3) homography from module coordinates (0..n) to pixels for corners V1..V4 (4, 2)
+    (qrfield.homography.square_to_quad; NaN entries for three corners in a line)."""
+    c = np.asarray(corners_px, dtype=np.float64)
+    return square_to_quad(c[:, 0], c[:, 1], float(n))
 
 
 def to_pixels(h: np.ndarray, xy: np.ndarray) -> np.ndarray:

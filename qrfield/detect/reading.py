@@ -25,6 +25,7 @@ import numpy as np
 
 from qrfield.detect.lens import Lens, undistort_pixels
 from qrfield.detect.symbol import QUIET_RINGS, fixed_cells
+from qrfield.homography import Homography
 
 #: Cells of the window around each pixel's cell, each way (a 5 x 5 window).
 WINDOW = 2
@@ -48,12 +49,6 @@ def _gauss_cdf(x: np.ndarray) -> np.ndarray:
     t = 1.0 / (1.0 + 0.3275911 * z)
     poly = ((((1.061405429 * t - 1.453152027) * t + 1.421413741) * t - 0.284496736) * t + 0.254829592) * t
     return 0.5 + np.copysign(0.5 - 0.5 * poly * np.exp(-z * z), x)
-
-
-def _homography(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
-    import cv2
-
-    return cv2.getPerspectiveTransform(src.astype(np.float32), dst.astype(np.float32)).astype(np.float64)
 
 
 def read_symbol(
@@ -84,7 +79,10 @@ def read_symbol(
     shift = np.asarray(offset, dtype=np.float64)
     ideal_corners = undistort_pixels(lens.camera, corners + shift) if lens.distorted else corners + shift
     square = np.array([[0.0, 0.0], [n, 0.0], [n, n], [0.0, n]])
-    to_modules = _homography(ideal_corners, square)
+    try:
+        to_modules = Homography.from_points(ideal_corners, square).matrix
+    except ValueError:  # three corners in a line
+        return None, None
     ideal, scale = lens.ideal(xs + int(offset[0]), ys + int(offset[1]))
     uvw = np.column_stack([ideal, np.ones(len(ideal))]) @ to_modules.T
     uv = uvw[:, :2] / uvw[:, 2:3]

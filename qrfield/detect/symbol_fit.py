@@ -45,6 +45,7 @@ import numpy as np
 
 from qrfield.detect.lens import Lens
 from qrfield.detect.symbol import QUIET_RINGS
+from qrfield.homography import Homography
 from qrfield.linalg import small_solve
 
 #: Module coordinates of V1..V4.
@@ -125,18 +126,6 @@ class SymbolFit:
 
 
 # ---------------------------------------------------------------------------------------- helpers
-def _homography(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
-    """(3, 3) homography taking 4 points ``src`` to ``dst`` (float64, H[2, 2] = 1)."""
-    a = np.zeros((8, 8))
-    b = np.zeros(8)
-    for i, ((x, y), (u, v)) in enumerate(zip(src, dst, strict=True)):
-        a[2 * i] = [x, y, 1, 0, 0, 0, -u * x, -u * y]
-        a[2 * i + 1] = [0, 0, 0, x, y, 1, -v * x, -v * y]
-        b[2 * i], b[2 * i + 1] = u, v
-    h = np.linalg.solve(a, b)
-    return np.append(h, 1.0).reshape(3, 3)
-
-
 def _apply(h: np.ndarray, xy: np.ndarray) -> np.ndarray:
     """Homography ``h`` applied to points (k, 2), float64."""
     return cv2.perspectiveTransform(np.asarray(xy, dtype=np.float64).reshape(1, -1, 2), h).reshape(-1, 2)
@@ -677,8 +666,8 @@ def fit_symbol(
         return fail("the code is too small to fit")
     norm = (origin, scale)
     try:
-        g0 = _homography((ideal_start - origin) / scale, _UNIT_SQUARE * n)
-    except np.linalg.LinAlgError:
+        g0 = Homography.from_points((ideal_start - origin) / scale, _UNIT_SQUARE * n).matrix
+    except ValueError:
         return fail("degenerate corners")
     module_px = scale * 2.0 / (n * math.sqrt(2.0))
     geo = _params_from_g(g0)
@@ -809,8 +798,8 @@ def polish(
     else:
         ideal = start + shift
     try:
-        geo = _params_from_g(_homography((ideal - origin) / scale, _UNIT_SQUARE * n))
-    except np.linalg.LinAlgError:
+        geo = _params_from_g(Homography.from_points((ideal - origin) / scale, _UNIT_SQUARE * n).matrix)
+    except ValueError:
         return SymbolFit(False, start.copy(), None, "degenerate corners")
     light = np.asarray(state.lighting, dtype=np.float64)
     with np.errstate(all="ignore"):

@@ -46,6 +46,7 @@ from qrfield.detect.symbol_fit import (
     _windows,
     corner_covariance,
 )
+from qrfield.homography import square_to_quad_floats, usable_floats
 from qrfield.linalg import small_inverse, small_solve
 
 #: Template points (module coordinates near the known edges); see tracking.TRACK_ITERATIONS.
@@ -231,36 +232,6 @@ class _Template:
         return bool(change < TEMPLATE_TOLERANCE and abs(edge_px / self.edge_px - 1.0) < TEMPLATE_TOLERANCE)
 
 
-def _square_homography(n: float, quad: list[list[float]]) -> list[float] | None:
-    """The 9 entries (row by row, h22 = 1) of the homography taking the corners (0, 0), (n, 0),
-    (n, n), (0, n) of the symbol's module square to the points ``quad`` (V1..V4, 4 x [x, y]), or
-    None when they are collinear: Heckbert's closed form for the unit square (Fundamentals of
-    Texture Mapping and Image Warping, 1989, sec. 2.2.3), its columns divided by n; in Python
-    floats (cv2.getPerspectiveTransform solves an 8 x 8 system for the same matrix)."""
-    (x0, y0), (x1, y1), (x2, y2), (x3, y3) = quad
-    sx, sy = x0 - x1 + x2 - x3, y0 - y1 + y2 - y3
-    if sx == 0.0 and sy == 0.0:
-        g = hh = 0.0
-    else:
-        dx1, dx2, dy1, dy2 = x1 - x2, x3 - x2, y1 - y2, y3 - y2
-        den = dx1 * dy2 - dx2 * dy1
-        if den == 0.0:
-            return None
-        g, hh = (sx * dy2 - dx2 * sy) / den, (dx1 * sy - sx * dy1) / den
-    q = 1.0 / n
-    return [
-        (x1 - x0 + g * x1) * q,
-        (x3 - x0 + hh * x3) * q,
-        x0,
-        (y1 - y0 + g * y1) * q,
-        (y3 - y0 + hh * y3) * q,
-        y0,
-        g * q,
-        hh * q,
-        1.0,
-    ]
-
-
 def _maps_inside(h: list[float], box: tuple[float, float, float, float], width: float, height: float) -> bool:
     """The homography ``h`` (9 floats) maps the module box (u0, v0, u1, v1) into [0, width] x
     [0, height] with w > 0 at its four corners (so over all of it: w is linear in u, v)."""
@@ -274,13 +245,6 @@ def _maps_inside(h: list[float], box: tuple[float, float, float, float], width: 
         if not (0.0 <= x <= width and 0.0 <= y <= height):
             return False
     return True
-
-
-def _usable_homography(h: list[float]) -> bool:
-    """A finite homography (9 floats, row by row) with |det| >= 1e-12."""
-    a, b, c, d, e, f, g, hh, i = h
-    det = a * (e * i - f * hh) - b * (d * i - f * g) + c * (d * hh - e * g)
-    return math.isfinite(a + b + c + d + e + f + g + hh + i) and abs(det) >= 1e-12
 
 
 def _compose_inverse(h: list[float], delta: np.ndarray) -> list[float] | None:
@@ -420,8 +384,8 @@ class WarmFit:
         else:
             quad = [[x + sx, y + sy] for x, y in start.tolist()]
         n = self.n
-        h = _square_homography(float(n), quad)  # module -> ideal camera pixels
-        if h is None or not _usable_homography(h):
+        h = square_to_quad_floats(float(n), quad)  # module -> ideal camera pixels
+        if h is None or not usable_floats(h):
             return fail("degenerate corners")
         edge = state.edge_px
         template = self._template

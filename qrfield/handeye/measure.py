@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from qrfield.camera import CameraModel
+from qrfield.methods import NUMERICAL
 
 #: The kinds of :func:`pair_problem_kind` ("" when the pose makes a pair).
 NO_POSE, NOT_CONVERGED, AMBIGUOUS = "no pose", "not converged", "ambiguous"
@@ -49,7 +50,7 @@ def pose_for_pair(
     side_mm: float,
     detector: Any,
     *,
-    method: str = "numerical",
+    method: str = NUMERICAL,
     settings: Any = None,
     select_text: str = "",
 ) -> tuple[Any, str]:

@@ -45,6 +45,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from qrfield.geometry import ANGLE_NAMES, POSITION_NAMES
 from qrfield.status import QRF_POSE_STATUSES, QRF_STATUSES, QRM_STATUSES, WireStatus
 
 #: The protocol's name in HELLO's answer.
@@ -84,8 +85,6 @@ _FIXED = {
     2: re.compile(r"-?(?:0|[1-9][0-9]{0,2})\.[0-9]{2}"),
 }
 _HEX4 = re.compile(rb"[0-9A-Fa-f]{4}")
-_POSITION_NAMES = ("x", "y", "z")
-_ANGLE_NAMES = ("alpha", "beta", "gamma")
 
 Triplet = tuple[float, float, float]
 Sigmas = tuple[float | None, float | None, float | None]
@@ -189,7 +188,7 @@ def wire_pose(
         low, high = (-90.0, 90.0) if k == 1 else (-180.0, 180.0)
         if not (low <= a <= high) or (k != 1 and a == -180.0):
             span = "[-90, 90]" if k == 1 else "(-180, 180]"
-            raise PoseValueError(f"{_ANGLE_NAMES[k]} must lie in {span} degrees, got {v}")
+            raise PoseValueError(f"{ANGLE_NAMES[k]} must lie in {span} degrees, got {v}")
         texts.append(text)
     for sigmas, decimals, limit in ((spos, 1, MAX_STD_MM), (sang, 2, MAX_STD_DEG)):
         texts += ["" if s is None else _fixed(min(s, limit), decimals) for s in sigmas]
@@ -416,8 +415,8 @@ def _parse_uint(text: str, name: str, modulus: int) -> int:
 
 
 def _parse_pose(texts: Sequence[str]) -> tuple[Triplet, Triplet, Sigmas, Sigmas]:
-    position = tuple(_number(t, 1, n) for t, n in zip(texts[0:3], _POSITION_NAMES, strict=True))
-    angles = tuple(_number(t, 2, n) for t, n in zip(texts[3:6], _ANGLE_NAMES, strict=True))
+    position = tuple(_number(t, 1, n) for t, n in zip(texts[0:3], POSITION_NAMES, strict=True))
+    angles = tuple(_number(t, 2, n) for t, n in zip(texts[3:6], ANGLE_NAMES, strict=True))
     alpha, beta, gamma = angles
     if not (-180.0 < alpha <= 180.0 and -90.0 <= beta <= 90.0 and -180.0 < gamma <= 180.0):
         raise ValueError(f"angles {angles} out of range")

@@ -49,11 +49,12 @@ from qrfield.handeye.setups import HandEyeError
 from qrfield.handeye.store import HandEyeCalibration, save_keeping_previous, simulated_path
 from qrfield.limits import TOOL_POSITION_MM
 from qrfield.serial import codec
+from qrfield.status import WireStatus
 
 #: A TOOL with no usable frame within this many seconds is answered with the reason.
 TOOL_TIMEOUT_S = 3.0
 #: The last field of a TOOL or HANDEYE answer resting on frames that are not a live camera's.
-SIM_MARK = "SIM"
+SIM_MARK = WireStatus.SIM
 #: The names of TOOL's seven arguments, in order.
 TOOL_FIELDS = ("x", "y", "z", "qw", "qx", "qy", "qz")
 # A controller's decimal number: an optional sign, digits, optionally a point and digits.

@@ -29,6 +29,7 @@ import numpy as np
 
 from qrfield.handeye import HandEyeCalibration, SimulatedRobot
 from qrfield.handeye.rigid import difference, quaternion_from_rotation
+from qrfield.methods import NUMERICAL
 from qrfield.serial import codec
 
 #: The demo's defaults: 15 tool poses, a 50 mm code, 30 frames a second, 115200 baud.
@@ -119,6 +120,7 @@ def run_robot_demo(
     from qrfield.serial.link import CONNECTED, SerialLinkSettings
     from qrfield.serial.relay import UartRelay
     from qrfield.sources import VirtualBenchSettings, VirtualBenchSource
+    from qrfield.sources.kinds import VIRTUAL
 
     camera = camera if camera is not None else resolve_camera(DEFAULT_CAMERA)
     robot = robot if robot is not None else SimulatedRobot.example(setup)
@@ -130,7 +132,7 @@ def run_robot_demo(
     folder = Path(folder)
     out = RobotDemoResult(robot)
     bench = VirtualBenchSource(camera, side_mm, VirtualBenchSettings(fps=fps))
-    config = RunConfig(source="virtual", camera=camera, side_mm=side_mm, methods=("numerical",))
+    config = RunConfig(source=VIRTUAL, camera=camera, side_mm=side_mm, methods=(NUMERICAL,))
     relay = UartRelay(baud / 10.0)
     controller = _Controller(relay)
     relay.on_line = controller.on_line
@@ -139,7 +141,7 @@ def run_robot_demo(
     info = {
         "camera": camera.name,
         "side_mm": float(side_mm),
-        "pose_method": "numerical",
+        "pose_method": NUMERICAL,
         "demo": "serial-demo",
     }
     link.add_handeye(HandEyeCommands(setup, folder / "handeye.json", info=info))
@@ -164,15 +166,7 @@ def run_robot_demo(
         if not link.wait_for_state(CONNECTED, 10.0):
             raise RuntimeError(f"the demo's serial link did not connect: {link.status().last_error}")
         thread.start()
-        exchange("HELLO")
-        for tool in tools:
-            robot.move(tool, bench)  # the robot program moves the arm and waits until it stands still
-            answer = exchange("TOOL", *tool_arguments(tool))
-            if answer.ok:
-                out.pairs = int(answer.fields[1])
-            else:
-                out.refused += 1
-        out.handeye = exchange("HANDEYE")
+        _robot_program(robot, tools, bench, exchange, out)
     finally:
         loop.stop()
         if thread.ident is not None:
@@ -181,8 +175,33 @@ def run_robot_demo(
         relay.close()
     done = link.handeye.status().done
     if out.handeye is not None and out.handeye.ok and done is not None:
-        out.calibration = HandEyeCalibration.load(done.path)
-        err = difference(out.calibration.transform, robot.transform)
-        out.error_mm = float(np.linalg.norm(err[:3]))
-        out.error_deg = float(math.degrees(np.linalg.norm(err[3:])))
+        _grade(out, HandEyeCalibration.load(done.path), robot)
     return out
+
+
+def _robot_program(
+    robot: SimulatedRobot,
+    tools: Any,
+    bench: Any,
+    exchange: Callable[..., codec.QraAnswer],
+    out: RobotDemoResult,
+) -> None:
+    """The robot program's side of the demo: HELLO, then per tool pose move the arm, wait until it
+    stands still and send TOOL (pairs counted, refusals too), then HANDEYE; answers go to ``out``."""
+    exchange("HELLO")
+    for tool in tools:
+        robot.move(tool, bench)  # the robot program moves the arm and waits until it stands still
+        answer = exchange("TOOL", *tool_arguments(tool))
+        if answer.ok:
+            out.pairs = int(answer.fields[1])
+        else:
+            out.refused += 1
+    out.handeye = exchange("HANDEYE")
+
+
+def _grade(out: RobotDemoResult, calibration: HandEyeCalibration, robot: SimulatedRobot) -> None:
+    """The saved calibration against the cell's true transform: its error in mm and degrees."""
+    out.calibration = calibration
+    err = difference(calibration.transform, robot.transform)
+    out.error_mm = float(np.linalg.norm(err[:3]))
+    out.error_deg = float(math.degrees(np.linalg.norm(err[3:])))

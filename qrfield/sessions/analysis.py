@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from qrfield.geometry import POSE_NAMES
 from qrfield.methods import METHODS
 from qrfield.sessions.averaging import judge_row
 from qrfield.sessions.groundtruth import GroundTruth
@@ -70,7 +71,7 @@ def row_tilt_deg(row: LoggedRow) -> float:
 
 
 def _has_pose(row: LoggedRow) -> bool:
-    return all(math.isfinite(row.number_or_nan(c)) for c in ("x", "y", "z", "alpha", "beta", "gamma"))
+    return all(math.isfinite(row.number_or_nan(c)) for c in POSE_NAMES)
 
 
 def summarize(rows: Sequence[LoggedRow]) -> dict[str, Any]:

@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from qrfield.geometry import angle_difference, wrap_degrees
+from qrfield.geometry import ANGLE_NAMES, angle_difference, wrap_degrees
 from qrfield.sessions.criteria import AcceptanceCriteria, pose_errors
 from qrfield.sessions.groundtruth import GroundTruth
 from qrfield.solvers.uncertainty import FRAME_SHARED_SHARE
@@ -267,7 +267,7 @@ def judge_row(
     reasons = []
     if not err_pos < criteria.max_position_error_mm:
         reasons.append(f"position error {err_pos:.2f} mm >= {criteria.max_position_error_mm:g} mm")
-    for name, err in zip(("alpha", "beta", "gamma"), err_ang, strict=True):
+    for name, err in zip(ANGLE_NAMES, err_ang, strict=True):
         if abs(err) > criteria.max_angle_error_deg:
             reasons.append(f"{name} error {err:+.2f} deg beyond {criteria.max_angle_error_deg:g} deg")
     return Judgement(err_pos, err_ang, passed, "; ".join(reasons))

@@ -27,11 +27,12 @@ from dataclasses import dataclass
 from typing import Any
 
 from qrfield.files import describe_value
+from qrfield.geometry import ANGLE_NAMES, POSITION_NAMES
 from qrfield.limits import LimitError, as_number
 
 #: Field names in form order, with their unit.
-POSITION_FIELDS = ("x", "y", "z")
-ANGLE_FIELDS = ("alpha", "beta", "gamma")
+POSITION_FIELDS = POSITION_NAMES
+ANGLE_FIELDS = ANGLE_NAMES
 FIELDS = (*POSITION_FIELDS, *ANGLE_FIELDS, "combo")
 UNITS = {"x": "mm", "y": "mm", "z": "mm", "alpha": "deg", "beta": "deg", "gamma": "deg", "combo": ""}
 

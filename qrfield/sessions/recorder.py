@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from qrfield.mailbox import Handoff
+from qrfield.methods import NUMERICAL
 from qrfield.runconfig import RunConfig
 from qrfield.seams import BaseSink
 from qrfield.sessions.averaging import FrameCollector, Measurement, circular_mean_deg
@@ -144,6 +145,7 @@ class RowRecorder(BaseSink):
         self._t_armed = 0.0
         self._last_frame_at = 0.0  # monotonic time of the last frame seen (any frame)
         self.frames_seen = 0
+        self.last_problem = ""  # why the last measure() gave no row ("" when it gave one)
 
     # ---------------------------------------------------------------- the owner's thread
     def arm(
@@ -174,7 +176,7 @@ class RowRecorder(BaseSink):
         request = RowRequest(
             truth=truth,
             frames=frames,
-            method=method or (info.solver if info is not None else "numerical"),
+            method=method or (info.solver if info is not None else NUMERICAL),
             criteria=criteria or (info.criteria if info is not None else AcceptanceCriteria()),
             note=note,
             follow_bench=follow_bench,
@@ -244,23 +246,37 @@ class RowRecorder(BaseSink):
         follow_bench: bool = False,
         until: Callable[[], bool] | None = None,
         combo: str = "",
+        frame_timeout_s: float | None = None,
     ) -> Measurement | None:
         """A terminal's row: collect the next ``frames`` frames (default: the session's frames per
         row), average and judge them. ``follow_bench``: the truth is the virtual bench's mean true
         pose (``truth`` may be None then; ``combo`` names the combination). ``until()`` True ends the
-        wait early (the loop ended, a signal): None then, and when the source went down.
-        ValueError when the truth was to follow the bench and the frames carry none."""
-        if not self.arm(truth, frames, note=note, follow_bench=follow_bench, combo=combo):
+        wait early (the loop ended, a signal): None then. ``frame_timeout_s`` (the app's
+        :class:`qrfield.sessions.criteria.SessionSettings` rule): the row waits through a gap in
+        the frames up to this long and is given up after it (None then); without it, the loop's
+        first "source down" (1 s without a frame) gives it up. Why a row gave None is in
+        :attr:`last_problem`. ValueError when the truth was to follow the bench and the frames
+        carry none."""
+        self.last_problem = ""
+        if not self.arm(
+            truth, frames, note=note, follow_bench=follow_bench, combo=combo, frame_timeout_s=frame_timeout_s
+        ):
             raise RuntimeError("a row is being collected already")
         try:
             while not self.wait(0.05):
                 if until is not None and until():
+                    self.last_problem = "the frame loop ended (the source stopped or failed)"
+                    return None
+                expired = self.expire() if frame_timeout_s is not None else None
+                if expired is not None:
+                    self.last_problem = expired.problem
                     return None
         finally:
             self.cancel()
         (row,) = self.take()
         if row.measurement is None and not row.stopped:
             raise ValueError(f"--truth virtual: {row.problem}")
+        self.last_problem = row.problem if row.measurement is None else ""
         return row.measurement
 
     # ---------------------------------------------------------------- the frame loop's thread

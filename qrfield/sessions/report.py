@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 import qrfield
+from qrfield.geometry import ANGLE_NAMES, POSE_NAMES, POSITION_NAMES
 from qrfield.sessions.analysis import row_tilt_deg, summarize
 from qrfield.sessions.store import LoggedRow, SessionInfo, read_session
 
@@ -110,9 +111,7 @@ def _td(text: str, numeric: bool = False, css: str = "") -> str:
 
 def _truth(rows: Sequence[LoggedRow]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(N, 3) positions mm, (N, 3) angles deg of the rows' ground truth, and (N,) which are complete."""
-    v = np.array(
-        [[r.number_or_nan(f"gt_{k}") for k in ("x", "y", "z", "alpha", "beta", "gamma")] for r in rows]
-    )
+    v = np.array([[r.number_or_nan(f"gt_{k}") for k in POSE_NAMES] for r in rows])
     v = v.reshape(-1, 6)
     return v[:, :3], v[:, 3:], np.all(np.isfinite(v), axis=1)
 
@@ -507,12 +506,12 @@ def _rows_section(
         target = progress.target_of_row(row.number) if progress is not None else None
         measured = [
             _td(f"{_esc(v.get(k) or '–')} ± {_esc(v.get(f'sigma_{k}') or '–')}", numeric=True)
-            for k in ("x", "y", "z", "alpha", "beta", "gamma")
+            for k in POSE_NAMES
         ]
         scatter = (
-            " ".join(v.get(f"std_{k}") or "–" for k in ("x", "y", "z"))
+            " ".join(v.get(f"std_{k}") or "–" for k in POSITION_NAMES)
             + " / "
-            + " ".join(v.get(f"std_{k}") or "–" for k in ("alpha", "beta", "gamma"))
+            + " ".join(v.get(f"std_{k}") or "–" for k in ANGLE_NAMES)
         )
         if predicted is None:
             sim = "–"
@@ -526,14 +525,12 @@ def _rows_section(
                 _td(str(row.number), numeric=True),
                 _td(str(target.number) if target is not None else "–", numeric=True),
                 _td(_esc(row.combo)),
-                _td(" ".join(_esc(v.get(f"gt_{k}", "")) for k in ("x", "y", "z")), numeric=True),
-                _td(" ".join(_esc(v.get(f"gt_{k}", "")) for k in ("alpha", "beta", "gamma")), numeric=True),
+                _td(" ".join(_esc(v.get(f"gt_{k}", "")) for k in POSITION_NAMES), numeric=True),
+                _td(" ".join(_esc(v.get(f"gt_{k}", "")) for k in ANGLE_NAMES), numeric=True),
                 *measured,
                 _td(_esc(scatter), numeric=True),
                 _td(_esc(v.get("err_pos") or "–"), numeric=True),
-                _td(
-                    " ".join(_esc(v.get(f"err_{k}") or "–") for k in ("alpha", "beta", "gamma")), numeric=True
-                ),
+                _td(" ".join(_esc(v.get(f"err_{k}") or "–") for k in ANGLE_NAMES), numeric=True),
                 _td(f"{_esc(v.get('n_converged', ''))}/{_esc(v.get('n_frames', ''))}", numeric=True),
                 _td("pass" if row.passed else "fail"),
                 _td(_esc(sim), numeric=True),

@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from qrfield.geometry import angle_difference
+from qrfield.geometry import POSE_NAMES, angle_difference
 from qrfield.sessions.averaging import circular_mean_deg
 from qrfield.settings import setting
 
@@ -40,7 +40,7 @@ from qrfield.settings import setting
 MIN_SIGMA_MM = 0.02
 MIN_SIGMA_DEG = 0.02
 #: The six values' names, in order (mm, mm, mm, deg, deg, deg).
-DOF = ("x", "y", "z", "alpha", "beta", "gamma")
+DOF = POSE_NAMES
 
 
 @dataclass(frozen=True)

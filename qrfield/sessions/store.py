@@ -40,7 +40,7 @@ import os
 import re
 import stat
 from array import array
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -53,9 +53,11 @@ from qrfield.files import (
     FileFormatError,
     check_field_sizes,
     csv_text_reader,
+    describe_error,
     make_folder,
     read_json,
 )
+from qrfield.geometry import ANGLE_NAMES
 from qrfield.handeye.setups import FRAMES
 from qrfield.limits import SIDE_MM, LimitError
 from qrfield.methods import METHODS
@@ -358,7 +360,7 @@ def measurement_values(measurement: Measurement, number: int, time_text: str) ->
         values[f"std_{axis}"] = _fmt(a.std_position_mm[k])
         values[f"sigma_{axis}"] = _fmt(a.sigma_position_mm[k])
         values[f"sem_{axis}"] = _fmt(a.sem_position_mm[k])
-    for k, angle in enumerate(("alpha", "beta", "gamma")):
+    for k, angle in enumerate(ANGLE_NAMES):
         values[angle] = _fmt(a.angles_deg[k])
         values[f"std_{angle}"] = _fmt(a.std_angles_deg[k])
         values[f"sigma_{angle}"] = _fmt(a.sigma_angles_deg[k])
@@ -655,23 +657,7 @@ def _scan_rows(source: _Source, size: int, where: str) -> RowsContent:
             more += 1
 
     lines = _lines(source, good_size, where)
-    first = next(lines, None)
-    if first is None:
-        raise SessionError(f"{where}: no header row")
-    offset, data = first
-    if data is None:
-        raise SessionError(f"{where}: the header row is longer than {MAX_LINE_BYTES} bytes")
-    head = _decode_line(data, offset, where)
-    head = head[1:] if head.startswith("\ufeff") else head  # a spreadsheet's "CSV UTF-8"
-    try:
-        header = next(csv_text_reader(head), [])  # an empty first line has no fields
-    except csv.Error as exc:
-        raise SessionError(f"{where}: the header row is not CSV ({exc})") from None
-    header = [name.strip() for name in header]
-    if tuple(header[: len(REQUIRED_COLUMNS)]) != REQUIRED_COLUMNS:
-        raise SessionError(
-            f"{where}: the header does not start with the required columns {','.join(REQUIRED_COLUMNS)}"
-        )
+    header = _read_header(lines, where)
     withdrawn: set[int] = set()
     rows = RowList(source, header, where, withdrawn)
     # Only these three columns matter to the scan (the first of equal names, as dict(zip()) keeps the
@@ -738,6 +724,29 @@ def _scan_rows(source: _Source, size: int, where: str) -> RowsContent:
         )
     partial = source.read(good_size, min(size - good_size, MAX_PARTIAL_KEPT)) if size > good_size else b""
     return RowsContent(header, rows, warnings, good_size, partial, withdrawn, size - good_size)
+
+
+def _read_header(lines: Iterator[tuple[int, bytes | None]], where: str) -> list[str]:
+    """The header of rows.csv from the first of ``lines`` ((offset, bytes or None when too long)),
+    its names stripped; SessionError when there is none or it does not start with REQUIRED_COLUMNS."""
+    first = next(lines, None)
+    if first is None:
+        raise SessionError(f"{where}: no header row")
+    offset, data = first
+    if data is None:
+        raise SessionError(f"{where}: the header row is longer than {MAX_LINE_BYTES} bytes")
+    head = _decode_line(data, offset, where)
+    head = head[1:] if head.startswith("\ufeff") else head  # a spreadsheet's "CSV UTF-8"
+    try:
+        header = next(csv_text_reader(head), [])  # an empty first line has no fields
+    except csv.Error as exc:
+        raise SessionError(f"{where}: the header row is not CSV ({exc})") from None
+    header = [name.strip() for name in header]
+    if tuple(header[: len(REQUIRED_COLUMNS)]) != REQUIRED_COLUMNS:
+        raise SessionError(
+            f"{where}: the header does not start with the required columns {','.join(REQUIRED_COLUMNS)}"
+        )
+    return header
 
 
 def _complete_size(source: _Source, size: int) -> int:
@@ -822,6 +831,79 @@ def _read_info(folder: Path) -> SessionInfo:
 
 
 # ---------------------------------------------------------------------------------------- session
+
+
+def _checked_new_session(
+    name: str,
+    operator: str,
+    notes: str,
+    pose_frame: str,
+    handeye: dict[str, Any] | None,
+    camera: CameraModel,
+    side_mm: float,
+    solver: str,
+    solver_settings: Any,
+    frames_per_row: int | None,
+) -> tuple[str, float, dict[str, Any], int]:
+    """The fields of :meth:`Session.create` checked (SessionError naming the bad one): the folder-safe
+    name, the side (mm), the solver's settings as a checked dict, the frames per row."""
+    try:  # session.json is UTF-8: a text that is not would be written as an escape no reader takes
+        for label, text in (("session name", name), ("operator", operator), ("notes", notes or "")):
+            check_text(text, label)
+    except TextError as exc:
+        raise SessionError(str(exc)) from None
+    if pose_frame not in FRAMES:
+        raise SessionError(f"pose frame {pose_frame!r} is not one of {', '.join(FRAMES)}")
+    if (pose_frame == "camera") != (not handeye):
+        raise SessionError(
+            f"pose frame {pose_frame}: a hand-eye calibration goes with the tool or base frame only"
+        )
+    safe = sanitize_name(name)
+    if not isinstance(camera, CameraModel):
+        raise SessionError(f"camera must be a CameraModel, got {type(camera).__name__}")
+    try:
+        side = float(side_mm)
+    except (TypeError, ValueError):
+        raise SessionError(f"QR side must be a length in mm, got {side_mm!r}") from None
+    if not math.isfinite(side) or side <= 0:
+        raise SessionError(f"QR side must be a positive length in mm, got {side_mm!r}")
+    if solver not in METHODS:
+        raise SessionError(f"solver {solver!r} is not one of {', '.join(METHODS)}")
+    if solver_settings is None:
+        settings_dict: dict[str, Any] = {}
+    elif isinstance(solver_settings, dict):
+        settings_dict = dict(solver_settings)
+    else:
+        settings_dict = to_dict(solver_settings)
+    settings_dict = _checked_solver_settings(solver, settings_dict)
+    frames = from_dict(
+        SessionSettings,
+        {} if frames_per_row is None else {"frames_per_row": frames_per_row},
+    ).frames_per_row
+    return safe, side, settings_dict, frames
+
+
+def _new_session_folder(root_path: Path, safe: str, now: dt.datetime | None) -> tuple[Path, dt.datetime]:
+    """``root_path/<YYYYmmdd-HHMMSS>-<safe>/`` made (never an existing one: the next free second is
+    taken for the stamp), and the time of its stamp."""
+    try:
+        make_folder(root_path, "sessions folder")  # never the folders above one the user named
+    except OSError as exc:
+        raise SessionError(describe_error(exc)) from None
+    stamp_time = now or dt.datetime.now()
+    for _ in range(3600):
+        folder = root_path / f"{stamp_time.strftime(_STAMP)}-{safe}"
+        try:
+            folder.mkdir()
+            break
+        except FileExistsError:
+            stamp_time += dt.timedelta(seconds=1)
+    else:
+        raise SessionError(f"{root_path}: no free folder name for session {safe!r}")
+    fsync_dir(root_path)
+    return folder, stamp_time
+
+
 class Session:
     """An open experiment session: log rows, withdraw them, retry pending writes.
 
@@ -874,55 +956,19 @@ class Session:
         ``pose_frame``, ``handeye``: the frame the rows are measured in and the hand-eye file's
         contents that take poses there (``qrfield.handeye.HandEyeCalibration.to_dict``).
         """
-        try:  # session.json is UTF-8: a text that is not would be written as an escape no reader takes
-            for label, text in (("session name", name), ("operator", operator), ("notes", notes or "")):
-                check_text(text, label)
-        except TextError as exc:
-            raise SessionError(str(exc)) from None
-        if pose_frame not in FRAMES:
-            raise SessionError(f"pose frame {pose_frame!r} is not one of {', '.join(FRAMES)}")
-        if (pose_frame == "camera") != (not handeye):
-            raise SessionError(
-                f"pose frame {pose_frame}: a hand-eye calibration goes with the tool or base frame only"
-            )
-        safe = sanitize_name(name)
-        if not isinstance(camera, CameraModel):
-            raise SessionError(f"camera must be a CameraModel, got {type(camera).__name__}")
-        try:
-            side = float(side_mm)
-        except (TypeError, ValueError):
-            raise SessionError(f"QR side must be a length in mm, got {side_mm!r}") from None
-        if not math.isfinite(side) or side <= 0:
-            raise SessionError(f"QR side must be a positive length in mm, got {side_mm!r}")
-        if solver not in METHODS:
-            raise SessionError(f"solver {solver!r} is not one of {', '.join(METHODS)}")
-        if solver_settings is None:
-            settings_dict: dict[str, Any] = {}
-        elif isinstance(solver_settings, dict):
-            settings_dict = dict(solver_settings)
-        else:
-            settings_dict = to_dict(solver_settings)
-        settings_dict = _checked_solver_settings(solver, settings_dict)
-        frames = from_dict(
-            SessionSettings,
-            {} if frames_per_row is None else {"frames_per_row": frames_per_row},
-        ).frames_per_row
-        root_path = Path(root)
-        try:
-            make_folder(root_path, "sessions folder")  # never the folders above one the user named
-        except OSError as exc:
-            raise SessionError(str(exc)) from None
-        stamp_time = now or dt.datetime.now()
-        for _ in range(3600):
-            folder = root_path / f"{stamp_time.strftime(_STAMP)}-{safe}"
-            try:
-                folder.mkdir()
-                break
-            except FileExistsError:
-                stamp_time += dt.timedelta(seconds=1)
-        else:
-            raise SessionError(f"{root_path}: no free folder name for session {safe!r}")
-        fsync_dir(root_path)
+        safe, side, settings_dict, frames = _checked_new_session(
+            name,
+            operator,
+            notes,
+            pose_frame,
+            handeye,
+            camera,
+            side_mm,
+            solver,
+            solver_settings,
+            frames_per_row,
+        )
+        folder, stamp_time = _new_session_folder(Path(root), safe, now)
         info = SessionInfo(
             name=_one_line(name),
             created=stamp_time.astimezone().isoformat(timespec="seconds"),

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from qrfield.files import FileFormatError, csv_text_reader, read_text
+from qrfield.geometry import ANGLE_NAMES
 from qrfield.limits import LimitError, as_number
 
 #: The ``combinations`` study value that names the shipped default set.
@@ -46,7 +47,7 @@ class Combination:
     def describe(self) -> str:
         """E.g. ``alpha=+t, beta=-t`` (zero multipliers left out)."""
         parts = []
-        for axis, m in zip(("alpha", "beta", "gamma"), self.multipliers, strict=True):
+        for axis, m in zip(ANGLE_NAMES, self.multipliers, strict=True):
             if m == 0:
                 continue
             sign = "+" if m > 0 else "-"

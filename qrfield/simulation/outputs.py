@@ -32,7 +32,7 @@ import numpy as np
 
 from qrfield.files import atomic_file, atomic_write, make_folder
 from qrfield.images import write_image
-from qrfield.methods import NUMERICAL
+from qrfield.methods import IPPE, NUMERICAL
 from qrfield.simulation import heatmap
 from qrfield.simulation.runner import (
     END_FAILED,
@@ -46,14 +46,16 @@ from qrfield.simulation.runner import (
     PASSED,
     StudyResult,
 )
+from qrfield.solvers.registry import POSE_METHODS
 
 #: The seed's figure: mean share of the simulated plane that converged within the criteria (percent).
 SEED_COVERAGE_PERCENT = 77.28
 #: Arrays of samples.npz stored as float32 (the rest keep their own type).
 FLOAT32_ARRAYS = ("position_mm", "angles_deg", "position_error_mm", "angle_error_deg")
+#: One line per solver key of the study that names a method alone (IPPE's is the registry's title).
 SOLVER_NOTES = {
-    "numerical": "the thesis' model as docs/conventions.md reads it (seed initial guess, seed stop rule)",
-    "ippe": "OpenCV IPPE_SQUARE (closed form, both candidates ranked by reprojection error)",
+    NUMERICAL: "the thesis' model as docs/conventions.md reads it (seed initial guess, seed stop rule)",
+    IPPE: POSE_METHODS[IPPE].title,
 }
 
 

@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 
 from qrfield.files import FileFormatError, loads_toml, read_toml
-from qrfield.methods import IPPE, METHODS, NUMERICAL
+from qrfield.methods import METHODS
 from qrfield.sessions.criteria import AcceptanceCriteria
 from qrfield.settings import SettingError, SettingSpec
 from qrfield.simulation.combinations import DEFAULT_NAME, Combination, load_combinations
@@ -260,17 +260,18 @@ def solver_spec(key: str, table: Mapping[str, Any], n_max: int) -> SolverSpec:
     (no mirror search).
     """
     from qrfield import settings as settings_mod
-    from qrfield.solvers import SEED_SETTINGS, IppeSettings, NumericalSettings
+    from qrfield.solvers import SEED_SETTINGS, NumericalSettings
+    from qrfield.solvers.registry import pose_method
 
     method = solver_method(key)
     where = f"solver.{key}"
     if "n_max" in table:
         raise StudyError(f"field '{where}.n_max': set n_max once, as criteria.n_max")
-    if method == IPPE:
-        cls: type = IppeSettings
-        base = settings_mod.to_dict(IppeSettings())
-    else:
-        cls = NumericalSettings
+    registered = pose_method(method)
+    cls = registered.settings_class
+    if cls is not NumericalSettings:
+        base = settings_mod.to_dict(cls())
+    else:  # the thesis' model as the seed ran it, or with the initial guess its key names
         base = settings_mod.to_dict(SEED_SETTINGS)
         suffix = key.partition("-")[2]
         if suffix:
@@ -295,10 +296,7 @@ def solver_spec(key: str, table: Mapping[str, Any], n_max: int) -> SolverSpec:
             )
     try:
         settings = settings_mod.from_dict(cls, {**base, **table})
-        if method == NUMERICAL:
-            from qrfield.solvers.numerical import checked_settings
-
-            checked_settings(settings)
+        registered.checked_settings(settings)
     except ValueError as exc:
         raise StudyError(f"field '{where}': {exc}") from None
     return SolverSpec(key, method, settings)

@@ -15,12 +15,13 @@ import math
 import numpy as np
 
 from qrfield.camera import CameraModel
+from qrfield.geometry import VERTEX_NAMES
 from qrfield.solvers.result import SolverError
 
 #: A turn whose |sin| is below this is treated as collinear corners (0.0057 degrees).
 COLLINEAR_SIN = 1e-4
 
-_NAMES = ("V1", "V2", "V3", "V4")
+_NAMES = VERTEX_NAMES
 
 
 def check_side(side_mm: float) -> float:

@@ -35,6 +35,7 @@ import numpy as np
 from qrfield.camera import CameraModel
 from qrfield.geometry import ippe_object_points, rotation_from_ippe, rotation_to_ippe
 from qrfield.lens import has_distortion
+from qrfield.methods import IPPE
 from qrfield.settings import setting, validated
 from qrfield.solvers.floats import angles_single, reprojection_single
 from qrfield.solvers.rays import normalised_single
@@ -139,7 +140,7 @@ class _Candidate:
         self, corners: np.ndarray, alternative: PoseResult | None = None, ambiguity: float | None = None
     ) -> PoseResult:
         return PoseResult(
-            method="ippe",
+            method=IPPE,
             position_mm=np.array(self.position),
             angles_deg=np.array(angles_single(self.rows)),
             rotation=np.array(self.rows),
@@ -190,9 +191,9 @@ def solve_ippe(
     try:
         count, rvecs, tvecs, _ = cv2.solvePnPGeneric(obj, pts, k, None, flags=cv2.SOLVEPNP_IPPE_SQUARE)
     except cv2.error as exc:
-        return PoseResult.failed("ippe", corners, f"OpenCV IPPE_SQUARE failed: {exc.err}")
+        return PoseResult.failed(IPPE, corners, f"OpenCV IPPE_SQUARE failed: {exc.err}")
     if count < 1:
-        return PoseResult.failed("ippe", corners, "OpenCV IPPE_SQUARE returned no pose")
+        return PoseResult.failed(IPPE, corners, "OpenCV IPPE_SQUARE returned no pose")
     rays = _unit_rays(*xy)
     starts = list(zip(rvecs[:count], tvecs[:count], strict=True))
     candidates = _refined_candidates(starts, obj, pts, k, s, side, camera, flat, rays)
@@ -205,7 +206,7 @@ def solve_ippe(
             candidates = extra + _other_branch(candidates, extra[0][0])
     if not candidates:
         return PoseResult.failed(
-            "ippe", corners, "OpenCV IPPE_SQUARE found no pose in front of the camera facing it"
+            IPPE, corners, "OpenCV IPPE_SQUARE found no pose in front of the camera facing it"
         )
     candidates.sort(key=lambda c: c[0].error)
     first = candidates[0][0]
@@ -305,7 +306,7 @@ def solve_ippe_batch(
     if cov is not None:
         out.update(
             batch_uncertainty(
-                "ippe",
+                IPPE,
                 corners,
                 cov,
                 camera,
@@ -318,5 +319,5 @@ def solve_ippe_batch(
             )
         )
     return BatchResult(
-        method="ippe", converged=converged, iterations=np.zeros(count, int), valid=valid.copy(), **out
+        method=IPPE, converged=converged, iterations=np.zeros(count, int), valid=valid.copy(), **out
     )

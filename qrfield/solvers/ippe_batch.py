@@ -21,7 +21,8 @@ card), so no conversion to OpenCV's IPPE frame and no rotation vector is ever ma
 6. candidates behind the camera or facing away dropped; the answer is the one with the smaller
    RMS reprojection error on the corners as given (distortion included).
 
-Why not OpenCV: it has no vectorised IPPE, and one call costs about 0.7 ms per pose through Python.
+Why not OpenCV: it has no vectorised IPPE, and one call per pose through Python costs many times a
+batch row (the figures: docs/benchmarks.md, "simulation").
 OpenCV 5.0's IPPE also returns wrong poses whenever its rotation is a half turn (its ``rot2vec``
 divides by sin(pi)); its frame is ours turned 180 degrees about X, so that is every pose whose
 rotation axis lies in the marker's Y-Z plane: a square-on card, a tilt about Y alone, a turn in
@@ -40,6 +41,7 @@ import numpy as np
 from qrfield.camera import CameraModel
 from qrfield.geometry import angles_from_rotation, marker_vertices, project_points
 from qrfield.homography import square_to_quad
+from qrfield.methods import IPPE
 from qrfield.solvers.ippe import checked_settings
 from qrfield.solvers.rays import normalised_batch
 from qrfield.solvers.result import BatchResult, SolverError
@@ -376,7 +378,7 @@ def solve_ippe_vectorised(
 
         arrays.update(
             batch_uncertainty(
-                "ippe",
+                IPPE,
                 corners,
                 cov,
                 camera,
@@ -388,7 +390,7 @@ def solve_ippe_vectorised(
                 arrays["converged"],
             )
         )
-    return BatchResult(method="ippe", **arrays)
+    return BatchResult(method=IPPE, **arrays)
 
 
 def _candidate_errors(
@@ -447,7 +449,7 @@ def _solve_chunk(
         reproj[rows] = best_err[found]
         residual[rows] = _line_of_sight_distance(best_rot[found], best_t[found], xn[found], yn[found], side)
     return BatchResult(
-        method="ippe",
+        method=IPPE,
         position_mm=position,
         angles_deg=angles,
         rotation=rotation_out,

@@ -50,6 +50,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from qrfield.camera import CameraModel
+from qrfield.methods import NUMERICAL
 from qrfield.settings import setting, validated
 from qrfield.solvers import kernel
 from qrfield.solvers.floats import angles_single, reprojection_single
@@ -292,7 +293,7 @@ def _result_single(
     ``pose`` = (rows of R, centre, reprojection px) when already computed by :func:`_pose_single`.
     """
     if not _usable(status, z):
-        return PoseResult.failed("numerical", corners, _reason(status, worst, n, s), iterations=n)
+        return PoseResult.failed(NUMERICAL, corners, _reason(status, worst, n, s), iterations=n)
     rows, centre, reprojection = pose or _pose_single(z, x, y, side, camera, flat)
     (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rows
     z0, z1, z2, z3 = z
@@ -307,7 +308,7 @@ def _result_single(
         ]
     )  # fmt: skip
     return PoseResult(
-        method="numerical",
+        method=NUMERICAL,
         position_mm=values[0:3],
         angles_deg=values[3:6],
         rotation=values[6:15].reshape(3, 3),

@@ -12,6 +12,7 @@ import numpy as np
 
 from qrfield.camera import CameraModel
 from qrfield.geometry import angles_from_rotation, marker_vertices, project_points
+from qrfield.methods import NUMERICAL
 from qrfield.solvers import kernel
 from qrfield.solvers.numerical import (
     CONVERGED,
@@ -95,7 +96,7 @@ def solve_numerical_batch(
         for i in range(0, corners.shape[0], BATCH_CHUNK)
     ]
     return BatchResult(
-        method="numerical",
+        method=NUMERICAL,
         **{
             name: np.concatenate([getattr(p, name) for p in parts])
             for name in (
@@ -237,7 +238,7 @@ def _solve_chunk(
     if cov is None:
         return result
     stds = batch_uncertainty(
-        "numerical",
+        NUMERICAL,
         corners,
         cov,
         camera,
@@ -296,7 +297,7 @@ def _batch_result(
         reproj[idx] = err
     worst = np.where(has_pose | (status != INVALID), worst, np.nan)
     return BatchResult(
-        method="numerical",
+        method=NUMERICAL,
         position_mm=position,
         angles_deg=angles,
         rotation=rotation,

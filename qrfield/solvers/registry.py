@@ -15,7 +15,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol
 
-from qrfield.methods import METHODS
+from qrfield.methods import IPPE, METHODS, NUMERICAL
 from qrfield.solvers.ippe import IppeSettings, solve_ippe
 from qrfield.solvers.ippe import checked_settings as checked_ippe
 from qrfield.solvers.ippe_batch import solve_ippe_vectorised
@@ -67,8 +67,8 @@ class PoseMethod:
 
 #: Every pose method, in qrfield.methods.METHODS order (the first gives a frame's status).
 POSE_METHODS: dict[str, PoseMethod] = {
-    "numerical": PoseMethod(
-        "numerical",
+    NUMERICAL: PoseMethod(
+        NUMERICAL,
         "the thesis' numerical positioning model (our reconstruction)",
         NumericalSettings,
         checked_numerical,
@@ -76,8 +76,8 @@ POSE_METHODS: dict[str, PoseMethod] = {
         solve_numerical_batch,
         depth_model=True,
     ),
-    "ippe": PoseMethod(
-        "ippe",
+    IPPE: PoseMethod(
+        IPPE,
         "OpenCV IPPE_SQUARE (closed form, both candidates ranked by reprojection error)",
         IppeSettings,
         checked_ippe,

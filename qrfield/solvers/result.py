@@ -14,6 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from qrfield.methods import METHODS
+
 
 class SolverError(ValueError):
     """Bad input to a solver (API misuse): the message says what is wrong."""
@@ -146,6 +148,12 @@ class PoseResult:
             "angles_std_deg": [_plain(v) for v in self.angles_std_deg],
             "ambiguous": bool(self.ambiguous),
         }
+
+
+#: The keys of a pose's JSON, in order (``qrfield solve --json``; each method's in ``qrfield run
+#: --json-lines``, null where a frame has no pose): read from :meth:`PoseResult.to_json_dict` itself,
+#: so the list and the writer cannot differ.
+POSE_JSON_KEYS = tuple(PoseResult.failed(METHODS[0], np.zeros((4, 2)), "").to_json_dict())
 
 
 @dataclass(frozen=True, eq=False)

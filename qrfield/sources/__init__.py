@@ -15,13 +15,19 @@ from pathlib import Path
 from qrfield.camera import DEFAULT_CAMERA, CameraModel, resolve_camera
 from qrfield.limits import MAX_USB_INDEX
 from qrfield.sources.base import EndOfStream, Frame, FrameSource, Pacer, SourceError
-from qrfield.sources.folder import ImageFolderSource
+from qrfield.sources.folder import ImageFolderSource, is_image_file
 from qrfield.sources.kinds import (
+    AUTO,
     AUTO_CANDIDATES,
+    FOLDER,
     LIVE_CAMERA_KINDS,
+    PICAMERA2,
+    PICAMERA2_SIM,
     SOURCE_CHOICES,
     SOURCE_HELP,
     SOURCE_KINDS,
+    USB,
+    VIRTUAL,
     is_live_camera,
     may_be_live_camera,
     source_kind,
@@ -80,7 +86,7 @@ def make_source(
 
     Args:
         spec: ``virtual``, ``picamera2``, ``picamera2-sim[:SENSOR]``, ``usb:N`` or a path (video
-            file or folder).
+            file, image file or folder).
         camera: the virtual bench's camera model (default picam-v2@640x480); for real cameras,
             its size is the resolution requested; picamera2 maps it through the stream's sensor
             crop, a USB camera's frames must have its size.
@@ -98,17 +104,17 @@ def make_source(
             "source '': empty; give auto, virtual, picamera2, usb:N, or a path (. for the current folder)"
         )
     kind = source_kind(spec)
-    if kind == "virtual":
+    if kind == VIRTUAL:
         return VirtualBenchSource(camera or resolve_camera(DEFAULT_CAMERA), side_mm, virtual)
-    if kind in ("picamera2", "picamera2-sim"):
+    if kind in (PICAMERA2, PICAMERA2_SIM):
         if picamera is None and camera is not None:
             picamera = Picamera2Settings(width=camera.width, height=camera.height)
-        if kind == "picamera2":
+        if kind == PICAMERA2:
             return Picamera2Source(picamera, profile=camera)
         sensor = spec.partition(":")[2] or "imx219"
         scene = virtual or VirtualBenchSettings()
         return SimulatedPicamera2Source(picamera, profile=camera, sensor=sensor, scene=scene, side_mm=side_mm)
-    if kind == "usb":
+    if kind == USB:
         index_text = spec[4:] if spec.startswith("usb:") else "0"
         if not (index_text.isascii() and index_text.isdigit()):
             raise SourceError(f"source {spec!r}: the USB camera index must be a whole number, e.g. usb:0")
@@ -120,10 +126,12 @@ def make_source(
             )
         size = (camera.width, camera.height) if camera else (None, None)
         return UsbCameraSource(int(index_text), *size, camera=camera, settings=usb)
-    if kind == "auto":
+    if kind == AUTO:
         raise SourceError("source 'auto' is resolved by open_source(), not make_source()")
     path = Path(spec).expanduser()
-    if kind == "folder":
+    if kind == FOLDER:
+        return ImageFolderSource(path, loop=loop, fps=2.0 if pace else 0.0)
+    if is_image_file(path):  # one photo: the image reader's limits and reasons, not a video decoder's
         return ImageFolderSource(path, loop=loop, fps=2.0 if pace else 0.0)
     if path.is_file():
         return VideoFileSource(path, loop=loop, pace=pace)

@@ -1,4 +1,6 @@
-"""A folder of still images, read in sorted file-name order (unreadable files reported and skipped)."""
+"""A folder of still images, read in sorted file-name order (unreadable files reported and skipped),
+or one image file (``--source photo.png``: through :func:`qrfield.images.read_image`, so the pixel
+limit, the PNG inflation cap and the one-line reasons hold, not through a video decoder)."""
 
 from __future__ import annotations
 
@@ -13,8 +15,14 @@ from qrfield.sources.base import EndOfStream, Frame, FrameSource, Pacer, SourceE
 log = logging.getLogger(__name__)
 
 
+def is_image_file(path: Path) -> bool:
+    """A regular file whose name ends in one of the image suffixes (``.png``, ``.jpg``, ...)."""
+    return path.suffix.lower() in IMAGE_SUFFIXES and path.is_file()
+
+
 class ImageFolderSource(FrameSource):
-    """Every image file of a folder (not its sub-folders), sorted by name.
+    """Every image file of a folder (not its sub-folders), sorted by name; or one image file
+    (``path`` a file whose name ends in one of :data:`qrfield.images.IMAGE_SUFFIXES`).
 
     Files that OpenCV cannot read are skipped; each is reported once in ``notes`` and ``skipped``
     and logged as a warning. When no file is readable the source raises SourceError.
@@ -39,9 +47,18 @@ class ImageFolderSource(FrameSource):
 
     @property
     def description(self) -> str:
+        if is_image_file(self.path):
+            return f"image {self.path}" + (" (looping)" if self.loop else "")
         return f"folder {self.path} ({len(self.files)} images)" + (" (looping)" if self.loop else "")
 
+    @property
+    def _what(self) -> str:
+        return f"image {self.path}" if is_image_file(self.path) else f"image folder {self.path}"
+
     def _open_impl(self) -> None:
+        if is_image_file(self.path):
+            self.files, self._position, self.skipped = [self.path], 0, []
+            return
         if not self.path.is_dir():
             raise SourceError(f"image folder {self.path}: no such folder")
         self.files = sorted(
@@ -58,7 +75,7 @@ class ImageFolderSource(FrameSource):
         while tried < len(self.files):
             if self._position >= len(self.files):
                 if not self.loop:
-                    raise EndOfStream(f"image folder {self.path}: end after {len(self.files)} files")
+                    raise EndOfStream(f"{self._what}: end after {len(self.files)} files")
                 self._position = 0
             path = self.files[self._position]
             self._position += 1
@@ -72,6 +89,8 @@ class ImageFolderSource(FrameSource):
                 image = read_image(path, mode="any")
             except ImageError as exc:
                 image, why = None, str(exc).removeprefix(f"{path}: ")
+            if image is None and is_image_file(self.path):
+                raise SourceError(f"image {path}: {why}")
             if image is None:
                 self.skipped.append(path)
                 message = f"skipped {path.name}: {why}"
@@ -83,7 +102,7 @@ class ImageFolderSource(FrameSource):
             raise SourceError(
                 f"image folder {self.path}: none of its {len(self.files)} image files is readable"
             )
-        raise EndOfStream(f"image folder {self.path}: end after {len(self.files)} files")
+        raise EndOfStream(f"{self._what}: end after {len(self.files)} files")
 
     def _close_impl(self) -> None:
         pass

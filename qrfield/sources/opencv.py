@@ -11,6 +11,7 @@ import cv2
 import numpy as np
 
 from qrfield.camera import CameraModel
+from qrfield.images import opencv_quiet
 from qrfield.settings import setting, validated
 from qrfield.sources.base import SETTLE_FRAMES, EndOfStream, Frame, FrameSource, Pacer, SourceError
 from qrfield.texts import TextError, check_path_for_library
@@ -231,15 +232,8 @@ def _set_and_check(cap: cv2.VideoCapture, prop: int, value: float) -> bool:
 def quietly_open(index: int) -> cv2.VideoCapture:
     """cv2.VideoCapture(index) without OpenCV's console warnings when there is no such camera
     (the SourceError raised instead says so once, in words)."""
-    logging = getattr(getattr(cv2, "utils", None), "logging", None)
-    if logging is None:
+    with opencv_quiet():
         return cv2.VideoCapture(index)
-    level = logging.getLogLevel()
-    logging.setLogLevel(logging.LOG_LEVEL_ERROR)
-    try:
-        return cv2.VideoCapture(index)
-    finally:
-        logging.setLogLevel(level)
 
 
 class VideoFileSource(FrameSource):

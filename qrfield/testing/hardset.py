@@ -355,9 +355,9 @@ def _picture(
     return image, corners, noise, blur, gradient
 
 
-#: The steep set (issue 26): codes tilted about both X and Y, alpha and beta each up to this (deg),
-#: at z in STEEP_Z_RANGE_MM (mm), anywhere in view: foreshortened modules of 1-2 px along the
-#: code's short side where the other side's are 2-4 px.
+#: The steep set (docs/benchmarks.md, "detect"): codes tilted about both X and Y, alpha and beta
+#: each up to this (deg), at z in STEEP_Z_RANGE_MM (mm), anywhere in view: foreshortened modules of
+#: 1-2 px along the code's short side where the other side's are 2-4 px.
 STEEP_TILT_DEG = 55.0
 STEEP_Z_RANGE_MM = (150.0, 600.0)
 

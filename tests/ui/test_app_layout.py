@@ -427,6 +427,29 @@ def test_every_control_of_every_tab_is_finger_sized_at_800x480(
     assert not problems, problems
 
 
+def test_every_control_not_on_screen_is_finger_sized_too(make_window, qtbot, tmp_path, monkeypatch) -> None:
+    """The tests above measure what is shown; controls that appear only in some states (Retry and
+    Save pending… after a failed write, Reopen source, Cancel while a row is collected, the guide's
+    Skip, the dialogs' buttons) are measured here by the height their style gives them."""
+    window = window_with_a_session(make_window, qtbot, tmp_path, monkeypatch)
+    hidden, small_ones = 0, []
+    for widget in window.findChildren(QtWidgets.QWidget):
+        if widget.isVisible() or not isinstance(widget, CONTROLS) or part_of_a_control(widget):
+            continue
+        if isinstance(widget.parentWidget(), (QtWidgets.QTabBar, QtWidgets.QAbstractItemView)):
+            continue
+        widget.ensurePolished()
+        hidden += 1
+        height = max(widget.sizeHint().height(), widget.minimumHeight())
+        if height < TOUCH_PX:
+            text = (
+                widget.text() if isinstance(widget, (QtWidgets.QAbstractButton, QtWidgets.QLineEdit)) else ""
+            )
+            small_ones.append(f"{name(widget)} {text!r}: {height} px")
+    assert hidden > 50  # the other tabs' controls, the banners' buttons, the dialogs' fields
+    assert not small_ones, small_ones
+
+
 def test_every_dialog_and_message_box_is_finger_sized_at_800x480(
     make_window, qtbot, tmp_path, monkeypatch
 ) -> None:

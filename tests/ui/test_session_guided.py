@@ -76,6 +76,7 @@ def shown_target(panel) -> int | None:
     return panel.guide_panel.chooser.currentData()
 
 
+@pytest.mark.slow
 def test_a_plan_guides_target_by_target_and_a_restart_continues(guided_window, qtbot) -> None:
     window = guided_window()
     panel = create_session(qtbot, window, "guided")
@@ -132,6 +133,7 @@ def test_a_plan_guides_target_by_target_and_a_restart_continues(guided_window, q
     assert [label[0] for label in labels] == ["✓", "–", "✓", " "], labels
 
 
+@pytest.mark.slow
 def test_a_done_target_is_redone_with_its_old_row_withdrawn(guided_window, qtbot, monkeypatch) -> None:
     window = guided_window()
     panel = create_session(qtbot, window, "redo")
@@ -155,6 +157,7 @@ def test_a_done_target_is_redone_with_its_old_row_withdrawn(guided_window, qtbot
     assert (state.state, state.rows, state.withdrawn) == ("done", (2,), (1,))
 
 
+@pytest.mark.slow
 def test_a_bad_plan_is_refused_with_its_lines_named(guided_window, qtbot, tmp_path, monkeypatch) -> None:
     window = guided_window()
     panel = create_session(qtbot, window, "bad plan")
@@ -170,6 +173,7 @@ def test_a_bad_plan_is_refused_with_its_lines_named(guided_window, qtbot, tmp_pa
     assert panel.log_button.text() == "Log row"
 
 
+@pytest.mark.slow
 def test_the_guide_strip_fits_800x480_with_every_button_in_reach(guided_window, qtbot) -> None:
     window = guided_window((800, 480))
     panel = create_session(qtbot, window, "small screen")
@@ -192,6 +196,7 @@ def test_the_guide_strip_fits_800x480_with_every_button_in_reach(guided_window, 
     assert panel.table.height() >= 40
 
 
+@pytest.mark.slow
 def test_open_report_writes_the_report_and_opens_it(guided_window, qtbot, monkeypatch) -> None:
     window = guided_window()
     panel = create_session(qtbot, window, "report")

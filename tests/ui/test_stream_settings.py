@@ -17,6 +17,7 @@ pytestmark = pytest.mark.gui
 WAIT_MS = 15000
 
 
+@pytest.mark.slow
 def test_setup_sets_the_filter_it_reaches_the_worker_and_is_saved(make_window, qtbot, tmp_path: Path) -> None:
     first = make_window({"source": "virtual", "method": "ippe"})
     form = first.solver_controls.stream
