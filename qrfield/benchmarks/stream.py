@@ -14,7 +14,9 @@ issue 25); branch continuity (the default); continuity and the filter at two tim
    wobble at 450 mm (the distorted lens); a still card at 450 mm; a fast swing (35 degrees at
    1 Hz, 220 deg/s at its fastest) at 400 mm and far (modules of 1.4 px); a steady turn (4.8 deg/s,
    tilted 12-36 degrees) of a far card (1.4 px), where the filter stays on while the card moves.
-   Per sequence, mode and method (numerical: the status' method; ippe): the share of all frames
+   Per sequence and seed, the corners' calibration (whitened by the detection's covariance against
+   cv2.projectPoints' truth, and how much of it the frames share). Per sequence, mode and method
+   (numerical: the status' method; ippe): the share of all frames
    within 2 deg / 5 mm; of the posed frames the share flagged ambiguous after history; the frames
    confidently wrong (not flagged, an angle more than 2 deg and 4 of its std off, or the position
    more than 5 mm off and a coordinate 4 of its std off); the frames resolved by history (of them:
@@ -357,6 +359,32 @@ def score(sequence: Sequence, results: list[Any], method: str) -> Score:
     return out
 
 
+def corner_calibration(sequence: Sequence, results: list[Any]) -> str:
+    """The detections' corners against cv2.projectPoints' truth, whitened by their covariance
+    (``Detection.pose_cov``): RMS and share within 2 (calibrated: 0.7-1.4, 90-99 %), and the RMS
+    of the whitened errors' mean over the frames (the part the frames share: about
+    1 / sqrt(frames) were the errors drawn afresh each frame)."""
+    from qrfield.benchmarks._corners import whiten
+    from qrfield.testing.hardset import true_corners
+
+    z = []
+    for result in results:
+        if result.detection is None or result.truth is None:
+            continue
+        truth = true_corners(sequence.camera, result.truth, sequence.side_mm)
+        w = whiten(result.detection.corners_px - truth, result.detection.pose_cov)
+        if len(w) == 8:
+            z.append(w)
+    if not z:
+        return "corners: none found"
+    zz = np.array(z)
+    return (
+        f"corners: {len(zz)} frames, whitened RMS {np.sqrt(np.mean(zz**2)):.2f}, "
+        f"{100 * np.mean(np.abs(zz) < 2):.1f} % within 2; their mean over the frames RMS "
+        f"{np.sqrt(np.mean(zz.mean(axis=0) ** 2)):.2f} ({1 / math.sqrt(len(zz)):.2f} if independent)"
+    )
+
+
 def modes() -> list[tuple[str, Any]]:
     from qrfield.stream import StreamSettings
 
@@ -409,6 +437,7 @@ def _sequences(args: argparse.Namespace) -> None:
             sequence = make_sequence(name, seed, args.frames)
             solved = solve_sequence(sequence)
             runs = [(label, replay(solved, settings, sequence.side_mm)) for label, settings in all_modes]
+            print(f"\n   {name}, seed {seed}: {corner_calibration(sequence, solved)}")
             for method in METHODS:
                 print(
                     f"\n   {name}, seed {seed}, {method} (modules {sequence.modules}, "
