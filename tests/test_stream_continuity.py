@@ -144,3 +144,61 @@ def test_the_mirror_chosen_is_widened_towards_the_answer_it_was_confused_with() 
         rise = max(abs(pose.mirror_chi2 - pose.chi2), 1.0)
         along = float(axis @ vector_cov(pose)[3:, 3:] @ axis)
         assert along >= 0.999 * float(turn @ turn) / rise
+
+
+def _near_fold_seeds(count: int, noise: float = 0.03) -> list[tuple[int, str]]:
+    """(seed, method) of unambiguous frames of the stream case whose mirror fits within
+    NEAR_FOLD_CHI2 of the answer (about 80 % of them at 0.03 px)."""
+    from qrfield.stream.continuity import NEAR_FOLD_CHI2
+
+    out = []
+    for seed in range(200):
+        for method in ("numerical", "ippe"):
+            r = solved(seed, noise, method)
+            if r.converged and not r.ambiguous and r.mirror_chi2 - r.chi2 < NEAR_FOLD_CHI2:
+                out.append((seed, method))
+                if len(out) == count:
+                    return out
+    return out
+
+
+def test_an_unambiguous_frame_near_the_fold_is_widened_towards_its_mirror() -> None:
+    """Its mirror fits within d < NEAR_FOLD_CHI2: the reported variance along the turn to the
+    mirror is at least turn^2 / d (computed here from the two branches), the pose itself is the
+    frame's, and the flag stays down; with continuity off the frame is reported as it is."""
+    from qrfield.geometry import rotation_vector
+    from qrfield.stream.poses import vector_cov
+
+    cases = _near_fold_seeds(4)
+    assert len(cases) == 4
+    for index, (seed, method) in enumerate(cases):
+        result = frame_result(solved(seed, 0.03, method), index, 0, noise_px=0.03)
+        frame = result.poses[method]
+        StreamStage().apply(result, SIDE_MM, result.detection.pose_cov)
+        pose = result.poses[method]
+        assert np.array_equal(pose.rotation, frame.rotation) and not pose.ambiguous
+        turn = rotation_vector(frame.alternative.rotation @ frame.rotation.T)
+        axis = turn / np.linalg.norm(turn)
+        along = float(axis @ vector_cov(pose)[3:, 3:] @ axis)
+        assert along >= 0.999 * float(turn @ turn) / (frame.mirror_chi2 - frame.chi2)
+        assert along > 1.5 * float(axis @ vector_cov(frame)[3:, 3:] @ axis)
+        alone = frame_result(solved(seed, 0.03, method), index, 0, noise_px=0.03)
+        StreamStage(StreamSettings(continuity=False)).apply(alone, SIDE_MM, alone.detection.pose_cov)
+        assert np.array_equal(alone.poses[method].angles_std_deg, frame.angles_std_deg)
+
+
+def test_the_filter_counts_a_frames_widening_as_shared_in_full() -> None:
+    """The filter reports rho of the frames' variance as shared and averages the rest: the
+    widening's (1 - rho) is added back (rho the angles' mean FRAME_SHARED_SHARE, by hand)."""
+    from qrfield.solvers.uncertainty import FRAME_SHARED_SHARE
+    from qrfield.stream.continuity import Decision
+    from qrfield.stream.stage import shared_widening
+
+    rho = float(np.mean(FRAME_SHARED_SHARE[3:]))
+    extra = np.diag([4e-4, 1e-4, 0.0])
+    base = np.diag([1.0, 2.0, 3.0, 1e-5, 2e-5, 3e-5])
+    decision = Decision(solved(0, 0.03), "frame", False, widening=extra)
+    out = shared_widening(base, decision)
+    assert np.allclose(out[:3, :3], base[:3, :3]) and np.allclose(out[:3, 3:], 0.0)
+    assert np.allclose(out[3:, 3:], base[3:, 3:] + (1.0 - rho) * extra)
+    assert shared_widening(base, Decision(solved(0, 0.03), "frame", False)) is base

@@ -51,7 +51,9 @@ class PreviewView(pg.GraphicsLayoutWidget):
         self.info = pg.TextItem("", color="#ffffff", anchor=(0, 0), fill=pg.mkBrush(0, 0, 0, 150))
         self.info.setFont(QtGui.QFont("Monospace", 9))
         self.info.setVisible(False)  # until there is something to say
-        self.view.addItem(self.info)
+        # Its size is the screen's, not the picture's: it must never move the view's range (with the
+        # range following the items, its wrap width and the range fed each other in a loop).
+        self.view.addItem(self.info, ignoreBounds=True)
         self._size: tuple[int, int] | None = None
         self.view.sigTransformChanged.connect(self._transform_changed)  # the picture moved or scaled
 
@@ -100,7 +102,11 @@ class PreviewView(pg.GraphicsLayoutWidget):
             corners = QtCore.QRectF(-0.5, -0.5, *self._size)
             shown = self.mapFromScene(self.view.mapViewToScene(corners)).boundingRect()
             room = float(min(shown.right(), self.width()) - max(shown.left(), 0))
-        self.info.textItem.setTextWidth(max(80.0, room - 8.0))
+        width = max(80.0, room - 8.0)
+        # Only a change of a pixel or more is set: setting the width moves the item, which may
+        # change the view's transform and call this again (a livelock in the event loop once).
+        if abs(self.info.textItem.textWidth() - width) >= 1.0:
+            self.info.textItem.setTextWidth(width)
 
     def show_frame(self, image: np.ndarray) -> None:
         """Display a grey (H, W) or BGR (H, W, 3) uint8 image."""

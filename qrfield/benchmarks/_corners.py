@@ -15,6 +15,14 @@ from qrfield.testing.hardset import BANDS, HardView
 
 #: A corner further off than this, px, must not be reported with a good quality.
 BAD_CORNER_PX = 0.5
+#: Module size bands (px, the view's shortest side over its modules) of the covariance's
+#: calibration: finer than BANDS below 2 px, where the stream's far cards are (issue 25).
+CALIBRATION_BANDS = (
+    ("< 1.5 px", 0.0, 1.5),
+    ("1.5-2 px", 1.5, 2.0),
+    ("2-3 px", 2.0, 3.0),
+    (">= 3 px", 3.0, np.inf),
+)
 
 
 @dataclass(frozen=True)
@@ -128,9 +136,12 @@ def print_tables(title: str, results: list[CornerResult]) -> None:
 
 
 def print_calibration(results: list[CornerResult]) -> None:
-    """Calibration of the corners' covariance, all views and by band (modules >= 2 px apart)."""
+    """Calibration of the corners' covariance, all views, by module band (CALIBRATION_BANDS) and by
+    lens."""
     print("covariance calibration (whitened corner errors; calibrated: RMS 0.7-1.4, 90-99 % within 2):")
-    groups = [("all", results)] + [(label, [r for r in results if r.band == label]) for label, _, _ in BANDS]
+    groups = [("all", results)] + [
+        (label, [r for r in results if low <= r.module_px < high]) for label, low, high in CALIBRATION_BANDS
+    ]
     groups.append(("pinhole", [r for r in results if not r.distorted]))
     groups.append(("distorted", [r for r in results if r.distorted]))
     for name, rows in groups:

@@ -48,6 +48,11 @@ UNREFINED_QUALITY_FACTOR = 0.5
 #: Pattern score an unrefined detection needs (its text was decoded; checking rough corners against
 #: modules of 1-2 px is noisy, so the bar is lower than ``min_quality``).
 UNREFINED_MIN_SCORE = 0.7
+#: Smallest module (px, along the code's shortest side) whose cold detection takes the
+#: inverse-compositional fit (:meth:`Detector.refine_cold`); smaller modules take the edge lines
+#: and the full fit. Below it the cold fit settled with V3 0.2 px off in every frame of a far
+#: frontal card at 1.4 px modules, stated std 0.03-0.08 px (docs/detection.md, "Cold detection").
+COLD_FIT_MIN_MODULE_PX = 2.0
 
 
 #: Least share of a decoded matrix's modules that must show their colour in the image (sampled at
@@ -151,6 +156,13 @@ def same_code(a: np.ndarray, b: np.ndarray) -> bool:
     size_b = float(np.linalg.norm(b[2] - b[0]))
     close = np.linalg.norm(a.mean(axis=0) - b.mean(axis=0)) < 0.2 * max(size_a, size_b)
     return bool(close and 0.7 < size_a / max(size_b, 1e-9) < 1.0 / 0.7)
+
+
+def shortest_module_px(corners: np.ndarray, modules: int) -> float:
+    """The module's size (px) along the shortest side of the quadrilateral ``corners`` (4, 2) px,
+    V1..V4 in order, of a code of ``modules`` per side."""
+    sides = np.linalg.norm(corners - np.roll(corners, -1, axis=0), axis=1)
+    return float(sides.min()) / max(int(modules), 1)
 
 
 class Detector:
@@ -263,8 +275,9 @@ class Detector:
         result = Refined(corners, None, np.full(4, np.nan), rough.score, False)
         if settings.refine:
             symbol = candidate.symbol
-            decoded = symbol is not None and settings.symbol_fit
-            result = self.refine_cold(grey, corners, modules, rough, symbol) if decoded else None
+            cold = symbol is not None and settings.symbol_fit
+            cold = cold and shortest_module_px(corners, modules) >= COLD_FIT_MIN_MODULE_PX
+            result = self.refine_cold(grey, corners, modules, rough, symbol) if cold else None
             if result is None:  # the edge lines and the full fit, from each seed in turn
                 seeds = self._seeds(grey, corners)
                 result = self.refine(grey, corners, modules, rough.score, rough.inverted, symbol, seeds)

@@ -24,8 +24,12 @@ keeps the last resolved pose (unambiguous, or resolved by history) and decides a
    candidate at all) and the history agrees with it;
 4. otherwise the frame stays ambiguous (AMBIG on a live camera) and the history is kept as it was.
 
-An unambiguous frame resets the history to itself; so does a resolved one. A frame without a pose
-leaves the history to age. What the history chose is the mirror's own full result
+An unambiguous frame resets the history to itself; so does a resolved one. Both are reported with
+their covariance widened towards the other branch where the branches are close (a resolved frame
+always, an unambiguous one when its mirror fits within NEAR_FOLD_CHI2: :func:`near_fold_widening`):
+near the fold of the planar ambiguity the linearised std of the tilt is several times too small
+(docs/uncertainty.md, "Near the fold"). The history itself predicts from the unwidened poses. A
+frame without a pose leaves the history to age. What the history chose is the mirror's own full result
 (:func:`qrfield.solvers.mirror.mirror_result`: its pose, std and reprojection), never the answer's
 numbers under the mirror's name.
 """
@@ -62,6 +66,14 @@ CONSISTENT_CHI2 = 16.27
 #: Two branches closer than this (chi-square of the rotation between them, under their
 #: covariance) are one pose: whichever is reported, it moves by less than its own std.
 SAME_POSE_CHI2 = 1.0
+#: An unambiguous frame whose mirror fits within this of its answer (mirror_chi2 - chi2, between
+#: FLIP_DELTA_CHI2 and this) is near the fold of the planar ambiguity, where the linearised std
+#: of its tilt is too small: its covariance is widened towards the mirror as a resolved frame's
+#: is (:func:`widened`). Tuned on the stream benchmark's seeds 1 and 2 (docs/uncertainty.md,
+#: "Near the fold"): there, unflagged frames 4-8 degrees off with a std of 0.5-1 degree had
+#: mirror_chi2 - chi2 of 9-23; cards tilted away (steady turn) are calibrated and their mirror
+#: is hundreds away.
+NEAR_FOLD_CHI2 = 36.0
 #: The same card: its centre moved by at most MAX_SHIFT_SIDES + MAX_SHIFT_SIDES_PER_S * dt code
 #: sides (mean side of V1..V4 in px) since the history's frame, and its size changed by less than
 #: the ratio MAX_SIZE_RATIO.
@@ -83,12 +95,17 @@ class Decision:
         resolved_by: BY_FRAME (the frame alone decided, or nothing was decided) or BY_HISTORY.
         ambiguous: the flip is unresolved after the history (= ``pose.ambiguous``).
         flipped: the history chose the mirror branch.
+        widening: what was added to the pose's rotation covariance along the turn to the other
+            branch ((3, 3) rad^2, :func:`widening`), None when nothing. It is an error the frames
+            near the fold share (the fold stays where the view is), so a filter must not average
+            it away.
     """
 
     pose: PoseResult
     resolved_by: str
     ambiguous: bool
     flipped: bool = False
+    widening: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -127,33 +144,68 @@ def rotation_chi2(rotation: np.ndarray, reference: np.ndarray, cov: np.ndarray) 
         return math.inf
 
 
-def widened(pose: PoseResult, other_rotation: np.ndarray) -> PoseResult:
-    """``pose`` (a branch of an ambiguous frame) with its covariance widened along the rotation that
-    leads to the other branch (``other_rotation``, (3, 3)): the corners' chi-square rises by only
-    d = |mirror_chi2 - chi2| over that turn of D radians, so along it the pose is known to about
+def widening(pose: PoseResult, other_rotation: np.ndarray) -> np.ndarray | None:
+    """What :func:`widened` adds to ``pose``'s rotation covariance (3, 3) rad^2 (the small rotation
+    w of the camera frame, as :func:`qrfield.stream.poses.vector_cov`), or None when nothing: the
+    corners' chi-square rises by only d = |mirror_chi2 - chi2| over the turn of D radians to the
+    other branch (``other_rotation``, (3, 3)), so along it the pose is known to about
     D / sqrt(max(d, 1)), whatever the linearised covariance says (docs/uncertainty.md: the std of
-    an ambiguous pose does not describe its error). The variance along that direction is raised to
-    that, the rest of ``pose_cov`` kept; the std fields follow."""
-    from qrfield.solvers.uncertainty import pose_std
-    from qrfield.stream.poses import angles_cov
-
+    an ambiguous pose does not describe its error); the variance along that direction is raised
+    to that."""
     cov = vector_cov(pose)
     if cov is None:
-        return pose
+        return None
     turn = rotation_vector(np.asarray(other_rotation, dtype=float) @ np.asarray(pose.rotation, dtype=float).T)
     angle = float(np.linalg.norm(turn))
     if angle < 1e-12:
-        return pose
+        return None
     axis = turn / angle
     rise = abs(float(pose.mirror_chi2) - float(pose.chi2))
     wanted = angle * angle / max(rise if math.isfinite(rise) else 1.0, 1.0)
     have = float(axis @ cov[3:, 3:] @ axis)
-    if have >= wanted:
+    return None if have >= wanted else (wanted - have) * np.outer(axis, axis)
+
+
+def with_rotation_cov(pose: PoseResult, extra: np.ndarray | None) -> PoseResult:
+    """``pose`` with ``extra`` (3, 3) rad^2 added to its rotation covariance (the rest of
+    ``pose_cov`` kept; the std fields follow); ``pose`` itself when ``extra`` is None."""
+    from qrfield.solvers.uncertainty import pose_std
+    from qrfield.stream.poses import angles_cov
+
+    cov = vector_cov(pose)
+    if extra is None or cov is None:
         return pose
-    cov[3:, 3:] += (wanted - have) * np.outer(axis, axis)
+    cov[3:, 3:] += extra
     pose_cov = angles_cov(cov, pose.angles_deg)
     position_std, angles_std = pose_std(pose_cov)
     return replace(pose, pose_cov=pose_cov, position_std_mm=position_std, angles_std_deg=angles_std)
+
+
+def widened(pose: PoseResult, other_rotation: np.ndarray) -> PoseResult:
+    """``pose`` (a branch of an ambiguous frame, or of one near the fold) with its covariance
+    widened along the rotation that leads to the other branch (:func:`widening`)."""
+    return with_rotation_cov(pose, widening(pose, other_rotation))
+
+
+def near_fold_widening(
+    pose: PoseResult, reflected: Callable[[PoseResult], np.ndarray | None] | None = None
+) -> np.ndarray | None:
+    """The :func:`widening` of an unambiguous ``pose`` near the fold (its mirror within
+    NEAR_FOLD_CHI2 of it), towards its mirror candidate (``alternative``) or, without one, the
+    reflected plane's rotation (``reflected``); None for any other pose. Near the fold the corners'
+    chi-square along the turn between the branches is far from the quadratic the linearised
+    covariance assumes (the branches merge there), so the rise d over the whole turn is the
+    better measure of what the corners decide along it."""
+    from qrfield.solvers.mirror import has_mirror
+
+    rise = float(pose.mirror_chi2) - float(pose.chi2)
+    if not (math.isfinite(rise) and rise < NEAR_FOLD_CHI2):
+        return None
+    if has_mirror(pose):
+        return widening(pose, pose.alternative.rotation)
+    if reflected is not None and (plane := reflected(pose)) is not None:
+        return widening(pose, plane)
+    return None
 
 
 class BranchHistory:
@@ -194,9 +246,11 @@ class BranchHistory:
         if not usable_pose(pose):
             return Decision(pose, BY_FRAME, bool(pose.ambiguous))
         if not pose.ambiguous:
-            if self.enabled:
-                self._remember(pose, t_ms, text)
-            return Decision(pose, BY_FRAME, False)
+            if not self.enabled:
+                return Decision(pose, BY_FRAME, False)
+            self._remember(pose, t_ms, text)
+            extra = near_fold_widening(pose, reflected)
+            return Decision(with_rotation_cov(pose, extra), BY_FRAME, False, widening=extra)
         last = self._usable(pose, t_ms, text) if self.enabled else None
         if last is None:
             return Decision(pose, BY_FRAME, True)
@@ -207,11 +261,13 @@ class BranchHistory:
         # ambiguous run had); the pose reported carries the covariance widened towards the other branch.
         self._remember(chosen, t_ms, text)
         other = pose if flipped else self._other
+        extra = None
         if other is not None:
-            chosen = widened(chosen, other.rotation)
+            extra = widening(chosen, other.rotation)
         elif reflected is not None and (plane := reflected(chosen)) is not None:
-            chosen = widened(chosen, plane)
-        return Decision(replace(chosen, ambiguous=False), BY_HISTORY, False, flipped)
+            extra = widening(chosen, plane)
+        chosen = with_rotation_cov(chosen, extra)
+        return Decision(replace(chosen, ambiguous=False), BY_HISTORY, False, flipped, extra)
 
     # ------------------------------------------------------------------ the rule
     def _usable(self, pose: PoseResult, t_ms: int, text: str | None) -> _Record | None:

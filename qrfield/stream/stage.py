@@ -15,7 +15,10 @@ method's PoseResult in ``FrameResult.poses`` by the one to report:
 
 It records per method a :class:`StreamMark` in ``FrameResult.stream`` (``resolved_by``,
 ``filtered``) and keeps the frame's own solver results in ``FrameResult.frame_poses``. A single
-frame (no history, filter off or just started) comes out exactly as the solvers made it.
+frame (no history, filter off or just started) comes out as the solvers made it: the same pose,
+branch and flag, and the same std unless its mirror fits within NEAR_FOLD_CHI2 with continuity
+on, where the std is widened towards the mirror (:func:`qrfield.stream.continuity.near_fold_widening`;
+near the fold the linearised std of the tilt is several times too small, docs/uncertainty.md).
 """
 
 from __future__ import annotations
@@ -30,7 +33,7 @@ from qrfield.solvers.registry import uses_depth_model
 from qrfield.solvers.result import PoseResult
 from qrfield.status import usable_pose
 from qrfield.stream.continuity import BY_FRAME, BranchHistory
-from qrfield.stream.kalman import PoseFilter
+from qrfield.stream.kalman import PoseFilter, shared_scale
 from qrfield.stream.poses import moved_result, vector_cov
 from qrfield.stream.settings import StreamSettings
 
@@ -53,6 +56,20 @@ class StreamMark:
     frame_ambiguous: bool
     flipped: bool = False
     reset: str = ""
+
+
+def shared_widening(cov: np.ndarray, decision: Any) -> np.ndarray:
+    """The filter's covariance ``cov`` (6, 6) over (x, y, z mm, w rad) with the frame's widening
+    towards its other branch (``decision.widening``, continuity's) counted as shared in full: the
+    filter already reports the shared share rho of the frames' variance (qrfield.stream.kalman),
+    and takes the rest for noise it averages away; near the fold the error along the turn between
+    the branches stays with the view, so (1 - rho) of the widening is added back."""
+    extra = getattr(decision, "widening", None)
+    if extra is None:
+        return cov
+    out = np.array(cov, dtype=float)
+    out[3:, 3:] += (1.0 - shared_scale()[3] ** 2) * np.asarray(extra, dtype=float)
+    return out
 
 
 class _MethodStream:
@@ -129,7 +146,12 @@ class StreamStage:
                 estimate = state.filter.update(out.rotation, out.position_mm, cov, result.t_ms, text)
                 if estimate.filtered:
                     out = moved_result(
-                        out, estimate.rotation, estimate.position_mm, estimate.cov, camera, side_mm
+                        out,
+                        estimate.rotation,
+                        estimate.position_mm,
+                        shared_widening(estimate.cov, decision),
+                        camera,
+                        side_mm,
                     )
                 filtered, reset = estimate.filtered, estimate.reset
         result.poses[name] = out

@@ -46,3 +46,39 @@ def test_the_status_line_is_never_cut(qtbot, size) -> None:
     picture = view.mapFromScene(view.image_item.mapToScene(view.image_item.boundingRect())).boundingRect()
     inside = view.rect().intersected(picture).adjusted(-1, -1, 1, 1)
     assert inside.contains(shown), (shown, inside)
+
+
+def test_the_status_lines_wrap_width_never_feeds_back_into_itself(qtbot) -> None:
+    """Setting the info line's wrap width moves the item; where that changes the view's transform,
+    the transform's signal sets the width again. A full suite once spun five minutes in that loop
+    (ui.preview resizeEvent -> _fit_info). Here every wrap width set changes the transform at once:
+    the loop must end after the width stops changing, and the info line never moves the view's
+    range before a picture is shown (the range follows the items then)."""
+    view = PreviewView()
+    qtbot.addWidget(view)
+    view.resize(500, 300)
+    view.show()
+    qtbot.wait(50)
+    before = view.view.viewRange()
+    view.show_info("SIM  19.5 fps  latency 62 ms (detect 41, solve 12.4)  #12345  3 behind " * 3)
+    qtbot.wait(50)
+    assert view.view.viewRange() == before  # the info line does not count in the view's bounds
+    text = view.info.textItem
+    real = text.setTextWidth
+    calls: list[float] = []
+
+    def set_and_move(width: float) -> None:
+        calls.append(width)
+        assert len(calls) < 50, "the wrap width keeps being set"
+        real(width)
+        view.view.sigTransformChanged.emit(view.view)  # what a transform that follows would do
+
+    text.setTextWidth = set_and_move
+    try:
+        view.resize(420, 300)
+        qtbot.wait(50)
+        view.resize(640, 360)
+        qtbot.wait(50)
+    finally:
+        del text.setTextWidth  # Qt's own again before the widget goes
+    assert 1 <= len(calls) < 50
