@@ -30,6 +30,7 @@ from qrfield.serial.link import SerialLinkSettings
 from qrfield.solvers import settings_classes
 from qrfield.sources import Picamera2Settings, VirtualBenchSettings
 from qrfield.stream import StreamSettings
+from ui import gui_gc
 from ui.analysis_tab import AnalysisTab
 from ui.calibration_dialog import CalibrationDialog, CalibrationDialogSettings
 from ui.controls import (
@@ -110,6 +111,7 @@ class MainWindow(QtWidgets.QMainWindow):
         super().__init__()
         install_wheel_guard()  # before any control is polished (see ui/wheel_guard.py)
         install_touch_style()  # every touch target 44 px high (ui/touch.py)
+        gui_gc.hold(self)  # garbage with Qt objects is never collected on the worker (ui/gui_gc.py)
         self.setWindowTitle("qrfield — bench")
         self.store = store
         stored: RunSettings = store.group("run", RunSettings)
@@ -705,6 +707,8 @@ class MainWindow(QtWidgets.QMainWindow):
         self.session_panel.shutdown()
         self.analysis_tab.shutdown()
         self.camera_controls.report.shutdown()
+        if self.worker_stopped:  # a loop left running keeps the collection on this thread
+            gui_gc.release(self)
 
     def showEvent(self, event: QtGui.QShowEvent) -> None:
         super().showEvent(event)
