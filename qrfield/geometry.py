@@ -143,6 +143,16 @@ def marker_vertices(side_mm: float) -> np.ndarray:
     return np.array([[-h, -h, 0.0], [h, -h, 0.0], [h, h, 0.0], [-h, h, 0.0]])
 
 
+def shortest_module_px(corners_px: np.ndarray, modules: int) -> float:
+    """The module's size (px) along the shortest side of the quadrilateral ``corners_px`` (4, 2) px,
+    V1..V4 in order, of a code of ``modules`` per side: what a code seen at a steep angle resolves."""
+    corners = np.asarray(corners_px, dtype=np.float64)
+    if corners.shape != (4, 2):
+        raise ValueError(f"corners_px must be (4, 2) (V1..V4), got {corners.shape}")
+    sides = np.linalg.norm(np.roll(corners, -1, axis=0) - corners, axis=1)
+    return float(sides.min()) / max(int(modules), 1)
+
+
 def transform_points(rotation: np.ndarray, translation: np.ndarray, points: np.ndarray) -> np.ndarray:
     """p = R @ q + t for points (..., N, 3) with R (..., 3, 3), t (..., 3)."""
     r = _as_rotation(rotation)

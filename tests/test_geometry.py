@@ -124,3 +124,13 @@ def test_shape_errors_say_what_is_wrong():
         marker_vertices(0.0)
     with pytest.raises(ValueError, match="6 comma-separated"):
         Pose.parse("1,2,3")
+
+
+def test_shortest_module_px_is_the_shortest_side_over_the_modules():
+    # A 30 x 12 px parallelogram-like quad of 25 modules: the short side 12 px, so 0.48 px a module.
+    corners = np.array([[0.0, 0.0], [30.0, 0.0], [30.0, 12.0], [0.0, 12.0]])
+    from qrfield.geometry import shortest_module_px
+
+    assert shortest_module_px(corners, 25) == pytest.approx(12.0 / 25)
+    with pytest.raises(ValueError, match=r"\(4, 2\)"):
+        shortest_module_px(corners[:3], 25)

@@ -15,6 +15,7 @@ from qrfield.detect.patterns import PatternCheck, best_module_count, check_patte
 from qrfield.detect.refine import refine_corners
 from qrfield.detect.symbol import decoded_cells, fixed_cells, verified_matrix
 from qrfield.detect.symbol_fit import FitState, fit_symbol
+from qrfield.geometry import shortest_module_px
 from qrfield.settings import validated
 
 
@@ -156,13 +157,6 @@ def same_code(a: np.ndarray, b: np.ndarray) -> bool:
     size_b = float(np.linalg.norm(b[2] - b[0]))
     close = np.linalg.norm(a.mean(axis=0) - b.mean(axis=0)) < 0.2 * max(size_a, size_b)
     return bool(close and 0.7 < size_a / max(size_b, 1e-9) < 1.0 / 0.7)
-
-
-def shortest_module_px(corners: np.ndarray, modules: int) -> float:
-    """The module's size (px) along the shortest side of the quadrilateral ``corners`` (4, 2) px,
-    V1..V4 in order, of a code of ``modules`` per side."""
-    sides = np.linalg.norm(corners - np.roll(corners, -1, axis=0), axis=1)
-    return float(sides.min()) / max(int(modules), 1)
 
 
 class Detector:

@@ -34,6 +34,7 @@ from qrfield.detect.lens import Lens
 from qrfield.detect.symbol import QUIET_RINGS
 from qrfield.detect.symbol_fit import START_EDGE_PX, FitState, SymbolFit, polish
 from qrfield.detect.symbol_track import WarmFit
+from qrfield.geometry import shortest_module_px
 
 #: Template points, Gauss-Newton steps (at most) and the move (px) below which a stage has settled.
 COARSE_POINTS = 400
@@ -84,8 +85,7 @@ def coarse_fit(
     n = cells.shape[0] - 2 * QUIET_RINGS
     # The module along the code's shortest side: a code seen at a steep angle has modules several
     # times as long one way as the other, and a blur sized by the long way washes out the short.
-    sides = np.linalg.norm(np.roll(corners_px, -1, axis=0) - corners_px, axis=1)
-    module_px = float(sides.min()) / n
+    module_px = shortest_module_px(corners_px, n)
     edge = max(1.5, 0.35 * module_px, START_EDGE_PX)
     start = FitState(edge, np.array([light, 0.0, 0.0, light - dark, 0.0, 0.0]))
     warm = WarmFit(cells, lens, COARSE_POINTS)

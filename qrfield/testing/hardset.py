@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from qrfield.camera import CameraModel
-from qrfield.geometry import Pose, marker_vertices
+from qrfield.geometry import Pose, marker_vertices, shortest_module_px
 
 #: A lens with visible barrel distortion (k1, k2, p1, p2, k3), typical of a wide Pi camera; the
 #: solver tests use it too (tests/solver_cases.DISTORTED).
@@ -266,8 +266,7 @@ def _lattice(count: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _module_px(corners: np.ndarray, n: int) -> float:
-    sides = np.linalg.norm(np.roll(corners, -1, axis=0) - corners, axis=1)
-    return float(sides.min()) / n
+    return shortest_module_px(corners, n)
 
 
 def true_corners(camera: CameraModel, pose: Pose, side_mm: float) -> np.ndarray:
