@@ -202,3 +202,63 @@ def test_the_filter_counts_a_frames_widening_as_shared_in_full() -> None:
     assert np.allclose(out[:3, :3], base[:3, :3]) and np.allclose(out[:3, 3:], 0.0)
     assert np.allclose(out[3:, 3:], base[3:, 3:] + (1.0 - rho) * extra)
     assert shared_widening(base, Decision(solved(0, 0.03), "frame", False)) is base
+
+
+def _tilt_plane_floor(frame) -> tuple[np.ndarray, float]:
+    """(the unit line of sight to the code's centre, the variance turn^2 / max(d, 1) every tilt
+    direction must reach), by hand: the turn between the frame's two branches and the rise d of
+    the chi-square to the mirror in the units of the answer's own fit (chi2 over its 2 degrees of
+    freedom, when above 1)."""
+    from qrfield.geometry import rotation_vector
+
+    turn = rotation_vector(frame.alternative.rotation @ frame.rotation.T)
+    rise = (frame.mirror_chi2 - frame.chi2) / max(1.0, frame.chi2 / 2.0)
+    sight = frame.position_mm / np.linalg.norm(frame.position_mm)
+    return sight, float(turn @ turn) / max(rise, 1.0)
+
+
+def _least_tilt_variance(rotation_cov: np.ndarray, sight: np.ndarray) -> float:
+    """The smallest variance of ``rotation_cov`` (3, 3) over the directions perpendicular to ``sight``."""
+    a = np.cross(sight, [1.0, 0.0, 0.0] if abs(sight[0]) < 0.9 else [0.0, 1.0, 0.0])
+    a /= np.linalg.norm(a)
+    basis = np.column_stack([a, np.cross(sight, a)])
+    return float(np.linalg.eigvalsh(basis.T @ rotation_cov @ basis)[0])
+
+
+def test_near_the_fold_every_direction_of_tilt_is_widened_not_only_the_turn() -> None:
+    """Near the fold the tilt is as poorly known across the turn to the mirror as along it: every
+    direction of tilt (perpendicular to the line of sight) gets at least turn^2 / d, also where
+    the frame's own covariance was thinner than that across the turn; the roll about the line of
+    sight keeps the frame's variance."""
+    from qrfield.stream.poses import vector_cov
+
+    thin = 0
+    for index, (seed, method) in enumerate(_near_fold_seeds(8)):
+        result = frame_result(solved(seed, 0.03, method), index, 0, noise_px=0.03)
+        frame = result.poses[method]
+        StreamStage().apply(result, SIDE_MM, result.detection.pose_cov)
+        sight, wanted = _tilt_plane_floor(frame)
+        own = vector_cov(frame)[3:, 3:]
+        reported = vector_cov(result.poses[method])[3:, 3:]
+        thin += _least_tilt_variance(own, sight) < 0.5 * wanted
+        assert _least_tilt_variance(reported, sight) >= 0.999 * wanted
+        assert float(sight @ reported @ sight) >= float(sight @ own @ sight) * (1.0 - 1e-9)
+    assert thin >= 4  # the cases do test the directions the turn alone would have left thin
+
+
+def test_a_poor_fit_counts_the_rise_to_the_mirror_in_its_own_units() -> None:
+    """A frame whose answer fits the corners worse than their covariance allows (chi2 above its 2
+    degrees of freedom) has its rise to the mirror divided by chi2 / 2 before the near-fold test:
+    a rise of 1.5 NEAR_FOLD_CHI2 is near the fold at chi2 = 10 (rise / 5), not at chi2 = 1."""
+    from dataclasses import replace
+
+    from qrfield.stream.continuity import NEAR_FOLD_CHI2
+
+    seed, method = _near_fold_seeds(1)[0]
+    frame = solved(seed, 0.03, method)
+    for chi2, near in ((10.0, True), (1.0, False)):
+        pose = replace(frame, chi2=chi2, mirror_chi2=chi2 + 1.5 * NEAR_FOLD_CHI2)
+        result = frame_result(pose, 0, 0, noise_px=0.03)
+        StreamStage().apply(result, SIDE_MM, result.detection.pose_cov)
+        widened = not np.array_equal(result.poses[method].angles_std_deg, pose.angles_std_deg)
+        assert widened == near

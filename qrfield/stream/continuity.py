@@ -25,10 +25,11 @@ keeps the last resolved pose (unambiguous, or resolved by history) and decides a
 4. otherwise the frame stays ambiguous (AMBIG on a live camera) and the history is kept as it was.
 
 An unambiguous frame resets the history to itself; so does a resolved one. Both are reported with
-their covariance widened towards the other branch where the branches are close (a resolved frame
-always, an unambiguous one when its mirror fits within NEAR_FOLD_CHI2: :func:`near_fold_widening`):
-near the fold of the planar ambiguity the linearised std of the tilt is several times too small
-(docs/uncertainty.md, "Near the fold"). The history itself predicts from the unwidened poses. A
+their covariance widened in the tilt plane where the branches are close (a resolved frame always,
+an unambiguous one when its mirror fits within NEAR_FOLD_CHI2: :func:`near_fold_widening`): near
+the fold of the planar ambiguity the linearised std of the tilt is several times too small, in
+the direction of the turn to the other branch and across it (docs/uncertainty.md, "Near the
+fold"). The history itself predicts from the unwidened poses. A
 frame without a pose leaves the history to age. What the history chose is the mirror's own full result
 (:func:`qrfield.solvers.mirror.mirror_result`: its pose, std and reprojection), never the answer's
 numbers under the mirror's name.
@@ -66,14 +67,18 @@ CONSISTENT_CHI2 = 16.27
 #: Two branches closer than this (chi-square of the rotation between them, under their
 #: covariance) are one pose: whichever is reported, it moves by less than its own std.
 SAME_POSE_CHI2 = 1.0
-#: An unambiguous frame whose mirror fits within this of its answer (mirror_chi2 - chi2, between
+#: An unambiguous frame whose mirror fits within this of its answer (:func:`fold_rise`, between
 #: FLIP_DELTA_CHI2 and this) is near the fold of the planar ambiguity, where the linearised std
-#: of its tilt is too small: its covariance is widened towards the mirror as a resolved frame's
+#: of its tilt is too small: its covariance is widened in the tilt plane as a resolved frame's
 #: is (:func:`widened`). Tuned on the stream benchmark's seeds 1 and 2 (docs/uncertainty.md,
-#: "Near the fold"): there, unflagged frames 4-8 degrees off with a std of 0.5-1 degree had
-#: mirror_chi2 - chi2 of 9-23; cards tilted away (steady turn) are calibrated and their mirror
-#: is hundreds away.
-NEAR_FOLD_CHI2 = 36.0
+#: "Near the fold"): there, with 36, a run of unflagged frames 2-4 degrees off with a std of
+#: 0.3-1 degree had a rise of 42-69 (a true tilt of 2 degrees measured as 4-6); cards tilted
+#: away (steady turn) are calibrated and their mirror is 368 and more away.
+NEAR_FOLD_CHI2 = 100.0
+#: The degrees of freedom of a branch's chi-square (8 corner coordinates, 6 pose parameters): the
+#: rise to the mirror is counted in the units of the answer's own fit, chi2 / FIT_DOF when that is
+#: above 1 (:func:`fold_rise`).
+FIT_DOF = 2.0
 #: The same card: its centre moved by at most MAX_SHIFT_SIDES + MAX_SHIFT_SIDES_PER_S * dt code
 #: sides (mean side of V1..V4 in px) since the history's frame, and its size changed by less than
 #: the ratio MAX_SIZE_RATIO.
@@ -144,14 +149,32 @@ def rotation_chi2(rotation: np.ndarray, reference: np.ndarray, cov: np.ndarray) 
         return math.inf
 
 
+def fold_rise(pose: PoseResult) -> float:
+    """How much worse the mirror's branch fits the corners than the answer's, in the units the
+    answer's own fit shows: d = |mirror_chi2 - chi2| over max(1, chi2 / FIT_DOF) (the Birge ratio:
+    a fit worse than the corners' covariance allows says that covariance is too small for this
+    frame, by about that factor in variance, and the rise with it). inf when either chi-square is
+    unknown."""
+    rise = abs(float(pose.mirror_chi2) - float(pose.chi2))
+    if not math.isfinite(rise):
+        return math.inf
+    return rise / max(1.0, float(pose.chi2) / FIT_DOF)
+
+
 def widening(pose: PoseResult, other_rotation: np.ndarray) -> np.ndarray | None:
     """What :func:`widened` adds to ``pose``'s rotation covariance (3, 3) rad^2 (the small rotation
-    w of the camera frame, as :func:`qrfield.stream.poses.vector_cov`), or None when nothing: the
-    corners' chi-square rises by only d = |mirror_chi2 - chi2| over the turn of D radians to the
+    w of the camera frame, as :func:`qrfield.stream.poses.vector_cov`), or None when nothing.
+
+    The corners' chi-square rises by only d (:func:`fold_rise`) over the turn of D radians to the
     other branch (``other_rotation``, (3, 3)), so along it the pose is known to about
     D / sqrt(max(d, 1)), whatever the linearised covariance says (docs/uncertainty.md: the std of
-    an ambiguous pose does not describe its error); the variance along that direction is raised
-    to that."""
+    an ambiguous pose does not describe its error). Near the fold the other tilt, about the axis
+    across the turn (perpendicular to it and to the line of sight), is no better known: near
+    frontal a tilt's axis is set by the same weak foreshortening that sets its size. So the
+    covariance C is raised to at least F = D^2 / max(d, 1) in every direction of tilt (F is that
+    variance on the plane perpendicular to the line of sight, 0 along it): C + (F - C)+, the
+    positive part of F - C, so that a direction where C is thin gets F's variance whatever C's
+    axes are."""
     cov = vector_cov(pose)
     if cov is None:
         return None
@@ -159,11 +182,15 @@ def widening(pose: PoseResult, other_rotation: np.ndarray) -> np.ndarray | None:
     angle = float(np.linalg.norm(turn))
     if angle < 1e-12:
         return None
-    axis = turn / angle
-    rise = abs(float(pose.mirror_chi2) - float(pose.chi2))
+    rise = fold_rise(pose)
     wanted = angle * angle / max(rise if math.isfinite(rise) else 1.0, 1.0)
-    have = float(axis @ cov[3:, 3:] @ axis)
-    return None if have >= wanted else (wanted - have) * np.outer(axis, axis)
+    sight = np.asarray(pose.position_mm, dtype=float)
+    sight = sight / float(np.linalg.norm(sight))
+    floor = wanted * (np.eye(3) - np.outer(sight, sight))
+    values, vectors = np.linalg.eigh(floor - cov[3:, 3:])
+    if not np.any(values > 0.0):
+        return None
+    return (vectors * np.maximum(values, 0.0)) @ vectors.T
 
 
 def with_rotation_cov(pose: PoseResult, extra: np.ndarray | None) -> PoseResult:
@@ -198,8 +225,8 @@ def near_fold_widening(
     better measure of what the corners decide along it."""
     from qrfield.solvers.mirror import has_mirror
 
-    rise = float(pose.mirror_chi2) - float(pose.chi2)
-    if not (math.isfinite(rise) and rise < NEAR_FOLD_CHI2):
+    rise = fold_rise(pose)
+    if not rise < NEAR_FOLD_CHI2:
         return None
     if has_mirror(pose):
         return widening(pose, pose.alternative.rotation)

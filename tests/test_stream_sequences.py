@@ -1,0 +1,73 @@
+"""The stream on a drawn far card near frontal (modules of 1.4 px, qrfield/testing/sequences.py): no
+frame is confidently wrong with branch continuity or with the filter.
+
+Confidently wrong, as issue 25 states it: not flagged ambiguous, and an angle more than 2 degrees
+and more than 4 of its stated std from the drawn truth (or the position more than 5 mm and a
+coordinate 4 std off). The window (frames 120-145 of seed 2) holds a run of frames whose tilt is
+3-4 degrees off on the right branch while their mirror fits 40-60 worse: before the widening of
+the tilt plane near the fold (docs/uncertainty.md, "Near the fold") their std said under 1 degree.
+"""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+from qrfield.geometry import angle_difference
+from qrfield.methods import METHODS
+from qrfield.pipeline import Pipeline
+from qrfield.sources import Frame
+from qrfield.status import usable_pose
+from qrfield.stream import StreamSettings, StreamStage
+from qrfield.testing.sequences import FPS, make_sequence
+
+NAME, SEED, FIRST, COUNT = "frontal far 1.4 px", 2, 0, 146
+
+
+def _confidently_wrong(pose, truth) -> bool:
+    if pose.ambiguous:
+        return False
+    dp = pose.position_mm - truth.position_mm
+    da = angle_difference(pose.angles_deg, truth.angles_deg)
+    angle = bool(np.any((np.abs(da) > 2.0) & (np.abs(da) > 4.0 * pose.angles_std_deg)))
+    position = bool(np.linalg.norm(dp) > 5.0 and np.any(np.abs(dp) > 4.0 * pose.position_std_mm))
+    return angle or position
+
+
+@pytest.fixture(scope="module")
+def solved() -> tuple[list, float]:
+    """The window's frames solved each alone (continuity off, no filter), as a frame loop would."""
+    sequence = make_sequence(NAME, SEED, COUNT)
+    pipeline = Pipeline(sequence.camera, sequence.side_mm, METHODS, stream=StreamSettings(continuity=False))
+    out = []
+    for i in range(FIRST, COUNT):
+        image, pose = sequence.frames[i]
+        out.append(pipeline.process(Frame(image, 1000.0 + i / FPS, i, truth=pose)))
+    return out, sequence.side_mm
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "settings",
+    [StreamSettings(), StreamSettings(filter_s=0.2), StreamSettings(filter_s=0.5)],
+    ids=["continuity", "filter 0.2 s", "filter 0.5 s"],
+)
+def test_no_frame_of_a_far_frontal_card_is_confidently_wrong(solved, settings) -> None:
+    results, side = solved
+    stage = StreamStage(settings)
+    posed = wrong = 0
+    for result in results:
+        again = copy.copy(result)
+        again.poses = dict(result.frame_poses or result.poses)
+        again.stream = {}
+        if again.poses:
+            stage.apply(again, side, result.detection.pose_cov)
+        for method in METHODS:
+            pose = again.poses.get(method)
+            if usable_pose(pose):
+                posed += 1
+                wrong += _confidently_wrong(pose, result.truth)
+    assert posed >= len(results)  # the far card is found in every frame, by at least one method
+    assert wrong == 0
