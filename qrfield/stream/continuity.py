@@ -100,8 +100,8 @@ class Decision:
         resolved_by: BY_FRAME (the frame alone decided, or nothing was decided) or BY_HISTORY.
         ambiguous: the flip is unresolved after the history (= ``pose.ambiguous``).
         flipped: the history chose the mirror branch.
-        widening: what was added to the pose's rotation covariance along the turn to the other
-            branch ((3, 3) rad^2, :func:`widening`), None when nothing. It is an error the frames
+        widening: what was added to the pose's rotation covariance in the tilt plane near the
+            fold ((3, 3) rad^2, :func:`widening`), None when nothing. It is an error the frames
             near the fold share (the fold stays where the view is), so a filter must not average
             it away.
     """
@@ -210,7 +210,7 @@ def with_rotation_cov(pose: PoseResult, extra: np.ndarray | None) -> PoseResult:
 
 def widened(pose: PoseResult, other_rotation: np.ndarray) -> PoseResult:
     """``pose`` (a branch of an ambiguous frame, or of one near the fold) with its covariance
-    widened along the rotation that leads to the other branch (:func:`widening`)."""
+    widened in the tilt plane by the turn that leads to the other branch (:func:`widening`)."""
     return with_rotation_cov(pose, widening(pose, other_rotation))
 
 

@@ -17,7 +17,7 @@ It records per method a :class:`StreamMark` in ``FrameResult.stream`` (``resolve
 ``filtered``) and keeps the frame's own solver results in ``FrameResult.frame_poses``. A single
 frame (no history, filter off or just started) comes out as the solvers made it: the same pose,
 branch and flag, and the same std unless its mirror fits within NEAR_FOLD_CHI2 with continuity
-on, where the std is widened towards the mirror (:func:`qrfield.stream.continuity.near_fold_widening`;
+on, where the std of its tilt is widened (:func:`qrfield.stream.continuity.near_fold_widening`;
 near the fold the linearised std of the tilt is several times too small, docs/uncertainty.md).
 """
 
@@ -60,10 +60,10 @@ class StreamMark:
 
 def shared_widening(cov: np.ndarray, decision: Any) -> np.ndarray:
     """The filter's covariance ``cov`` (6, 6) over (x, y, z mm, w rad) with the frame's widening
-    towards its other branch (``decision.widening``, continuity's) counted as shared in full: the
+    near the fold (``decision.widening``, continuity's) counted as shared in full: the
     filter already reports the shared share rho of the frames' variance (qrfield.stream.kalman),
-    and takes the rest for noise it averages away; near the fold the error along the turn between
-    the branches stays with the view, so (1 - rho) of the widening is added back."""
+    and takes the rest for noise it averages away; near the fold the error of the tilt stays with
+    the view, so (1 - rho) of the widening is added back."""
     extra = getattr(decision, "widening", None)
     if extra is None:
         return cov
