@@ -72,7 +72,7 @@ SAME_POSE_CHI2 = 1.0
 #: of its tilt is too small: its covariance is widened in the tilt plane as a resolved frame's
 #: is (:func:`widened`). Tuned on the stream benchmark's seeds 1 and 2 (docs/uncertainty.md,
 #: "Near the fold"): there, with 36, a run of unflagged frames 2-4 degrees off with a std of
-#: 0.3-1 degree had a rise of 42-69 (a true tilt of 2 degrees measured as 4-6); cards tilted
+#: 0.3-1 degree had a rise of 36-69 (a true tilt of 2 degrees measured as 4-6); cards tilted
 #: away (steady turn) are calibrated and their mirror is 368 and more away.
 NEAR_FOLD_CHI2 = 100.0
 #: The degrees of freedom of a branch's chi-square (8 corner coordinates, 6 pose parameters): the
