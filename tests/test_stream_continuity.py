@@ -262,3 +262,25 @@ def test_a_poor_fit_counts_the_rise_to_the_mirror_in_its_own_units() -> None:
         StreamStage().apply(result, SIDE_MM, result.detection.pose_cov)
         widened = not np.array_equal(result.poses[method].angles_std_deg, pose.angles_std_deg)
         assert widened == near
+
+
+def test_near_the_fold_the_position_is_widened_along_the_way_to_the_mirror() -> None:
+    """The path to the mirror moves the position by dp while the chi-square rises by only d: the
+    reported position variance along dp is at least |dp|^2 / d (by hand from the two branches),
+    here for frames whose own position covariance is set far below that (1e-6 mm^2); the
+    rotation and the covariance between position and rotation are not touched by it."""
+    from dataclasses import replace
+
+    for index, (seed, method) in enumerate(_near_fold_seeds(4)):
+        frame = solved(seed, 0.03, method)
+        cov = np.array(frame.pose_cov)
+        cov[:3, :3] = 1e-6 * np.eye(3)
+        frame = replace(frame, pose_cov=cov)
+        result = frame_result(frame, index, 0, noise_px=0.03)
+        StreamStage().apply(result, SIDE_MM, result.detection.pose_cov)
+        reported = result.poses[method].pose_cov
+        step = frame.alternative.position_mm - frame.position_mm
+        rise = (frame.mirror_chi2 - frame.chi2) / max(1.0, frame.chi2 / 2.0)
+        unit = step / np.linalg.norm(step)
+        assert float(unit @ reported[:3, :3] @ unit) >= 0.999 * float(step @ step) / max(rise, 1.0)
+        assert np.allclose(reported[:3, 3:], cov[:3, 3:])

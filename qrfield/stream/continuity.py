@@ -44,6 +44,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from qrfield.geometry import rotation_from_vector, rotation_vector
+from qrfield.solvers.mirror import has_mirror
 from qrfield.solvers.result import PoseResult
 from qrfield.solvers.uncertainty import FLIP_DELTA_CHI2, FRAME_SHARED_SHARE
 from qrfield.status import usable_pose
@@ -104,6 +105,7 @@ class Decision:
             fold ((3, 3) rad^2, :func:`widening`), None when nothing. It is an error the frames
             near the fold share (the fold stays where the view is), so a filter must not average
             it away.
+        position_widening: the same for the position ((3, 3) mm^2, :func:`position_widening`).
     """
 
     pose: PoseResult
@@ -111,6 +113,7 @@ class Decision:
     ambiguous: bool
     flipped: bool = False
     widening: np.ndarray | None = None
+    position_widening: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -193,6 +196,37 @@ def widening(pose: PoseResult, other_rotation: np.ndarray) -> np.ndarray | None:
     return (vectors * np.maximum(values, 0.0)) @ vectors.T
 
 
+def position_widening(pose: PoseResult, other_position: np.ndarray) -> np.ndarray | None:
+    """What near the fold is added to ``pose``'s position covariance (3, 3) mm^2, or None when
+    nothing: the path to the other branch (at ``other_position``, (3,) mm) moves the position by
+    dp while the corners' chi-square rises by only d (:func:`fold_rise`), so along dp the position
+    is known to about |dp| / sqrt(max(d, 1)); the covariance is raised to at least
+    dp dp^T / max(d, 1) (the positive part of the difference, as :func:`widening`)."""
+    cov = np.asarray(pose.pose_cov, dtype=float)
+    step = np.asarray(other_position, dtype=float).reshape(3) - np.asarray(pose.position_mm, dtype=float)
+    if cov.shape != (6, 6) or not (np.all(np.isfinite(cov[:3, :3])) and np.all(np.isfinite(step))):
+        return None
+    rise = fold_rise(pose)
+    floor = np.outer(step, step) / max(rise if math.isfinite(rise) else 1.0, 1.0)
+    values, vectors = np.linalg.eigh(floor - cov[:3, :3])
+    if not np.any(values > 0.0):
+        return None
+    return (vectors * np.maximum(values, 0.0)) @ vectors.T
+
+
+def with_position_cov(pose: PoseResult, extra: np.ndarray | None) -> PoseResult:
+    """``pose`` with ``extra`` (3, 3) mm^2 added to its position covariance (the std fields
+    follow); ``pose`` itself when ``extra`` is None."""
+    from qrfield.solvers.uncertainty import pose_std
+
+    if extra is None:
+        return pose
+    pose_cov = np.array(pose.pose_cov, dtype=float)
+    pose_cov[:3, :3] += extra
+    position_std, angles_std = pose_std(pose_cov)
+    return replace(pose, pose_cov=pose_cov, position_std_mm=position_std, angles_std_deg=angles_std)
+
+
 def with_rotation_cov(pose: PoseResult, extra: np.ndarray | None) -> PoseResult:
     """``pose`` with ``extra`` (3, 3) rad^2 added to its rotation covariance (the rest of
     ``pose_cov`` kept; the std fields follow); ``pose`` itself when ``extra`` is None."""
@@ -223,8 +257,6 @@ def near_fold_widening(
     chi-square along the turn between the branches is far from the quadratic the linearised
     covariance assumes (the branches merge there), so the rise d over the whole turn is the
     better measure of what the corners decide along it."""
-    from qrfield.solvers.mirror import has_mirror
-
     rise = fold_rise(pose)
     if not rise < NEAR_FOLD_CHI2:
         return None
@@ -277,7 +309,11 @@ class BranchHistory:
                 return Decision(pose, BY_FRAME, False)
             self._remember(pose, t_ms, text)
             extra = near_fold_widening(pose, reflected)
-            return Decision(with_rotation_cov(pose, extra), BY_FRAME, False, widening=extra)
+            moved = None
+            if fold_rise(pose) < NEAR_FOLD_CHI2 and has_mirror(pose):
+                moved = position_widening(pose, pose.alternative.position_mm)
+            out = with_position_cov(with_rotation_cov(pose, extra), moved)
+            return Decision(out, BY_FRAME, False, widening=extra, position_widening=moved)
         last = self._usable(pose, t_ms, text) if self.enabled else None
         if last is None:
             return Decision(pose, BY_FRAME, True)
@@ -288,13 +324,14 @@ class BranchHistory:
         # ambiguous run had); the pose reported carries the covariance widened towards the other branch.
         self._remember(chosen, t_ms, text)
         other = pose if flipped else self._other
-        extra = None
+        extra = moved = None
         if other is not None:
             extra = widening(chosen, other.rotation)
+            moved = position_widening(chosen, other.position_mm)
         elif reflected is not None and (plane := reflected(chosen)) is not None:
             extra = widening(chosen, plane)
-        chosen = with_rotation_cov(chosen, extra)
-        return Decision(replace(chosen, ambiguous=False), BY_HISTORY, False, flipped, extra)
+        chosen = with_position_cov(with_rotation_cov(chosen, extra), moved)
+        return Decision(replace(chosen, ambiguous=False), BY_HISTORY, False, flipped, extra, moved)
 
     # ------------------------------------------------------------------ the rule
     def _usable(self, pose: PoseResult, t_ms: int, text: str | None) -> _Record | None:

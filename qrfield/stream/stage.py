@@ -65,10 +65,15 @@ def shared_widening(cov: np.ndarray, decision: Any) -> np.ndarray:
     and takes the rest for noise it averages away; near the fold the error of the tilt stays with
     the view, so (1 - rho) of the widening is added back."""
     extra = getattr(decision, "widening", None)
-    if extra is None:
+    moved = getattr(decision, "position_widening", None)
+    if extra is None and moved is None:
         return cov
     out = np.array(cov, dtype=float)
-    out[3:, 3:] += (1.0 - shared_scale()[3] ** 2) * np.asarray(extra, dtype=float)
+    scale = shared_scale()
+    if extra is not None:
+        out[3:, 3:] += (1.0 - scale[3] ** 2) * np.asarray(extra, dtype=float)
+    if moved is not None:
+        out[:3, :3] += (1.0 - scale[0] ** 2) * np.asarray(moved, dtype=float)
     return out
 
 
