@@ -189,8 +189,13 @@ def widening(pose: PoseResult, other_rotation: np.ndarray) -> np.ndarray | None:
     wanted = angle * angle / max(rise if math.isfinite(rise) else 1.0, 1.0)
     sight = np.asarray(pose.position_mm, dtype=float)
     sight = sight / float(np.linalg.norm(sight))
-    floor = wanted * (np.eye(3) - np.outer(sight, sight))
-    values, vectors = np.linalg.eigh(floor - cov[3:, 3:])
+    return _raise_to(wanted * (np.eye(3) - np.outer(sight, sight)), cov[3:, 3:])
+
+
+def _raise_to(floor: np.ndarray, cov: np.ndarray) -> np.ndarray | None:
+    """The positive part of ``floor - cov`` (both (3, 3)): what raises ``cov`` to at least
+    ``floor`` in every direction, whatever their axes; None when ``cov`` is already there."""
+    values, vectors = np.linalg.eigh(floor - cov)
     if not np.any(values > 0.0):
         return None
     return (vectors * np.maximum(values, 0.0)) @ vectors.T
@@ -207,11 +212,7 @@ def position_widening(pose: PoseResult, other_position: np.ndarray) -> np.ndarra
     if cov.shape != (6, 6) or not (np.all(np.isfinite(cov[:3, :3])) and np.all(np.isfinite(step))):
         return None
     rise = fold_rise(pose)
-    floor = np.outer(step, step) / max(rise if math.isfinite(rise) else 1.0, 1.0)
-    values, vectors = np.linalg.eigh(floor - cov[:3, :3])
-    if not np.any(values > 0.0):
-        return None
-    return (vectors * np.maximum(values, 0.0)) @ vectors.T
+    return _raise_to(np.outer(step, step) / max(rise if math.isfinite(rise) else 1.0, 1.0), cov[:3, :3])
 
 
 def with_position_cov(pose: PoseResult, extra: np.ndarray | None) -> PoseResult:
@@ -257,13 +258,25 @@ def near_fold_widening(
     chi-square along the turn between the branches is far from the quadratic the linearised
     covariance assumes (the branches merge there), so the rise d over the whole turn is the
     better measure of what the corners decide along it."""
-    rise = fold_rise(pose)
-    if not rise < NEAR_FOLD_CHI2:
+    if not near_fold(pose):
         return None
     if has_mirror(pose):
         return widening(pose, pose.alternative.rotation)
     if reflected is not None and (plane := reflected(pose)) is not None:
         return widening(pose, plane)
+    return None
+
+
+def near_fold(pose: PoseResult) -> bool:
+    """The pose's mirror fits within NEAR_FOLD_CHI2 of it (:func:`fold_rise`): near the fold."""
+    return fold_rise(pose) < NEAR_FOLD_CHI2
+
+
+def near_fold_position_widening(pose: PoseResult) -> np.ndarray | None:
+    """The :func:`position_widening` of an unambiguous ``pose`` near the fold towards its mirror
+    candidate's position; None for any other pose (or one without a distinct mirror candidate)."""
+    if near_fold(pose) and has_mirror(pose):
+        return position_widening(pose, pose.alternative.position_mm)
     return None
 
 
@@ -309,9 +322,7 @@ class BranchHistory:
                 return Decision(pose, BY_FRAME, False)
             self._remember(pose, t_ms, text)
             extra = near_fold_widening(pose, reflected)
-            moved = None
-            if fold_rise(pose) < NEAR_FOLD_CHI2 and has_mirror(pose):
-                moved = position_widening(pose, pose.alternative.position_mm)
+            moved = near_fold_position_widening(pose)
             out = with_position_cov(with_rotation_cov(pose, extra), moved)
             return Decision(out, BY_FRAME, False, widening=extra, position_widening=moved)
         last = self._usable(pose, t_ms, text) if self.enabled else None
