@@ -254,3 +254,30 @@ def test_a_far_card_with_small_modules_is_not_fitted_into_a_confident_bias():
     cov = np.asarray(found[0].corners_cov).reshape(4, 2, 2)
     whitened = [float(np.sqrt(e @ np.linalg.solve(c, e))) for e, c in zip(error, cov, strict=True)]
     assert max(whitened) < 3.0, (np.round(error, 3).tolist(), np.round(whitened, 2).tolist())
+
+
+def test_a_stage_without_its_covariance_lands_where_the_full_call_does(scenes):
+    """WarmFit.fit(covariance=False) (the cold fit's coarse and template stages, whose answers only
+    start the next stage): the same corners, edge width and lighting as the call with the
+    covariance, within a pixel of the truth from the backend's corners, and no covariance."""
+    from qrfield.detect.symbol_cold import coarse_fit
+
+    for camera, text, drawn in scenes:
+        truth, modules = drawn.corners[0], drawn.modules[0]
+        lens = Lens(camera)
+        candidate = _zxing_candidate(drawn.image, text)
+        rough = check_patterns(drawn.image, candidate.corners_px, modules, lens)
+        cells = decoded_cells(candidate.symbol)
+        quick = coarse_fit(drawn.image, candidate.corners_px, cells, lens, rough.light, rough.dark)
+        assert quick.ok and quick.corners_cov is None, text
+        # the same fit with and without its covariance
+        start = FitState(quick.state.edge_px, quick.state.lighting)
+        assert np.linalg.norm(quick.corners_px - truth, axis=1).max() < 0.5, text
+        image, begin = drawn.image, candidate.corners_px
+        a = WarmFit(cells, lens, 400).fit(image, begin, start, (0, 0), 2)
+        b = WarmFit(cells, lens, 400).fit(
+            drawn.image, candidate.corners_px, start, (0, 0), 2, covariance=False
+        )
+        assert a.ok and b.ok and a.corners_cov is not None and b.corners_cov is None
+        assert np.abs(a.corners_px - b.corners_px).max() < 1e-12
+        assert a.edge_px == b.edge_px and np.array_equal(a.state.lighting, b.state.lighting)

@@ -89,7 +89,7 @@ def coarse_fit(
     edge = max(1.5, 0.35 * module_px, START_EDGE_PX)
     start = FitState(edge, np.array([light, 0.0, 0.0, light - dark, 0.0, 0.0]))
     warm = WarmFit(cells, lens, COARSE_POINTS)
-    return warm.fit(grey, corners_px, start, offset, COARSE_ITERATIONS, COARSE_SETTLE_PX)
+    return warm.fit(grey, corners_px, start, offset, COARSE_ITERATIONS, COARSE_SETTLE_PX, covariance=False)
 
 
 def fine_fit(
@@ -116,7 +116,7 @@ def fine_fit(
     # is the module coordinates, this one's the image's).
     light = np.asarray(state.lighting, dtype=np.float64)
     begin = FitState(START_EDGE_PX, np.array([light[0], 0.0, 0.0, light[3], 0.0, 0.0]), state.scale)
-    fit = warm.fit(grey, corners_px, begin, offset, FINE_ITERATIONS, COARSE_SETTLE_PX)
+    fit = warm.fit(grey, corners_px, begin, offset, FINE_ITERATIONS, COARSE_SETTLE_PX, covariance=False)
     samples = warm.samples
     if not fit.ok or fit.state is None or samples is None:
         return fit

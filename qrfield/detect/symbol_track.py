@@ -344,6 +344,20 @@ class WarmFit:
             axis=1,
         )
 
+    def _corners(self, h: list[float]) -> np.ndarray | None:
+        """Corners V1..V4 (4, 2) through the homography ``h`` (9 floats) and, when distorted,
+        the lens (ideal pixels to the camera's); None when not finite."""
+        n = self.n
+        h00, h01, h02, h10, h11, h12, h20, h21, h22 = h
+        points = []
+        for u, v in ((0.0, 0.0), (n, 0.0), (n, n), (0.0, n)):
+            q = 1.0 / (h20 * u + h21 * v + h22)
+            points.append([(h00 * u + h01 * v + h02) * q, (h10 * u + h11 * v + h12) * q])
+        if not math.isfinite(sum(sum(p) for p in points)):
+            return None
+        corners = np.array(points)
+        return self.lens.distort(corners) if self.lens.distorted else corners
+
     def forget_template(self) -> None:
         """Make the template again at the next fit (whatever its scale)."""
         self._template = None
@@ -357,12 +371,15 @@ class WarmFit:
         offset: tuple[int, int] = (0, 0),
         iterations: int = 2,
         settle_px: float = 0.0,
+        covariance: bool = True,
     ) -> SymbolFit:
         """Corners V1..V4 (pixels of ``grey``, a crop at ``offset`` of the camera's image) from the
         predicted corners and the last frame's edge width and lighting; never raises for content.
 
         At most ``iterations`` Gauss-Newton steps; with ``settle_px`` > 0 it stops after a step
         that moved no corner by ``settle_px`` or more (a good prediction needs one step).
+        ``covariance`` False: ``corners_cov`` is None and the fit's ``residual`` NaN (a stage whose
+        answer only starts another: :mod:`qrfield.detect.symbol_cold`).
 
         The homography, its updates and the corners are kept in Python floats, and through a
         pinhole the crop's offset is folded into the homography (every tracked frame runs this:
@@ -477,10 +494,24 @@ class WarmFit:
             # (r - J delta, J = d model / d parameters): what the tracker's checks compare with
             # the track's reference (after one step from a prediction 0.5 px off the samples'
             # own residuals are half as large again).
-            fitted = max(1.4826 * float(np.partition(np.abs(resid - delta @ jac_t), half)[half]), 0.5)
             contrast = float(light[3])
             if abs(contrast) < MIN_CONTRAST:
                 return fail(f"too little contrast ({abs(contrast):.0f} grey levels)")
+            if not covariance:
+                corners = self._corners(h)
+                if corners is None:
+                    return fail("the fit diverged")
+                return SymbolFit(
+                    ok=True,
+                    corners_px=corners - (sx, sy) if distorted else corners,
+                    corners_cov=None,
+                    contrast=contrast,
+                    edge_px=edge,
+                    samples=k,
+                    iterations=done,
+                    state=FitState(edge, light, robust),
+                )
+            fitted = max(1.4826 * float(np.partition(np.abs(resid - delta @ jac_t), half)[half]), 0.5)
             # The corners (ideal pixels through a lens, else the crop's) and d corner / d module.
             h00, h01, h02, h10, h11, h12, h20, h21, h22 = h
             points, dpx = [], []
