@@ -288,37 +288,41 @@ def test_the_blur_aware_check_corrects_misread_modules_of_a_small_code():
 
 @pytest.mark.slow
 def test_the_cold_fit_of_a_far_card_at_small_modules_is_not_confidently_biased():
-    """The stream benchmark's "frontal far 1.4 px", seed 13, frame 0 (the hard set's rasteriser,
-    truth from its pose): the backend's matrix holds 9 misread modules and the plain check passed
-    4 of them, so the inverse-compositional cold fit settled with V3 (-0.14, -0.17) px off at a
-    std of (0.06, 0.03). Cold-fitted (its modules are over COLD_FIT_MIN_MODULE_PX), every corner
-    is within 3 of its stated std, and the detection's matrix holds no module the encoder did not
-    draw."""
+    """The stream benchmark's "frontal far 1.4 px", seed 13, frames 0, 2 and 3 (the hard set's
+    rasteriser, truth from its pose): the backend's matrix holds 9-18 misread modules and the
+    plain check passed 4-7 of them, so the inverse-compositional cold fit settled with V3 (-0.14,
+    -0.17) px off at a std of (0.06, 0.03) on frame 0. Cold-fitted (its modules are over
+    COLD_FIT_MIN_MODULE_PX), every corner is within 3 of its stated std, and the detection's matrix
+    holds no module the encoder did not draw (frame 0; at most one on frames 2 and 3). (On frames 2 and 3 the patterns check out at 0.90
+    at the fitted corners against 0.94-0.95 at the backend's: PATTERN_SLACK_BLURRED lets the fit
+    answer, where before the edge lines' corners were reported, without a covariance.)"""
     from qrfield.detect import detector as detector_module
     from qrfield.testing.hardset import true_corners
     from qrfield.testing.sequences import SEQUENCES, _symbol, make_sequence
 
     name, seed = "frontal far 1.4 px", 13
     assert detector_module.COLD_FIT_MIN_MODULE_PX <= 1.4
-    sequence = make_sequence(name, seed, 1)
-    image, pose = sequence.frames[0]
+    sequence = make_sequence(name, seed, 4)
     truth_matrix = _symbol(np.random.default_rng([seed, 25, list(SEQUENCES).index(name)]), SEQUENCES[name][1])
-    detector = Detector(camera=sequence.camera)
-    colds = []
-    refine_cold = detector.refine_cold
+    for frame in (0, 2, 3):
+        image, pose = sequence.frames[frame]
+        detector = Detector(camera=sequence.camera)
+        colds = []
+        refine_cold = detector.refine_cold
 
-    def recorded(*args):
-        colds.append(refine_cold(*args))
-        return colds[-1]
+        def recorded(*args, refine_cold=refine_cold, colds=colds):
+            colds.append(refine_cold(*args))
+            return colds[-1]
 
-    detector.refine_cold = recorded  # type: ignore[method-assign]
-    found = detector.detect(image)
-    assert len(colds) == 1 and colds[0] is not None  # the cold fit gave the answer
-    assert len(found) == 1 and found[0].refined and found[0].corners_cov is not None
-    error = found[0].corners_px - true_corners(sequence.camera, pose, sequence.side_mm)
-    cov = np.asarray(found[0].corners_cov).reshape(4, 2, 2)
-    whitened = [float(np.sqrt(e @ np.linalg.solve(c, e))) for e, c in zip(error, cov, strict=True)]
-    assert max(whitened) < 3.0, (np.round(error, 3).tolist(), np.round(whitened, 2).tolist())
-    matrix = np.asarray(found[0].symbol, dtype=np.float64)
-    known = np.isfinite(matrix)
-    assert known.mean() > 0.95 and np.array_equal(matrix[known] > 0.5, truth_matrix[known])
+        detector.refine_cold = recorded  # type: ignore[method-assign]
+        found = detector.detect(image)
+        assert len(colds) == 1 and colds[0] is not None, frame  # the cold fit gave the answer
+        assert len(found) == 1 and found[0].refined and found[0].corners_cov is not None
+        error = found[0].corners_px - true_corners(sequence.camera, pose, sequence.side_mm)
+        cov = np.asarray(found[0].corners_cov).reshape(4, 2, 2)
+        whitened = [float(np.sqrt(e @ np.linalg.solve(c, e))) for e, c in zip(error, cov, strict=True)]
+        assert max(whitened) < 3.0, (frame, np.round(error, 3).tolist(), np.round(whitened, 2).tolist())
+        matrix = np.asarray(found[0].symbol, dtype=np.float64)
+        known = np.isfinite(matrix)
+        wrong = int(np.sum(known & ((matrix > 0.5) != truth_matrix)))
+        assert known.mean() > 0.95 and wrong <= (0 if frame == 0 else 1), (frame, wrong)
