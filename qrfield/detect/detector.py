@@ -68,8 +68,8 @@ COLD_FIT_MIN_MODULE_PX = 1.2
 BLUR_CHECK_MODULE_PX = 2.0
 #: How much worse (pattern score) a code under BLUR_CHECK_MODULE_PX may check out at the cold fit's
 #: corners than at the backend's (0.02 above): at 1.4 px the score at the backend's corners was
-#: 0.93-0.95 and at corners within 0.03 px of the truth 0.90, and the gate sent 40 % of the frames
-#: of a far frontal card to the full fit, whose own gate refused them too.
+#: 0.93-0.95 and at corners within 0.03 px of the truth 0.90, and the gate sent 35 of 82 cold
+#: frames of a far frontal card to the full fit, whose own gate refused them too.
 PATTERN_SLACK_BLURRED = 0.05
 
 
