@@ -292,10 +292,11 @@ def test_the_cold_fit_of_a_far_card_at_small_modules_is_not_confidently_biased()
     rasteriser, truth from its pose): the backend's matrix holds 9-18 misread modules and the
     plain check passed 4-7 of them, so the inverse-compositional cold fit settled with V3 (-0.14,
     -0.17) px off at a std of (0.06, 0.03) on frame 0. Cold-fitted (its modules are over
-    COLD_FIT_MIN_MODULE_PX), every corner is within 3 of its stated std, and the detection's matrix
-    holds no module the encoder did not draw (frame 0; at most one on frames 2 and 3). (On frames 2 and 3 the patterns check out at 0.90
-    at the fitted corners against 0.94-0.95 at the backend's: PATTERN_SLACK_BLURRED lets the fit
-    answer, where before the edge lines' corners were reported, without a covariance.)"""
+    COLD_FIT_MIN_MODULE_PX), every corner is within 3 of its stated std, and the detection's
+    matrix holds no module the encoder did not draw (frame 0; at most one on frames 2 and 3).
+    On frames 2 and 3 the patterns check out at 0.90 at the fitted corners against 0.94-0.95 at
+    the backend's: PATTERN_SLACK_BLURRED lets the fit answer, where before corners without a
+    covariance were reported."""
     from qrfield.detect import detector as detector_module
     from qrfield.testing.hardset import true_corners
     from qrfield.testing.sequences import SEQUENCES, _symbol, make_sequence
