@@ -13,7 +13,13 @@ from qrfield.detect.detection import Detection, DetectorSettings, quality_of
 from qrfield.detect.lens import Lens, module_points_px
 from qrfield.detect.patterns import PatternCheck, best_module_count, check_patterns
 from qrfield.detect.refine import refine_corners
-from qrfield.detect.symbol import decoded_cells, fixed_cells, verified_matrix
+from qrfield.detect.symbol import (
+    QUIET_RINGS,
+    blur_verified_matrix,
+    decoded_cells,
+    fixed_cells,
+    verified_matrix,
+)
 from qrfield.detect.symbol_fit import FitState, fit_symbol
 from qrfield.geometry import shortest_module_px
 from qrfield.settings import validated
@@ -51,9 +57,20 @@ UNREFINED_QUALITY_FACTOR = 0.5
 UNREFINED_MIN_SCORE = 0.7
 #: Smallest module (px, along the code's shortest side) whose cold detection takes the
 #: inverse-compositional fit (:meth:`Detector.refine_cold`); smaller modules take the edge lines
-#: and the full fit. Below it the cold fit settled with V3 0.2 px off in every frame of a far
-#: frontal card at 1.4 px modules, stated std 0.03-0.08 px (docs/detection.md, "Cold detection").
-COLD_FIT_MIN_MODULE_PX = 2.0
+#: and the full fit. (The smallest the backends read; below BLUR_CHECK_MODULE_PX the decoded
+#: matrix is checked with the blur modelled.)
+COLD_FIT_MIN_MODULE_PX = 1.2
+#: Below this module (px, along the shortest side) the cold fit's matrix is checked with the blur
+#: modelled (:func:`blur_confirmed`), misread modules corrected, at the coarse corners and again at
+#: the fitted ones: the plain check passed misread modules of a far frontal card at 1.4 px, and
+#: the fit settled with V3 0.15-0.2 px off at a std of 0.03-0.06 px in every frame
+#: (docs/detection.md, "Cold detection").
+BLUR_CHECK_MODULE_PX = 2.0
+#: How much worse (pattern score) a code under BLUR_CHECK_MODULE_PX may check out at the cold fit's
+#: corners than at the backend's (0.02 above): at 1.4 px the score at the backend's corners was
+#: 0.93-0.95 and at corners within 0.03 px of the truth 0.90, and the gate sent 35 of 82 cold
+#: frames of a far frontal card to the full fit, whose own gate refused them too.
+PATTERN_SLACK_BLURRED = 0.05
 
 
 #: Least share of a decoded matrix's modules that must show their colour in the image (sampled at
@@ -367,12 +384,24 @@ class Detector:
         if not coarse.ok or coarse.state is None:
             return None
         confirmed = None
+        blurred = decoded and shortest_module_px(corners, modules) < BLUR_CHECK_MODULE_PX
         if decoded:
             confirmed = confirmed_matrix(grey, coarse.corners_px + shift, matrix, rough.inverted, lens)
+            if confirmed is not None and blurred:
+                confirmed = blur_confirmed(crop, coarse.corners_px, matrix, lens, offset)
             if confirmed is None:
                 return None
             cells = decoded_cells(confirmed)
         fine = fine_fit(crop, coarse.corners_px, cells, lens, coarse.state, offset)
+        if blurred and fine.ok and fine.state is not None:
+            # Checked again at the fitted corners (the coarse ones can be 0.2-0.5 px off at these
+            # sizes); fitted again when that changes the matrix.
+            again = blur_confirmed(crop, fine.corners_px, matrix, lens, offset)
+            if again is None:
+                return None
+            if not np.array_equal(again, confirmed, equal_nan=True):
+                confirmed, cells = again, decoded_cells(again)
+                fine = fine_fit(crop, fine.corners_px, cells, lens, fine.state, offset)
         if not fine.ok or fine.state is None or fine.corners_cov is None:
             return None
         fitted = fine.corners_px + shift
@@ -385,7 +414,7 @@ class Detector:
         ):
             return None
         check = check_patterns(grey, fitted, modules, lens)
-        if check.score < rough.score - 0.02:
+        if check.score < rough.score - (PATTERN_SLACK_BLURRED if blurred else 0.02):
             return None
         return Refined(
             fitted,
@@ -468,7 +497,13 @@ class Detector:
                 ).reshape(modules, modules)
                 levels = check_patterns(grey, whole.corners_px, modules, lens, offset)
                 checked = verified_matrix(values, matrix, levels.dark, levels.light)
-                if np.isnan(checked).sum() > np.isnan(np.asarray(matrix, dtype=np.float64)).sum():
+                if shortest_module_px(whole.corners_px, modules) < BLUR_CHECK_MODULE_PX:
+                    blurred = blur_confirmed(grey, whole.corners_px, matrix, lens, offset)
+                    checked = checked if blurred is None else blurred
+                as_decoded = np.asarray(matrix, dtype=np.float64)
+                if not np.array_equal(
+                    checked, np.where(np.isnan(as_decoded), np.nan, as_decoded > 0.5), equal_nan=True
+                ):
                     again_cells = decoded_cells(checked)
                     again = fit_symbol(
                         grey,
@@ -498,3 +533,24 @@ class Detector:
                     matrix if decoded else None,
                 )
         return None
+
+
+def blur_confirmed(
+    grey: np.ndarray,
+    corners: np.ndarray,
+    matrix: np.ndarray,
+    lens: Lens | None = None,
+    offset: tuple[int, int] = (0, 0),
+) -> np.ndarray | None:
+    """The decoded (n, n) ``matrix`` checked with the blur modelled at ``corners`` V1..V4 (px of
+    ``grey``, a crop at ``offset``): misread modules corrected, NaN where unclear, None when it does
+    not agree (:func:`qrfield.detect.symbol.blur_verified_matrix`; the cell centres sampled over
+    the symbol and QUIET_RINGS rings of its quiet zone)."""
+    n = matrix.shape[0]
+    size = n + 2 * QUIET_RINGS
+    centres = _module_centres(size) - QUIET_RINGS
+    values = sample_bilinear(grey, module_points_px(lens, corners, n, centres, offset)).reshape(size, size)
+    c = np.asarray(corners, dtype=np.float64)
+    along_x = 0.5 * (np.linalg.norm(c[1] - c[0]) + np.linalg.norm(c[2] - c[3])) / n
+    along_y = 0.5 * (np.linalg.norm(c[3] - c[0]) + np.linalg.norm(c[2] - c[1])) / n
+    return blur_verified_matrix(values, matrix, (along_x, along_y))
