@@ -33,6 +33,8 @@ from here is reported without those checks.
 
 from __future__ import annotations
 
+import itertools
+
 import cv2
 import numpy as np
 
@@ -53,19 +55,27 @@ MAX_WIDTH_PX = 600.0
 #: How far the busy mask reaches beyond a code's outline (px, each side: the 5 x 5 average at half
 #: resolution and the closing), taken off each principal width.
 MASK_REACH_PX = 4.0
+#: Least area (half-resolution px) of a blob: the smallest code's widths with the mask's reach.
+MIN_AREA = int((21 * MIN_MODULE_PX + 2 * MASK_REACH_PX) ** 2 * MIN_ANISOTROPY / 4)
 #: Least and most share of its principal widths' rectangle (including the reach) a blob fills.
 MIN_FILL = 0.6
 MAX_FILL = 1.3
-#: Canvas px per image px across the compression: at least CANVAS_SCALE, enough for canvas modules
-#: of CANVAS_MODULE_PX at the most modules the blob can hold, at most MAX_CANVAS_SCALE; the
-#: unsharp-mask strength (against a 1 px blur).
-CANVAS_SCALE = 2.5
-CANVAS_MODULE_PX = 3.0
+#: Canvas px per image px across the compression: enough for canvas modules of CANVAS_MODULE_PX
+#: at the most modules the blob can hold, within CANVAS_SCALE .. MAX_CANVAS_SCALE (the canvas's
+#: cost goes with its area); the unsharp-mask strength (against a 1 px blur).
+CANVAS_SCALE = 1.8
+CANVAS_MODULE_PX = 3.5
 MAX_CANVAS_SCALE = 6.0
 SHARPEN = 6.0
+#: Module sizes tried differ by this share at least (the triple search allows 20 %).
+MODULE_STEP = 0.15
 #: Finder candidates per module count: the strongest correlation peaks, at least this correlation.
 MAX_PEAKS = 5
 MIN_CORRELATION = 0.35
+#: A triple of peaks is tried only when it makes a code's finder triangle: legs of this range of
+#: times (n - 7) modules, at 90 degrees within this.
+LEG_RANGE = (0.5, 1.7)
+RIGHT_ANGLE_DEG = 40.0
 
 
 def compressed_blobs(grey: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, float, float, np.ndarray]]:
@@ -79,7 +89,7 @@ def compressed_blobs(grey: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, flo
     out = []
     for k in range(1, count):
         x, y, w, h, area = (int(v) for v in stats[k])
-        if area < 40 or max(w, h) * 2 > 1.5 * MAX_WIDTH_PX:
+        if area < MIN_AREA or max(w, h) * 2 > 1.5 * MAX_WIDTH_PX:
             continue
         blob = (labels[y : y + h, x : x + w] == k).astype(np.uint8)
         m = cv2.moments(blob, binaryImage=True)
@@ -148,6 +158,22 @@ def _finder_template(module_px: float) -> np.ndarray:
     return light.reshape(size, 4, size, 4).mean(axis=(1, 3))
 
 
+def _finder_triangle(points: list[np.ndarray], leg_px: float) -> bool:
+    """True when three finder centres (canvas px) make the right-angled triangle of a code whose
+    finder centres are ``leg_px`` apart along its sides: at one of them two legs of LEG_RANGE
+    times ``leg_px`` at an angle of 90 +- RIGHT_ANGLE_DEG (the canvas undoes the compression;
+    perspective remains)."""
+    lo, hi = LEG_RANGE
+    for a in range(3):
+        u, v = points[(a + 1) % 3] - points[a], points[(a + 2) % 3] - points[a]
+        lu, lv = float(np.hypot(*u)), float(np.hypot(*v))
+        if not (lo * leg_px <= lu <= hi * leg_px and lo * leg_px <= lv <= hi * leg_px):
+            continue
+        if abs(float(u @ v)) <= np.sin(np.deg2rad(RIGHT_ANGLE_DEG)) * lu * lv:
+            return True
+    return False
+
+
 def _peaks(response: np.ndarray, radius: int) -> list[tuple[int, int]]:
     """(x, y) of the strongest local maxima of ``response``, at most MAX_PEAKS, at least
     MIN_CORRELATION, each ``radius`` px from the stronger ones."""
@@ -204,25 +230,28 @@ def locate_steep(grey: np.ndarray) -> list[tuple[np.ndarray, int, str | None, np
 def _locate_in_canvas(canvas, short_w, scale, decode_rectified, candidates_from_finders):
     """The best (corners V1..V4 canvas px, n, text, matrix) in an upright canvas, or None."""
     tried: list[float] = []
+    image = canvas.astype(np.float32)
     for n in module_counts(short_w):
         module = scale * short_w / n
-        if any(abs(module - m) < 0.1 * m for m in tried):
+        if any(abs(module - m) < MODULE_STEP * m for m in tried):
             continue
         tried.append(module)
-        template = _finder_template(module)
+        template = _finder_template(module) * 255.0
         size = template.shape[0]
         if size + 2 > canvas.shape[0]:
             continue
-        response = cv2.matchTemplate(canvas.astype(np.float32), template * 255.0, cv2.TM_CCOEFF_NORMED)
+        response = cv2.matchTemplate(image, template, cv2.TM_CCOEFF_NORMED)
         peaks = _peaks(response, max(int(3.5 * module), 2))
         if len(peaks) < 3:
             continue
         half = 3.5 * size / 9.0
-        quads = []
-        for x, y in peaks:
-            c = np.array([x + (size - 1) / 2.0, y + (size - 1) / 2.0])
-            quads.append(c + half * np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], dtype=np.float64))
-        for corners, m in candidates_from_finders(canvas, quads):
-            text, matrix = decode_rectified(canvas, corners, m)
-            return corners, m, text, matrix
+        centres = [np.array([x + (size - 1) / 2.0, y + (size - 1) / 2.0]) for x, y in peaks]
+        square = half * np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], dtype=np.float64)
+        for trio in itertools.combinations(range(len(centres)), 3):
+            points = [centres[i] for i in trio]
+            if not _finder_triangle(points, (n - 7) * module):
+                continue
+            for corners, m in candidates_from_finders(canvas, [c + square for c in points]):
+                text, matrix = decode_rectified(canvas, corners, m)
+                return corners, m, text, matrix
     return None
