@@ -5,7 +5,7 @@ A code tilted 40-55 degrees about both axes is a thin parallelogram: its modules
 across the compression and several px along it. Through a blur of about a px the finder patterns'
 one-module rings are gone across the compression, so the contour locators (qrfield.detect.finders,
 qrfield.detect.small) do not see the nested squares; along the other direction they are sharp.
-Here, in the busy regions of the image (:func:`qrfield.detect.small.busy_mask`) that no other
+Here, in the busy regions of the image (:func:`qrfield.detect.small.busy_blobs`) that no other
 backend explained (this backend runs last):
 
 1. *Compressed blobs*: each connected busy blob's second moments give its widths along their two
@@ -33,6 +33,7 @@ from here is reported without those checks.
 
 from __future__ import annotations
 
+import functools
 import itertools
 
 import cv2
@@ -82,10 +83,9 @@ def compressed_blobs(grey: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, flo
     """Busy blobs of ``grey`` shaped like a compressed code, the largest first (at most MAX_BLOBS):
     (centre (2,) px, long direction (2,) unit, long width px, compressed width px, blob pixel
     centres (k, 2) px in the image), widths from the second moments less the mask's reach."""
-    from qrfield.detect.small import busy_mask
+    from qrfield.detect.small import busy_blobs
 
-    mask = busy_mask(grey)
-    count, labels, stats, _ = cv2.connectedComponentsWithStats(mask)
+    count, labels, stats = busy_blobs(grey)
     out = []
     for k in range(1, count):
         x, y, w, h, area = (int(v) for v in stats[k])
@@ -147,15 +147,15 @@ def canvas_map(
     return np.hstack([linear, offset[:, None]]), side, scale
 
 
-def _finder_template(module_px: float) -> np.ndarray:
-    """A dark-on-light finder pattern with its light separator, 9 x 9 modules of ``module_px``
-    canvas px, upright (float32, 0 dark .. 1 light; 4 x 4 samples per px)."""
-    size = max(round(9 * module_px), 9)
+@functools.lru_cache(maxsize=64)
+def _finder_template(size: int) -> np.ndarray:
+    """A dark-on-light finder pattern with its light separator, 9 x 9 modules in ``size`` x
+    ``size`` canvas px, upright (float32, 0 dark .. 255 light; 4 x 4 samples per px)."""
     sub = (np.arange(4 * size) + 0.5) / 4.0 * (9.0 / size)  # module coordinates 0..9
     ring = np.maximum(np.abs(sub[:, None] - 4.5), np.abs(sub[None, :] - 4.5))
     dark = ((ring < 3.5) & (ring >= 2.5)) | (ring < 1.5)
     light = (~dark).astype(np.float32)
-    return light.reshape(size, 4, size, 4).mean(axis=(1, 3))
+    return 255.0 * light.reshape(size, 4, size, 4).mean(axis=(1, 3))
 
 
 def _finder_triangle(points: list[np.ndarray], leg_px: float) -> bool:
@@ -236,7 +236,7 @@ def _locate_in_canvas(canvas, short_w, scale, decode_rectified, candidates_from_
         if any(abs(module - m) < MODULE_STEP * m for m in tried):
             continue
         tried.append(module)
-        template = _finder_template(module) * 255.0
+        template = _finder_template(max(round(9 * module), 9))
         size = template.shape[0]
         if size + 2 > canvas.shape[0]:
             continue
