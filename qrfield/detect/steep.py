@@ -9,21 +9,24 @@ Here, in the busy regions of the image (:func:`qrfield.detect.small.busy_blobs`)
 backend explained (this backend runs last):
 
 1. *Compressed blobs*: each connected busy blob's second moments give its widths along their two
-   principal directions (a square's second moment is isotropic, so for a code they are its side
-   and its side compressed); blobs whose widths differ by less than MIN_ANISOTROPY (the small
-   backend's), that do not fill their moments' rectangle, or whose compressed width cannot hold 21
-   modules of MIN_MODULE_PX are rejected before any resampling (the cost on frames with no code).
+   principal directions (a square's second moment is isotropic, so for a code seen through an
+   affine map they are its side and its side compressed); blobs whose widths (less the mask's
+   reach) differ by less than MIN_ANISOTROPY (the small backend's), that do not fill their
+   moments' rectangle, or whose compressed width cannot hold 21 modules of MIN_MODULE_PX are
+   rejected before any resampling (the cost on frames with no code).
 2. *Un-compressed canvas*: the blob's surroundings, sharpened (unsharp mask against a blur of one
    px, SHARPEN times), are resampled by one affine map (cubic) that stretches the compressed
-   direction back (CANVAS_SCALE canvas px per image px across the compression, less along it)
-   and turns the code's outline (the blob's least-area rectangle) upright: the code is then a
-   roughly square, upright symbol with modules of 3 px and more.
-3. *Finder patterns by correlation*: for each module count n the blob's width allows, the canvas
-   is correlated (normalised) with a finder pattern and its light separator (9 x 9 modules) of
-   that size; the strongest peaks (at most MAX_PEAKS, at least MIN_CORRELATION) are the finder
-   candidates, handed as squares to the contour locator's triple search
-   (qrfield.detect.finders), which picks the finders and n by the fixed patterns (>= 0.8) and
-   decodes the rectified symbol.
+   direction back (:func:`canvas_scale` canvas px per image px across the compression, less
+   along it) and turns the code's outline (the blob's least-area rectangle) upright: the code is
+   then a roughly square, upright symbol with canvas modules of about CANVAS_MODULE_PX.
+3. *Finder patterns by correlation*: for each module count n the blob's width allows (module
+   sizes MODULE_STEP apart), the canvas is correlated (normalised) with a finder pattern and its
+   light separator (9 x 9 modules) of that size; the strongest peaks (at most MAX_PEAKS, at least
+   MIN_CORRELATION) whose triples make a code's finder triangle (LEG_RANGE, RIGHT_ANGLE_DEG; the
+   TRIOS_PER_SIZE strongest) are handed as squares to the contour locator's triple search
+   (qrfield.detect.finders), which picks the finders and n by the fixed patterns (>= 0.8 in the
+   canvas) and decodes the rectified symbol. A code not decoded must score MIN_IMAGE_SCORE in the
+   image too, before the costly reading is tried.
 
 Corners come back to the image by the inverse affine map. A code located but not read is read
 by qrfield.detect.reading after its fixed patterns are fitted in the image
@@ -236,8 +239,13 @@ def locate_steep(grey: np.ndarray) -> list[tuple[np.ndarray, int, str | None, np
     return found
 
 
-def _locate_in_canvas(canvas, short_w, scale, decode_rectified, candidates_from_finders):
-    """The best (corners V1..V4 canvas px, n, text, matrix) in an upright canvas, or None."""
+def _locate_in_canvas(
+    canvas: np.ndarray, short_w: float, scale: float, decode_rectified, candidates_from_finders
+) -> tuple[np.ndarray, int, str | None, np.ndarray | None] | None:
+    """The first code (corners V1..V4 canvas px, n, text or None, matrix or None) found in an
+    upright (side, side) uint8 ``canvas`` made at ``scale`` from a blob of compressed width
+    ``short_w`` px, or None. (The finders module's locator functions are passed in: imported
+    lazily, as qrfield.detect.backends imports this module.)"""
     tried: list[float] = []
     image = canvas.astype(np.float32)
     for n in module_counts(short_w):
