@@ -244,8 +244,8 @@ def _locate_in_canvas(
 ) -> tuple[np.ndarray, int, str | None, np.ndarray | None] | None:
     """The first code (corners V1..V4 canvas px, n, text or None, matrix or None) found in an
     upright (side, side) uint8 ``canvas`` made at ``scale`` from a blob of compressed width
-    ``short_w`` px, or None. (The finders module's locator functions are passed in: imported
-    lazily, as qrfield.detect.backends imports this module.)"""
+    ``short_w`` px, or None; ``decode_rectified`` and ``candidates_from_finders`` are
+    qrfield.detect.finders' (imported once by the caller)."""
     tried: list[float] = []
     image = canvas.astype(np.float32)
     for n in module_counts(short_w):
