@@ -24,8 +24,10 @@ from qrfield.settings import SettingError
 #: image upscaled twice (bicubic): slower, but it reads codes whose modules are 2-3 px. "finders"
 #: locates finder patterns by contours and decodes the rectified symbol (strong perspective).
 #: "small" does so in the busy regions of the image upscaled 3 times and sharpened (modules of
-#: 1.2-3 px under a blur of about a module: qrfield.detect.small).
-BACKEND_NAMES = ("zxing", "zxing-x2", "opencv-aruco", "opencv", "finders", "small")
+#: 1.2-3 px under a blur of about a module: qrfield.detect.small). "steep" finds the finder patterns by
+#: correlation in busy regions compressed along one direction (a code tilted steeply), stretched
+#: back (qrfield.detect.steep): run last, on what the others did not explain.
+BACKEND_NAMES = ("zxing", "zxing-x2", "opencv-aruco", "opencv", "finders", "small", "steep")
 
 
 class BackendError(SettingError):
@@ -186,6 +188,12 @@ def _small(grey: np.ndarray) -> list[Candidate]:
     return [Candidate(corners, text, "small", n, symbol) for corners, n, text, symbol in locate_small(grey)]
 
 
+def _steep(grey: np.ndarray) -> list[Candidate]:
+    from qrfield.detect.steep import locate_steep
+
+    return [Candidate(corners, text, "steep", n, symbol) for corners, n, text, symbol in locate_steep(grey)]
+
+
 _BACKENDS: dict[str, Callable[[np.ndarray], list[Candidate]]] = {
     "zxing": _zxing,
     "zxing-x2": _zxing_x2,
@@ -193,6 +201,7 @@ _BACKENDS: dict[str, Callable[[np.ndarray], list[Candidate]]] = {
     "opencv": _opencv,
     "finders": _finders,
     "small": _small,
+    "steep": _steep,
 }
 
 

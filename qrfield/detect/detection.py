@@ -184,12 +184,13 @@ class DetectorSettings:
     """Settings of QR detection, refinement, tracking and selection (see qrfield.settings)."""
 
     backends: str = setting(
-        "zxing,zxing-x2,finders,small",
+        "zxing,zxing-x2,finders,small,steep",
         label="detector backends",
         help="comma-separated, tried in order until one finds a code: zxing, zxing-x2 (zxing on the "
         "image upscaled 2x, for small codes), finders (finder patterns by contours, for strong "
         "perspective), small (finder patterns in busy regions upscaled 3x and sharpened, for "
-        "modules of 1.2-3 px), opencv-aruco, opencv",
+        "modules of 1.2-3 px), steep (finder patterns by correlation in busy regions compressed by "
+        "a steep tilt, stretched back), opencv-aruco, opencv",
         check=_check_backends,
     )
     refine: bool = setting(

@@ -1,0 +1,278 @@
+"""The ``steep`` backend: small codes seen steeply, compressed along one direction, that the other
+backends miss.
+
+A code tilted 40-55 degrees about both axes is a thin parallelogram: its modules are 1.2-1.5 px
+across the compression and several px along it. Through a blur of about a px the finder patterns'
+one-module rings are gone across the compression, so the contour locators (qrfield.detect.finders,
+qrfield.detect.small) do not see the nested squares; along the other direction they are sharp.
+Here, in the busy regions of the image (:func:`qrfield.detect.small.busy_blobs`) that no other
+backend explained (this backend runs last):
+
+1. *Compressed blobs*: each connected busy blob's second moments give its widths along their two
+   principal directions (a square's second moment is isotropic, so for a code seen through an
+   affine map they are its side and its side compressed); blobs whose widths (less the mask's
+   reach) differ by less than MIN_ANISOTROPY (the small backend's), that do not fill their
+   moments' rectangle, or whose compressed width cannot hold 21 modules of MIN_MODULE_PX are
+   rejected before any resampling (the cost on frames with no code).
+2. *Un-compressed canvas*: the blob's surroundings, sharpened (unsharp mask against a blur of one
+   px, SHARPEN times), are resampled by one affine map (cubic) that stretches the compressed
+   direction back (:func:`canvas_scale` canvas px per image px across the compression, less
+   along it) and turns the code's outline (the blob's least-area rectangle) upright: the code is
+   then a roughly square, upright symbol with canvas modules of about CANVAS_MODULE_PX.
+3. *Finder patterns by correlation*: for each module count n the blob's width allows (module
+   sizes MODULE_STEP apart), the canvas is correlated (normalised) with a finder pattern and its
+   light separator (9 x 9 modules) of that size; the strongest peaks (at most MAX_PEAKS, at least
+   MIN_CORRELATION) whose triples make a code's finder triangle (LEG_RANGE, RIGHT_ANGLE_DEG; the
+   TRIOS_PER_SIZE strongest) are handed as squares to the contour locator's triple search
+   (qrfield.detect.finders), which picks the finders and n by the fixed patterns (>= 0.8 in the
+   canvas) and decodes the rectified symbol. A code not decoded must score MIN_IMAGE_SCORE in the
+   image too, before the costly reading is tried.
+
+Corners come back to the image by the inverse affine map. A code located but not read is read
+by qrfield.detect.reading after its fixed patterns are fitted in the image
+(:meth:`qrfield.detect.detector.Detector.accept`), which also checks the patterns again: nothing
+from here is reported without those checks.
+"""
+
+from __future__ import annotations
+
+import functools
+import itertools
+
+import cv2
+import numpy as np
+
+from qrfield.detect.patterns import ALL_MODULES, check_patterns
+
+#: Least ratio of a blob's principal widths for this backend (rounder blobs are the small
+#: backend's); most blobs tried per image, the largest first.
+MIN_ANISOTROPY = 1.15
+MAX_BLOBS = 4
+#: Least and most share (px) of the compressed width per module: a code compressed along its
+#: diagonal has modules of 1.2 px along its sides and 0.6 px of its compressed width per module.
+MIN_MODULE_PX = 0.6
+MAX_MODULE_PX = 3.0
+#: Most modules per side searched for (version 10).
+MAX_MODULES = 57
+#: Longest principal width (px) of a blob tried.
+MAX_WIDTH_PX = 600.0
+#: How far the busy mask reaches beyond a code's outline (px, each side: the 5 x 5 average at half
+#: resolution and the closing), taken off each principal width.
+MASK_REACH_PX = 4.0
+#: Least area (half-resolution px) of a blob: the smallest code's widths with the mask's reach.
+MIN_AREA = int((21 * MIN_MODULE_PX + 2 * MASK_REACH_PX) ** 2 * MIN_ANISOTROPY / 4)
+#: Least and most share of its principal widths' rectangle (including the reach) a blob fills.
+MIN_FILL = 0.6
+MAX_FILL = 1.3
+#: Canvas px per image px across the compression: enough for canvas modules of CANVAS_MODULE_PX
+#: at the most modules the blob can hold, within CANVAS_SCALE .. MAX_CANVAS_SCALE (the canvas's
+#: cost goes with its area); the unsharp-mask strength (against a 1 px blur).
+CANVAS_SCALE = 1.8
+CANVAS_MODULE_PX = 3.5
+MAX_CANVAS_SCALE = 6.0
+SHARPEN = 6.0
+#: Module sizes tried differ by this share at least (the triple search allows 20 %).
+MODULE_STEP = 0.15
+#: Finder candidates per module count: the strongest correlation peaks, at least this correlation.
+MAX_PEAKS = 5
+MIN_CORRELATION = 0.35
+#: A triple of peaks is tried only when it makes a code's finder triangle: legs of this range of
+#: times (n - 7) modules, at 90 degrees within this.
+LEG_RANGE = (0.5, 1.7)
+RIGHT_ANGLE_DEG = 40.0
+#: Least pattern score in the image (no lens) of a located code not decoded in the canvas: below
+#: it the reading (qrfield.detect.reading, the costly part) is not tried. Located codes of the
+#: steep set that were read scored 0.78-0.85; the hard set's located codes that no one reads
+#: 0.67-0.93.
+MIN_IMAGE_SCORE = 0.76
+#: Of those, the strongest (summed correlation) are tried, this many per module size.
+TRIOS_PER_SIZE = 2
+
+
+def compressed_blobs(grey: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, float, float, np.ndarray]]:
+    """Busy blobs of ``grey`` shaped like a compressed code, the largest first (at most MAX_BLOBS):
+    (centre (2,) px, long direction (2,) unit, long width px, compressed width px, blob pixel
+    centres (k, 2) px in the image), widths from the second moments less the mask's reach."""
+    from qrfield.detect.small import busy_blobs
+
+    count, labels, stats = busy_blobs(grey)
+    out = []
+    for k in range(1, count):
+        x, y, w, h, area = (int(v) for v in stats[k])
+        if area < MIN_AREA or max(w, h) * 2 > 1.5 * MAX_WIDTH_PX:
+            continue
+        blob = (labels[y : y + h, x : x + w] == k).astype(np.uint8)
+        m = cv2.moments(blob, binaryImage=True)
+        if m["m00"] <= 0:
+            continue
+        cov = np.array([[m["mu20"], m["mu11"]], [m["mu11"], m["mu02"]]]) / m["m00"] * 4.0  # full px^2
+        values, vectors = np.linalg.eigh(cov)
+        if values[0] <= 0:
+            continue
+        long_w = 2.0 * np.sqrt(3.0 * values[1]) - 2.0 * MASK_REACH_PX
+        short_w = 2.0 * np.sqrt(3.0 * values[0]) - 2.0 * MASK_REACH_PX
+        if short_w < 21 * MIN_MODULE_PX or long_w > MAX_WIDTH_PX or long_w < MIN_ANISOTROPY * short_w:
+            continue
+        fill = 4.0 * area / ((long_w + 2 * MASK_REACH_PX) * (short_w + 2 * MASK_REACH_PX))
+        if not MIN_FILL <= fill <= MAX_FILL:
+            continue
+        centre = 2.0 * np.array([x + m["m10"] / m["m00"], y + m["m01"] / m["m00"]]) + 0.5
+        ys, xs = np.nonzero(blob)
+        points = 2.0 * np.column_stack([xs + x, ys + y]).astype(np.float64) + 0.5
+        out.append((area, (centre, vectors[:, 1], float(long_w), float(short_w), points)))
+    out.sort(key=lambda item: -item[0])
+    return [blob for _, blob in out[:MAX_BLOBS]]
+
+
+def module_counts(short_w: float) -> list[int]:
+    """Module counts per side a code of compressed width ``short_w`` px may have."""
+    return [n for n in ALL_MODULES if n <= MAX_MODULES and MIN_MODULE_PX <= short_w / n <= MAX_MODULE_PX]
+
+
+def canvas_scale(short_w: float) -> float:
+    """Canvas px per image px across the compression for a blob of compressed width ``short_w``."""
+    counts = module_counts(short_w)
+    most = counts[-1] if counts else 21
+    return float(np.clip(CANVAS_MODULE_PX * most / short_w, CANVAS_SCALE, MAX_CANVAS_SCALE))
+
+
+def canvas_map(
+    centre: np.ndarray, long_dir: np.ndarray, long_w: float, short_w: float, points: np.ndarray
+) -> tuple[np.ndarray, int, float]:
+    """The (2, 3) affine map image px -> canvas px that stretches the compressed direction back
+    (``scale`` = :func:`canvas_scale` across it, scale * short_w / long_w along it) and turns the
+    blob's least-area rectangle upright, the code's centre at the canvas's; the canvas side (px);
+    the scale."""
+    scale = canvas_scale(short_w)
+    e1 = long_dir / np.linalg.norm(long_dir)
+    e2 = np.array([-e1[1], e1[0]])
+    stretch = np.diag([scale * short_w / long_w, scale]) @ np.vstack([e1, e2])
+    local = (points - centre) @ stretch.T
+    (_, _), (_, _), angle = cv2.minAreaRect(local.astype(np.float32))
+    t = np.deg2rad(angle)
+    turn = np.array([[np.cos(t), np.sin(t)], [-np.sin(t), np.cos(t)]])  # undoes the rectangle's angle
+    linear = turn @ stretch
+    side = int(np.ceil(1.5 * scale * short_w + 24))
+    offset = np.full(2, (side - 1) / 2.0) - linear @ centre
+    return np.hstack([linear, offset[:, None]]), side, scale
+
+
+@functools.lru_cache(maxsize=64)
+def _finder_template(size: int) -> np.ndarray:
+    """A dark-on-light finder pattern with its light separator, 9 x 9 modules in ``size`` x
+    ``size`` canvas px, upright (float32, 0 dark .. 255 light; 4 x 4 samples per px)."""
+    sub = (np.arange(4 * size) + 0.5) / 4.0 * (9.0 / size)  # module coordinates 0..9
+    ring = np.maximum(np.abs(sub[:, None] - 4.5), np.abs(sub[None, :] - 4.5))
+    dark = ((ring < 3.5) & (ring >= 2.5)) | (ring < 1.5)
+    light = (~dark).astype(np.float32)
+    return 255.0 * light.reshape(size, 4, size, 4).mean(axis=(1, 3))
+
+
+def _finder_triangle(points: list[np.ndarray], leg_px: float) -> bool:
+    """True when three finder centres (canvas px) make the right-angled triangle of a code whose
+    finder centres are ``leg_px`` apart along its sides: at one of them two legs of LEG_RANGE
+    times ``leg_px`` at an angle of 90 +- RIGHT_ANGLE_DEG (the canvas undoes the compression;
+    perspective remains)."""
+    lo, hi = LEG_RANGE
+    for a in range(3):
+        u, v = points[(a + 1) % 3] - points[a], points[(a + 2) % 3] - points[a]
+        lu, lv = float(np.hypot(*u)), float(np.hypot(*v))
+        if not (lo * leg_px <= lu <= hi * leg_px and lo * leg_px <= lv <= hi * leg_px):
+            continue
+        if abs(float(u @ v)) <= np.sin(np.deg2rad(RIGHT_ANGLE_DEG)) * lu * lv:
+            return True
+    return False
+
+
+def _peaks(response: np.ndarray, radius: int) -> list[tuple[int, int]]:
+    """(x, y) of the strongest local maxima of ``response``, at most MAX_PEAKS, at least
+    MIN_CORRELATION, each ``radius`` px from the stronger ones."""
+    r = response.copy()
+    out: list[tuple[int, int]] = []
+    for _ in range(MAX_PEAKS):
+        _, value, _, (x, y) = cv2.minMaxLoc(r)
+        if value < MIN_CORRELATION:
+            break
+        out.append((x, y))
+        r[max(y - radius, 0) : y + radius + 1, max(x - radius, 0) : x + radius + 1] = -1.0
+    return out
+
+
+def locate_steep(grey: np.ndarray) -> list[tuple[np.ndarray, int, str | None, np.ndarray | None]]:
+    """Codes in the compressed busy blobs of ``grey`` (H, W) uint8: (corners V1..V4 px, modules,
+    text or None, decoded module matrix or None), as qrfield.detect.finders.locate_by_finders gives
+    them; pixel centres as OpenCV's (the top-left pixel's centre at (0, 0))."""
+    from qrfield.detect.finders import _candidates_from_finders, decode_rectified
+
+    found: list[tuple[np.ndarray, int, str | None, np.ndarray | None]] = []
+    blobs = compressed_blobs(grey)
+    if not blobs:
+        return found
+    g = grey.astype(np.float32)
+    for centre, long_dir, long_w, short_w, points in blobs:
+        affine, side, scale = canvas_map(centre, long_dir, long_w, short_w, points)
+        # the image region the canvas covers, sharpened there only
+        inverse = cv2.invertAffineTransform(affine)
+        box = np.array([[0, 0], [side, 0], [side, side], [0, side]], dtype=np.float64)
+        reach = box @ inverse[:, :2].T + inverse[:, 2]
+        x0, y0 = np.maximum(np.floor(reach.min(axis=0)).astype(int) - 4, 0)
+        x1, y1 = np.minimum(np.ceil(reach.max(axis=0)).astype(int) + 5, (grey.shape[1], grey.shape[0]))
+        if x1 - x0 < 8 or y1 - y0 < 8:
+            continue
+        crop = g[y0:y1, x0:x1]
+        sharp = cv2.addWeighted(crop, 1.0 + SHARPEN, cv2.GaussianBlur(crop, (0, 0), 1.0), -SHARPEN, 0.0)
+        shifted = affine.copy()
+        shifted[:, 2] += affine[:, :2] @ np.array([x0, y0], dtype=np.float64)
+        canvas = cv2.warpAffine(
+            sharp, shifted, (side, side), flags=cv2.INTER_CUBIC, borderMode=cv2.BORDER_REPLICATE
+        )
+        canvas = np.clip(canvas, 0, 255).astype(np.uint8)
+        best = _locate_in_canvas(canvas, short_w, scale, decode_rectified, _candidates_from_finders)
+        if best is None:
+            continue
+        corners_c, n, text, matrix = best
+        corners = corners_c @ inverse[:, :2].T + inverse[:, 2]
+        if text is None and check_patterns(grey, corners, n).score < MIN_IMAGE_SCORE:
+            continue  # not read, and its patterns hold too poorly in the image to be read there
+        if not any(np.abs(corners - other[0]).max() < 2.0 for other in found):
+            found.append((corners, n, text, matrix))
+    return found
+
+
+def _locate_in_canvas(
+    canvas: np.ndarray, short_w: float, scale: float, decode_rectified, candidates_from_finders
+) -> tuple[np.ndarray, int, str | None, np.ndarray | None] | None:
+    """The first code (corners V1..V4 canvas px, n, text or None, matrix or None) found in an
+    upright (side, side) uint8 ``canvas`` made at ``scale`` from a blob of compressed width
+    ``short_w`` px, or None; ``decode_rectified`` and ``candidates_from_finders`` are
+    qrfield.detect.finders' (imported once by the caller)."""
+    tried: list[float] = []
+    image = canvas.astype(np.float32)
+    for n in module_counts(short_w):
+        module = scale * short_w / n
+        if any(abs(module - m) < MODULE_STEP * m for m in tried):
+            continue
+        tried.append(module)
+        template = _finder_template(max(round(9 * module), 9))
+        size = template.shape[0]
+        if size + 2 > canvas.shape[0]:
+            continue
+        response = cv2.matchTemplate(image, template, cv2.TM_CCOEFF_NORMED)
+        peaks = _peaks(response, max(int(3.5 * module), 2))
+        if len(peaks) < 3:
+            continue
+        half = 3.5 * size / 9.0
+        centres = [np.array([x + (size - 1) / 2.0, y + (size - 1) / 2.0]) for x, y in peaks]
+        square = half * np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], dtype=np.float64)
+        strength = [float(response[y, x]) for x, y in peaks]
+        trios = [
+            trio
+            for trio in itertools.combinations(range(len(centres)), 3)
+            if _finder_triangle([centres[i] for i in trio], (n - 7) * module)
+        ]
+        trios.sort(key=lambda trio: -sum(strength[i] for i in trio))
+        for trio in trios[:TRIOS_PER_SIZE]:
+            for corners, m in candidates_from_finders(canvas, [centres[i] + square for i in trio]):
+                text, matrix = decode_rectified(canvas, corners, m)
+                return corners, m, text, matrix
+    return None

@@ -1,0 +1,73 @@
+"""The steep backend (qrfield.detect.steep): small codes compressed by a steep tilt, against the
+steep set's truth (segno's symbols, cv2.projectPoints' corners), and frames with no code."""
+
+from __future__ import annotations
+
+import glob
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+segno = pytest.importorskip("segno", reason="segno (a dev dependency) encodes the steep set's symbols")
+
+from qrfield.detect import Detector  # noqa: E402
+from qrfield.detect.backends import find_candidates  # noqa: E402
+from qrfield.detect.detection import DetectorSettings  # noqa: E402
+from qrfield.testing.hardset import steep_view  # noqa: E402
+
+#: Steep-set views (seed 2026) that main's backends (zxing, zxing-x2, finders, small) miss: 169
+#: (modules of 1.23 px along the shortest side, compressed 1.7 times, blur 0.86 px, pinhole) and
+#: 54 (1.46 px, compressed 2.2 times, blur 1.04 px).
+VIEWS = (169, 54)
+MAIN_BACKENDS = "zxing,zxing-x2,finders,small"
+CALIBRATION = Path(__file__).resolve().parents[2] / "shared" / "data" / "calibration"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("index", VIEWS)
+def test_steep_view_found_where_main_misses(index):
+    view = steep_view(index, 2026)
+    assert 1.2 <= view.module_px < 1.5
+    main = Detector(DetectorSettings(backends=MAIN_BACKENDS), camera=view.camera)
+    assert main.detect(view.image) == []
+    found = Detector(camera=view.camera).detect(view.image)
+    assert len(found) == 1, f"view {index}: {len(found)} codes"
+    (d,) = found
+    assert d.backend == "steep" and d.text == view.text and d.refined
+    error = np.linalg.norm(d.corners_px - view.corners_px, axis=1)
+    assert error.max() < 0.3, f"view {index}: {error.max():.3f} px off"
+
+
+def test_nothing_on_blank_frames():
+    rng = np.random.default_rng(5)
+    for level, noise in ((128, 2.0), (60, 6.0), (200, 0.0)):
+        frame = np.clip(level + rng.normal(0.0, noise, (480, 640)), 0, 255).astype(np.uint8)
+        assert find_candidates(frame, "steep") == []
+
+
+def _chessboards() -> list[np.ndarray]:
+    files = sorted(glob.glob(str(CALIBRATION / "**" / "*.jpg"), recursive=True))
+    return [cv2.imread(f, cv2.IMREAD_GRAYSCALE) for f in files]
+
+
+@pytest.mark.slow
+def test_nothing_on_chessboards():
+    frames = _chessboards()
+    if not frames:
+        pytest.skip(f"no chessboard pictures in {CALIBRATION}")
+    detector = Detector()
+    for frame in frames:
+        assert detector.detect(frame) == []
+
+
+def test_tilted_chessboard_is_not_taken_for_a_code():
+    """A chessboard compressed like a steep code (its busy blob passes the shape test) gives no
+    candidate: its corners correlate with no finder triple that holds the fixed patterns."""
+    board = np.kron((np.indices((9, 9)).sum(axis=0) % 2) * 200 + 30, np.ones((12, 12))).astype(np.uint8)
+    frame = np.full((480, 640), 140, np.uint8)
+    warp = np.array([[1.0, 0.0, 260.0], [0.35, 0.45, 180.0]], dtype=np.float32)
+    frame = cv2.warpAffine(board, warp, (640, 480), dst=frame, borderMode=cv2.BORDER_TRANSPARENT)
+    frame = cv2.GaussianBlur(frame, (0, 0), 0.9)
+    assert find_candidates(frame, "steep") == []
