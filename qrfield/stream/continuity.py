@@ -80,6 +80,14 @@ NEAR_FOLD_CHI2 = 100.0
 #: rise to the mirror is counted in the units of the answer's own fit, chi2 / FIT_DOF when that is
 #: above 1 (:func:`fold_rise`).
 FIT_DOF = 2.0
+#: A fit whose chi-square exceeds this (the 0.99 quantile of chi-square with FIT_DOF degrees of
+#: freedom) says its corners are further off than their covariance allows (a tracked fit that
+#: stopped short of the far corner V3 in a fast swing: seed 53 of ``qrfield benchmark stream``,
+#: "fast swing far 1.4 px", frames 93-96, V3 0.5-0.9 px off with a std of 0.23, chi2 16-22, the
+#: pose 1.7 degrees and 7 mm off with a std of 0.5 degree): its covariance is scaled by
+#: chi2 / FIT_CHI2 (:func:`fit_scaled`). Below it a frame keeps its covariance (about 1 % of
+#: frames whose corners are as their covariance says lie above it).
+FIT_CHI2 = 9.21
 #: The same card: its centre moved by at most MAX_SHIFT_SIDES + MAX_SHIFT_SIDES_PER_S * dt code
 #: sides (mean side of V1..V4 in px) since the history's frame, and its size changed by less than
 #: the ratio MAX_SIZE_RATIO.
@@ -162,6 +170,22 @@ def fold_rise(pose: PoseResult) -> float:
     if not math.isfinite(rise):
         return math.inf
     return rise / max(1.0, float(pose.chi2) / FIT_DOF)
+
+
+def fit_scaled(pose: PoseResult) -> PoseResult:
+    """``pose`` with its covariance (``pose_cov``, (6, 6) over x, y, z mm and alpha, beta, gamma
+    deg; the std fields follow) scaled by chi2 / FIT_CHI2 when its fit's chi-square is above
+    FIT_CHI2 (the corners are further off than their covariance says, by about that factor in
+    variance); ``pose`` itself otherwise or when the chi-square or covariance is unknown."""
+    from qrfield.solvers.uncertainty import pose_std
+
+    chi2 = float(pose.chi2)
+    cov = np.asarray(pose.pose_cov, dtype=float)
+    if not (math.isfinite(chi2) and chi2 > FIT_CHI2) or cov.shape != (6, 6):
+        return pose
+    pose_cov = cov * (chi2 / FIT_CHI2)
+    position_std, angles_std = pose_std(pose_cov)
+    return replace(pose, pose_cov=pose_cov, position_std_mm=position_std, angles_std_deg=angles_std)
 
 
 def widening(pose: PoseResult, other_rotation: np.ndarray) -> np.ndarray | None:
@@ -320,6 +344,7 @@ class BranchHistory:
         if not pose.ambiguous:
             if not self.enabled:
                 return Decision(pose, BY_FRAME, False)
+            pose = fit_scaled(pose)
             self._remember(pose, t_ms, text)
             extra = near_fold_widening(pose, reflected)
             moved = near_fold_position_widening(pose)
@@ -333,6 +358,7 @@ class BranchHistory:
             return Decision(pose, BY_FRAME, True)
         # The history predicts from the branch's linearised covariance (what the frames before an
         # ambiguous run had); the pose reported carries the covariance widened towards the other branch.
+        chosen = fit_scaled(chosen)
         self._remember(chosen, t_ms, text)
         other = pose if flipped else self._other
         extra = moved = None
