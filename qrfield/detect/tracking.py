@@ -396,7 +396,9 @@ class Tracker:
                     grey, fit.corners_px, fit.state, offset, TRACK_ITERATIONS, TRACK_SETTLE_PX
                 )
             if _warm_holds(fit, track) and fit.residual > SETTLE_RESIDUAL_GROWTH * track.reference_residual:
-                further = track.warm.fit(grey, fit.corners_px, fit.state, offset, SETTLE_ITERATIONS, SETTLE_PX)
+                further = track.warm.fit(
+                    grey, fit.corners_px, fit.state, offset, SETTLE_ITERATIONS, SETTLE_PX
+                )
                 if _warm_holds(further, track) and further.residual <= fit.residual:
                     fit = further
             if _warm_holds(fit, track):
