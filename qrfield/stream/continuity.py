@@ -313,12 +313,14 @@ class BranchHistory:
     def __init__(self, enabled: bool = True) -> None:
         self.enabled = enabled
         self._last: _Record | None = None
-        self._before: _Record | None = None  # the resolved pose before the last (for the turn rate)
+        # the resolved poses before the last, at most HISTORY_S older than it (for the turn rate)
+        self._earlier: list[_Record] = []
         self._other: PoseResult | None = None  # the mirror of the frame being decided
 
     def reset(self) -> None:
         """Forget the history (a new source, a new stream)."""
-        self._last = self._before = None
+        self._last = None
+        self._earlier = []
 
     def decide(
         self,
@@ -391,31 +393,37 @@ class BranchHistory:
     def _predict(self, last: _Record, t_ms: int) -> _Record:
         """The history's rotation moved on to ``t_ms``, with its covariance (3, 3) rad^2.
 
-        With the resolved pose before the last (at most HISTORY_S old, the same code), at the turn
-        rate between the two: R = exp(k w) R_last with w the rotation from the one before to the
-        last and k = dt / dt_between, covariance (1 + k)^2 C_last + k^2 C_before (the two taken as
-        independent: larger than it is, as their shared error cancels in the rate) plus a change
-        of rate of up to TURN_ACCEL_DEG_S2 (1 sigma per axis). Without it: the last rotation, plus
-        a turn of up to TURN_RATE_DEG_S."""
+        With an earlier resolved pose ``before`` (at most HISTORY_S before ``t_ms``, the same code),
+        at the turn rate between it and the last: R = exp(k w) R_last with w the rotation from
+        ``before`` to the last and k = dt / dt_between, covariance (1 + k)^2 C_last + k^2 C_before
+        (the two taken as independent: larger than it is, as their shared error cancels in the rate)
+        plus a change of rate of up to TURN_ACCEL_DEG_S2 (1 sigma per axis). Of the earlier poses
+        the one whose prediction has the least variance is used: a rate from the frame just before
+        the last, extrapolated over k = 3 or more frames, multiplies their noise by k, where one
+        further back has a longer baseline (and a larger allowance for a change of rate). Without
+        one: the last rotation, plus a turn of up to TURN_RATE_DEG_S."""
         assert last.rotation_cov is not None
         dt = (t_ms - last.t_ms) / 1000.0
-        before = self._before
-        if (
-            before is not None
-            and before.rotation_cov is not None
-            and before.text == last.text
-            and last.t_ms - before.t_ms > 0
-            and (t_ms - before.t_ms) / 1000.0 <= HISTORY_S
-        ):
+        best: _Record | None = None
+        for before in self._earlier:
+            if (
+                before.rotation_cov is None
+                or before.text != last.text
+                or last.t_ms - before.t_ms <= 0
+                or (t_ms - before.t_ms) / 1000.0 > HISTORY_S
+            ):
+                continue
             between = (last.t_ms - before.t_ms) / 1000.0
             k = dt / between
             turn = rotation_vector(last.rotation @ before.rotation.T)
             rotation = rotation_from_vector(k * turn) @ last.rotation
             allowance = math.radians(TURN_ACCEL_DEG_S2) * dt * (dt + between) / 2.0
             cov = OWN_SHARE * ((1.0 + k) ** 2 * last.rotation_cov + k * k * before.rotation_cov)
-            return _Record(
-                rotation, cov + allowance**2 * np.eye(3), t_ms, last.text, last.centre_px, last.side_px
-            )
+            cov = cov + allowance**2 * np.eye(3)
+            if best is None or best.rotation_cov is None or np.trace(cov) < np.trace(best.rotation_cov):
+                best = _Record(rotation, cov, t_ms, last.text, last.centre_px, last.side_px)
+        if best is not None:
+            return best
         allowance = math.radians(TURN_RATE_DEG_S) * dt
         cov = OWN_SHARE * last.rotation_cov + allowance**2 * np.eye(3)
         return _Record(last.rotation, cov, t_ms, last.text, last.centre_px, last.side_px)
@@ -465,7 +473,8 @@ class BranchHistory:
 
     def _remember(self, pose: PoseResult, t_ms: int, text: str | None) -> None:
         centre, side = _outline(pose.corners_px)
-        self._before = self._last
+        if self._last is not None:
+            self._earlier = [r for r in self._earlier if t_ms - r.t_ms <= 1000.0 * HISTORY_S] + [self._last]
         self._last = _Record(
             np.array(pose.rotation, dtype=float), _rotation_cov(pose), t_ms, text, centre, side
         )
