@@ -9,8 +9,9 @@ keeps the last resolved pose (unambiguous, or resolved by history) and decides a
 1. the history must be usable: at most HISTORY_S (0.5 s) old, of the same code (text) and the same
    card in view (the tracker's corners: the code's centre moved less than MAX_SHIFT_SIDES code sides
    plus MAX_SHIFT_SIDES_PER_S per second, its size changed by less than MAX_SIZE_RATIO);
-2. the history's rotation is moved on to the frame's time (at the turn rate between its last two
-   resolved poses when it has two, else held) and each branch is compared with it by the rotation
+2. the history's rotation is moved on to the frame's time (at the turn rate between the last
+   resolved pose and the earlier one, within HISTORY_S of the frame, whose prediction varies
+   least, when it has one; else held) and each branch is compared with it by the rotation
    between them, as a chi-square m = w^T (C_branch + C_history)^-1 w of the small rotation w (rad)
    from the prediction to the branch (each pose's covariance scaled to its own part, OWN_SHARE:
    the error neighbouring frames of a card share cancels between them; C_history also holds the
@@ -24,15 +25,16 @@ keeps the last resolved pose (unambiguous, or resolved by history) and decides a
    candidate at all) and the history agrees with it;
 4. otherwise the frame stays ambiguous (AMBIG on a live camera) and the history is kept as it was.
 
-An unambiguous frame resets the history to itself; so does a resolved one. Both are reported with
-their covariance widened in the tilt plane where the branches are close (a resolved frame always,
-an unambiguous one when its mirror fits within NEAR_FOLD_CHI2: :func:`near_fold_widening`): near
-the fold of the planar ambiguity the linearised std of the tilt is several times too small, in
-the direction of the turn to the other branch and across it (docs/uncertainty.md, "Near the
-fold"). The history itself predicts from the unwidened poses. A
-frame without a pose leaves the history to age. What the history chose is the mirror's own full result
-(:func:`qrfield.solvers.mirror.mirror_result`: its pose, std and reprojection), never the answer's
-numbers under the mirror's name.
+An unambiguous frame resets the history to itself; so does a resolved one. A frame whose fit's
+chi-square exceeds FIT_CHI2 has its covariance scaled by chi2 / FIT_CHI2 first (:func:`fit_scaled`).
+Both are reported with their covariance widened in the tilt plane where the branches are close (a
+resolved frame always, an unambiguous one when its mirror fits within NEAR_FOLD_CHI2:
+:func:`near_fold_widening`): near the fold of the planar ambiguity the linearised std of the tilt is
+several times too small, in the direction of the turn to the other branch and across it
+(docs/uncertainty.md, "Near the fold"). The history itself predicts from the unwidened poses. A
+frame without a pose leaves the history to age. What the history chose is the mirror's own full
+result (:func:`qrfield.solvers.mirror.mirror_result`: its pose, std and reprojection), never the
+answer's numbers under the mirror's name.
 """
 
 from __future__ import annotations
