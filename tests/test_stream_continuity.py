@@ -284,3 +284,51 @@ def test_near_the_fold_the_position_is_widened_along_the_way_to_the_mirror() -> 
         unit = step / np.linalg.norm(step)
         assert float(unit @ reported[:3, :3] @ unit) >= 0.999 * float(step @ step) / max(rise, 1.0)
         assert np.allclose(reported[:3, 3:], cov[:3, 3:])
+
+
+def test_a_fit_worse_than_its_corners_covariance_allows_has_its_covariance_scaled_by_it() -> None:
+    """A frame's chi-square above FIT_CHI2 (9.21, the 0.99 quantile of chi-square with 2 degrees
+    of freedom) scales its reported covariance by chi2 / 9.21 (hand-computed: chi2 = 36.84 doubles
+    every std); at chi2 = 5 the std is the solver's."""
+    from dataclasses import replace
+
+    frame = solved(20_000, QUIET)
+    for chi2, factor in ((36.84, 2.0), (5.0, 1.0)):
+        pose = replace(frame, chi2=chi2, mirror_chi2=chi2 + 10_000.0)
+        result = frame_result(pose, 0, 0, noise_px=QUIET)
+        StreamStage().apply(result, SIDE_MM, result.detection.pose_cov)
+        out = result.poses["numerical"]
+        assert np.allclose(out.angles_std_deg, factor * pose.angles_std_deg, rtol=1e-6)
+        assert np.allclose(out.position_std_mm, factor * pose.position_std_mm, rtol=1e-6)
+    off = StreamStage(StreamSettings(continuity=False))
+    result = frame_result(replace(frame, chi2=36.84, mirror_chi2=10_000.0), 0, 0, noise_px=QUIET)
+    off.apply(result, SIDE_MM, result.detection.pose_cov)
+    assert np.array_equal(result.poses["numerical"].angles_std_deg, frame.angles_std_deg)
+
+
+@pytest.mark.slow
+def test_the_turn_rate_comes_from_the_earlier_pose_whose_prediction_varies_least() -> None:
+    """A still card seen in ten unambiguous frames 33 ms apart (corner noise 0.06 px), then, after a
+    gap of 200 ms, a frame ambiguous with its answer on the wrong branch (the mirror nearer the
+    truth, TRUTH). A rate from the last two frames, carried over k = 6 of their spacings, multiplies
+    their noise by 6 and leaves the history no evidence (none of the four resolved); the rate from
+    the frame 300 ms before the last decides at least two, each onto the mirror, and none onto
+    the wrong branch."""
+    seeds = wrong_branch_seeds(4, "numerical", NOISE)
+    resolved = 0
+    for seed in seeds:
+        stage, t_ms, k, index = StreamStage(), -300, 0, 0
+        while t_ms <= 0:
+            pose = solved(50_000 + 31 * seed + k, 0.06)
+            k += 1
+            if pose.ambiguous:
+                continue
+            quiet = frame_result(pose, index, t_ms, noise_px=0.06)
+            stage.apply(quiet, SIDE_MM, quiet.detection.pose_cov)
+            index, t_ms = index + 1, t_ms + 33
+        result = frame_result(solved(seed, NOISE), index, t_ms - 33 + 200, noise_px=NOISE)
+        stage.apply(result, SIDE_MM, result.detection.pose_cov)
+        if not result.ambiguous:
+            assert result.stream["numerical"].flipped
+            resolved += 1
+    assert resolved >= 2

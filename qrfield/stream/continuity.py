@@ -9,8 +9,9 @@ keeps the last resolved pose (unambiguous, or resolved by history) and decides a
 1. the history must be usable: at most HISTORY_S (0.5 s) old, of the same code (text) and the same
    card in view (the tracker's corners: the code's centre moved less than MAX_SHIFT_SIDES code sides
    plus MAX_SHIFT_SIDES_PER_S per second, its size changed by less than MAX_SIZE_RATIO);
-2. the history's rotation is moved on to the frame's time (at the turn rate between its last two
-   resolved poses when it has two, else held) and each branch is compared with it by the rotation
+2. the history's rotation is moved on to the frame's time (at the turn rate between the last
+   resolved pose and the earlier one, within HISTORY_S of the frame, whose prediction varies
+   least, when it has one; else held) and each branch is compared with it by the rotation
    between them, as a chi-square m = w^T (C_branch + C_history)^-1 w of the small rotation w (rad)
    from the prediction to the branch (each pose's covariance scaled to its own part, OWN_SHARE:
    the error neighbouring frames of a card share cancels between them; C_history also holds the
@@ -24,15 +25,16 @@ keeps the last resolved pose (unambiguous, or resolved by history) and decides a
    candidate at all) and the history agrees with it;
 4. otherwise the frame stays ambiguous (AMBIG on a live camera) and the history is kept as it was.
 
-An unambiguous frame resets the history to itself; so does a resolved one. Both are reported with
-their covariance widened in the tilt plane where the branches are close (a resolved frame always,
-an unambiguous one when its mirror fits within NEAR_FOLD_CHI2: :func:`near_fold_widening`): near
-the fold of the planar ambiguity the linearised std of the tilt is several times too small, in
-the direction of the turn to the other branch and across it (docs/uncertainty.md, "Near the
-fold"). The history itself predicts from the unwidened poses. A
-frame without a pose leaves the history to age. What the history chose is the mirror's own full result
-(:func:`qrfield.solvers.mirror.mirror_result`: its pose, std and reprojection), never the answer's
-numbers under the mirror's name.
+An unambiguous frame resets the history to itself; so does a resolved one. A frame whose fit's
+chi-square exceeds FIT_CHI2 has its covariance scaled by chi2 / FIT_CHI2 first (:func:`fit_scaled`).
+Both are reported with their covariance widened in the tilt plane where the branches are close (a
+resolved frame always, an unambiguous one when its mirror fits within NEAR_FOLD_CHI2:
+:func:`near_fold_widening`): near the fold of the planar ambiguity the linearised std of the tilt is
+several times too small, in the direction of the turn to the other branch and across it
+(docs/uncertainty.md, "Near the fold"). The history itself predicts from the unwidened poses. A
+frame without a pose leaves the history to age. What the history chose is the mirror's own full
+result (:func:`qrfield.solvers.mirror.mirror_result`: its pose, std and reprojection), never the
+answer's numbers under the mirror's name.
 """
 
 from __future__ import annotations
@@ -80,6 +82,14 @@ NEAR_FOLD_CHI2 = 100.0
 #: rise to the mirror is counted in the units of the answer's own fit, chi2 / FIT_DOF when that is
 #: above 1 (:func:`fold_rise`).
 FIT_DOF = 2.0
+#: A fit whose chi-square exceeds this (the 0.99 quantile of chi-square with FIT_DOF degrees of
+#: freedom) says its corners are further off than their covariance allows (a tracked fit that
+#: stopped short of the far corner V3 in a fast swing: seed 53 of ``qrfield benchmark stream``,
+#: "fast swing far 1.4 px", frames 93-96, V3 0.5-0.9 px off with a std of 0.23, chi2 16-22, the
+#: pose 1.7 degrees and 7 mm off with a std of 0.5 degree): its covariance is scaled by
+#: chi2 / FIT_CHI2 (:func:`fit_scaled`). Below it a frame keeps its covariance (about 1 % of
+#: frames whose corners are as their covariance says lie above it).
+FIT_CHI2 = 9.21
 #: The same card: its centre moved by at most MAX_SHIFT_SIDES + MAX_SHIFT_SIDES_PER_S * dt code
 #: sides (mean side of V1..V4 in px) since the history's frame, and its size changed by less than
 #: the ratio MAX_SIZE_RATIO.
@@ -162,6 +172,22 @@ def fold_rise(pose: PoseResult) -> float:
     if not math.isfinite(rise):
         return math.inf
     return rise / max(1.0, float(pose.chi2) / FIT_DOF)
+
+
+def fit_scaled(pose: PoseResult) -> PoseResult:
+    """``pose`` with its covariance (``pose_cov``, (6, 6) over x, y, z mm and alpha, beta, gamma
+    deg; the std fields follow) scaled by chi2 / FIT_CHI2 when its fit's chi-square is above
+    FIT_CHI2 (the corners are further off than their covariance says, by about that factor in
+    variance); ``pose`` itself otherwise or when the chi-square or covariance is unknown."""
+    from qrfield.solvers.uncertainty import pose_std
+
+    chi2 = float(pose.chi2)
+    cov = np.asarray(pose.pose_cov, dtype=float)
+    if not (math.isfinite(chi2) and chi2 > FIT_CHI2) or cov.shape != (6, 6):
+        return pose
+    pose_cov = cov * (chi2 / FIT_CHI2)
+    position_std, angles_std = pose_std(pose_cov)
+    return replace(pose, pose_cov=pose_cov, position_std_mm=position_std, angles_std_deg=angles_std)
 
 
 def widening(pose: PoseResult, other_rotation: np.ndarray) -> np.ndarray | None:
@@ -289,12 +315,14 @@ class BranchHistory:
     def __init__(self, enabled: bool = True) -> None:
         self.enabled = enabled
         self._last: _Record | None = None
-        self._before: _Record | None = None  # the resolved pose before the last (for the turn rate)
+        # the resolved poses before the last, at most HISTORY_S older than it (for the turn rate)
+        self._earlier: list[_Record] = []
         self._other: PoseResult | None = None  # the mirror of the frame being decided
 
     def reset(self) -> None:
         """Forget the history (a new source, a new stream)."""
-        self._last = self._before = None
+        self._last = None
+        self._earlier = []
 
     def decide(
         self,
@@ -320,6 +348,7 @@ class BranchHistory:
         if not pose.ambiguous:
             if not self.enabled:
                 return Decision(pose, BY_FRAME, False)
+            pose = fit_scaled(pose)
             self._remember(pose, t_ms, text)
             extra = near_fold_widening(pose, reflected)
             moved = near_fold_position_widening(pose)
@@ -333,6 +362,7 @@ class BranchHistory:
             return Decision(pose, BY_FRAME, True)
         # The history predicts from the branch's linearised covariance (what the frames before an
         # ambiguous run had); the pose reported carries the covariance widened towards the other branch.
+        chosen = fit_scaled(chosen)
         self._remember(chosen, t_ms, text)
         other = pose if flipped else self._other
         extra = moved = None
@@ -365,31 +395,37 @@ class BranchHistory:
     def _predict(self, last: _Record, t_ms: int) -> _Record:
         """The history's rotation moved on to ``t_ms``, with its covariance (3, 3) rad^2.
 
-        With the resolved pose before the last (at most HISTORY_S old, the same code), at the turn
-        rate between the two: R = exp(k w) R_last with w the rotation from the one before to the
-        last and k = dt / dt_between, covariance (1 + k)^2 C_last + k^2 C_before (the two taken as
-        independent: larger than it is, as their shared error cancels in the rate) plus a change
-        of rate of up to TURN_ACCEL_DEG_S2 (1 sigma per axis). Without it: the last rotation, plus
-        a turn of up to TURN_RATE_DEG_S."""
+        With an earlier resolved pose ``before`` (at most HISTORY_S before ``t_ms``, the same code),
+        at the turn rate between it and the last: R = exp(k w) R_last with w the rotation from
+        ``before`` to the last and k = dt / dt_between, covariance (1 + k)^2 C_last + k^2 C_before
+        (the two taken as independent: larger than it is, as their shared error cancels in the rate)
+        plus a change of rate of up to TURN_ACCEL_DEG_S2 (1 sigma per axis). Of the earlier poses
+        the one whose prediction has the least variance is used: a rate from the frame just before
+        the last, extrapolated over k = 3 or more frames, multiplies their noise by k, where one
+        further back has a longer baseline (and a larger allowance for a change of rate). Without
+        one: the last rotation, plus a turn of up to TURN_RATE_DEG_S."""
         assert last.rotation_cov is not None
         dt = (t_ms - last.t_ms) / 1000.0
-        before = self._before
-        if (
-            before is not None
-            and before.rotation_cov is not None
-            and before.text == last.text
-            and last.t_ms - before.t_ms > 0
-            and (t_ms - before.t_ms) / 1000.0 <= HISTORY_S
-        ):
+        best: _Record | None = None
+        for before in self._earlier:
+            if (
+                before.rotation_cov is None
+                or before.text != last.text
+                or last.t_ms - before.t_ms <= 0
+                or (t_ms - before.t_ms) / 1000.0 > HISTORY_S
+            ):
+                continue
             between = (last.t_ms - before.t_ms) / 1000.0
             k = dt / between
             turn = rotation_vector(last.rotation @ before.rotation.T)
             rotation = rotation_from_vector(k * turn) @ last.rotation
             allowance = math.radians(TURN_ACCEL_DEG_S2) * dt * (dt + between) / 2.0
             cov = OWN_SHARE * ((1.0 + k) ** 2 * last.rotation_cov + k * k * before.rotation_cov)
-            return _Record(
-                rotation, cov + allowance**2 * np.eye(3), t_ms, last.text, last.centre_px, last.side_px
-            )
+            cov = cov + allowance**2 * np.eye(3)
+            if best is None or best.rotation_cov is None or np.trace(cov) < np.trace(best.rotation_cov):
+                best = _Record(rotation, cov, t_ms, last.text, last.centre_px, last.side_px)
+        if best is not None:
+            return best
         allowance = math.radians(TURN_RATE_DEG_S) * dt
         cov = OWN_SHARE * last.rotation_cov + allowance**2 * np.eye(3)
         return _Record(last.rotation, cov, t_ms, last.text, last.centre_px, last.side_px)
@@ -439,7 +475,8 @@ class BranchHistory:
 
     def _remember(self, pose: PoseResult, t_ms: int, text: str | None) -> None:
         centre, side = _outline(pose.corners_px)
-        self._before = self._last
+        if self._last is not None:
+            self._earlier = [r for r in self._earlier if t_ms - r.t_ms <= 1000.0 * HISTORY_S] + [self._last]
         self._last = _Record(
             np.array(pose.rotation, dtype=float), _rotation_cov(pose), t_ms, text, centre, side
         )

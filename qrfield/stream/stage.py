@@ -16,9 +16,11 @@ method's PoseResult in ``FrameResult.poses`` by the one to report:
 It records per method a :class:`StreamMark` in ``FrameResult.stream`` (``resolved_by``,
 ``filtered``) and keeps the frame's own solver results in ``FrameResult.frame_poses``. A single
 frame (no history, filter off or just started) comes out as the solvers made it: the same pose,
-branch and flag, and the same std unless its mirror fits within NEAR_FOLD_CHI2 with continuity
-on, where the std of its tilt is widened (:func:`qrfield.stream.continuity.near_fold_widening`;
-near the fold the linearised std of the tilt is several times too small, docs/uncertainty.md).
+branch and flag, and the same std unless, with continuity on, its fit's chi-square exceeds
+FIT_CHI2 (its covariance scaled by chi2 / FIT_CHI2: :func:`qrfield.stream.continuity.fit_scaled`)
+or its mirror fits within NEAR_FOLD_CHI2, where the std of its tilt is widened
+(:func:`qrfield.stream.continuity.near_fold_widening`; near the fold the linearised std of the
+tilt is several times too small, docs/uncertainty.md).
 """
 
 from __future__ import annotations
