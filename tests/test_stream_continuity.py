@@ -332,3 +332,27 @@ def test_the_turn_rate_comes_from_the_earlier_pose_whose_prediction_varies_least
             assert result.stream["numerical"].flipped
             resolved += 1
     assert resolved >= 2
+
+
+def test_at_200_fps_the_history_compares_a_bounded_number_of_earlier_poses() -> None:
+    """A still card at 200 fps for 1 s (unambiguous frames 5 ms apart): the earlier resolved poses
+    kept for the turn rate are spaced EARLIER_SPACING_S apart within HISTORY_S, at most
+    HISTORY_S / EARLIER_SPACING_S + 1 of them (without the spacing: all 100 of the last 0.5 s,
+    each compared on every ambiguous frame); at 30 fps every frame is kept."""
+    from qrfield.stream.continuity import EARLIER_SPACING_S, HISTORY_S, BranchHistory
+
+    bound = int(HISTORY_S / EARLIER_SPACING_S) + 1
+    for step_ms, expected in ((5, None), (33, 15)):
+        history, t_ms, k = BranchHistory(), 0, 0
+        while t_ms <= 1000:
+            pose = solved(60_000 + k, 0.06)
+            k += 1
+            if pose.ambiguous:
+                continue
+            history.decide(pose, t_ms, TEXT, lambda p: None)
+            t_ms += step_ms
+        kept = history._earlier
+        gaps = np.diff([r.t_ms for r in kept])
+        assert len(kept) <= bound and np.all(gaps >= 1000.0 * EARLIER_SPACING_S)
+        if expected is not None:
+            assert len(kept) == expected  # 33 ms apart: the last 0.5 s, every frame

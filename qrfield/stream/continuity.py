@@ -54,6 +54,11 @@ from qrfield.stream.poses import vector_cov
 
 #: The history decides a frame only when it is at most this old (docs/conventions.md), s.
 HISTORY_S = 0.5
+#: The earlier resolved poses kept for the turn rate (:meth:`BranchHistory._predict`) are at least
+#: this far apart (ms): at 30 fps every frame, at 206 fps about one in seven, so that at most
+#: HISTORY_S / EARLIER_SPACING_S + 1 are compared on each ambiguous frame (a rate from a pose a
+#: few ms before the last is the noisiest anyway).
+EARLIER_SPACING_S = HISTORY_S / 16
 #: How fast a card may turn between the history and the frame, 1 sigma per axis, degrees per
 #: second, when the history has one resolved pose (a hand turning a card); and how fast its turn
 #: rate may change when it has two (a turn rate is then known). Tuned on the stream benchmark's
@@ -478,7 +483,10 @@ class BranchHistory:
     def _remember(self, pose: PoseResult, t_ms: int, text: str | None) -> None:
         centre, side = _outline(pose.corners_px)
         if self._last is not None:
-            self._earlier = [r for r in self._earlier if t_ms - r.t_ms <= 1000.0 * HISTORY_S] + [self._last]
+            kept = [r for r in self._earlier if t_ms - r.t_ms <= 1000.0 * HISTORY_S]
+            if not kept or self._last.t_ms - kept[-1].t_ms >= 1000.0 * EARLIER_SPACING_S:
+                kept.append(self._last)
+            self._earlier = kept
         self._last = _Record(
             np.array(pose.rotation, dtype=float), _rotation_cov(pose), t_ms, text, centre, side
         )
