@@ -43,7 +43,7 @@ BLUR_FACTORS = (1.0, 0.75, 1.3)
 LOGISTIC_STD = math.pi / (2.0 * math.sqrt(3.0))
 
 
-def _gauss_cdf(x: np.ndarray) -> np.ndarray:
+def gauss_cdf(x: np.ndarray) -> np.ndarray:
     """The standard normal CDF (Abramowitz and Stegun 7.1.26: |error| < 1.5e-7)."""
     z = np.abs(x) * (1.0 / math.sqrt(2.0))
     t = 1.0 / (1.0 + 0.3275911 * z)
@@ -122,12 +122,12 @@ def _read(
     ku_all = []
     for du in range(-WINDOW, WINDOW + 1):
         mu = base[:, 0] + du
-        ku = _gauss_cdf((mu + 1 - uv[:, 0]) / spread[:, 0]) - _gauss_cdf((mu - uv[:, 0]) / spread[:, 0])
+        ku = gauss_cdf((mu + 1 - uv[:, 0]) / spread[:, 0]) - gauss_cdf((mu - uv[:, 0]) / spread[:, 0])
         ku_all.append((mu, ku))
     j = 0
     for dv in range(-WINDOW, WINDOW + 1):
         mv = base[:, 1] + dv
-        kv = _gauss_cdf((mv + 1 - uv[:, 1]) / spread[:, 1]) - _gauss_cdf((mv - uv[:, 1]) / spread[:, 1])
+        kv = gauss_cdf((mv + 1 - uv[:, 1]) / spread[:, 1]) - gauss_cdf((mv - uv[:, 1]) / spread[:, 1])
         on_v = (mv >= -q) & (mv < n + q)
         for mu, ku in ku_all:
             np.multiply(ku, kv, out=share[j])

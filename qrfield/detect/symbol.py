@@ -180,11 +180,11 @@ MOST_CORRECTED = 0.1
 def _module_kernel(sigma_modules: float) -> np.ndarray:
     """Shares (5,) of modules -2..2 in a point's blurred view of a module's centre: a Gaussian of
     ``sigma_modules`` (std, in modules) over unit modules."""
-    from qrfield.detect.reading import _gauss_cdf
+    from qrfield.detect.reading import gauss_cdf
 
     d = np.arange(-2, 3, dtype=np.float64)
     s = max(float(sigma_modules), 1e-3)
-    return _gauss_cdf((d + 0.5) / s) - _gauss_cdf((d - 0.5) / s)
+    return gauss_cdf((d + 0.5) / s) - gauss_cdf((d - 0.5) / s)
 
 
 def _band(size: int, kernel: np.ndarray) -> np.ndarray:

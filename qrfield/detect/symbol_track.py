@@ -392,6 +392,20 @@ class WarmFit:
         def fail(reason: str) -> SymbolFit:
             return SymbolFit(False, start.copy(), None, reason)
 
+        def _fitted(corners: np.ndarray, corners_cov: np.ndarray | None, residual: float) -> SymbolFit:
+            # The fit's answer, from the state the steps below leave (edge, light, robust, k, done).
+            return SymbolFit(
+                ok=True,
+                corners_px=corners,
+                corners_cov=corners_cov,
+                residual=residual,
+                contrast=contrast,
+                edge_px=edge,
+                samples=k,
+                iterations=done,
+                state=FitState(edge, light, robust),
+            )
+
         if start.shape != (4, 2):
             raise ValueError(f"predicted corners must be (4, 2) pixels V1..V4, got shape {start.shape}")
         if distorted:
@@ -501,16 +515,7 @@ class WarmFit:
                 corners = self._corners(h)
                 if corners is None:
                     return fail("the fit diverged")
-                return SymbolFit(
-                    ok=True,
-                    corners_px=corners - (sx, sy) if distorted else corners,
-                    corners_cov=None,
-                    contrast=contrast,
-                    edge_px=edge,
-                    samples=k,
-                    iterations=done,
-                    state=FitState(edge, light, robust),
-                )
+                return _fitted(corners - (sx, sy) if distorted else corners, None, math.nan)
             fitted = max(1.4826 * float(np.partition(np.abs(resid - delta @ jac_t), half)[half]), 0.5)
             # The corners (ideal pixels through a lens, else the crop's) and d corner / d module.
             h00, h01, h02, h10, h11, h12, h20, h21, h22 = h
@@ -534,14 +539,4 @@ class WarmFit:
             corners_cov = corner_covariance(-(np.array(dpx) @ self._dw), cov, corners_model, lens)
         if not np.isfinite(corners_cov).all():
             return fail("the fit is singular")
-        return SymbolFit(
-            ok=True,
-            corners_px=corners,
-            corners_cov=corners_cov,
-            residual=fitted,
-            contrast=contrast,
-            edge_px=edge,
-            samples=k,
-            iterations=done,
-            state=FitState(edge, light, robust),
-        )
+        return _fitted(corners, corners_cov, fitted)
