@@ -57,6 +57,9 @@ MAX_DEPTH = 32
 MAX_FIELD_CHARS = 131_072
 
 _BOM = "\ufeff"
+#: Longest digit run parsed as an integer: below sys.int_info.default_max_str_digits (4300), far
+#: above any float.
+_MAX_INT_DIGITS = 4000
 
 
 class FileFormatError(ValueError):
@@ -242,6 +245,8 @@ def _check_values(value: Any, where: str, max_chars: int, path: str = "") -> Non
             check_text(value, f"{where}: value {path or '(top)'}")
         except TextError as exc:
             raise FileFormatError(str(exc)) from None
+    elif isinstance(value, _TooLongInteger):
+        raise FileFormatError(f"{where}: value {path or '(top)'}: {value.why()}")
     elif isinstance(value, (int, float)) and not isinstance(value, bool):
         try:
             as_number(value, f"{where}: value {path or '(top)'}", "the number")
@@ -261,8 +266,22 @@ def _check_values(value: Any, where: str, max_chars: int, path: str = "") -> Non
             _check_values(item, where, max_chars, f"{path}[{i}]")
 
 
-def loads_json(text: str, where: str, *, max_depth: int = MAX_DEPTH, max_chars: int = MAX_FIELD_CHARS) -> Any:
-    """Parse JSON text with the depth and field-size limits; FileFormatError naming ``where``."""
+def loads_json(
+    text: str,
+    where: str,
+    *,
+    max_depth: int = MAX_DEPTH,
+    max_chars: int = MAX_FIELD_CHARS,
+    dropped: list[tuple[str, str]] | None = None,
+) -> Any:
+    """Parse JSON text with the depth and field-size limits; FileFormatError naming ``where``.
+
+    ``dropped``: when given (a settings file, whose readers fall back to defaults key by key), a
+    value inside an object that breaks a limit (a number that is not a finite float, a text too
+    long or not UTF-8) is left out with its key instead of refusing the whole text, and (its dotted
+    key, one line naming it) is appended to the list; the text as a whole (not JSON, too deep) is
+    still refused.
+    """
     if text.startswith(_BOM):
         text = text[1:]
     depth = nesting_depth(text, "json")
@@ -271,7 +290,9 @@ def loads_json(text: str, where: str, *, max_depth: int = MAX_DEPTH, max_chars: 
             f"{where}: nested {depth} levels deep, more than {max_depth}; not a qrfield file"
         )
     try:
-        data = json.loads(text, parse_constant=_no_constant, parse_int=_parse_int)
+        data = json.loads(
+            text, parse_constant=_no_constant, parse_int=_parse_int if dropped is None else _lenient_int
+        )
     except _LongInteger as exc:
         raise FileFormatError(f"{where}: {exc.describe(text)}") from None
     except json.JSONDecodeError as exc:
@@ -282,8 +303,47 @@ def loads_json(text: str, where: str, *, max_depth: int = MAX_DEPTH, max_chars: 
         raise FileFormatError(f"{where}: not JSON ({exc})") from None
     except RecursionError:  # pragma: no cover - the scan above bounds the depth
         raise FileFormatError(f"{where}: nested too deeply") from None
+    if dropped is not None and isinstance(data, dict):
+        return _without_bad_values(data, where, max_chars, dropped)
     _check_values(data, where, max_chars)
     return data
+
+
+def _without_bad_values(
+    data: dict, where: str, max_chars: int, dropped: list[tuple[str, str]], path: str = ""
+) -> dict:
+    """``data`` without the keys whose value (or name) breaks a limit of :func:`_check_values`;
+    objects are cleaned key by key, a list or a scalar is kept or left out whole."""
+    kept = {}
+    for key, item in data.items():
+        here = f"{path}.{key}" if path else str(key)
+        try:
+            _check_values({key: {} if isinstance(item, dict) else item}, where, max_chars, path)
+        except FileFormatError as exc:
+            dropped.append((here, str(exc)))
+            continue
+        if isinstance(item, dict):
+            item = _without_bad_values(item, where, max_chars, dropped, here)
+        kept[key] = item
+    return kept
+
+
+class _TooLongInteger:
+    """A digit run too long for int() (over 4000 digits), kept in place of its value so that a
+    lenient reader (:func:`loads_json` with ``dropped``) can name the key holding it."""
+
+    __slots__ = ("digits",)
+
+    def __init__(self, digits: str) -> None:
+        self.digits = digits
+
+    def why(self) -> str:
+        count = sum(ch.isdigit() for ch in self.digits)
+        return f"the number is an integer of {count} digits, too large for a number"
+
+
+def _lenient_int(digits: str) -> int | _TooLongInteger:
+    return _TooLongInteger(digits) if len(digits) > _MAX_INT_DIGITS else int(digits)
 
 
 class _LongInteger(ValueError):
@@ -301,15 +361,14 @@ class _LongInteger(ValueError):
         key = re.search(r'"([^"\\]{1,80})"\s*:\s*$', before) or re.search(
             r"(?m)^\s*([\w.\-\"]{1,80})\s*=\s*$", before
         )
-        digits = sum(ch.isdigit() for ch in self.digits)
-        why = f"the number is an integer of {digits} digits, too large for a number"
+        why = _TooLongInteger(self.digits).why()
         return f"value {key.group(1)}: {why} (line {line})" if key else f"line {line}: {why}"
 
 
 def _parse_int(digits: str) -> int:
     """int(), except that a digit run too long for it is refused in words, not with Python's advice
     to call sys.set_int_max_str_digits()."""
-    if len(digits) > 4000:  # below sys.int_info.default_max_str_digits (4300), far above any float
+    if len(digits) > _MAX_INT_DIGITS:
         raise _LongInteger(digits)
     return int(digits)
 
@@ -325,11 +384,17 @@ def read_json(
     max_bytes: int = MAX_FILE_BYTES,
     max_depth: int = MAX_DEPTH,
     max_chars: int = MAX_FIELD_CHARS,
+    dropped: list[tuple[str, str]] | None = None,
 ) -> Any:
-    """Read a JSON file with every limit of this module; FileFormatError naming ``what`` and the file."""
+    """Read a JSON file with every limit of this module; FileFormatError naming ``what`` and the file
+    (``dropped``: as for :func:`loads_json`)."""
     where = f"{what} {path}"
     return loads_json(
-        decode_text(read_bytes(path, what, max_bytes), where), where, max_depth=max_depth, max_chars=max_chars
+        decode_text(read_bytes(path, what, max_bytes), where),
+        where,
+        max_depth=max_depth,
+        max_chars=max_chars,
+        dropped=dropped,
     )
 
 
@@ -371,12 +436,15 @@ class LoadedJson:
     problem: one line for the user ("" when all is well or the file is simply missing).
     kept_as: where a damaged file was moved (None if it was not damaged, or could not be moved).
     damaged: the file exists but could not be used.
+    dropped: (dotted key, one line) for each value left out of ``data`` (an absurd number, a text
+        too long), its key's default used; the rest of the file is kept.
     """
 
     data: dict[str, Any] | None
     problem: str = ""
     kept_as: Path | None = None
     damaged: bool = False
+    dropped: tuple[tuple[str, str], ...] = ()
 
     @property
     def safe_to_overwrite(self) -> bool:
@@ -389,11 +457,14 @@ def read_json_or_set_aside(path: str | os.PathLike[str], what: str = "settings f
 
     A missing file gives ``LoadedJson(None)``; an unreadable one (permissions) is left where it is
     with a problem line; one that is not a usable JSON object (not UTF-8, not JSON, too deep, not an
-    object, a value too long) is renamed beside itself, and ``problem`` says where it went.
+    object) is renamed beside itself, and ``problem`` says where it went. A value that breaks a
+    limit (a 500-digit number, a text too long) is only left out, named in ``dropped``: one absurd
+    value does not cost the rest of the file.
     """
     path = Path(path)
+    dropped: list[tuple[str, str]] = []
     try:
-        data = read_json(path, what)
+        data = read_json(path, what, dropped=dropped)
         if not isinstance(data, dict):
             raise FileFormatError(f"{what} {path}: expected a JSON object, got {describe_value(data)}")
     except FileFormatError as exc:
@@ -412,7 +483,7 @@ def read_json_or_set_aside(path: str | os.PathLike[str], what: str = "settings f
                 True,
             )
         return LoadedJson(None, f"{exc}; kept as {kept.name}, defaults used", kept, True)
-    return LoadedJson(data)
+    return LoadedJson(data, dropped=tuple((key, f"{line}; default used") for key, line in dropped))
 
 
 def set_aside(path: str | os.PathLike[str]) -> Path:

@@ -232,3 +232,25 @@ def test_config_dir_also_holds_the_users_camera_profiles(tmp_path, capsys, monke
     monkeypatch.setenv("QRFIELD_CONFIG_DIR", str(tmp_path / "elsewhere"))  # a new process without it
     assert main(["config", "--camera", "mycam", "--json"]) == 2  # not found
     assert "mycam" in capsys.readouterr().err
+
+
+def test_one_absurd_value_costs_only_its_own_key_and_stops_a_strict_run(tmp_path: Path, capsys) -> None:
+    # A 500-digit integer (and one of 5000 digits, over Python's int() limit) or a text over the
+    # csv field limit in app.json once set the whole file aside: every saved setting was lost for
+    # one bad value. Each is now left out alone, named, its default used; `qrfield run` refuses it.
+    big, huge = "1" + "0" * 500, "1" + "0" * 5000
+    text = (
+        f'{{"run": {{"side_mm": {big}, "method": "ippe"}}, "detector": {{"max_codes": {huge}, '
+        f'"search_px": 3.0}}, "window": {{"w": 5, "x": "{"a" * 200_000}"}}}}'
+    )
+    (tmp_path / "app.json").write_text(text)
+    store = ConfigStore(tmp_path)
+    assert store.group("run", RunSettings) == RunSettings(method="ippe")
+    assert store.group("detector", DetectorSettings) == DetectorSettings(search_px=3.0)
+    assert store.value("window") == {"w": 5}
+    assert not list(tmp_path.glob("app.json.bad-*"))
+    assert sorted(store.dropped) == ["detector.max_codes", "run.side_mm", "window.x"]
+    assert any("run.side_mm" in p and "501 digits" in p and "default used" in p for p in store.problems)
+    assert any("detector.max_codes" in p and "5001 digits" in p for p in store.problems)
+    assert main(["run", "--config-dir", str(tmp_path), "--source", "virtual"]) != 0
+    assert "run.side_mm" in capsys.readouterr().err

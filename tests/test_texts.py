@@ -119,15 +119,20 @@ def test_a_command_line_text_that_is_not_utf8_is_one_line_not_a_crash(argv, tmp_
     assert not list(tmp_path.glob("[mr].*"))  # nothing written
 
 
-def test_a_settings_file_text_that_is_not_utf8_is_set_aside_and_run_goes_on(tmp_path, monkeypatch, capsys):
+def test_a_settings_file_text_that_is_not_utf8_costs_only_its_key_and_a_strict_run_names_it(
+    tmp_path, monkeypatch, capsys
+):
+    # Only the bad value is left out (the rest of the file is kept, nothing set aside); `qrfield
+    # run`, strict about the values it uses, stops naming it, as for any other bad value.
     config = tmp_path / "config"
     config.mkdir()
-    (config / "app.json").write_text('{"virtual": {"text": "\\ud800"}}')
+    (config / "app.json").write_text('{"virtual": {"text": "\\ud800"}, "run": {"method": "ippe"}}')
     monkeypatch.setenv("QRFIELD_CONFIG_DIR", str(config))
-    assert main(["run", "--source", "virtual", "--frames", "1"]) == 0
+    assert main(["run", "--source", "virtual", "--frames", "1"]) != 0
     err = capsys.readouterr().err
-    assert "value virtual.text: not UTF-8 text" in err and "defaults used" in err
-    assert list(config.glob("app.json.bad-*"))
+    assert "value virtual.text: not UTF-8 text" in err and err.count("\n") == 1
+    assert not list(config.glob("app.json.bad-*"))
+    assert main(["run", "--source", "virtual", "--frames", "1", "--virtual-text", "ok"]) == 0
 
 
 @pytest.mark.slow

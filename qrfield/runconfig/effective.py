@@ -160,6 +160,8 @@ def _section_settings(
                 spec.validate(store.value(section.name)[spec.name])
             except SettingError as exc:
                 raise SettingError(f"{store.path}: key {section.name}.{spec.name}: {exc}") from None
+        elif strict and f"{section.name}.{spec.name}" in store.dropped:
+            raise SettingError(store.dropped[f"{section.name}.{spec.name}"].removesuffix("; default used"))
         else:
             origins[spec.name] = (FROM_DEFAULT, option)
     instance = from_dict(section.cls, data)

@@ -24,19 +24,26 @@ class ConfigStore:
         self.path = paths.config_dir(directory) / CONFIG_FILE
         self.problems: list[str] = []
         self._data: dict[str, Any] = {}
+        self.dropped: dict[str, str] = {}
         self._can_save = True
         self.load()
 
     def load(self) -> None:
         """Read the file (qrfield.files' limits: size, nesting, a BOM accepted). A damaged file
         (not UTF-8, not JSON, too deep, not an object) is kept as ``app.json.bad-<time>`` beside
-        itself and one line in ``problems`` says so; the defaults are used."""
+        itself and one line in ``problems`` says so; the defaults are used. A value that breaks a
+        file limit (an integer of 500 digits, a text too long) is left out, its default used, with a
+        line of its own; the rest is kept."""
         loaded = read_json_or_set_aside(self.path, "settings file")
         self._data = {}
         # False only while a damaged file is still in place (it could not be moved): never save over it.
         self._can_save = loaded.safe_to_overwrite
         if loaded.problem:
             self.problems.append(loaded.problem)
+        # Dotted keys ("run.side_mm") whose value broke a file limit and was left out: a strict
+        # reader (qrfield run) refuses to start on one it would use.
+        self.dropped = dict(loaded.dropped)
+        self.problems.extend(self.dropped.values())
         data = loaded.data
         if data is None:
             return
