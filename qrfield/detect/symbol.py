@@ -177,21 +177,39 @@ FLIP_MARGIN = 0.25
 MOST_CORRECTED = 0.1
 
 
-def _module_kernel(sigma_modules: float) -> np.ndarray:
-    """Shares (5,) of modules -2..2 in a point's blurred view of a module's centre: a Gaussian of
-    ``sigma_modules`` (std, in modules) over unit modules."""
+def _module_kernel(sigma_modules: float | np.ndarray) -> np.ndarray:
+    """Shares (..., 5) of modules -2..2 in a point's blurred view of a module's centre: a Gaussian of
+    ``sigma_modules`` (std, in modules; a float or an array of them, one kernel each) over unit
+    modules (elementwise: each kernel is the one its sigma alone gives)."""
     from qrfield.detect.reading import gauss_cdf
 
     d = np.arange(-2, 3, dtype=np.float64)
-    s = max(float(sigma_modules), 1e-3)
+    s = np.maximum(np.asarray(sigma_modules, dtype=np.float64), 1e-3)[..., None]
     return gauss_cdf((d + 0.5) / s) - gauss_cdf((d - 0.5) / s)
 
 
+@functools.lru_cache(maxsize=16)
+def _band_index(size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rows, columns and kernel taps (0..4 for offsets -2..2) of the entries of a (size, size) band
+    of half-width 2 (row i, column i + offset)."""
+    rows, taps = [], []
+    for tap, k in enumerate(range(-2, 3)):
+        i = np.arange(max(0, -k), min(size, size - k))
+        rows.append(i)
+        taps.append(np.full(len(i), tap))
+    r, t = np.concatenate(rows), np.concatenate(taps)
+    c = r + t - 2
+    for a in (r, c, t):
+        a.setflags(write=False)
+    return r, c, t
+
+
 def _band(size: int, kernel: np.ndarray) -> np.ndarray:
-    """(size, size) matrix of the 1-D blur ``kernel`` (5,): row i holds the shares of cells i-2..i+2."""
+    """(size, size) matrix of the 1-D blur ``kernel`` (5,): row i holds the shares of cells i-2..i+2.
+    (Set entry by entry: each entry is one tap, as the sum of the five shifted identities gives it.)"""
+    r, c, t = _band_index(size)
     out = np.zeros((size, size))
-    for k, w in zip(range(-2, 3), kernel, strict=True):
-        out += w * np.eye(size, k=k)
+    out[r, c] = kernel[t]
     return out
 
 
@@ -235,14 +253,19 @@ def blur_verified_matrix(
         return None
     rows, cols = np.mgrid[0:size, 0:size] / size - 0.5
     best = None
-    for blur in BLUR_CANDIDATES_PX:
-        sx = np.sqrt(blur**2 + 1.0 / 12.0) / max(module_px[0], 1e-6)
-        sy = np.sqrt(blur**2 + 1.0 / 12.0) / max(module_px[1], 1e-6)
-        ky, kx = _band(size, _module_kernel(sy)), _band(size, _module_kernel(sx))
+    # Every blur's kernels at once (elementwise: as one by one); the least squares one by one.
+    widths = np.sqrt(np.asarray(BLUR_CANDIDATES_PX) ** 2 + 1.0 / 12.0)
+    kernels_x = _module_kernel(widths / max(module_px[0], 1e-6))
+    kernels_y = _module_kernel(widths / max(module_px[1], 1e-6))
+    basis = np.empty((int(known.sum()), 4))
+    basis[:, 0], basis[:, 1], basis[:, 2] = 1.0, cols[known], rows[known]
+    target = values[known]
+    for kernel_x, kernel_y in zip(kernels_x, kernels_y, strict=True):
+        ky, kx = _band(size, kernel_y), _band(size, kernel_x)
         seen = ky @ cells @ kx.T  # predicted darkness at the centres
-        basis = np.column_stack([np.ones(known.sum()), cols[known], rows[known], -seen[known]])
-        solution, *_ = np.linalg.lstsq(basis, values[known], rcond=None)
-        cost = float(np.sum((basis @ solution - values[known]) ** 2))
+        basis[:, 3] = -seen[known]
+        solution, *_ = np.linalg.lstsq(basis, target, rcond=None)
+        cost = float(np.sum((basis @ solution - target) ** 2))
         if best is None or cost < best[0]:
             best = (cost, ky, kx, solution)
     _, ky, kx, (a0, au, av, contrast) = best

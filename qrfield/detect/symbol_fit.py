@@ -491,14 +491,23 @@ def _corners_ideal(theta: np.ndarray, n: int, norm: tuple[np.ndarray, float]) ->
     return _apply(inv, _UNIT_SQUARE * n) * scale + origin
 
 
-def _corners_jacobian(theta: np.ndarray, n: int, norm: tuple[np.ndarray, float]) -> np.ndarray:
-    """(8, 8) d (V1..V4 ideal px, flattened x1 y1 x2 ...) / d theta, analytically.
+def _corners_jacobian(
+    theta: np.ndarray,
+    n: int,
+    norm: tuple[np.ndarray, float],
+    mapped: tuple[np.ndarray, np.ndarray] | None = None,
+) -> np.ndarray:
+    """(8, 8) d (V1..V4 ideal px, flattened x1 y1 x2 ...) / d theta, analytically. ``mapped``: G^-1
+    (3, 3) and the corners in normalised ideal pixels (4, 2), when the caller has them.
 
     Corner x solves G (x, 1) ~ (m, 1); for a change dG, dx = -(G^-1 dG x~)[:2] + x (G^-1 dG x~)[2].
     """
     _, scale = norm
-    inv = np.linalg.inv(_g_from_params(theta))
-    corners = _apply(inv, _UNIT_SQUARE * n)  # normalised, (4, 2)
+    if mapped is None:
+        inv = np.linalg.inv(_g_from_params(theta))
+        corners = _apply(inv, _UNIT_SQUARE * n)  # normalised, (4, 2)
+    else:
+        inv, corners = mapped
     xh = np.column_stack([corners, np.ones(4)])
     # theta's entries (i, j) of G: g02 g00 g01 g12 g10 g11 g20 g21; G^-1 E_ij x~ = G^-1[:, i] x~_j
     y = inv[:, _ENTRY_ROWS].T[None, :, :] * xh[:, _ENTRY_COLS][:, :, None]  # (4 corners, 8, 3)
@@ -715,11 +724,13 @@ def _finish(
     iterations: int,
     start_geo: np.ndarray | None,
     module_px: float,
+    normal: np.ndarray | None = None,
 ) -> SymbolFit:
     """A fit's result from its last state on ``problem`` (``last``: its residuals, Jacobian and
     robust scale): corners, checks and covariance (see :func:`fit_symbol`); ``start_geo``: the
     parameters of the starting corners, to measure the start's residual on the same pixels (None:
-    not measured, NaN); ``module_px``: the module size a corner's move is measured against."""
+    not measured, NaN); ``module_px``: the module size a corner's move is measured against;
+    ``normal``: J^T W J of ``last`` with its Huber weights, when the caller has formed it."""
     n, norm = problem.n, problem.norm
     resid, jac, robust = last
 
@@ -727,7 +738,10 @@ def _finish(
         return SymbolFit(False, start.copy(), None, reason, iterations=iterations)
 
     with np.errstate(all="ignore"):
-        corners_ideal = _corners_ideal(geo, n, norm)
+        origin, scale = norm
+        inv = np.linalg.inv(_g_from_params(geo))
+        corners_norm = _apply(inv, _UNIT_SQUARE * n)
+        corners_ideal = corners_norm * scale + origin  # as _corners_ideal
         if not np.all(np.isfinite(corners_ideal)):
             return fail("the fit diverged")
         corners = lens.distort(corners_ideal) - shift
@@ -746,13 +760,14 @@ def _finish(
         if moved > max(3.0, 2.0 * module_px) and not robust < 0.5 * start_scale:
             return fail(f"a corner moved {moved:.1f} px from its start")
         # Covariance: robust scale^2 (J^T W J)^-1, its homography block taken to the corners.
-        w = _Solver.weights(resid, robust)
-        normal = (jac * w[:, None]).T @ jac
+        if normal is None:
+            w = _Solver.weights(resid, robust)
+            normal = (jac * w[:, None]).T @ jac
         try:
             cov = robust**2 * np.linalg.inv(normal)[:8, :8]
         except np.linalg.LinAlgError:
             return fail("the fit is singular")
-        dc = _corners_jacobian(geo, n, norm).reshape(4, 2, 8)
+        dc = _corners_jacobian(geo, n, norm, (inv, corners_norm)).reshape(4, 2, 8)
         corners_cov = corner_covariance(dc, cov, corners_ideal, lens)
         if not np.all(np.isfinite(corners_cov)):
             return fail("the fit is singular")
@@ -807,14 +822,15 @@ def polish(
         jac = problem.jacobian(at, True)
         robust = _Solver.robust_scale(resid)
         jw = jac * _Solver.weights(resid, robust)[:, None]
-        normal = jw.T @ jac
-        normal.flat[:: len(normal) + 1] += 1e-9
+        normal = jw.T @ jac  # the covariance's too (_finish)
+        damped = normal.copy()
+        damped.flat[:: len(damped) + 1] += 1e-9
         try:
-            delta = -small_solve(normal, jw.T @ resid, symmetric=True)  # J = d resid / d parameters
+            delta = -small_solve(damped, jw.T @ resid, symmetric=True)  # J = d resid / d parameters
         except np.linalg.LinAlgError:
             return SymbolFit(False, start.copy(), None, "the fit is singular")
         geo = geo + delta[:8]
         edge = float(np.clip(state.edge_px + delta[8], MIN_EDGE_PX, 6.0))
         light = light + delta[9:15]
     last = (resid, jac, robust)
-    return _finish(problem, start, geo, edge, light, last, lens, shift, 1, None, problem.module_px)
+    return _finish(problem, start, geo, edge, light, last, lens, shift, 1, None, problem.module_px, normal)
