@@ -204,12 +204,12 @@ def _band_index(size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return r, c, t
 
 
-def _band(size: int, kernel: np.ndarray) -> np.ndarray:
-    """(size, size) matrix of the 1-D blur ``kernel`` (5,): row i holds the shares of cells i-2..i+2.
-    (Set entry by entry: each entry is one tap, as the sum of the five shifted identities gives it.)"""
+def _bands(size: int, kernels: np.ndarray) -> np.ndarray:
+    """(b, size, size) matrices of the 1-D blurs ``kernels`` (b, 5): row i of each holds the shares
+    of cells i-2..i+2 (set entry by entry: each entry is one tap)."""
     r, c, t = _band_index(size)
-    out = np.zeros((size, size))
-    out[r, c] = kernel[t]
+    out = np.zeros((len(kernels), size, size))
+    out[:, r, c] = kernels[:, t]
     return out
 
 
@@ -252,23 +252,34 @@ def blur_verified_matrix(
     if known.sum() < 50 or data.sum() < 10:
         return None
     rows, cols = np.mgrid[0:size, 0:size] / size - 0.5
-    best = None
-    # Every blur's kernels at once (elementwise: as one by one); the least squares one by one.
+    # Every blur at once: its kernels (elementwise), the predicted darkness at the centres (batched
+    # products) and its least squares for the light level, its slopes and the contrast by the
+    # normal equations (the basis 1, x, y is shared; only the darkness column changes), the blur
+    # whose fit leaves the smallest squared residual kept (the first of equals).
     widths = np.sqrt(np.asarray(BLUR_CANDIDATES_PX) ** 2 + 1.0 / 12.0)
-    kernels_x = _module_kernel(widths / max(module_px[0], 1e-6))
-    kernels_y = _module_kernel(widths / max(module_px[1], 1e-6))
-    basis = np.empty((int(known.sum()), 4))
-    basis[:, 0], basis[:, 1], basis[:, 2] = 1.0, cols[known], rows[known]
+    bands_x = _bands(size, _module_kernel(widths / max(module_px[0], 1e-6)))
+    bands_y = _bands(size, _module_kernel(widths / max(module_px[1], 1e-6)))
+    seen = (bands_y @ cells @ bands_x.transpose(0, 2, 1)).reshape(len(widths), -1)[:, known.ravel()]
     target = values[known]
-    for kernel_x, kernel_y in zip(kernels_x, kernels_y, strict=True):
-        ky, kx = _band(size, kernel_y), _band(size, kernel_x)
-        seen = ky @ cells @ kx.T  # predicted darkness at the centres
-        basis[:, 3] = -seen[known]
-        solution, *_ = np.linalg.lstsq(basis, target, rcond=None)
-        cost = float(np.sum((basis @ solution - target) ** 2))
-        if best is None or cost < best[0]:
-            best = (cost, ky, kx, solution)
-    _, ky, kx, (a0, au, av, contrast) = best
+    base = np.empty((len(target), 3))
+    base[:, 0], base[:, 1], base[:, 2] = 1.0, cols[known], rows[known]
+    normal = np.empty((len(widths), 4, 4))
+    normal[:, :3, :3] = base.T @ base
+    cross = -(seen @ base)  # (blurs, 3): the darkness column (-seen) against the basis
+    normal[:, :3, 3] = normal[:, 3, :3] = cross
+    normal[:, 3, 3] = np.einsum("bk,bk->b", seen, seen)
+    rhs = np.empty((len(widths), 4))
+    rhs[:, :3] = base.T @ target
+    rhs[:, 3] = -(seen @ target)
+    try:
+        solutions = np.linalg.solve(normal, rhs[:, :, None])[:, :, 0]
+    except np.linalg.LinAlgError:
+        return None  # no blur's basis has full rank: no contrast to fit
+    fitted = solutions[:, :3] @ base.T - solutions[:, 3:] * seen  # (blurs, known)
+    fitted -= target
+    choice = int(np.argmin(np.einsum("bk,bk->b", fitted, fitted)))
+    ky, kx = bands_y[choice], bands_x[choice]
+    a0, au, av, contrast = solutions[choice]
     if abs(contrast) < 1e-6:
         return None
     darkness = (a0 + au * cols + av * rows - values) / contrast
