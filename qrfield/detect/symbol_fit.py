@@ -186,10 +186,12 @@ class _Layout:
         wanted = math.ceil(2.0 * budget / max(len(along) * len(across) * 0.6, 1.0))
         mids, kinds = self.mids[:wanted], self.kinds[:wanted]
         a, c = np.tile(along, len(across)), np.repeat(across, len(along))  # np.meshgrid's order
-        vertical = kinds[:, None] == 0  # an edge along v: across it is u
-        du = np.where(vertical, c[None, :], a[None, :])
-        dv = np.where(vertical, a[None, :], c[None, :])
-        pts = np.column_stack([(mids[:, :1] + du).ravel(), (mids[:, 1:] + dv).ravel()])
+        # The offsets (du, dv) from an edge's midpoint by its kind: an edge along v (kind 0) has u
+        # across it; then every edge's points in one gather and one sum.
+        offsets = np.empty((2, len(a), 2))
+        offsets[0, :, 0], offsets[0, :, 1] = c, a
+        offsets[1, :, 0], offsets[1, :, 1] = a, c
+        pts = (mids[:, None, :] + offsets[kinds]).reshape(-1, 2)
         if len(self._candidates) > 32:
             self._candidates.clear()
         self._candidates[key] = pts
@@ -204,17 +206,24 @@ def _shuffle(count: int) -> np.ndarray:
     return order
 
 
-def _windows(layout: _Layout, uv: np.ndarray, r: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _windows(
+    layout: _Layout, uv: np.ndarray, r: int, transposed: bool = False
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """For points at module coordinates ``uv`` (k, 2): which have a window of (2 r + 1)^2 known
     cells around the cell they lie in (k,) bool, those windows' colours (k', m, m) and their
-    first boundary in u and v (k', 2) (boundaries lie there + 0 .. 2 r + 1)."""
+    first boundary in u and v (k', 2) (boundaries lie there + 0 .. 2 r + 1). ``transposed``: the
+    colours as (m, m, k') instead (the points on the last axis, as _Darkness takes them), gathered
+    so directly."""
     size = layout.size
     m = 2 * r + 1
     first = np.floor(uv).astype(np.int64) + (QUIET_RINGS - r)  # the window's first column, row
     inside = ((first >= 0) & (first <= size - m)).all(axis=1)
     start = np.where(inside, first[:, 1] * size + first[:, 0], 0)
     ok = inside & layout.safe[start]
-    colour = layout.colour[start[ok][:, None] + layout.window[None, :]].reshape(-1, m, m)
+    if transposed:
+        colour = layout.colour[layout.window[:, None] + start[ok][None, :]].reshape(m, m, -1)
+    else:
+        colour = layout.colour[start[ok][:, None] + layout.window[None, :]].reshape(-1, m, m)
     return ok, colour, (first[ok] - QUIET_RINGS).astype(np.float64)
 
 
@@ -386,12 +395,20 @@ class _Problem:
         xy = np.rint(px).astype(np.int64) - (ox, oy)
         xs, ys = xy[:, 0], xy[:, 1]
         inside = (xs >= 1) & (ys >= 1) & (xs < w - 1) & (ys < h - 1)
-        flat = np.sort(ys[inside] * w + xs[inside])
-        if len(flat):
-            distinct = np.empty(len(flat), dtype=bool)
-            distinct[0] = True
-            np.not_equal(flat[1:], flat[:-1], out=distinct[1:])
-            flat = flat[distinct]
+        flat = ys[inside] * w + xs[inside]
+        if h * w <= 16 * len(flat):
+            # The distinct pixels in order by a mark per pixel (a crop: a few times the candidates'
+            # count), else by sorting (the whole frame): the same sorted distinct indices.
+            mark = np.zeros(h * w, dtype=bool)
+            mark[flat] = True
+            flat = np.flatnonzero(mark)
+        else:
+            flat = np.sort(flat)
+            if len(flat):
+                distinct = np.empty(len(flat), dtype=bool)
+                distinct[0] = True
+                np.not_equal(flat[1:], flat[:-1], out=distinct[1:])
+                flat = flat[distinct]
         if len(flat) > budget:
             flat = flat[np.linspace(0, len(flat) - 1, budget).astype(np.int64)]
         xs, ys = flat % w, flat // w
@@ -400,7 +417,7 @@ class _Problem:
         # Where each pixel starts in module coordinates; the cells around it must all be known.
         uvw = p @ g[:, :2].T + g[:, 2]
         uv = uvw[:, :2] / uvw[:, 2:3]
-        ok, colour, corner = _windows(layout, uv, r)
+        ok, colour_t, corner = _windows(layout, uv, r, transposed=True)
         self.xs, self.ys = xs[ok], ys[ok]
         self.values = grey[self.ys, self.xs].astype(np.float64)
         # Per-pixel terms with the pixels along the last axis (see _darkness_t): p (2, k), the
@@ -410,7 +427,7 @@ class _Problem:
         self.ph_t[0] = 1.0
         self.ph_t[1:] = self.p_t
         self.corner_t = np.ascontiguousarray(corner.T)
-        self.colour_t = np.ascontiguousarray(colour.transpose(1, 2, 0))
+        self.colour_t = colour_t
         # px per module unit across u and across v edges (2, k): 1 / |du/dp|, 1 / |dv/dp|, with
         # d(u, v)/d(normalised ideal) = (G[:2, :2] - (u, v) G[2, :2]) / w and the lens' d ideal /
         # d pixel, component by component (whole (k, 2, 2) arrays cost several times as much).

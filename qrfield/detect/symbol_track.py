@@ -172,15 +172,10 @@ class _Template:
             pts = layout.candidates(max(1, min(8, round(module_px))), max(module_px, 0.05), band, points)
             if len(pts) > points:
                 pts = pts[np.linspace(0, len(pts) - 1, points).astype(np.int64)]
-            ok, colour, corner = _windows(layout, pts, r)
+            ok, colour_t, corner = _windows(layout, pts, r, transposed=True)
             uv = pts[ok]
             uv_t = np.ascontiguousarray(uv.T)
-            dark = _Darkness(
-                np.ascontiguousarray((uv - corner).T),
-                _inv_grad(uv, h, lens),
-                np.ascontiguousarray(colour.transpose(1, 2, 0)),
-                edge_px,
-            )
+            dark = _Darkness(np.ascontiguousarray((uv - corner).T), _inv_grad(uv, h, lens), colour_t, edge_px)
             xy_t = uv_t / (n / 2.0) - 1.0
         t = dark.value
         (du, dv), dts = dark.derivatives(free_edge)
