@@ -213,6 +213,34 @@ def _bands(size: int, kernels: np.ndarray) -> np.ndarray:
     return out
 
 
+def _blur_fits(base: np.ndarray, seen: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Least squares of ``target`` (k,) on the columns ``base`` (k, 3) and -``seen[b]`` for each
+    blur b (``seen``: (blurs, k)): the solutions (blurs, 4) and their squared residuals (blurs,).
+    By the normal equations, all blurs at once (the three shared columns' products computed once);
+    where one is singular, numpy's lstsq for each (as one by one)."""
+    count = len(seen)
+    normal = np.empty((count, 4, 4))
+    normal[:, :3, :3] = base.T @ base
+    cross = -(seen @ base)  # (blurs, 3): the darkness column (-seen) against the basis
+    normal[:, :3, 3] = normal[:, 3, :3] = cross
+    normal[:, 3, 3] = np.einsum("bk,bk->b", seen, seen)
+    rhs = np.empty((count, 4))
+    rhs[:, :3] = base.T @ target
+    rhs[:, 3] = -(seen @ target)
+    try:
+        solutions = np.linalg.solve(normal, rhs[:, :, None])[:, :, 0]
+    except np.linalg.LinAlgError:
+        basis = np.empty((len(target), 4))
+        basis[:, :3] = base
+        solutions = np.empty((count, 4))
+        for b in range(count):
+            basis[:, 3] = -seen[b]
+            solutions[b] = np.linalg.lstsq(basis, target, rcond=None)[0]
+    fitted = solutions[:, :3] @ base.T - solutions[:, 3:] * seen  # (blurs, k)
+    fitted -= target
+    return solutions, np.einsum("bk,bk->b", fitted, fitted)
+
+
 def blur_verified_matrix(
     values: np.ndarray, matrix: np.ndarray, module_px: tuple[float, float]
 ) -> np.ndarray | None:
@@ -263,21 +291,8 @@ def blur_verified_matrix(
     target = values[known]
     base = np.empty((len(target), 3))
     base[:, 0], base[:, 1], base[:, 2] = 1.0, cols[known], rows[known]
-    normal = np.empty((len(widths), 4, 4))
-    normal[:, :3, :3] = base.T @ base
-    cross = -(seen @ base)  # (blurs, 3): the darkness column (-seen) against the basis
-    normal[:, :3, 3] = normal[:, 3, :3] = cross
-    normal[:, 3, 3] = np.einsum("bk,bk->b", seen, seen)
-    rhs = np.empty((len(widths), 4))
-    rhs[:, :3] = base.T @ target
-    rhs[:, 3] = -(seen @ target)
-    try:
-        solutions = np.linalg.solve(normal, rhs[:, :, None])[:, :, 0]
-    except np.linalg.LinAlgError:
-        return None  # no blur's basis has full rank: no contrast to fit
-    fitted = solutions[:, :3] @ base.T - solutions[:, 3:] * seen  # (blurs, known)
-    fitted -= target
-    choice = int(np.argmin(np.einsum("bk,bk->b", fitted, fitted)))
+    solutions, costs = _blur_fits(base, seen, target)
+    choice = int(np.argmin(costs))
     ky, kx = bands_y[choice], bands_x[choice]
     a0, au, av, contrast = solutions[choice]
     if abs(contrast) < 1e-6:
