@@ -206,25 +206,19 @@ def _shuffle(count: int) -> np.ndarray:
     return order
 
 
-def _windows(
-    layout: _Layout, uv: np.ndarray, r: int, transposed: bool = False
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _windows(layout: _Layout, uv: np.ndarray, r: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """For points at module coordinates ``uv`` (k, 2): which have a window of (2 r + 1)^2 known
-    cells around the cell they lie in (k,) bool, those windows' colours (k', m, m) and their
-    first boundary in u and v (k', 2) (boundaries lie there + 0 .. 2 r + 1). ``transposed``: the
-    colours as (m, m, k') instead (the points on the last axis, as _Darkness takes them), gathered
-    so directly."""
+    cells around the cell they lie in (k,) bool, those windows' colours (m, m, k') with the points
+    on the last axis (as _Darkness takes them: gathered so, no transposed copy) and their first
+    boundary in u and v (k', 2) (boundaries lie there + 0 .. 2 r + 1)."""
     size = layout.size
     m = 2 * r + 1
     first = np.floor(uv).astype(np.int64) + (QUIET_RINGS - r)  # the window's first column, row
     inside = ((first >= 0) & (first <= size - m)).all(axis=1)
     start = np.where(inside, first[:, 1] * size + first[:, 0], 0)
     ok = inside & layout.safe[start]
-    if transposed:
-        colour = layout.colour[layout.window[:, None] + start[ok][None, :]].reshape(m, m, -1)
-    else:
-        colour = layout.colour[start[ok][:, None] + layout.window[None, :]].reshape(-1, m, m)
-    return ok, colour, (first[ok] - QUIET_RINGS).astype(np.float64)
+    colour_t = layout.colour[layout.window[:, None] + start[ok][None, :]].reshape(m, m, -1)
+    return ok, colour_t, (first[ok] - QUIET_RINGS).astype(np.float64)
 
 
 _LAYOUTS: dict[tuple[int, int], tuple[np.ndarray, _Layout]] = {}
@@ -268,7 +262,7 @@ def darkness_at(
     edge_derivative: bool = True,
 ):
     """The model's darkness D (k,) at module coordinates ``uv`` (k, 2) of points whose windows of
-    cells start at boundaries ``corner`` (k, 2) with colours ``colour`` (k, m, m) (see _windows),
+    cells start at boundaries ``corner`` (k, 2) with colours ``colour`` (k, m, m) (_windows' transposed),
     ``inv_grad`` (k, 2) px per module unit across u and v edges there, edge width ``edge_px``.
     With ``derivatives`` also (dD/du, dD/dv) (k, 2) and dD/ds (k,) (None without ``edge_derivative``).
     """
@@ -417,7 +411,7 @@ class _Problem:
         # Where each pixel starts in module coordinates; the cells around it must all be known.
         uvw = p @ g[:, :2].T + g[:, 2]
         uv = uvw[:, :2] / uvw[:, 2:3]
-        ok, colour_t, corner = _windows(layout, uv, r, transposed=True)
+        ok, colour_t, corner = _windows(layout, uv, r)
         self.xs, self.ys = xs[ok], ys[ok]
         self.values = grey[self.ys, self.xs].astype(np.float64)
         # Per-pixel terms with the pixels along the last axis (see _darkness_t): p (2, k), the

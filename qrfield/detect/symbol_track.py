@@ -173,7 +173,7 @@ class _Template:
             pts = layout.candidates(max(1, min(8, round(module_px))), max(module_px, 0.05), band, points)
             if len(pts) > points:
                 pts = pts[np.linspace(0, len(pts) - 1, points).astype(np.int64)]
-            ok, colour_t, corner = _windows(layout, pts, r, transposed=True)
+            ok, colour_t, corner = _windows(layout, pts, r)
             uv = pts[ok]
             uv_t = np.ascontiguousarray(uv.T)
             dark = _Darkness(np.ascontiguousarray((uv - corner).T), _inv_grad(uv, h, lens), colour_t, edge_px)
