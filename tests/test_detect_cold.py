@@ -313,6 +313,37 @@ def test_the_blur_aware_check_corrects_misread_modules_of_a_small_code():
     assert known.mean() > 0.97 and np.array_equal(checked[known] > 0.5, truth_matrix[known])
 
 
+def test_the_blur_aware_checks_batched_fits_are_each_blurs_least_squares():
+    """The blur-aware check fits every blur width at once (batched band products, the normal
+    equations of the shared columns): each blur's band matrix is the sum of its kernel's shifted
+    identities and each fit numpy's least squares on that blur's basis (1, x, y, -predicted
+    darkness), also where one blur's darkness column is constant (its basis rank-deficient)."""
+    from qrfield.detect.symbol import _bands, _blur_fits
+
+    rng = np.random.default_rng(2026)
+    kernels = rng.uniform(0.0, 1.0, (3, 5))
+    for size in (5, 9, 25):
+        for kernel, band in zip(kernels, _bands(size, kernels), strict=True):
+            expected = sum(w * np.eye(size, k=k) for k, w in zip(range(-2, 3), kernel, strict=True))
+            assert np.array_equal(band, expected)
+    k = 400
+    base = np.column_stack([np.ones(k), rng.uniform(-0.5, 0.5, (k, 2))])
+    seen = rng.uniform(0.0, 1.0, (5, k))
+    target = 200.0 - 120.0 * seen[2] + 15.0 * base[:, 1] + rng.normal(0.0, 2.0, k)
+    for columns in (seen, np.vstack([seen, np.full((1, k), 0.5)])):
+        solutions, costs = _blur_fits(base, columns, target)
+        for b, column in enumerate(columns):
+            basis = np.column_stack([base, -column])
+            expected, *_ = np.linalg.lstsq(basis, target, rcond=None)
+            fitted = basis @ solutions[b]
+            best = basis @ expected
+            assert np.abs(fitted - best).max() < 1e-8
+            assert abs(costs[b] - np.sum((best - target) ** 2)) < 1e-6 * max(costs[b], 1.0)
+            if b < len(seen):
+                assert np.abs(solutions[b] - expected).max() < 1e-8
+        assert int(np.argmin(costs)) == 2
+
+
 @pytest.mark.slow
 def test_the_cold_fit_of_a_far_card_at_small_modules_is_not_confidently_biased():
     """The stream benchmark's "frontal far 1.4 px", seed 13, frames 0, 2 and 3 (the hard set's

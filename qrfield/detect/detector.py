@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -11,7 +12,7 @@ from qrfield.detect.backends import Candidate, find_candidates, parse_backends
 from qrfield.detect.bilinear import sample_bilinear
 from qrfield.detect.detection import Detection, DetectorSettings, quality_of
 from qrfield.detect.lens import Lens, module_points_px
-from qrfield.detect.patterns import PatternCheck, best_module_count, check_patterns
+from qrfield.detect.patterns import PatternCheck, _median, best_module_count, check_patterns
 from qrfield.detect.refine import refine_corners
 from qrfield.detect.symbol import (
     QUIET_RINGS,
@@ -95,8 +96,13 @@ class Refined:
     matrix: np.ndarray | None = None
 
 
+@functools.lru_cache(maxsize=32)
 def _module_centres(n: int) -> np.ndarray:
-    return np.stack(np.meshgrid(np.arange(n) + 0.5, np.arange(n) + 0.5), axis=-1).reshape(-1, 2)
+    """Module coordinates (n * n, 2) of the centres of an n x n grid, row by row (read-only, cached:
+    every cold refinement samples them two to four times)."""
+    out = np.stack(np.meshgrid(np.arange(n) + 0.5, np.arange(n) + 0.5), axis=-1).reshape(-1, 2)
+    out.setflags(write=False)
+    return out
 
 
 def matrix_agrees(
@@ -135,7 +141,7 @@ def confirmed_matrix(
     seen, dark = values[known], m[known] > 0.5
     if dark.all() or not dark.any():
         return None
-    dark_level, light_level = float(np.median(seen[dark])), float(np.median(seen[~dark]))
+    dark_level, light_level = _median(seen[dark]), _median(seen[~dark])
     threshold = 0.5 * (dark_level + light_level)
     seen_dark = seen > threshold if inverted else seen < threshold
     if float(np.mean(seen_dark == dark)) < MATRIX_AGREEMENT:

@@ -177,22 +177,68 @@ FLIP_MARGIN = 0.25
 MOST_CORRECTED = 0.1
 
 
-def _module_kernel(sigma_modules: float) -> np.ndarray:
-    """Shares (5,) of modules -2..2 in a point's blurred view of a module's centre: a Gaussian of
-    ``sigma_modules`` (std, in modules) over unit modules."""
+def _module_kernel(sigma_modules: float | np.ndarray) -> np.ndarray:
+    """Shares (..., 5) of modules -2..2 in a point's blurred view of a module's centre: a Gaussian of
+    ``sigma_modules`` (std, in modules; a float or an array of them, one kernel each) over unit
+    modules (elementwise: each kernel is the one its sigma alone gives)."""
     from qrfield.detect.reading import gauss_cdf
 
     d = np.arange(-2, 3, dtype=np.float64)
-    s = max(float(sigma_modules), 1e-3)
+    s = np.maximum(np.asarray(sigma_modules, dtype=np.float64), 1e-3)[..., None]
     return gauss_cdf((d + 0.5) / s) - gauss_cdf((d - 0.5) / s)
 
 
-def _band(size: int, kernel: np.ndarray) -> np.ndarray:
-    """(size, size) matrix of the 1-D blur ``kernel`` (5,): row i holds the shares of cells i-2..i+2."""
-    out = np.zeros((size, size))
-    for k, w in zip(range(-2, 3), kernel, strict=True):
-        out += w * np.eye(size, k=k)
+@functools.lru_cache(maxsize=16)
+def _band_index(size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rows, columns and kernel taps (0..4 for offsets -2..2) of the entries of a (size, size) band
+    of half-width 2 (row i, column i + offset)."""
+    rows, taps = [], []
+    for tap, k in enumerate(range(-2, 3)):
+        i = np.arange(max(0, -k), min(size, size - k))
+        rows.append(i)
+        taps.append(np.full(len(i), tap))
+    r, t = np.concatenate(rows), np.concatenate(taps)
+    c = r + t - 2
+    for a in (r, c, t):
+        a.setflags(write=False)
+    return r, c, t
+
+
+def _bands(size: int, kernels: np.ndarray) -> np.ndarray:
+    """(b, size, size) matrices of the 1-D blurs ``kernels`` (b, 5): row i of each holds the shares
+    of cells i-2..i+2 (set entry by entry: each entry is one tap)."""
+    r, c, t = _band_index(size)
+    out = np.zeros((len(kernels), size, size))
+    out[:, r, c] = kernels[:, t]
     return out
+
+
+def _blur_fits(base: np.ndarray, seen: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Least squares of ``target`` (k,) on the columns ``base`` (k, 3) and -``seen[b]`` for each
+    blur b (``seen``: (blurs, k)): the solutions (blurs, 4) and their squared residuals (blurs,).
+    By the normal equations, all blurs at once (the three shared columns' products computed once);
+    where one is singular, numpy's lstsq for each (as one by one)."""
+    count = len(seen)
+    normal = np.empty((count, 4, 4))
+    normal[:, :3, :3] = base.T @ base
+    cross = -(seen @ base)  # (blurs, 3): the darkness column (-seen) against the basis
+    normal[:, :3, 3] = normal[:, 3, :3] = cross
+    normal[:, 3, 3] = np.einsum("bk,bk->b", seen, seen)
+    rhs = np.empty((count, 4))
+    rhs[:, :3] = base.T @ target
+    rhs[:, 3] = -(seen @ target)
+    try:
+        solutions = np.linalg.solve(normal, rhs[:, :, None])[:, :, 0]
+    except np.linalg.LinAlgError:
+        basis = np.empty((len(target), 4))
+        basis[:, :3] = base
+        solutions = np.empty((count, 4))
+        for b in range(count):
+            basis[:, 3] = -seen[b]
+            solutions[b] = np.linalg.lstsq(basis, target, rcond=None)[0]
+    fitted = solutions[:, :3] @ base.T - solutions[:, 3:] * seen  # (blurs, k)
+    fitted -= target
+    return solutions, np.einsum("bk,bk->b", fitted, fitted)
 
 
 def blur_verified_matrix(
@@ -234,18 +280,21 @@ def blur_verified_matrix(
     if known.sum() < 50 or data.sum() < 10:
         return None
     rows, cols = np.mgrid[0:size, 0:size] / size - 0.5
-    best = None
-    for blur in BLUR_CANDIDATES_PX:
-        sx = np.sqrt(blur**2 + 1.0 / 12.0) / max(module_px[0], 1e-6)
-        sy = np.sqrt(blur**2 + 1.0 / 12.0) / max(module_px[1], 1e-6)
-        ky, kx = _band(size, _module_kernel(sy)), _band(size, _module_kernel(sx))
-        seen = ky @ cells @ kx.T  # predicted darkness at the centres
-        basis = np.column_stack([np.ones(known.sum()), cols[known], rows[known], -seen[known]])
-        solution, *_ = np.linalg.lstsq(basis, values[known], rcond=None)
-        cost = float(np.sum((basis @ solution - values[known]) ** 2))
-        if best is None or cost < best[0]:
-            best = (cost, ky, kx, solution)
-    _, ky, kx, (a0, au, av, contrast) = best
+    # Every blur at once: its kernels (elementwise), the predicted darkness at the centres (batched
+    # products) and its least squares for the light level, its slopes and the contrast by the
+    # normal equations (the basis 1, x, y is shared; only the darkness column changes), the blur
+    # whose fit leaves the smallest squared residual kept (the first of equals).
+    widths = np.sqrt(np.asarray(BLUR_CANDIDATES_PX) ** 2 + 1.0 / 12.0)
+    bands_x = _bands(size, _module_kernel(widths / max(module_px[0], 1e-6)))
+    bands_y = _bands(size, _module_kernel(widths / max(module_px[1], 1e-6)))
+    seen = (bands_y @ cells @ bands_x.transpose(0, 2, 1)).reshape(len(widths), -1)[:, known.ravel()]
+    target = values[known]
+    base = np.empty((len(target), 3))
+    base[:, 0], base[:, 1], base[:, 2] = 1.0, cols[known], rows[known]
+    solutions, costs = _blur_fits(base, seen, target)
+    choice = int(np.argmin(costs))
+    ky, kx = bands_y[choice], bands_x[choice]
+    a0, au, av, contrast = solutions[choice]
     if abs(contrast) < 1e-6:
         return None
     darkness = (a0 + au * cols + av * rows - values) / contrast

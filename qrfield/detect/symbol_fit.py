@@ -186,10 +186,12 @@ class _Layout:
         wanted = math.ceil(2.0 * budget / max(len(along) * len(across) * 0.6, 1.0))
         mids, kinds = self.mids[:wanted], self.kinds[:wanted]
         a, c = np.tile(along, len(across)), np.repeat(across, len(along))  # np.meshgrid's order
-        vertical = kinds[:, None] == 0  # an edge along v: across it is u
-        du = np.where(vertical, c[None, :], a[None, :])
-        dv = np.where(vertical, a[None, :], c[None, :])
-        pts = np.column_stack([(mids[:, :1] + du).ravel(), (mids[:, 1:] + dv).ravel()])
+        # The offsets (du, dv) from an edge's midpoint by its kind: an edge along v (kind 0) has u
+        # across it; then every edge's points in one gather and one sum.
+        offsets = np.empty((2, len(a), 2))
+        offsets[0, :, 0], offsets[0, :, 1] = c, a
+        offsets[1, :, 0], offsets[1, :, 1] = a, c
+        pts = (mids[:, None, :] + offsets[kinds]).reshape(-1, 2)
         if len(self._candidates) > 32:
             self._candidates.clear()
         self._candidates[key] = pts
@@ -206,16 +208,17 @@ def _shuffle(count: int) -> np.ndarray:
 
 def _windows(layout: _Layout, uv: np.ndarray, r: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """For points at module coordinates ``uv`` (k, 2): which have a window of (2 r + 1)^2 known
-    cells around the cell they lie in (k,) bool, those windows' colours (k', m, m) and their
-    first boundary in u and v (k', 2) (boundaries lie there + 0 .. 2 r + 1)."""
+    cells around the cell they lie in (k,) bool, those windows' colours (m, m, k') with the points
+    on the last axis (as _Darkness takes them: gathered so, no transposed copy) and their first
+    boundary in u and v (k', 2) (boundaries lie there + 0 .. 2 r + 1)."""
     size = layout.size
     m = 2 * r + 1
     first = np.floor(uv).astype(np.int64) + (QUIET_RINGS - r)  # the window's first column, row
     inside = ((first >= 0) & (first <= size - m)).all(axis=1)
     start = np.where(inside, first[:, 1] * size + first[:, 0], 0)
     ok = inside & layout.safe[start]
-    colour = layout.colour[start[ok][:, None] + layout.window[None, :]].reshape(-1, m, m)
-    return ok, colour, (first[ok] - QUIET_RINGS).astype(np.float64)
+    colour_t = layout.colour[layout.window[:, None] + start[ok][None, :]].reshape(m, m, -1)
+    return ok, colour_t, (first[ok] - QUIET_RINGS).astype(np.float64)
 
 
 _LAYOUTS: dict[tuple[int, int], tuple[np.ndarray, _Layout]] = {}
@@ -259,7 +262,7 @@ def darkness_at(
     edge_derivative: bool = True,
 ):
     """The model's darkness D (k,) at module coordinates ``uv`` (k, 2) of points whose windows of
-    cells start at boundaries ``corner`` (k, 2) with colours ``colour`` (k, m, m) (see _windows),
+    cells start at boundaries ``corner`` (k, 2) with colours ``colour`` (k, m, m) (_windows' transposed),
     ``inv_grad`` (k, 2) px per module unit across u and v edges there, edge width ``edge_px``.
     With ``derivatives`` also (dD/du, dD/dv) (k, 2) and dD/ds (k,) (None without ``edge_derivative``).
     """
@@ -386,12 +389,20 @@ class _Problem:
         xy = np.rint(px).astype(np.int64) - (ox, oy)
         xs, ys = xy[:, 0], xy[:, 1]
         inside = (xs >= 1) & (ys >= 1) & (xs < w - 1) & (ys < h - 1)
-        flat = np.sort(ys[inside] * w + xs[inside])
-        if len(flat):
-            distinct = np.empty(len(flat), dtype=bool)
-            distinct[0] = True
-            np.not_equal(flat[1:], flat[:-1], out=distinct[1:])
-            flat = flat[distinct]
+        flat = ys[inside] * w + xs[inside]
+        if h * w <= 16 * len(flat):
+            # The distinct pixels in order by a mark per pixel (a crop: a few times the candidates'
+            # count), else by sorting (the whole frame): the same sorted distinct indices.
+            mark = np.zeros(h * w, dtype=bool)
+            mark[flat] = True
+            flat = np.flatnonzero(mark)
+        else:
+            flat = np.sort(flat)
+            if len(flat):
+                distinct = np.empty(len(flat), dtype=bool)
+                distinct[0] = True
+                np.not_equal(flat[1:], flat[:-1], out=distinct[1:])
+                flat = flat[distinct]
         if len(flat) > budget:
             flat = flat[np.linspace(0, len(flat) - 1, budget).astype(np.int64)]
         xs, ys = flat % w, flat // w
@@ -400,7 +411,7 @@ class _Problem:
         # Where each pixel starts in module coordinates; the cells around it must all be known.
         uvw = p @ g[:, :2].T + g[:, 2]
         uv = uvw[:, :2] / uvw[:, 2:3]
-        ok, colour, corner = _windows(layout, uv, r)
+        ok, colour_t, corner = _windows(layout, uv, r)
         self.xs, self.ys = xs[ok], ys[ok]
         self.values = grey[self.ys, self.xs].astype(np.float64)
         # Per-pixel terms with the pixels along the last axis (see _darkness_t): p (2, k), the
@@ -410,7 +421,7 @@ class _Problem:
         self.ph_t[0] = 1.0
         self.ph_t[1:] = self.p_t
         self.corner_t = np.ascontiguousarray(corner.T)
-        self.colour_t = np.ascontiguousarray(colour.transpose(1, 2, 0))
+        self.colour_t = colour_t
         # px per module unit across u and across v edges (2, k): 1 / |du/dp|, 1 / |dv/dp|, with
         # d(u, v)/d(normalised ideal) = (G[:2, :2] - (u, v) G[2, :2]) / w and the lens' d ideal /
         # d pixel, component by component (whole (k, 2, 2) arrays cost several times as much).
@@ -491,14 +502,23 @@ def _corners_ideal(theta: np.ndarray, n: int, norm: tuple[np.ndarray, float]) ->
     return _apply(inv, _UNIT_SQUARE * n) * scale + origin
 
 
-def _corners_jacobian(theta: np.ndarray, n: int, norm: tuple[np.ndarray, float]) -> np.ndarray:
-    """(8, 8) d (V1..V4 ideal px, flattened x1 y1 x2 ...) / d theta, analytically.
+def _corners_jacobian(
+    theta: np.ndarray,
+    n: int,
+    norm: tuple[np.ndarray, float],
+    mapped: tuple[np.ndarray, np.ndarray] | None = None,
+) -> np.ndarray:
+    """(8, 8) d (V1..V4 ideal px, flattened x1 y1 x2 ...) / d theta, analytically. ``mapped``: G^-1
+    (3, 3) and the corners in normalised ideal pixels (4, 2), when the caller has them.
 
     Corner x solves G (x, 1) ~ (m, 1); for a change dG, dx = -(G^-1 dG x~)[:2] + x (G^-1 dG x~)[2].
     """
     _, scale = norm
-    inv = np.linalg.inv(_g_from_params(theta))
-    corners = _apply(inv, _UNIT_SQUARE * n)  # normalised, (4, 2)
+    if mapped is None:
+        inv = np.linalg.inv(_g_from_params(theta))
+        corners = _apply(inv, _UNIT_SQUARE * n)  # normalised, (4, 2)
+    else:
+        inv, corners = mapped
     xh = np.column_stack([corners, np.ones(4)])
     # theta's entries (i, j) of G: g02 g00 g01 g12 g10 g11 g20 g21; G^-1 E_ij x~ = G^-1[:, i] x~_j
     y = inv[:, _ENTRY_ROWS].T[None, :, :] * xh[:, _ENTRY_COLS][:, :, None]  # (4 corners, 8, 3)
@@ -715,11 +735,13 @@ def _finish(
     iterations: int,
     start_geo: np.ndarray | None,
     module_px: float,
+    normal: np.ndarray | None = None,
 ) -> SymbolFit:
     """A fit's result from its last state on ``problem`` (``last``: its residuals, Jacobian and
     robust scale): corners, checks and covariance (see :func:`fit_symbol`); ``start_geo``: the
     parameters of the starting corners, to measure the start's residual on the same pixels (None:
-    not measured, NaN); ``module_px``: the module size a corner's move is measured against."""
+    not measured, NaN); ``module_px``: the module size a corner's move is measured against;
+    ``normal``: J^T W J of ``last`` with its Huber weights, when the caller has formed it."""
     n, norm = problem.n, problem.norm
     resid, jac, robust = last
 
@@ -727,7 +749,10 @@ def _finish(
         return SymbolFit(False, start.copy(), None, reason, iterations=iterations)
 
     with np.errstate(all="ignore"):
-        corners_ideal = _corners_ideal(geo, n, norm)
+        origin, scale = norm
+        inv = np.linalg.inv(_g_from_params(geo))
+        corners_norm = _apply(inv, _UNIT_SQUARE * n)
+        corners_ideal = corners_norm * scale + origin  # as _corners_ideal
         if not np.all(np.isfinite(corners_ideal)):
             return fail("the fit diverged")
         corners = lens.distort(corners_ideal) - shift
@@ -746,13 +771,14 @@ def _finish(
         if moved > max(3.0, 2.0 * module_px) and not robust < 0.5 * start_scale:
             return fail(f"a corner moved {moved:.1f} px from its start")
         # Covariance: robust scale^2 (J^T W J)^-1, its homography block taken to the corners.
-        w = _Solver.weights(resid, robust)
-        normal = (jac * w[:, None]).T @ jac
+        if normal is None:
+            w = _Solver.weights(resid, robust)
+            normal = (jac * w[:, None]).T @ jac
         try:
             cov = robust**2 * np.linalg.inv(normal)[:8, :8]
         except np.linalg.LinAlgError:
             return fail("the fit is singular")
-        dc = _corners_jacobian(geo, n, norm).reshape(4, 2, 8)
+        dc = _corners_jacobian(geo, n, norm, (inv, corners_norm)).reshape(4, 2, 8)
         corners_cov = corner_covariance(dc, cov, corners_ideal, lens)
         if not np.all(np.isfinite(corners_cov)):
             return fail("the fit is singular")
@@ -807,14 +833,15 @@ def polish(
         jac = problem.jacobian(at, True)
         robust = _Solver.robust_scale(resid)
         jw = jac * _Solver.weights(resid, robust)[:, None]
-        normal = jw.T @ jac
-        normal.flat[:: len(normal) + 1] += 1e-9
+        normal = jw.T @ jac  # the covariance's too (_finish)
+        damped = normal.copy()
+        damped.flat[:: len(damped) + 1] += 1e-9
         try:
-            delta = -small_solve(normal, jw.T @ resid, symmetric=True)  # J = d resid / d parameters
+            delta = -small_solve(damped, jw.T @ resid, symmetric=True)  # J = d resid / d parameters
         except np.linalg.LinAlgError:
             return SymbolFit(False, start.copy(), None, "the fit is singular")
         geo = geo + delta[:8]
         edge = float(np.clip(state.edge_px + delta[8], MIN_EDGE_PX, 6.0))
         light = light + delta[9:15]
     last = (resid, jac, robust)
-    return _finish(problem, start, geo, edge, light, last, lens, shift, 1, None, problem.module_px)
+    return _finish(problem, start, geo, edge, light, last, lens, shift, 1, None, problem.module_px, normal)

@@ -25,6 +25,7 @@ averages out (measured on the moving sequences of ``qrfield benchmark detect``: 
 
 from __future__ import annotations
 
+import functools
 import math
 
 import cv2
@@ -172,15 +173,10 @@ class _Template:
             pts = layout.candidates(max(1, min(8, round(module_px))), max(module_px, 0.05), band, points)
             if len(pts) > points:
                 pts = pts[np.linspace(0, len(pts) - 1, points).astype(np.int64)]
-            ok, colour, corner = _windows(layout, pts, r)
+            ok, colour_t, corner = _windows(layout, pts, r)
             uv = pts[ok]
             uv_t = np.ascontiguousarray(uv.T)
-            dark = _Darkness(
-                np.ascontiguousarray((uv - corner).T),
-                _inv_grad(uv, h, lens),
-                np.ascontiguousarray(colour.transpose(1, 2, 0)),
-                edge_px,
-            )
+            dark = _Darkness(np.ascontiguousarray((uv - corner).T), _inv_grad(uv, h, lens), colour_t, edge_px)
             xy_t = uv_t / (n / 2.0) - 1.0
         t = dark.value
         (du, dv), dts = dark.derivatives(free_edge)
@@ -304,6 +300,24 @@ def _shifted(h: list[float], sx: float, sy: float) -> list[float]:
     ]  # fmt: skip
 
 
+@functools.lru_cache(maxsize=64)
+def _corner_warp_jacobian(n: int) -> np.ndarray:
+    """d W(m_k; dH) / d dH at the identity for the corners V1..V4 of an n-module symbol, (4, 2, 8)
+    (see _Template: dH's terms d0..d7); read-only, one per module count."""
+    m = _SQUARE * n
+    u, v = m[:, 0], m[:, 1]
+    zero, one = np.zeros(4), np.ones(4)
+    out = np.stack(
+        [
+            np.column_stack([u, v, one, zero, zero, zero, -u * u, -u * v]),
+            np.column_stack([zero, zero, zero, u, v, one, -u * v, -v * v]),
+        ],
+        axis=1,
+    )
+    out.setflags(write=False)
+    return out
+
+
 class WarmFit:
     """The warm whole-symbol fit of one tracked code (its cell map and lens fixed).
 
@@ -330,19 +344,7 @@ class WarmFit:
         #: the pixel-centred template's samples (qrfield.detect.symbol_fit._Problem), else None
         self.samples: _Problem | None = None
         self._template: _Template | None = None
-        m = _SQUARE * self.n
-        self._corner_modules = np.ascontiguousarray(m.reshape(1, 4, 2))
-        self._square32 = m.astype(np.float32)
-        u, v = m[:, 0], m[:, 1]
-        zero, one = np.zeros(4), np.ones(4)
-        # d W(m_k; dH) / d dH at the identity for V1..V4, (4, 2, 8) (see _Template.geo).
-        self._dw = np.stack(
-            [
-                np.column_stack([u, v, one, zero, zero, zero, -u * u, -u * v]),
-                np.column_stack([zero, zero, zero, u, v, one, -u * v, -v * v]),
-            ],
-            axis=1,
-        )
+        self._dw = _corner_warp_jacobian(self.n)
 
     def _corners(self, h: list[float]) -> np.ndarray | None:
         """Corners V1..V4 (4, 2) through the homography ``h`` (9 floats) and, when distorted,
