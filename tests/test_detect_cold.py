@@ -272,7 +272,8 @@ def test_a_stage_without_its_covariance_lands_where_the_full_call_does(scenes):
         assert quick.ok and quick.corners_cov is None, text
         # the same fit with and without its covariance
         start = FitState(quick.state.edge_px, quick.state.lighting)
-        assert np.linalg.norm(quick.corners_px - truth, axis=1).max() < 0.5, text
+        # A start for the fine stage (0.2-0.5 px off at small modules, docs/detection.md): within a pixel.
+        assert np.linalg.norm(quick.corners_px - truth, axis=1).max() < 1.0, text
         image, begin = drawn.image, candidate.corners_px
         a = WarmFit(cells, lens, 400).fit(image, begin, start, (0, 0), 2)
         b = WarmFit(cells, lens, 400).fit(

@@ -176,11 +176,17 @@ class _Layout:
     def candidates(self, per_edge: int, module_px: float, band_px: float, budget: int) -> np.ndarray:
         """Module coordinates (k, 2) of points near the edges: ``per_edge`` along each, every 0.7 px
         across it within +-``band_px``; the first edges of the shuffle, enough for about twice
-        ``budget`` pixels. Cached per (per_edge, module size and band to 5 %, budget)."""
+        ``budget`` pixels. Cached per (per_edge, module size and band to 5 %, budget), and made at
+        the module size and band of that 5 % step."""
         key = (per_edge, round(math.log(module_px) * 20), round(math.log(band_px) * 20), budget)
         pts = self._candidates.get(key)
         if pts is not None:
             return pts
+        # Made at the key's own module size and band, not the caller's: the points are a function
+        # of the key alone, so a hit gives what a miss would make. The fixed patterns' cell map
+        # (fixed_cells, cached) and so its layout are shared by every stream: made at the first
+        # caller's size, a later stream within the same 5 % got the earlier one's points.
+        module_px, band_px = math.exp(key[1] / 20.0), math.exp(key[2] / 20.0)
         along = (np.arange(per_edge) + 0.5) / per_edge - 0.5
         across = np.arange(-band_px, band_px + 1e-9, 0.7) / module_px
         wanted = math.ceil(2.0 * budget / max(len(along) * len(across) * 0.6, 1.0))
