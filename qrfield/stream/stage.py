@@ -13,6 +13,12 @@ method's PoseResult in ``FrameResult.poses`` by the one to report:
   angles, std, vertices and reprojection), ``filtered`` True once earlier frames were used. A frame
   still ambiguous after the history is reported as it is and is not given to the filter.
 
+The mirror the history weighs is the numerical model's own (its search ends on a minimum); IPPE's
+is refined first (:func:`qrfield.solvers.mirror.refined_mirror_result`): near frontal its second
+closed-form solution slides onto the answer, so there is no distinct mirror, and, as for the
+numerical model's mirror search that slides back, the history confirms the answer unless it points
+nearer the candidate the refinement started from (:func:`qrfield.solvers.mirror.mirror_start`).
+
 It records per method a :class:`StreamMark` in ``FrameResult.stream`` (``resolved_by``,
 ``filtered``) and keeps the frame's own solver results in ``FrameResult.frame_poses``. A single
 frame (no history, filter off or just started) comes out as the solvers made it: the same pose,
@@ -30,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from qrfield.solvers.mirror import mirror_result, reflected_rotation
+from qrfield.solvers.mirror import mirror_result, mirror_start, refined_mirror_result, reflected_rotation
 from qrfield.solvers.registry import uses_depth_model
 from qrfield.solvers.result import PoseResult
 from qrfield.status import usable_pose
@@ -139,13 +145,13 @@ class StreamStage:
         corners_cov: np.ndarray | None,
     ) -> None:
         """Continuity, then the filter, for one method's pose of one frame."""
-        decision = state.history.decide(
-            pose,
-            result.t_ms,
-            text,
-            mirror=lambda p: mirror_result(p, camera, side_mm, corners_cov),
-            reflected=(lambda p: reflected_rotation(p, camera)) if uses_depth_model(name) else None,
-        )
+        if uses_depth_model(name):  # the numerical model: its mirror search ends on a minimum
+            mirror = lambda p: mirror_result(p, camera, side_mm, corners_cov)  # noqa: E731
+            reflected = lambda p: reflected_rotation(p, camera)  # noqa: E731
+        else:  # IPPE's mirror may be its closed-form second solution: refined first
+            mirror = lambda p: refined_mirror_result(p, camera, side_mm, corners_cov)  # noqa: E731
+            reflected = mirror_start
+        decision = state.history.decide(pose, result.t_ms, text, mirror=mirror, reflected=reflected)
         out, filtered, reset = decision.pose, False, ""
         if state.filter is not None and not decision.ambiguous:
             cov = vector_cov(out)
