@@ -69,6 +69,28 @@ def test_steep_view_of_2px_modules_gives_its_pose(seed, index):
     assert np.abs(angle_difference(pose.angles_deg, view.pose.angles_deg)).max() < 2.0
 
 
+def test_a_symbol_decoded_turned_comes_back_in_its_own_corner_order():
+    """decode_rectified from finders taken one place round (V4 given as V1): zxing-cpp reads the
+    turned symbol, and the corners come back in the symbol's order (the true ones, drawn here).
+    On main they came back as given: steep seed 2037 view 258, the right text with every corner
+    one place round."""
+    from qrfield.detect.finders import decode_rectified
+
+    text = "qrfield turned"
+    matrix = np.array(segno.make(text, error="m", micro=False).matrix, dtype=bool)
+    n, px, quiet = matrix.shape[0], 6, 4
+    image = np.full(((n + 2 * quiet) * px,) * 2, 230, np.uint8)
+    image[quiet * px : (quiet + n) * px, quiet * px : (quiet + n) * px] = np.where(
+        np.kron(matrix, np.ones((px, px), bool)), 25, 230
+    )
+    lo, hi = quiet * px - 0.5, (quiet + n) * px - 0.5  # pixel centres at integers (OpenCV)
+    true = np.array([[lo, lo], [hi, lo], [hi, hi], [lo, hi]])
+    for turn in range(4):
+        read, _, corners = decode_rectified(image, np.roll(true, turn, axis=0), n)
+        assert read == text, turn
+        np.testing.assert_allclose(corners, true)
+
+
 def test_nothing_on_blank_frames():
     rng = np.random.default_rng(5)
     for level, noise in ((128, 2.0), (60, 6.0), (200, 0.0)):

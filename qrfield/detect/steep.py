@@ -392,7 +392,7 @@ def _locate_in_canvas(
             for _, centre, size in trio
         ]
         for corners, m in candidates_from_finders(canvas, squares)[:1]:
-            text, matrix = decode_rectified(canvas, corners, m)
+            text, matrix, corners = decode_rectified(canvas, corners, m)
             if text is not None:
                 return corners, m, text, matrix
             located = located or (corners, m, None, None)
