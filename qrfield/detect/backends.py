@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from qrfield.detect.lens import Lens
 from qrfield.settings import SettingError
 
 #: Backend names accepted by the ``backends`` setting, fastest first. "zxing-x2" runs zxing-cpp on the
@@ -188,10 +189,12 @@ def _small(grey: np.ndarray) -> list[Candidate]:
     return [Candidate(corners, text, "small", n, symbol) for corners, n, text, symbol in locate_small(grey)]
 
 
-def _steep(grey: np.ndarray) -> list[Candidate]:
+def _steep(grey: np.ndarray, lens: Lens | None = None) -> list[Candidate]:
     from qrfield.detect.steep import locate_steep
 
-    return [Candidate(corners, text, "steep", n, symbol) for corners, n, text, symbol in locate_steep(grey)]
+    return [
+        Candidate(corners, text, "steep", n, symbol) for corners, n, text, symbol in locate_steep(grey, lens)
+    ]
 
 
 _BACKENDS: dict[str, Callable[[np.ndarray], list[Candidate]]] = {
@@ -226,8 +229,17 @@ def parse_backends(spec: str) -> tuple[str, ...]:
     return names
 
 
-def find_candidates(grey: np.ndarray, backend: str) -> list[Candidate]:
-    """Run one backend on a (H, W) uint8 grey image; never raises for image content."""
+#: Backends that model the camera's lens (given to :func:`find_candidates`); the others see the
+#: image alone.
+_LENS_BACKENDS: dict[str, Callable[[np.ndarray, Lens | None], list[Candidate]]] = {"steep": _steep}
+
+
+def find_candidates(grey: np.ndarray, backend: str, lens: Lens | None = None) -> list[Candidate]:
+    """Run one backend on a (H, W) uint8 grey image; never raises for image content. ``lens``:
+    the camera's lens (qrfield.detect.lens.Lens, None for a pinhole), used by the steep backend
+    (its canvas is made in ideal pixels)."""
+    if backend in _LENS_BACKENDS:
+        return _LENS_BACKENDS[backend](grey, lens)
     try:
         return _BACKENDS[backend](grey)
     except KeyError:

@@ -224,7 +224,7 @@ class Detector:
         most = settings.max_codes or None
         for backend in self.backends:
             skipped = False
-            candidates = find_candidates(grey, backend)
+            candidates = find_candidates(grey, backend, self.lens)
             if len(candidates) > 1 and most is not None:  # the largest first: they are the ones kept
                 candidates.sort(key=lambda c: -_area(c.corners_px))
             for candidate in candidates:

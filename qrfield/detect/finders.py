@@ -148,9 +148,13 @@ def _fit_symbol(
 
 def decode_rectified(
     grey: np.ndarray, corners: np.ndarray, modules: int
-) -> tuple[str | None, np.ndarray | None]:
+) -> tuple[str | None, np.ndarray | None, np.ndarray]:
     """Warp the symbol at ``corners`` (V1..V4) upright with a quiet zone and decode it with zxing-cpp:
-    (text, (n, n) bool module matrix) or (None, None)."""
+    (text, (n, n) bool module matrix, corners V1..V4) or (None, None, ``corners``). The corners are
+    ``corners`` in the order zxing-cpp read the symbol: it decodes a symbol turned by quarter
+    turns all the same (a triple of finders taken in the wrong order), and its V1 is then
+    another of ours. (A mirrored symbol it reads too, reporting its corners clockwise: that is
+    not seen here; the decoded matrix's check against the image refuses it later.)"""
     from qrfield.detect.backends import read_qr_barcodes  # here: backends imports this module
     from qrfield.detect.symbol import matrix_from_zxing
 
@@ -163,9 +167,33 @@ def decode_rectified(
     )
     barcodes = read_qr_barcodes(upright)
     if not barcodes or not barcodes[0].valid:
-        return None, None
+        return None, None, corners
+    turn = _quarter_turns(barcodes[0].position, dst.astype(np.float64))
+    if turn is None:
+        return None, None, corners
+    # zxing-cpp's V1 is our V(turn + 1): steep seed 2037 view 258 came with the right text and
+    # every corner one place round (223 px off, not reported good: its patterns did not check out)
+    ordered = np.roll(corners, -turn, axis=0)
     matrix = matrix_from_zxing(barcodes[0])
-    return barcodes[0].text, matrix if matrix is not None and matrix.shape[0] == modules else None
+    return barcodes[0].text, matrix if matrix is not None and matrix.shape[0] == modules else None, ordered
+
+
+def _quarter_turns(position, square: np.ndarray) -> int | None:
+    """How many places round (0-3) the symbol's own V1..V4 as zxing-cpp read them (``position``:
+    top_left .. bottom_left in the rectified image) lie from the rectified corners ``square``
+    (4, 2) of our V1..V4; None when they are not our corners in their cyclic order."""
+    seen = np.array(
+        [
+            [p.x, p.y]
+            for p in (position.top_left, position.top_right, position.bottom_right, position.bottom_left)
+        ],
+        dtype=np.float64,
+    )
+    nearest = [int(np.argmin(np.linalg.norm(square - point, axis=1))) for point in seen]
+    turn = nearest[0]
+    if nearest != [(turn + k) % 4 for k in range(4)]:
+        return None
+    return turn
 
 
 def locate_by_finders(
@@ -195,7 +223,7 @@ def locate_by_finders(
                 for c, _, _, _ in found
             ):
                 continue
-            text, matrix = decode_rectified(grey, corners, n) if decode else (None, None)
+            text, matrix, corners = decode_rectified(grey, corners, n) if decode else (None, None, corners)
             found.append((corners, n, text, matrix))
         if found:
             break

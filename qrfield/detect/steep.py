@@ -19,17 +19,22 @@ backend explained (this backend runs last):
    direction back (:func:`canvas_scale` canvas px per image px across the compression, less
    along it) and turns the code's outline (the blob's least-area rectangle) upright: the code is
    then a roughly square, upright symbol with canvas modules of about CANVAS_MODULE_PX.
-3. *Finder patterns by correlation*: for each module count n the blob's width allows (module
-   sizes MODULE_STEP apart), the canvas is correlated (normalised) with a finder pattern and its
-   light separator (9 x 9 modules) of that size; the strongest peaks (at most MAX_PEAKS, at least
-   MIN_CORRELATION) whose triples make a code's finder triangle (LEG_RANGE, RIGHT_ANGLE_DEG; the
-   TRIOS_PER_SIZE strongest) are handed as squares to the contour locator's triple search
-   (qrfield.detect.finders), which picks the finders and n by the fixed patterns (>= 0.8 in the
-   canvas) and decodes the rectified symbol. A code not decoded must score MIN_IMAGE_SCORE in the
-   image too, before the costly reading is tried.
+3. *Finder patterns*: first the contour locator (qrfield.detect.finders) on the canvas, where
+   its finders show as nested squares; then by correlation: the canvas is correlated
+   (normalised) with a finder pattern and its light separator (9 x 9 modules) at module sizes
+   MODULE_STEP apart (:func:`module_sizes`: those the blob's module counts allow, widened by
+   PERSPECTIVE, since the canvas undoes one affine map and a code in perspective keeps finders
+   of different sizes); the strongest peaks over all sizes (at most MAX_PEAKS a size,
+   MAX_FINDERS in all, at least MIN_CORRELATION) whose triples make a code's finder triangle
+   (LEG_RANGE, RIGHT_ANGLE_DEG, sizes and legs within FINDER_RATIO; the TRIOS strongest) are
+   handed as squares to the contour locator's triple search, which picks the finders and n by
+   the fixed patterns (>= 0.8 in the canvas) and decodes the rectified symbol. A code not
+   decoded must score MIN_IMAGE_SCORE in the image too, before the costly reading is tried.
 
-Corners come back to the image by the inverse affine map. A code located but not read is read
-by qrfield.detect.reading after its fixed patterns are fitted in the image
+Through a distorting lens (``locate_steep(grey, lens)``) the blob's widths and the canvas are
+taken in ideal pixels (qrfield.detect.lens), where the code's plane maps by a homography.
+Corners come back to the image by the inverse affine map (and the lens). A code located but not
+read is read by qrfield.detect.reading after its fixed patterns are fitted in the image
 (:meth:`qrfield.detect.detector.Detector.accept`), which also checks the patterns again: nothing
 from here is reported without those checks.
 """
@@ -42,6 +47,7 @@ import itertools
 import cv2
 import numpy as np
 
+from qrfield.detect.lens import Lens, undistort_pixels
 from qrfield.detect.patterns import ALL_MODULES, check_patterns
 
 #: Least ratio of a blob's principal widths for this backend (rounder blobs are the small
@@ -85,8 +91,16 @@ RIGHT_ANGLE_DEG = 40.0
 #: steep set that were read scored 0.78-0.85; the hard set's located codes that no one reads
 #: 0.67-0.93.
 MIN_IMAGE_SCORE = 0.76
-#: Of those, the strongest (summed correlation) are tried, this many per module size.
-TRIOS_PER_SIZE = 2
+#: The canvas undoes one affine compression; perspective remains, so a code's near finder can be
+#: up to twice its far one: finders are searched for at module sizes from PERSPECTIVE[0] times the
+#: smallest the blob's module counts allow to PERSPECTIVE[1] times the largest, and three finder
+#: candidates (their sizes, and the two legs of their triangle) may differ by up to FINDER_RATIO.
+PERSPECTIVE = (0.7, 1.4)
+FINDER_RATIO = 2.0
+#: Most finder candidates kept per canvas (the strongest over all sizes), and most triples of them
+#: tried (the strongest by summed correlation).
+MAX_FINDERS = 8
+TRIOS = 6
 
 
 def compressed_blobs(grey: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, float, float, np.ndarray]]:
@@ -168,16 +182,18 @@ def _finder_template(size: int) -> np.ndarray:
     return 255.0 * light.reshape(size, 4, size, 4).mean(axis=(1, 3))
 
 
-def _finder_triangle(points: list[np.ndarray], leg_px: float) -> bool:
+def _finder_triangle(points: list[np.ndarray], shortest_px: float, longest_px: float) -> bool:
     """True when three finder centres (canvas px) make the right-angled triangle of a code whose
-    finder centres are ``leg_px`` apart along its sides: at one of them two legs of LEG_RANGE
-    times ``leg_px`` at an angle of 90 +- RIGHT_ANGLE_DEG (the canvas undoes the compression;
-    perspective remains)."""
+    finder centres are ``shortest_px`` to ``longest_px`` apart along its sides: at one of them
+    two legs within LEG_RANGE of that span, at most FINDER_RATIO apart, at an angle of
+    90 +- RIGHT_ANGLE_DEG (the canvas undoes the compression; perspective remains)."""
     lo, hi = LEG_RANGE
     for a in range(3):
         u, v = points[(a + 1) % 3] - points[a], points[(a + 2) % 3] - points[a]
         lu, lv = float(np.hypot(*u)), float(np.hypot(*v))
-        if not (lo * leg_px <= lu <= hi * leg_px and lo * leg_px <= lv <= hi * leg_px):
+        if not (lo * shortest_px <= min(lu, lv) and max(lu, lv) <= hi * longest_px):
+            continue
+        if max(lu, lv) > FINDER_RATIO * min(lu, lv):
             continue
         if abs(float(u @ v)) <= np.sin(np.deg2rad(RIGHT_ANGLE_DEG)) * lu * lv:
             return True
@@ -198,81 +214,186 @@ def _peaks(response: np.ndarray, radius: int) -> list[tuple[int, int]]:
     return out
 
 
-def locate_steep(grey: np.ndarray) -> list[tuple[np.ndarray, int, str | None, np.ndarray | None]]:
+def _ideal_blob(
+    lens: Lens, points: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, float, float, np.ndarray] | None:
+    """A blob's (centre, long direction, long width, compressed width, points) as
+    :func:`compressed_blobs` gives them, in ideal pixels of ``lens`` (qrfield.detect.lens: where
+    the plane of the code maps by a homography): its pixel centres ``points`` (k, 2) undistorted,
+    the widths from their second moments less the mask's reach; None when degenerate."""
+    ideal = undistort_pixels(lens.camera, points)
+    centre = ideal.mean(axis=0)
+    values, vectors = np.linalg.eigh(np.cov((ideal - centre).T))
+    if values[0] <= 0:
+        return None
+    long_w = 2.0 * np.sqrt(3.0 * values[1]) - 2.0 * MASK_REACH_PX
+    short_w = 2.0 * np.sqrt(3.0 * values[0]) - 2.0 * MASK_REACH_PX
+    if short_w <= 0:
+        return None
+    return centre, vectors[:, 1], float(long_w), float(short_w), ideal
+
+
+def locate_steep(
+    grey: np.ndarray, lens: Lens | None = None
+) -> list[tuple[np.ndarray, int, str | None, np.ndarray | None]]:
     """Codes in the compressed busy blobs of ``grey`` (H, W) uint8: (corners V1..V4 px, modules,
     text or None, decoded module matrix or None), as qrfield.detect.finders.locate_by_finders gives
-    them; pixel centres as OpenCV's (the top-left pixel's centre at (0, 0))."""
+    them; pixel centres as OpenCV's (the top-left pixel's centre at (0, 0)).
+
+    ``lens``: the camera's lens (qrfield.detect.lens.Lens, for images of this size), None for a
+    pinhole. Through a distorting lens the canvas is made from ideal pixels (each canvas pixel
+    mapped back by the affine map, then through the lens): a code near the edge of a wide lens
+    is curved in the image (a 100 mm code at 240 mm: a corner 5 px off a straight-sided
+    quadrilateral, steep seed 2027 view 137), in ideal pixels it is the plane's homography."""
     from qrfield.detect.finders import _candidates_from_finders, decode_rectified
 
     found: list[tuple[np.ndarray, int, str | None, np.ndarray | None]] = []
     blobs = compressed_blobs(grey)
     if not blobs:
         return found
+    distorted = lens is not None and lens.distorted and lens.fits(grey.shape)
     g = grey.astype(np.float32)
-    for centre, long_dir, long_w, short_w, points in blobs:
+    for blob in blobs:
+        if distorted:
+            ideal_blob = _ideal_blob(lens, blob[4])
+            if ideal_blob is None:
+                continue
+            blob = ideal_blob
+        centre, long_dir, long_w, short_w, points = blob
         affine, side, scale = canvas_map(centre, long_dir, long_w, short_w, points)
-        # the image region the canvas covers, sharpened there only
         inverse = cv2.invertAffineTransform(affine)
-        box = np.array([[0, 0], [side, 0], [side, side], [0, side]], dtype=np.float64)
-        reach = box @ inverse[:, :2].T + inverse[:, 2]
+        if distorted:
+            # canvas px -> ideal px (the inverse affine map) -> image px (the lens)
+            ys, xs = np.mgrid[0:side, 0:side].astype(np.float64)
+            grid = np.column_stack([xs.ravel(), ys.ravel()]) @ inverse[:, :2].T + inverse[:, 2]
+            source = lens.distort(grid).reshape(side, side, 2)
+        else:
+            box = np.array([[0, 0], [side, 0], [side, side], [0, side]], dtype=np.float64)
+            source = box @ inverse[:, :2].T + inverse[:, 2]
+        # the image region the canvas covers, sharpened there only
+        reach = source.reshape(-1, 2)
         x0, y0 = np.maximum(np.floor(reach.min(axis=0)).astype(int) - 4, 0)
         x1, y1 = np.minimum(np.ceil(reach.max(axis=0)).astype(int) + 5, (grey.shape[1], grey.shape[0]))
         if x1 - x0 < 8 or y1 - y0 < 8:
             continue
         crop = g[y0:y1, x0:x1]
         sharp = cv2.addWeighted(crop, 1.0 + SHARPEN, cv2.GaussianBlur(crop, (0, 0), 1.0), -SHARPEN, 0.0)
-        shifted = affine.copy()
-        shifted[:, 2] += affine[:, :2] @ np.array([x0, y0], dtype=np.float64)
-        canvas = cv2.warpAffine(
-            sharp, shifted, (side, side), flags=cv2.INTER_CUBIC, borderMode=cv2.BORDER_REPLICATE
-        )
+        if distorted:
+            maps = (source - np.array([x0, y0], dtype=np.float64)).astype(np.float32)
+            canvas = cv2.remap(sharp, maps, None, cv2.INTER_CUBIC, borderMode=cv2.BORDER_REPLICATE)
+        else:
+            shifted = affine.copy()
+            shifted[:, 2] += affine[:, :2] @ np.array([x0, y0], dtype=np.float64)
+            canvas = cv2.warpAffine(
+                sharp, shifted, (side, side), flags=cv2.INTER_CUBIC, borderMode=cv2.BORDER_REPLICATE
+            )
         canvas = np.clip(canvas, 0, 255).astype(np.uint8)
         best = _locate_in_canvas(canvas, short_w, scale, decode_rectified, _candidates_from_finders)
         if best is None:
             continue
         corners_c, n, text, matrix = best
         corners = corners_c @ inverse[:, :2].T + inverse[:, 2]
-        if text is None and check_patterns(grey, corners, n).score < MIN_IMAGE_SCORE:
+        if distorted:
+            corners = lens.distort(corners)
+        if (
+            text is None
+            and check_patterns(grey, corners, n, lens if distorted else None).score < MIN_IMAGE_SCORE
+        ):
             continue  # not read, and its patterns hold too poorly in the image to be read there
         if not any(np.abs(corners - other[0]).max() < 2.0 for other in found):
             found.append((corners, n, text, matrix))
     return found
 
 
+def module_sizes(short_w: float, scale: float) -> list[float]:
+    """Canvas module sizes (px) at which finder patterns are searched for in a canvas made at
+    ``scale`` from a blob of compressed width ``short_w`` px: from the largest module the blob's
+    module counts allow (times PERSPECTIVE[1]) down to the smallest (times PERSPECTIVE[0]),
+    each MODULE_STEP below the last; the canvas undoes one affine compression, so a code seen
+    in perspective keeps finders of different sizes (its near finder up to twice its far one)."""
+    counts = module_counts(short_w)
+    if not counts:
+        return []
+    largest = PERSPECTIVE[1] * scale * short_w / counts[0]
+    smallest = max(PERSPECTIVE[0] * scale * short_w / counts[-1], 1.0)
+    sizes = []
+    module = largest
+    while module >= smallest:
+        sizes.append(module)
+        module /= 1.0 + MODULE_STEP
+    return sizes
+
+
+def _finder_peaks(image: np.ndarray, sizes: list[float]) -> list[tuple[float, np.ndarray, int]]:
+    """Finder-pattern candidates in a float32 canvas: (correlation, centre (2,) canvas px, template
+    side px) of the strongest peaks of each module size in ``sizes`` (:func:`_peaks`), the
+    strongest first, a weaker peak dropped where a stronger one (of any size) lies within half a
+    finder of it (one finder answers several sizes), at most MAX_FINDERS."""
+    found = []
+    for module in sizes:
+        template = _finder_template(max(round(9 * module), 9))
+        size = template.shape[0]
+        if size + 2 > image.shape[0]:
+            continue
+        response = cv2.matchTemplate(image, template, cv2.TM_CCOEFF_NORMED)
+        for x, y in _peaks(response, max(int(3.5 * module), 2)):
+            found.append(
+                (float(response[y, x]), np.array([x + (size - 1) / 2.0, y + (size - 1) / 2.0]), size)
+            )
+    found.sort(key=lambda peak: -peak[0])
+    kept: list[tuple[float, np.ndarray, int]] = []
+    for peak in found:
+        if all(np.hypot(*(peak[1] - k[1])) > 3.5 / 9.0 * max(peak[2], k[2]) for k in kept):
+            kept.append(peak)
+    return kept[:MAX_FINDERS]
+
+
+def _finder_trio(peaks: list[tuple[float, np.ndarray, int]], counts: list[int]) -> bool:
+    """True when three finder candidates (:func:`_finder_peaks`) can be a code's three finders:
+    their sizes within FINDER_RATIO of each other and a right-angled triangle
+    (:func:`_finder_triangle`) whose legs fit between the fewest and the most modules
+    ``counts`` allow at their mean module size."""
+    sizes = [size for _, _, size in peaks]
+    if max(sizes) > FINDER_RATIO * min(sizes):
+        return False
+    module = float(np.mean(sizes)) / 9.0
+    return _finder_triangle(
+        [centre for _, centre, _ in peaks], (counts[0] - 7) * module, (counts[-1] - 7) * module
+    )
+
+
 def _locate_in_canvas(
     canvas: np.ndarray, short_w: float, scale: float, decode_rectified, candidates_from_finders
 ) -> tuple[np.ndarray, int, str | None, np.ndarray | None] | None:
-    """The first code (corners V1..V4 canvas px, n, text or None, matrix or None) found in an
-    upright (side, side) uint8 ``canvas`` made at ``scale`` from a blob of compressed width
-    ``short_w`` px, or None; ``decode_rectified`` and ``candidates_from_finders`` are
-    qrfield.detect.finders' (imported once by the caller)."""
-    tried: list[float] = []
-    image = canvas.astype(np.float32)
-    for n in module_counts(short_w):
-        module = scale * short_w / n
-        if any(abs(module - m) < MODULE_STEP * m for m in tried):
-            continue
-        tried.append(module)
-        template = _finder_template(max(round(9 * module), 9))
-        size = template.shape[0]
-        if size + 2 > canvas.shape[0]:
-            continue
-        response = cv2.matchTemplate(image, template, cv2.TM_CCOEFF_NORMED)
-        peaks = _peaks(response, max(int(3.5 * module), 2))
-        if len(peaks) < 3:
-            continue
-        half = 3.5 * size / 9.0
-        centres = [np.array([x + (size - 1) / 2.0, y + (size - 1) / 2.0]) for x, y in peaks]
-        square = half * np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], dtype=np.float64)
-        strength = [float(response[y, x]) for x, y in peaks]
-        trios = [
-            trio
-            for trio in itertools.combinations(range(len(centres)), 3)
-            if _finder_triangle([centres[i] for i in trio], (n - 7) * module)
+    """The code (corners V1..V4 canvas px, n, text or None, matrix or None) found in an upright
+    (side, side) uint8 ``canvas`` made at ``scale`` from a blob of compressed width ``short_w``
+    px, or None: the first one decoded, else the first one located, of (1) the contour locator
+    on the canvas (qrfield.detect.finders.locate_by_finders: where the canvas shows the finders'
+    nested squares, their outlines hold the perspective better than squares of the templates'
+    sizes) and (2) the TRIOS strongest finder triples by correlation (summed correlation);
+    ``decode_rectified`` and ``candidates_from_finders`` are qrfield.detect.finders' (imported
+    once by the caller)."""
+    from qrfield.detect.finders import locate_by_finders
+
+    counts = module_counts(short_w)
+    if not counts:
+        return None
+    located = None
+    for corners, m, text, matrix in locate_by_finders(canvas):
+        if text is not None:
+            return corners, m, text, matrix
+        located = located or (corners, m, None, None)
+    peaks = _finder_peaks(canvas.astype(np.float32), module_sizes(short_w, scale))
+    trios = [trio for trio in itertools.combinations(peaks, 3) if _finder_trio(list(trio), counts)]
+    trios.sort(key=lambda trio: -sum(strength for strength, _, _ in trio))
+    for trio in trios[:TRIOS]:
+        squares = [
+            centre + 3.5 / 9.0 * size * np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], dtype=np.float64)
+            for _, centre, size in trio
         ]
-        trios.sort(key=lambda trio: -sum(strength[i] for i in trio))
-        for trio in trios[:TRIOS_PER_SIZE]:
-            for corners, m in candidates_from_finders(canvas, [centres[i] + square for i in trio]):
-                text, matrix = decode_rectified(canvas, corners, m)
+        for corners, m in candidates_from_finders(canvas, squares)[:1]:
+            text, matrix, corners = decode_rectified(canvas, corners, m)
+            if text is not None:
                 return corners, m, text, matrix
-    return None
+            located = located or (corners, m, None, None)
+    return located
