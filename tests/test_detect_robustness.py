@@ -10,7 +10,6 @@ import pytest
 from qrfield.camera import resolve_camera
 from qrfield.detect import Detector, DetectorInputError, DetectorSettings, Tracker
 from qrfield.detect.backends import BackendError
-from qrfield.detect.detection import GOOD_CORNER_STD_PX
 from qrfield.geometry import Pose
 from qrfield.render import render_view
 from qrfield.sampling import random_visible_poses
@@ -113,12 +112,14 @@ def test_no_bad_corners_are_reported_as_good_on_hard_views(camera_vga):
                 # Below the good line: the backend's own corners, edge-line corners that the
                 # whole-symbol fit could not better and that therefore carry no covariance, or
                 # fitted corners whose uncertainty is above the good line (small codes found by the
-                # small backend): their error is within what their std says.
+                # small backend), or whose patterns score below it (codes read by the least-squares
+                # reading are kept from a score of 0.78: view 25 since issue 26r, 0.02 px off at
+                # a score of 0.83): their error is within what their std says.
                 std = float(np.max(d.corners_std_px)) if d.corners_cov is not None else math.nan
                 assert (
                     (not d.refined and d.quality <= 0.5)
                     or (d.refined and d.corners_cov is None)
-                    or (d.refined and std > GOOD_CORNER_STD_PX and error < 4.0 * std)
+                    or (d.refined and error < 4.0 * std)
                 ), f"view {i}: quality {d.quality:.2f}, {error:.2f} px off, std {std:.3f} px"
     assert good >= 15
 
