@@ -155,3 +155,7 @@ def test_the_stream_benchmark_runs_and_prints_every_mode(tmp_path: Path) -> None
     for mode in ("single frame", "continuity", "filter 0.2 s", "filter 0.5 s"):
         assert mode in done.stdout
     assert "seeds [1] were used for tuning" in done.stdout and "RMS (mean - truth) / sem" in done.stdout
+    # why frames miss the criteria, per method and mode, and the single frames' tilt precision
+    for method in ("num", "ipp"):
+        assert f"{method} continuity" in done.stdout.split("why frames miss 2 deg / 5 mm")[1]
+        assert f"{method} single frames' tilt (alpha, beta): RMS error" in done.stdout
