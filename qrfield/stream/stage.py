@@ -40,7 +40,7 @@ from qrfield.solvers.mirror import mirror_result, mirror_start, refined_mirror_r
 from qrfield.solvers.registry import uses_depth_model
 from qrfield.solvers.result import PoseResult
 from qrfield.status import usable_pose
-from qrfield.stream.continuity import BY_FRAME, BranchHistory
+from qrfield.stream.continuity import BY_FRAME, BranchHistory, Decision
 from qrfield.stream.kalman import PoseFilter, shared_scale
 from qrfield.stream.poses import moved_result, vector_cov
 from qrfield.stream.settings import StreamSettings
@@ -66,14 +66,13 @@ class StreamMark:
     reset: str = ""
 
 
-def shared_widening(cov: np.ndarray, decision: Any) -> np.ndarray:
+def shared_widening(cov: np.ndarray, decision: Decision) -> np.ndarray:
     """The filter's covariance ``cov`` (6, 6) over (x, y, z mm, w rad) with the frame's widening
     near the fold (``decision.widening``, continuity's) counted as shared in full: the
     filter already reports the shared share rho of the frames' variance (qrfield.stream.kalman),
     and takes the rest for noise it averages away; near the fold the error of the tilt stays with
     the view, so (1 - rho) of the widening is added back."""
-    extra = getattr(decision, "widening", None)
-    moved = getattr(decision, "position_widening", None)
+    extra, moved = decision.widening, decision.position_widening
     if extra is None and moved is None:
         return cov
     out = np.array(cov, dtype=float)
