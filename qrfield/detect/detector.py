@@ -12,7 +12,7 @@ from qrfield.detect.backends import Candidate, find_candidates, parse_backends
 from qrfield.detect.bilinear import sample_bilinear
 from qrfield.detect.detection import Detection, DetectorSettings, quality_of
 from qrfield.detect.lens import Lens, module_points_px
-from qrfield.detect.patterns import PatternCheck, _median, best_module_count, check_patterns
+from qrfield.detect.patterns import PatternCheck, best_module_count, check_patterns, small_median
 from qrfield.detect.refine import refine_corners
 from qrfield.detect.symbol import (
     QUIET_RINGS,
@@ -141,7 +141,7 @@ def confirmed_matrix(
     seen, dark = values[known], m[known] > 0.5
     if dark.all() or not dark.any():
         return None
-    dark_level, light_level = _median(seen[dark]), _median(seen[~dark])
+    dark_level, light_level = small_median(seen[dark]), small_median(seen[~dark])
     threshold = 0.5 * (dark_level + light_level)
     seen_dark = seen > threshold if inverted else seen < threshold
     if float(np.mean(seen_dark == dark)) < MATRIX_AGREEMENT:

@@ -89,7 +89,7 @@ def to_pixels(h: np.ndarray, xy: np.ndarray) -> np.ndarray:
     return p[:, :2] / p[:, 2:3]
 
 
-def _median(values: np.ndarray) -> float:
+def small_median(values: np.ndarray) -> float:
     """Median of a small 1-D array (np.median's overhead dominates at this size)."""
     ordered = np.sort(values)
     n = len(ordered)
@@ -115,8 +115,8 @@ def check_patterns(
         return PatternCheck(0.0, n, False, np.nan, np.nan, "the code is cut by the image border")
     if outside.any():  # a tightly cropped image: judge by the quiet zone that is there
         values, dark = values[~outside], dark[~outside]
-    d = _median(values[dark])
-    light = _median(values[~dark])
+    d = small_median(values[dark])
+    light = small_median(values[~dark])
     inverted = d > light
     if abs(light - d) < MIN_CONTRAST:
         return PatternCheck(

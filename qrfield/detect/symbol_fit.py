@@ -502,10 +502,16 @@ def _params_from_g(g: np.ndarray) -> np.ndarray:
     return np.array([g[0, 2], g[0, 0], g[0, 1], g[1, 2], g[1, 0], g[1, 1], g[2, 0], g[2, 1]])
 
 
+def _corners_mapped(theta: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """G^-1 (3, 3) of the parameters ``theta`` and the corners V1..V4 it maps to, in normalised
+    ideal pixels (4, 2)."""
+    inv = np.linalg.inv(_g_from_params(theta))
+    return inv, _apply(inv, _UNIT_SQUARE * n)
+
+
 def _corners_ideal(theta: np.ndarray, n: int, norm: tuple[np.ndarray, float]) -> np.ndarray:
     origin, scale = norm
-    inv = np.linalg.inv(_g_from_params(theta))
-    return _apply(inv, _UNIT_SQUARE * n) * scale + origin
+    return _corners_mapped(theta, n)[1] * scale + origin
 
 
 def _corners_jacobian(
@@ -520,11 +526,7 @@ def _corners_jacobian(
     Corner x solves G (x, 1) ~ (m, 1); for a change dG, dx = -(G^-1 dG x~)[:2] + x (G^-1 dG x~)[2].
     """
     _, scale = norm
-    if mapped is None:
-        inv = np.linalg.inv(_g_from_params(theta))
-        corners = _apply(inv, _UNIT_SQUARE * n)  # normalised, (4, 2)
-    else:
-        inv, corners = mapped
+    inv, corners = _corners_mapped(theta, n) if mapped is None else mapped
     xh = np.column_stack([corners, np.ones(4)])
     # theta's entries (i, j) of G: g02 g00 g01 g12 g10 g11 g20 g21; G^-1 E_ij x~ = G^-1[:, i] x~_j
     y = inv[:, _ENTRY_ROWS].T[None, :, :] * xh[:, _ENTRY_COLS][:, :, None]  # (4 corners, 8, 3)
@@ -756,9 +758,8 @@ def _finish(
 
     with np.errstate(all="ignore"):
         origin, scale = norm
-        inv = np.linalg.inv(_g_from_params(geo))
-        corners_norm = _apply(inv, _UNIT_SQUARE * n)
-        corners_ideal = corners_norm * scale + origin  # as _corners_ideal
+        inv, corners_norm = _corners_mapped(geo, n)
+        corners_ideal = corners_norm * scale + origin
         if not np.all(np.isfinite(corners_ideal)):
             return fail("the fit diverged")
         corners = lens.distort(corners_ideal) - shift
