@@ -265,10 +265,6 @@ def _lattice(count: int) -> tuple[np.ndarray, np.ndarray]:
     return x[None, :].astype(np.float32), y[None, :].astype(np.float32)
 
 
-def _module_px(corners: np.ndarray, n: int) -> float:
-    return shortest_module_px(corners, n)
-
-
 def true_corners(camera: CameraModel, pose: Pose, side_mm: float) -> np.ndarray:
     """(4, 2) pixels of the corners V1..V4 of a code of ``side_mm`` at ``pose``, by
     ``cv2.projectPoints`` with the lens' distortion: the set's truth."""
@@ -316,7 +312,7 @@ def hard_view(index: int, seed: int = 2024) -> HardView:
         text,
         version,
         n,
-        _module_px(corners, n),
+        shortest_module_px(corners, n),
         noise,
         blur,
         gradient,
@@ -391,7 +387,7 @@ def steep_view(index: int, seed: int = 2026) -> HardView:
         if bool(view_of(camera, quiet_side, pose.rotation, pose.position_mm, margin_px=2.0).in_view):
             break
     image, corners, noise, blur, gradient = _picture(rng, camera, pose, side, matrix)
-    small = _module_px(corners, n)
+    small = shortest_module_px(corners, n)
     return HardView(index, image, corners, camera, side, pose, text, version, n, small, noise, blur, gradient)
 
 
@@ -460,7 +456,7 @@ def multi_view(index: int, count: int, seed: int = 2024) -> MultiView:
         corners.append(true)
         texts.append(text)
         modules.append(matrix.shape[0])
-        module_px.append(_module_px(true, matrix.shape[0]))
+        module_px.append(shortest_module_px(true, matrix.shape[0]))
     blur = float(rng.uniform(0.4, 0.9))
     image = cv2.GaussianBlur(image, (0, 0), sigmaX=blur, borderType=cv2.BORDER_REPLICATE)
     image = np.clip(np.round(image + rng.normal(0.0, float(rng.uniform(0.0, 3.0)), image.shape)), 0, 255)
