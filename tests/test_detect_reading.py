@@ -11,10 +11,11 @@ import pytest
 
 segno = pytest.importorskip("segno", reason="segno (a dev dependency) encodes the steep set's symbols")
 
-from qrfield.detect import Detector  # noqa: E402
+from view_checks import drawn_agreement, found_once  # noqa: E402
+
 from qrfield.detect.lens import Lens  # noqa: E402
 from qrfield.detect.reading import _operator, read_symbol  # noqa: E402
-from qrfield.testing.hardset import steep_view, symbol_matrix  # noqa: E402
+from qrfield.testing.hardset import steep_view  # noqa: E402
 
 #: Steep-set views (seed 2026) that the reading before issue 26r could not read even from the true
 #: corners and blur: 48 (1.37 px modules along the short side, blur 1.08 px, version 9, pinhole),
@@ -32,9 +33,7 @@ def test_a_steep_blurred_code_is_read_from_its_true_corners(index):
     text, matrix = read_symbol(view.image, view.corners_px, view.modules, view.blur_px, lens)
     assert text == view.text
     # The matrix read is the symbol segno drew, but for the modules the error correction put right.
-    drawn = [symbol_matrix(view.text, level)[0] for level in "LMQH"]
-    agree = max(float(np.mean(matrix == d)) for d in drawn if d.shape == matrix.shape)
-    assert agree > 0.9
+    assert drawn_agreement(matrix, view.text) > 0.9
     # A module off along either side: no text (the decode of the drawn symbol is the guard).
     for side in (1, 3):
         step = (view.corners_px[side] - view.corners_px[0]) / view.modules
@@ -46,13 +45,7 @@ def test_a_steep_blurred_code_is_read_from_its_true_corners(index):
 @pytest.mark.parametrize("index", (48, 166))
 def test_a_steep_blurred_code_is_found_end_to_end(index):
     """Located by the small / steep backends, fitted, then read: the corners are the truth's."""
-    view = steep_view(index, 2026)
-    found = Detector(camera=view.camera).detect(view.image)
-    assert len(found) == 1, f"view {index}: {len(found)} codes"
-    (d,) = found
-    assert d.text == view.text and d.refined
-    error = np.linalg.norm(d.corners_px - view.corners_px, axis=1)
-    assert error.max() < 0.3, f"view {index}: {error.max():.3f} px off"
+    found_once(steep_view(index, 2026))
 
 
 def test_the_blur_model_is_the_sheared_gaussian_over_each_cell():
