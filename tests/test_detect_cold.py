@@ -1,5 +1,5 @@
 """A cold detection's refinement by inverse composition (qrfield.detect.symbol_cold), against the
-truth of an independent renderer (tests/scene_truth.py: segno symbols, stratified ray casting,
+truth of an independent renderer (tests/scene_truth.py: segno symbols, the hard set's rasteriser,
 cv2.projectPoints), pinhole and a distorted lens."""
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Several codes in one frame: every one found and refined, the largest first under ``max_codes``,
 only the selected text refined and followed; against an independent renderer's truth
-(tests/scene_truth.py: segno symbols, stratified ray casting, cv2.projectPoints)."""
+(tests/scene_truth.py: segno symbols, the hard set's rasteriser, cv2.projectPoints)."""
 
 from __future__ import annotations
 

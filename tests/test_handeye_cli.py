@@ -1,4 +1,4 @@
-"""``qrfield handeye PAIRS.csv``: images drawn by tests/handeye_views.py at tool poses written as
+"""``qrfield handeye PAIRS.csv``: images drawn by tests/scene_truth.py at tool poses written as
 quaternions by hand; the calibration written matches the truth; bad rows are reported and left out;
 bad input and degenerate pose sets are one line."""
 
@@ -10,7 +10,7 @@ import math
 import cv2
 import numpy as np
 import pytest
-from handeye_views import draw, symbol
+from scene_truth import draw_card
 
 from qrfield.cli import main
 from qrfield.geometry import Pose, angles_from_rotation
@@ -35,13 +35,12 @@ def _tool(axis, angle_deg, position):
 def _write_set(folder, camera, tools):
     folder.mkdir(exist_ok=True)
     lines = ["x,y,z,qw,qx,qy,qz,image"]
-    matrix = symbol()
     for k, (tool, q) in enumerate(tools):
         code = (
             np.linalg.inv(X) @ tool @ Y
         )  # eye-to-hand: T_base_camera T_camera_marker = T_base_tool T_tool_marker
         pose = Pose(code[:3, 3], angles_from_rotation(code[:3, :3]))
-        cv2.imwrite(str(folder / f"view{k:02d}.png"), draw(camera, pose, SIDE, matrix, seed=k))
+        cv2.imwrite(str(folder / f"view{k:02d}.png"), draw_card(camera, pose, SIDE, seed=k))
         lines.append(",".join(f"{v:.6f}" for v in (*tool[:3, 3], *q)) + f",view{k:02d}.png")
     return lines
 

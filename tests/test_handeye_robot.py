@@ -1,7 +1,7 @@
 """The simulated robot (qrfield.handeye.robot) and the whole hand-eye workflow on views it drives.
 
-The accuracy figures of issue 28 are checked on views drawn by tests/handeye_views.py (an
-independent renderer: segno's symbol, per-pixel ray tracing), detected and solved by the project's
+The accuracy figures of issue 28 are checked on views drawn by tests/scene_truth.py (segno's
+symbol, the hard set's rasteriser, not qrfield.render), detected and solved by the project's
 pipeline: eye-in-hand and eye-to-hand from 15 views of a 50 mm code at 250-380 mm tilted up to
 32 degrees: camera_to_tool / camera_to_base within 2 mm and 0.3 degrees of the truth, residuals
 and uncertainty honest. The truth is composed here by hand (the chain of frames), not taken from
@@ -15,7 +15,7 @@ import threading
 
 import numpy as np
 import pytest
-from handeye_views import draw, symbol
+from scene_truth import draw_card
 
 from qrfield.detect import Detector
 from qrfield.handeye import HandEyeError, PairCollector, SimulatedRobot, solve_handeye
@@ -55,11 +55,10 @@ def test_the_robot_sees_what_the_chain_of_frames_says(setup, camera_vga):
 
 def _measured_pairs(robot, camera, tools, seed):
     detector = Detector()
-    matrix = symbol()
     pairs, errors, left_out = [], [], []
     for k, tool in enumerate(tools):
         truth = robot.code_pose(tool)
-        image = draw(camera, truth, SIDE, matrix, seed=seed * 100 + k)
+        image = draw_card(camera, truth, SIDE, seed=seed * 100 + k)
         result, problem = pose_for_pair(image, camera, SIDE, detector)
         if problem:
             left_out.append(problem)
@@ -101,11 +100,11 @@ def test_views_turned_only_about_the_optical_axis_are_refused(setup, camera_vga)
     robot = SimulatedRobot.example(setup)
     views = [transform_from_pose([5.0, -3.0, 300.0], [0.0, 0.0, g]) for g in range(-60, 61, 15)]
     tools = robot.tool_for_view(np.array(views))
-    detector, matrix = Detector(), symbol()
+    detector = Detector()
     pairs = []
     for k, tool in enumerate(tools):
         result, problem = pose_for_pair(
-            draw(camera_vga, robot.code_pose(tool), SIDE, matrix, seed=k), camera_vga, SIDE, detector
+            draw_card(camera_vga, robot.code_pose(tool), SIDE, seed=k), camera_vga, SIDE, detector
         )
         if not problem:
             pairs.append(Pair.from_pose(tool, result))
