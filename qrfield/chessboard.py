@@ -141,7 +141,7 @@ def render_chessboard(
     Raises:
         ValueError: a corner is behind the camera or outside the image, or the board faces away.
     """
-    from qrfield.render import _ideal_pixel_map  # the same distortion remap the QR renderer uses
+    from qrfield.render import ideal_canvas  # the same distortion remap the QR renderer uses
 
     if supersample < 1 or int(supersample) != supersample:
         raise ValueError(f"supersample must be a whole number >= 1, got {supersample!r}")
@@ -162,22 +162,10 @@ def render_chessboard(
             f"{int(np.sum(~inside))} board corners fall outside the {camera.width}x{camera.height} image"
         )
 
-    offset = (0.0, 0.0)
-    size = camera.size
-    if camera.has_distortion:
-        map_u, map_v = _ideal_pixel_map(camera)
-        x0, y0 = math.floor(float(map_u.min())) - 2, math.floor(float(map_v.min())) - 2
-        x1, y1 = math.ceil(float(map_u.max())) + 3, math.ceil(float(map_v.max())) + 3
-        offset, size = (float(x0), float(y0)), (x1 - x0, y1 - y0)
-    canvas = _ideal_picture(camera, board, pose, offset, size, int(supersample), background)
-    if camera.has_distortion:
-        canvas = cv2.remap(
-            canvas,
-            map_u - np.float32(offset[0]),
-            map_v - np.float32(offset[1]),
-            cv2.INTER_LINEAR,
-            borderMode=cv2.BORDER_REPLICATE,
-        )
+    ideal = ideal_canvas(camera)
+    canvas = ideal.to_camera(
+        _ideal_picture(camera, board, pose, ideal.offset, ideal.size, int(supersample), background)
+    )
     if noise_sigma < 0 or not math.isfinite(noise_sigma):
         raise ValueError(f"noise_sigma must be a finite number >= 0, got {noise_sigma!r}")
     if noise_sigma > 0:

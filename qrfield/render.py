@@ -113,6 +113,48 @@ def _ideal_pixel_map(camera: CameraModel) -> tuple[np.ndarray, np.ndarray]:
     return ideal[..., 0].copy(), ideal[..., 1].copy()
 
 
+@dataclass(frozen=True)
+class IdealCanvas:
+    """The pinhole (distortion-free) canvas a camera's picture is drawn on before the lens.
+
+    Attributes:
+        offset: the camera pixel (x, y) of the canvas' pixel (0, 0); (0, 0) without distortion.
+        size: the canvas' (width, height) in pixels: the camera's, or with distortion the bounds
+            of every ideal pixel the camera sees, 2 px wider on the top and left and 3 px on the
+            bottom and right (the remap's bilinear neighbours).
+        maps: (map_u, map_v), each (H, W) float32: the ideal pixel each camera pixel sees
+            (:func:`_ideal_pixel_map`); None without distortion.
+    """
+
+    offset: tuple[float, float]
+    size: tuple[int, int]
+    maps: tuple[np.ndarray, np.ndarray] | None
+
+    def to_camera(self, canvas: np.ndarray) -> np.ndarray:
+        """``canvas`` (the size of :attr:`size`) brought to camera pixels through the lens (bilinear,
+        edge pixels replicated); the canvas itself without distortion."""
+        if self.maps is None:
+            return canvas
+        map_u, map_v = self.maps
+        return cv2.remap(
+            canvas,
+            map_u - np.float32(self.offset[0]),
+            map_v - np.float32(self.offset[1]),
+            cv2.INTER_LINEAR,
+            borderMode=cv2.BORDER_REPLICATE,
+        )
+
+
+def ideal_canvas(camera: CameraModel) -> IdealCanvas:
+    """The canvas that holds every ideal pixel ``camera`` sees (see :class:`IdealCanvas`)."""
+    if not camera.has_distortion:
+        return IdealCanvas((0.0, 0.0), camera.size, None)
+    map_u, map_v = _ideal_pixel_map(camera)
+    x0, y0 = math.floor(float(map_u.min())) - 2, math.floor(float(map_v.min())) - 2
+    x1, y1 = math.ceil(float(map_u.max())) + 3, math.ceil(float(map_v.max())) + 3
+    return IdealCanvas((float(x0), float(y0)), (x1 - x0, y1 - y0), (map_u, map_v))
+
+
 @functools.lru_cache(maxsize=8)
 def _gradient_ramp(width: int, height: int) -> np.ndarray:
     """(H, W) float32 ramp from -1 (left) to +1 (right) with a slight vertical slant."""
@@ -181,38 +223,24 @@ def render_view(
         raise ValueError(f"supersample must be a whole number >= 1, got {supersample!r}")
     corners = check_view(camera, side_mm, pose, allow_partial=allow_partial)
     modules = qr_symbol(text).shape[0]
+    ideal = ideal_canvas(camera)
     ideal_camera = camera
-    canvas_offset = (0.0, 0.0)
-    canvas_size = camera.size
     if camera.has_distortion:
-        map_u, map_v = _ideal_pixel_map(camera)
-        x0, y0 = math.floor(float(map_u.min())) - 2, math.floor(float(map_v.min())) - 2
-        x1, y1 = math.ceil(float(map_u.max())) + 3, math.ceil(float(map_v.max())) + 3
-        canvas_offset = (float(x0), float(y0))
-        canvas_size = (x1 - x0, y1 - y0)
         ideal_camera = CameraModel(
             fx=camera.fx,
             fy=camera.fy,
-            cx=camera.cx - x0,
-            cy=camera.cy - y0,
-            width=canvas_size[0],
-            height=canvas_size[1],
+            cx=camera.cx - ideal.offset[0],
+            cy=camera.cy - ideal.offset[1],
+            width=ideal.size[0],
+            height=ideal.size[1],
             name="ideal-canvas",
         )
 
     def view_over(behind: np.ndarray | int) -> np.ndarray:
         """The card drawn over ``behind`` on the ideal canvas, brought to camera pixels."""
-        canvas = _background(behind, canvas_size, camera)
+        canvas = _background(behind, ideal.size, camera)
         _draw_card(canvas, ideal_camera, side_mm, pose, text, modules, int(supersample))
-        if not camera.has_distortion:
-            return canvas
-        return cv2.remap(
-            canvas,
-            map_u - np.float32(canvas_offset[0]),
-            map_v - np.float32(canvas_offset[1]),
-            cv2.INTER_LINEAR,
-            borderMode=cv2.BORDER_REPLICATE,
-        )
+        return ideal.to_camera(canvas)
 
     if camera.has_distortion and isinstance(background, np.ndarray):
         # A background image is a camera image (already distorted): it must not go through the
