@@ -155,3 +155,7 @@ def check_corners_in_view(corners: Any, width: int, height: int, where: str = "-
 
 #: A robot's tool position (pairs.csv, ``$QRC,TOOL``) in mm: 100 m is beyond any arm or gantry.
 TOOL_POSITION_MM = Limit("tool position", "mm", -100_000.0, 100_000.0, "any robot's reach")
+#: A robot's own pose uncertainty, 1 sigma (``handeye --tool-std-mm/--tool-std-deg``, the hand-eye
+#: bench's noise): 100 mm and 10 degrees are far beyond any arm's repeatability.
+TOOL_STD_MM = Limit("tool std mm", "mm", 0.0, 100.0, "far beyond any robot's repeatability")
+TOOL_STD_DEG = Limit("tool std deg", "deg", 0.0, 10.0, "far beyond any robot's repeatability")

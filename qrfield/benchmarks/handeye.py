@@ -32,8 +32,8 @@ HELP = "hand-eye calibration: accuracy against the known transform and honesty o
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from qrfield.arguments import count, limited, number, seed
-    from qrfield.limits import MAX_BENCHMARK_COUNT, SIDE_MM
+    from qrfield.arguments import count, limited, seed
+    from qrfield.limits import MAX_BENCHMARK_COUNT, SIDE_MM, TOOL_STD_DEG, TOOL_STD_MM
 
     parser.add_argument(
         "--sets", type=count("--sets", 1, MAX_BENCHMARK_COUNT), default=5, help="cells per set-up (default 5)"
@@ -54,13 +54,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--method", default=NUMERICAL, help="pose method (default numerical)")
     parser.add_argument(
         "--tool-std-mm",
-        type=number("--tool-std-mm", 0.0, 100.0, "mm"),
+        type=limited(TOOL_STD_MM, "--tool-std-mm"),
         default=0.0,
         help="noise on the robot's reported positions, mm (default 0)",
     )
     parser.add_argument(
         "--tool-std-deg",
-        type=number("--tool-std-deg", 0.0, 10.0, "deg"),
+        type=limited(TOOL_STD_DEG, "--tool-std-deg"),
         default=0.0,
         help="noise on its reported orientations, deg (default 0)",
     )

@@ -28,11 +28,12 @@ DESCRIPTION = (
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from qrfield.arguments import add_side_argument, number
+    from qrfield.arguments import add_side_argument, limited
     from qrfield.camera import add_camera_arguments
     from qrfield.detect import DetectorSettings
     from qrfield.handeye.setups import SETUPS
     from qrfield.images import ImageSettings
+    from qrfield.limits import TOOL_STD_DEG, TOOL_STD_MM
     from qrfield.methods import METHODS
     from qrfield.settings import add_arguments as add_setting_arguments
 
@@ -56,14 +57,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--tool-std-mm",
-        type=number("--tool-std-mm", 0.0, 100.0, "mm"),
+        type=limited(TOOL_STD_MM, "--tool-std-mm"),
         default=0.0,
         metavar="S",
         help="the robot's position uncertainty (1 sigma, e.g. its repeatability), mm; default 0",
     )
     parser.add_argument(
         "--tool-std-deg",
-        type=number("--tool-std-deg", 0.0, 10.0, "deg"),
+        type=limited(TOOL_STD_DEG, "--tool-std-deg"),
         default=0.0,
         metavar="S",
         help="the robot's orientation uncertainty (1 sigma), degrees; default 0",
