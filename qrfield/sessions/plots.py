@@ -74,23 +74,8 @@ def errors_vs_tilt_image(
         predicted_values = ([float(v) for v in predicted[0]], [float(v) for v in predicted[1]])
         if len(predicted_values[0]) != len(rows) or len(predicted_values[1]) != len(rows):
             raise ValueError(f"predicted errors: one value per row ({len(rows)}) expected")
-    left = Panel(
-        img,
-        rects[0],
-        xlim,
-        padded_range([0.0, crit.max_angle_error_deg * 1.2, *angle_values, *predicted_values[0]]),
-        title="angle errors",
-        xlabel="tilt: largest |ground-truth angle| (deg)",
-        ylabel="|measured - truth| (deg)",
-    )
-    left.draw_axes()
-    left.line(
-        (xlim[0], crit.max_angle_error_deg),
-        (xlim[1], crit.max_angle_error_deg),
-        RED,
-        label=f"limit {crit.max_angle_error_deg:g} deg",
-        dashed=True,
-    )
+    angle_range = [*angle_values, *predicted_values[0]]
+    left = _error_panel(img, rects[0], xlim, angle_range, crit.max_angle_error_deg, "deg", "angle errors")
     for label, colour, marker, key in angle_sets:
         left.scatter(tilt, [e[key] for e in errors], colour, marker, label)
     if predicted is not None:
@@ -98,28 +83,39 @@ def errors_vs_tilt_image(
     left.draw_legend()
 
     pos = [e["pos_mm"] for e in errors]
-    right = Panel(
-        img,
-        rects[1],
-        xlim,
-        padded_range([0.0, crit.max_position_error_mm * 1.2, *pos, *predicted_values[1]]),
-        title="position error",
-        xlabel="tilt: largest |ground-truth angle| (deg)",
-        ylabel="|measured - truth| (mm)",
-    )
-    right.draw_axes()
-    right.line(
-        (xlim[0], crit.max_position_error_mm),
-        (xlim[1], crit.max_position_error_mm),
-        RED,
-        label=f"limit {crit.max_position_error_mm:g} mm",
-        dashed=True,
+    right = _error_panel(
+        img, rects[1], xlim, [*pos, *predicted_values[1]], crit.max_position_error_mm, "mm", "position error"
     )
     right.scatter(tilt, pos, BLUE, "circle", "position error")
     if predicted is not None:
         right.scatter(tilt, predicted[1], GREY, "cross", "simulation: position error")
     right.draw_legend()
     return img
+
+
+def _error_panel(
+    img: np.ndarray,
+    rect: tuple[int, int, int, int],
+    xlim: tuple[float, float],
+    values: list[float],
+    limit: float,
+    unit: str,
+    title: str,
+) -> Panel:
+    """A panel of |measured - truth| (``unit``) against tilt (deg) over ``xlim``, its y range holding
+    0, 1.2 times ``limit`` and ``values``, with its axes and the criterion ``limit`` drawn (dashed red)."""
+    panel = Panel(
+        img,
+        rect,
+        xlim,
+        padded_range([0.0, limit * 1.2, *values]),
+        title=title,
+        xlabel="tilt: largest |ground-truth angle| (deg)",
+        ylabel=f"|measured - truth| ({unit})",
+    )
+    panel.draw_axes()
+    panel.line((xlim[0], limit), (xlim[1], limit), RED, label=f"limit {limit:g} {unit}", dashed=True)
+    return panel
 
 
 def measured_vs_truth_image(rows: Sequence[LoggedRow], info: SessionInfo) -> np.ndarray:
