@@ -12,9 +12,8 @@ import math
 import cv2
 import numpy as np
 
-FONT = cv2.FONT_HERSHEY_SIMPLEX
-WHITE = (255, 255, 255)
-BLACK = (0, 0, 0)
+from qrfield.sessions.plotting import BLACK, FONT, WHITE
+
 #: Cells whose sweep failed at t = 0 (no solvable angle).
 NONE_COLOUR = (40, 40, 40)
 #: Cells out of view already at t = 0.
