@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import functools
 
+import cv2
 import numpy as np
 
-from qrfield.camera import resolve_camera
-from qrfield.geometry import angle_difference
+from qrfield.camera import CameraModel, resolve_camera
+from qrfield.geometry import Pose, angle_difference, angles_from_rotation, marker_vertices
 from qrfield.sampling import random_visible_poses
 from qrfield.testing.hardset import DISTORTED_CAMERA
 
@@ -37,3 +38,15 @@ def errors(position_mm, angles_deg, true_position_mm, true_angles_deg) -> tuple[
     pos = np.linalg.norm(np.asarray(position_mm) - true_position_mm, axis=-1)
     ang = np.max(np.abs(angle_difference(np.asarray(angles_deg), true_angles_deg)), axis=-1)
     return pos, ang
+
+
+def opencv_pose(corners_px: np.ndarray, camera: CameraModel) -> tuple[Pose, np.ndarray, np.ndarray]:
+    """OpenCV's own pose of a code of SIDE_MM whose V1..V4 are seen at ``corners_px`` (4, 2) px
+    through ``camera`` (pinhole): cv2.solvePnP, iterative from its planar homography start (no
+    IPPE, no mirror), on our marker-frame vertices. (pose, rvec, tvec), the last two as OpenCV
+    gives them."""
+    ok, rvec, tvec = cv2.solvePnP(
+        marker_vertices(SIDE_MM), corners_px, camera.K, None, flags=cv2.SOLVEPNP_ITERATIVE
+    )
+    assert ok, "cv2.solvePnP found no pose"
+    return Pose(tvec.ravel(), angles_from_rotation(cv2.Rodrigues(rvec)[0])), rvec, tvec
