@@ -19,11 +19,11 @@ from __future__ import annotations
 
 import argparse
 import math
-import signal
 import sys
 import time
 from dataclasses import dataclass
 
+from qrfield.commands._signals import restore_sigterm, sigterm_as_interrupt
 from qrfield.status import ResultStatus
 
 HELP = "stream a synthetic moving pose to a serial port (test a controller without camera or app)"
@@ -133,13 +133,7 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--seconds must be a positive number of seconds, got {args.seconds}")
     settings = validated(SerialLinkSettings(port=args.port, baud=args.baud, max_rate_hz=args.max_rate))
 
-    def on_sigterm(signum: int, frame: object) -> None:
-        raise KeyboardInterrupt
-
-    try:
-        previous = signal.signal(signal.SIGTERM, on_sigterm)
-    except ValueError:  # not the main thread (a test, an embedding program): Ctrl-C only
-        previous = None
+    previous = sigterm_as_interrupt()
     link = GripperLink(settings, on_status=lambda s: print(s.summary(), file=sys.stderr, flush=True))
     link.set_context(side_mm=args.side_mm, camera="serial-demo")
     start = time.monotonic()
@@ -165,8 +159,7 @@ def run(args: argparse.Namespace) -> int:
         pass
     finally:
         link.close()
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
+        restore_sigterm(previous)
     return 0
 
 

@@ -19,11 +19,11 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import signal
 import sys
 import time
 from typing import Any
 
+from qrfield.commands._signals import restore_sigterm, sigterm_as_interrupt
 from qrfield.geometry import ANGLE_NAMES, POSITION_NAMES
 
 HELP = "print decoded pose frames arriving on a serial port and count bad checksums and garbage"
@@ -149,13 +149,7 @@ def run(args: argparse.Namespace) -> int:
     except (serial.SerialException, ValueError) as exc:
         raise OSError(f"cannot open serial port {args.port}: {exc}") from None
 
-    def on_sigterm(signum: int, frame: object) -> None:
-        raise KeyboardInterrupt
-
-    try:
-        previous = signal.signal(signal.SIGTERM, on_sigterm)
-    except ValueError:  # not the main thread: Ctrl-C only
-        previous = None
+    previous = sigterm_as_interrupt()
     decoder = FrameDecoder()
     printed = seq_gaps = 0
     last_seq: int | None = None
@@ -197,8 +191,7 @@ def run(args: argparse.Namespace) -> int:
         code = 1
     finally:
         port.close()
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
+        restore_sigterm(previous)
     c = decoder.counters
     print(
         f"serial-monitor: {ended}; frames {c.frames}, answers {c.answers}, commands {c.commands}, "

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from qrfield.commands._signals import interrupt
 from qrfield.geometry import POSE_NAMES
 
 HELP = "make experiment sessions and log rows without the app (new, log, run-plan, undo, list, show, export)"
@@ -200,10 +201,6 @@ def _parse_truth(text: str, combo: str | None, combinations: Any) -> Any:
     return parse_ground_truth(fields, combinations)
 
 
-def _interrupt(signum: int, _frame: Any) -> None:
-    raise KeyboardInterrupt  # SIGTERM like Ctrl-C: stop collecting, log nothing half-done
-
-
 def _run_log(args: argparse.Namespace) -> int:
     from qrfield.engine import FrameLoop, SayEvents
     from qrfield.handeye import InFrame, PoseFrame
@@ -260,7 +257,8 @@ def loop_thread(loop: Any) -> Iterator[threading.Thread]:
     """Run a frame loop on a daemon thread for the block (SIGTERM ends the block as Ctrl-C does);
     then stop the loop and join its thread (it closes the source)."""
     thread = threading.Thread(target=loop.run, name="frame loop", daemon=True)
-    previous = signal.signal(signal.SIGTERM, _interrupt)
+    # SIGTERM like Ctrl-C: stop collecting, log nothing half-done (on the main thread only).
+    previous = signal.signal(signal.SIGTERM, interrupt)
     thread.start()
     try:
         yield thread
