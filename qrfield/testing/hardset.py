@@ -275,15 +275,23 @@ def true_corners(camera: CameraModel, pose: Pose, side_mm: float) -> np.ndarray:
     return projected.reshape(4, 2)
 
 
+def _card(rng: np.random.Generator, index: int) -> tuple[CameraModel, float, str, np.ndarray, int]:
+    """A view's camera (even ``index`` pinhole, odd :data:`DISTORTED_CAMERA`) and card drawn from
+    ``rng`` in this order: the side (SIDES_MM, mm), the payload, the error level; the symbol's
+    matrix and version (:func:`symbol_matrix`)."""
+    camera = DISTORTED_CAMERA if index % 2 else _pinhole()
+    side = float(SIDES_MM[int(rng.integers(len(SIDES_MM)))])
+    text = _payload(rng)
+    matrix, version = symbol_matrix(text, "LMQH"[int(rng.integers(4))])
+    return camera, side, text, matrix, version
+
+
 def hard_view(index: int, seed: int = 2024) -> HardView:
     """View ``index`` of the hard set with ``seed``: the same view every time."""
     from qrfield.sampling import random_visible_poses
 
     rng = np.random.default_rng([seed, index])
-    camera = DISTORTED_CAMERA if index % 2 else _pinhole()
-    side = float(SIDES_MM[int(rng.integers(len(SIDES_MM)))])
-    text = _payload(rng)
-    matrix, version = symbol_matrix(text, "LMQH"[int(rng.integers(4))])
+    camera, side, text, matrix, version = _card(rng, index)
     n = matrix.shape[0]
     # Stratified by module size (log-uniform over MODULE_PX_RANGE) so that every band is well
     # filled; the distance follows from it and must lie in Z_RANGE_MM (else another draw).
@@ -367,10 +375,7 @@ def steep_view(index: int, seed: int = 2026) -> HardView:
     from qrfield.visibility import view_of
 
     rng = np.random.default_rng([seed, 7_000_001, index])
-    camera = DISTORTED_CAMERA if index % 2 else _pinhole()
-    side = float(SIDES_MM[int(rng.integers(len(SIDES_MM)))])
-    text = _payload(rng)
-    matrix, version = symbol_matrix(text, "LMQH"[int(rng.integers(4))])
+    camera, side, text, matrix, version = _card(rng, index)
     n = matrix.shape[0]
     quiet_side = side * (n + 2 * QUIET_MODULES) / n  # the symbol with its quiet zone
     w, h = camera.size
