@@ -9,8 +9,7 @@ from pathlib import Path
 import pytest
 
 from qrfield.camera import CameraModel, resolve_camera
-
-REPO = Path(__file__).resolve().parent.parent
+from qrfield.testing.shared_data import shared_data_dir
 
 
 @pytest.fixture(autouse=True, scope="session")
@@ -26,15 +25,6 @@ def _private_user_folders(tmp_path_factory: pytest.TempPathFactory) -> None:
     ):
         os.environ[name] = str(home / sub)
     os.environ.pop("QRFIELD_CALIB_DIR", None)
-
-
-def shared_data_dir() -> Path | None:
-    """``../shared/data`` beside the repository (or $QRFIELD_SHARED_DATA), if present."""
-    candidates = [os.environ.get("QRFIELD_SHARED_DATA"), REPO.parent / "shared" / "data"]
-    for candidate in candidates:
-        if candidate and Path(candidate).is_dir():
-            return Path(candidate)
-    return None
 
 
 @pytest.fixture(scope="session")

@@ -24,7 +24,6 @@ from qrfield.testing.hardset import steep_view  # noqa: E402
 #: 54 (1.46 px, compressed 2.2 times, blur 1.04 px).
 VIEWS = (169, 54)
 MAIN_BACKENDS = "zxing,zxing-x2,finders,small"
-CALIBRATION = Path(__file__).resolve().parents[2] / "shared" / "data" / "calibration"
 
 
 @pytest.mark.slow
@@ -90,16 +89,16 @@ def test_nothing_on_blank_frames():
         assert find_candidates(frame, "steep") == []
 
 
-def _chessboards() -> list[np.ndarray]:
-    files = sorted(glob.glob(str(CALIBRATION / "**" / "*.jpg"), recursive=True))
+def _chessboards(folder: Path) -> list[np.ndarray]:
+    files = sorted(glob.glob(str(folder / "**" / "*.jpg"), recursive=True))
     return [cv2.imread(f, cv2.IMREAD_GRAYSCALE) for f in files]
 
 
 @pytest.mark.slow
-def test_nothing_on_chessboards():
-    frames = _chessboards()
+def test_nothing_on_chessboards(shared_data: Path):
+    frames = _chessboards(shared_data / "calibration")
     if not frames:
-        pytest.skip(f"no chessboard pictures in {CALIBRATION}")
+        pytest.skip(f"no chessboard pictures in {shared_data / 'calibration'}")
     detector = Detector()
     for frame in frames:
         assert detector.detect(frame) == []

@@ -10,14 +10,14 @@ import numpy as np
 
 from qrfield.methods import METHODS
 from qrfield.testing.real_squares import FOLDER, SquareCase, square_cases
+from qrfield.testing.shared_data import shared_data_dir
 
 
 def real_optics(data: Path | None) -> None:
     """Print section 4 of ``qrfield benchmark pose`` (skipped with a reason when the data is absent)."""
-    from qrfield.benchmarks.detect import _shared_data
     from qrfield.benchmarks.pose import COMPONENTS, calibration_line
 
-    root = _shared_data(data)
+    root = shared_data_dir(data)
     folder = None if root is None else root / FOLDER
     print("\n4. real optics: squares of 4 inner chessboard corners vs cv2.solvePnP on all 24 (Bumblebee2)")
     if folder is None or not folder.is_dir():

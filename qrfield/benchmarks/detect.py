@@ -33,6 +33,7 @@ from pathlib import Path
 
 from qrfield.methods import BOTH, NUMERICAL
 from qrfield.status import ResultStatus
+from qrfield.testing.shared_data import shared_data_dir
 
 #: Timing rounds per resolution; the fastest round counts (the same rule for the baseline).
 REPEATS = 5
@@ -103,20 +104,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default="0,1,2,2b,3,4,5,6,7",
         help="sections to run, comma-separated (default all: 0,1,2,2b,3,4,5,6,7)",
     )
-
-
-def _shared_data(path: Path | None) -> Path | None:
-    import os
-
-    candidates = [
-        path,
-        os.environ.get("QRFIELD_SHARED_DATA"),
-        Path(__file__).resolve().parents[2].parent / "shared" / "data",
-    ]
-    for candidate in candidates:
-        if candidate and Path(candidate).is_dir():
-            return Path(candidate)
-    return None
 
 
 def _made(make, label: str) -> list:
@@ -544,7 +531,7 @@ def _cold_sections(args: argparse.Namespace, hard: list, sections: set[str]) -> 
         camera = resolve_camera("picam-v2@640x480")
         frames, _ = _sequence(camera, args.side_mm, args.frames)
         sets["moving sequence of (2), 640x480"] = ([as_grey(f) for f in frames], camera)
-        photos = _photo_paths(_shared_data(args.data))
+        photos = _photo_paths(shared_data_dir(args.data))
         sets["real photos (qr-photos, their own sizes)"] = (
             [as_grey(cv2.imread(str(p), cv2.IMREAD_COLOR)) for p in photos],
             None,
@@ -595,7 +582,7 @@ def run(args: argparse.Namespace) -> int:
     if "2b" in sections and args.hard_sequences > 0:
         _hard_sequences(args.hard_sequences, args.hard_seed)
     if "3" in sections:
-        _photos(_shared_data(args.data))
+        _photos(shared_data_dir(args.data))
     if "4" in sections:
         _rates(total, found_by)
     _cold_sections(args, hard, sections)
