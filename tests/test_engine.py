@@ -9,6 +9,7 @@ import time
 
 import numpy as np
 import pytest
+from waiting import wait_until
 
 from qrfield.camera import resolve_camera
 from qrfield.engine import DONE, ENDED, FAILED, STOPPED, FrameLoop
@@ -86,11 +87,8 @@ class Recorder(LoopEventsBase):
             return [c[0] for c in self.calls]
 
 
-def wait_for(predicate, timeout: float = 20.0) -> None:
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        assert time.monotonic() < deadline, "timed out"
-        time.sleep(0.01)
+#: The bound of a wait for the frame loop's thread, s.
+WAIT_S = 20.0
 
 
 def config(source: str = "fake", **kw) -> RunConfig:
@@ -160,10 +158,10 @@ def test_without_retry_a_failed_source_ends_the_loop_or_waits_for_reopen() -> No
                      hold_when_down=True)  # fmt: skip
     thread = threading.Thread(target=held.run, daemon=True)
     thread.start()
-    wait_for(lambda: "down" in rec.kinds())
+    wait_until(lambda: "down" in rec.kinds(), WAIT_S)
     assert held.source is None and thread.is_alive()
     held.reopen()
-    wait_for(lambda: rec.kinds().count("result") >= 3)
+    wait_until(lambda: rec.kinds().count("result") >= 3, WAIT_S)
     held.stop()
     thread.join(10)
     assert not thread.is_alive() and held.source is None
@@ -189,9 +187,9 @@ def test_a_live_camera_that_stops_delivering_is_down_until_frames_come_again() -
     loop.NO_FRAMES_S = 0.3
     thread = threading.Thread(target=loop.run, daemon=True)
     thread.start()
-    wait_for(lambda: "owner down" in rec.kinds())
+    wait_until(lambda: "owner down" in rec.kinds(), WAIT_S)
     source.release.set()
-    wait_for(lambda: "owner up" in rec.kinds())
+    wait_until(lambda: "owner up" in rec.kinds(), WAIT_S)
     loop.stop()
     thread.join(10)
     down = next(c for c in rec.calls if c[0] == "down")
@@ -252,12 +250,12 @@ def test_each_source_records_the_request_it_was_opened_for() -> None:
     loop = FrameLoop(config(), events=Events(), opener=opener_of(first, second))
     thread = threading.Thread(target=loop.run, daemon=True)
     thread.start()
-    wait_for(lambda: len(seen) >= 2)
+    wait_until(lambda: len(seen) >= 2, WAIT_S)
     same = loop.configure(config())  # nothing to reopen: the source and its generation stay
-    wait_for(lambda: loop._pending is None and len(seen) >= 4)
+    wait_until(lambda: loop._pending is None and len(seen) >= 4, WAIT_S)
     request = loop.reopen()
     assert request > same > 0
-    wait_for(lambda: any(name == "two" for name, _ in seen[-3:]))
+    wait_until(lambda: any(name == "two" for name, _ in seen[-3:]), WAIT_S)
     loop.stop()
     thread.join(10)
     assert {g for name, g in seen if name == "one"} == {0}  # opened for the first configuration

@@ -10,12 +10,12 @@ from __future__ import annotations
 import math
 import re
 import threading
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
 import pytest
 from serial_truth import command_line, crc16, frames_and_answers, parse_answer_line
+from waiting import wait_until
 
 from qrfield import __version__
 from qrfield.serial.codec import FrameDecoder
@@ -333,11 +333,8 @@ class FakePort:
         pass
 
 
-def wait_for(predicate, timeout: float = 10.0) -> None:
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        assert time.monotonic() < deadline, "timed out"
-        time.sleep(0.01)
+#: The bound of a wait for the link's thread, s.
+WAIT_S = 10.0
 
 
 def test_gripper_link_answers_on_its_port_and_sends_ok_only_for_an_unambiguous_live_pose() -> None:
@@ -347,19 +344,19 @@ def test_gripper_link_answers_on_its_port_and_sends_ok_only_for_an_unambiguous_l
     try:
         assert link.wait_for_state(CONNECTED, 5)
         link.on_result(ok(1, [1, 2, 3], [4, 5, 6]), simulated=True)
-        wait_for(lambda: b"SIM*" in port.written)
+        wait_until(lambda: b"SIM*" in port.written, WAIT_S)
         link.on_result(ok(2, [1, 2, 3], [4, 5, 6], ambiguous=True), simulated=False)
-        wait_for(lambda: b"AMBIG*" in port.written)
+        wait_until(lambda: b"AMBIG*" in port.written, WAIT_S)
         link.on_result(ok(3, [1, 2, 3], [4, 5, 6]), simulated=False)
-        wait_for(lambda: b",OK*" in port.written)
+        wait_until(lambda: b",OK*" in port.written, WAIT_S)
         with port.lock:
             port.incoming += command_line("PING") + command_line("MEAS", "2")
-        wait_for(lambda: b"$QRA,PING,OK" in port.written)
+        wait_until(lambda: b"$QRA,PING,OK" in port.written, WAIT_S)
         for t in (4, 5):
             link.on_result(ok(t, [1, 2, 3], [4, 5, 6]), simulated=False)
-        wait_for(lambda: b"$QRM" in port.written)
+        wait_until(lambda: b"$QRM" in port.written, WAIT_S)
         link.on_source_down("unplugged")
-        wait_for(lambda: b"NOSRC" in port.written)
+        wait_until(lambda: b"NOSRC" in port.written, WAIT_S)
         assert link.status().last_command.startswith("MEAS,2 -> QRM,0,")
     finally:
         link.close()

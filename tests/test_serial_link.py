@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from serial_truth import parse_frame_line, split_lines
+from waiting import wait_until
 
 from qrfield.serial.codec import ControllerCommand, FrameError, encode_command, encode_ok, wire_pose
 from qrfield.serial.link import (
@@ -52,14 +53,6 @@ while True:
     out.write(data)
     out.flush()
 """
-
-
-def wait_until(predicate, timeout: float = 5.0, what: str = "condition") -> None:
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out waiting for {what}")
-        time.sleep(0.01)
 
 
 class PtyTwin:
