@@ -40,7 +40,6 @@ from qrfield.detect.symbol_fit import (
     FitState,
     SymbolFit,
     _Darkness,
-    _g_from_params,
     _layout,
     _params_from_g,
     _Problem,
@@ -120,10 +119,11 @@ def pixel_samples(
     centre and half diagonal in ideal pixels)."""
     n = cells.shape[0] - 2 * QUIET_RINGS
     corners = cv2.perspectiveTransform((_SQUARE * n).reshape(1, 4, 2), h).reshape(4, 2)
+    (x0, y0), _, (x2, y2), _ = corners.tolist()
     origin = corners.mean(axis=0)
-    scale = float(np.linalg.norm(corners[2] - corners[0])) / 2.0
+    scale = math.hypot(x2 - x0, y2 - y0) / 2.0
     # The full fit's parameters: module coordinates of normalised ideal pixels (x - origin) / scale.
-    g = np.linalg.inv(h) @ np.array([[scale, 0.0, origin[0]], [0.0, scale, origin[1]], [0.0, 0.0, 1.0]])
+    g = small_inverse(h) @ np.array([[scale, 0.0, origin[0]], [0.0, scale, origin[1]], [0.0, 0.0, 1.0]])
     band = 1.5 * edge_px + 1.0
     return _Problem(grey, lens, cells, _params_from_g(g), (origin, scale), edge_px, band, budget, offset)
 
@@ -163,9 +163,7 @@ class _Template:
         # Per-point terms with the points on the last axis (as the full fit's: every operation on
         # contiguous runs; the Jacobian is filled row by row, transposed).
         if samples is not None:
-            g = _g_from_params(samples.geo)
-            uvw = g[:, :2] @ samples.p_t + g[:, 2:3]
-            uv_t = uvw[:2] / uvw[2]
+            uv_t = samples.uv_t  # the pixels' module coordinates at the samples' geometry
             dark = _Darkness(uv_t - samples.corner_t, samples.inv_grad_t, samples.colour_t, edge_px)
             xy_t = samples.p_t
         else:
