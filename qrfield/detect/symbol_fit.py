@@ -65,6 +65,9 @@ COARSE_BUDGET = 600
 #: which the independent floor cannot express. 0.006 px: corners RMS 0.83-0.91 (96-98 % within 2),
 #: poses 91-97 % within 2 for every component on those seeds (qrfield benchmark pose, section 3).
 MODEL_FLOOR_PX = 0.006
+#: The floor as a corner's (2, 2) covariance.
+_FLOOR_COV = MODEL_FLOOR_PX**2 * np.eye(2)
+_FLOOR_COV.setflags(write=False)
 #: Smallest fitted contrast, grey levels (a code is not seen below it).
 MIN_CONTRAST = 12.0
 #: Row and column in G of each of the 8 parameters (see _g_from_params).
@@ -191,7 +194,9 @@ class _Layout:
         across = np.arange(-band_px, band_px + 1e-9, 0.7) / module_px
         wanted = math.ceil(2.0 * budget / max(len(along) * len(across) * 0.6, 1.0))
         mids, kinds = self.mids[:wanted], self.kinds[:wanted]
-        a, c = np.tile(along, len(across)), np.repeat(across, len(along))  # np.meshgrid's order
+        # np.meshgrid's order (np.tile by a broadcast: np.tile's Python wrapper costs a dozen calls)
+        a = np.broadcast_to(along, (len(across), len(along))).ravel()
+        c = np.repeat(across, len(along))
         # The offsets (du, dv) from an edge's midpoint by its kind: an edge along v (kind 0) has u
         # across it; then every edge's points in one gather and one sum.
         offsets = np.empty((2, len(a), 2))
@@ -379,7 +384,7 @@ class _Problem:
         self.n, self.geo, self.norm = n, geo, norm
         h, w = grey.shape
         g = _g_from_params(geo)
-        inv = small_inverse(g)
+        inv = np.linalg.inv(g)  # (LAPACK's, as main: the pixels sampled follow it to the bit)
         ideal_corners = _apply(inv, _UNIT_SQUARE * n)
         sides = ideal_corners - ideal_corners[[1, 2, 3, 0]]
         module_px = float(np.sqrt((sides * sides).sum(axis=1)).mean()) * scale / n
@@ -509,7 +514,7 @@ def _params_from_g(g: np.ndarray) -> np.ndarray:
 def _corners_mapped(theta: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     """G^-1 (3, 3) of the parameters ``theta`` and the corners V1..V4 it maps to, in normalised
     ideal pixels (4, 2)."""
-    inv = small_inverse(_g_from_params(theta))
+    inv = np.linalg.inv(_g_from_params(theta))
     return inv, _apply(inv, _UNIT_SQUARE * n)
 
 
@@ -546,7 +551,7 @@ def corner_covariance(dc: np.ndarray, cov: np.ndarray, corners_ideal: np.ndarray
     if lens.distorted:
         jl = lens.distort_jacobian(corners_ideal)
         out = jl @ out @ jl.transpose(0, 2, 1)
-    return out + MODEL_FLOOR_PX**2 * np.eye(2)
+    return out + _FLOOR_COV
 
 
 class _Solver:
@@ -771,7 +776,8 @@ def _finish(
             return fail("the fit diverged")
         corners = lens.distort(corners_ideal) - shift
         contrast = float(light[3])
-        moved = float(np.linalg.norm(corners - start, axis=1).max())
+        step = corners - start
+        moved = math.sqrt(float((step * step).sum(axis=1).max()))  # the largest corner's move
         if abs(contrast) < MIN_CONTRAST:
             return fail(f"too little contrast ({abs(contrast):.0f} grey levels)")
         # The starting corners on the same pixels (lighting refitted): the fallback's measure

@@ -119,11 +119,10 @@ def pixel_samples(
     centre and half diagonal in ideal pixels)."""
     n = cells.shape[0] - 2 * QUIET_RINGS
     corners = cv2.perspectiveTransform((_SQUARE * n).reshape(1, 4, 2), h).reshape(4, 2)
-    (x0, y0), _, (x2, y2), _ = corners.tolist()
     origin = corners.mean(axis=0)
-    scale = math.hypot(x2 - x0, y2 - y0) / 2.0
+    scale = float(np.linalg.norm(corners[2] - corners[0])) / 2.0
     # The full fit's parameters: module coordinates of normalised ideal pixels (x - origin) / scale.
-    g = small_inverse(h) @ np.array([[scale, 0.0, origin[0]], [0.0, scale, origin[1]], [0.0, 0.0, 1.0]])
+    g = np.linalg.inv(h) @ np.array([[scale, 0.0, origin[0]], [0.0, scale, origin[1]], [0.0, 0.0, 1.0]])
     band = 1.5 * edge_px + 1.0
     return _Problem(grey, lens, cells, _params_from_g(g), (origin, scale), edge_px, band, budget, offset)
 
