@@ -15,6 +15,7 @@ All functions accept a leading batch shape (...) and keep it.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -149,8 +150,15 @@ def shortest_module_px(corners_px: np.ndarray, modules: int) -> float:
     corners = np.asarray(corners_px, dtype=np.float64)
     if corners.shape != (4, 2):
         raise ValueError(f"corners_px must be (4, 2) (V1..V4), got {corners.shape}")
-    sides = np.linalg.norm(np.roll(corners, -1, axis=0) - corners, axis=1)
-    return float(sides.min()) / max(int(modules), 1)
+    # In floats (every cold refinement asks twice): the same sqrt of the summed squares as
+    # np.linalg.norm, NaN when any side is (as numpy's min).
+    (x1, y1), (x2, y2), (x3, y3), (x4, y4) = corners.tolist()
+    sides = [
+        math.sqrt(dx * dx + dy * dy)
+        for dx, dy in ((x2 - x1, y2 - y1), (x3 - x2, y3 - y2), (x4 - x3, y4 - y3), (x1 - x4, y1 - y4))
+    ]
+    shortest = math.nan if any(side != side for side in sides) else min(sides)
+    return shortest / max(int(modules), 1)
 
 
 def transform_points(rotation: np.ndarray, translation: np.ndarray, points: np.ndarray) -> np.ndarray:

@@ -46,7 +46,7 @@ import numpy as np
 from qrfield.detect.lens import Lens
 from qrfield.detect.symbol import QUIET_RINGS
 from qrfield.homography import Homography
-from qrfield.linalg import small_solve
+from qrfield.linalg import small_inverse, small_solve
 
 #: Module coordinates of V1..V4.
 _UNIT_SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
@@ -65,6 +65,9 @@ COARSE_BUDGET = 600
 #: which the independent floor cannot express. 0.006 px: corners RMS 0.83-0.91 (96-98 % within 2),
 #: poses 91-97 % within 2 for every component on those seeds (qrfield benchmark pose, section 3).
 MODEL_FLOOR_PX = 0.006
+#: The floor as a corner's (2, 2) covariance.
+_FLOOR_COV = MODEL_FLOOR_PX**2 * np.eye(2)
+_FLOOR_COV.setflags(write=False)
 #: Smallest fitted contrast, grey levels (a code is not seen below it).
 MIN_CONTRAST = 12.0
 #: Row and column in G of each of the 8 parameters (see _g_from_params).
@@ -191,7 +194,9 @@ class _Layout:
         across = np.arange(-band_px, band_px + 1e-9, 0.7) / module_px
         wanted = math.ceil(2.0 * budget / max(len(along) * len(across) * 0.6, 1.0))
         mids, kinds = self.mids[:wanted], self.kinds[:wanted]
-        a, c = np.tile(along, len(across)), np.repeat(across, len(along))  # np.meshgrid's order
+        # np.meshgrid's order (np.tile by a broadcast: np.tile's Python wrapper costs a dozen calls)
+        a = np.broadcast_to(along, (len(across), len(along))).ravel()
+        c = np.repeat(across, len(along))
         # The offsets (du, dv) from an edge's midpoint by its kind: an edge along v (kind 0) has u
         # across it; then every edge's points in one gather and one sum.
         offsets = np.empty((2, len(a), 2))
@@ -318,9 +323,8 @@ class _Darkness:
         # Each cell's share F(z_j) - F(z_j+1) (u|v, m cells, k); the cell map summed over u per row
         # with the shares across u (m rows, k); D sums those rows with the shares across v.
         share = (f[:, :-1] - f[:, 1:]).astype(np.float64)
-        rows = colour_t[:, 0] * share[0, 0]
-        for c in range(1, m):
-            rows += colour_t[:, c] * share[0, c]
+        # One contraction over the columns (einsum: half the time of m products and sums).
+        rows = np.einsum("rck,ck->rk", colour_t, share[0])
         self.value = (share[1] * rows).sum(axis=0)
         self._terms = (x, e, lc, share, rows, inv_grad_t, colour_t)
 
@@ -331,25 +335,23 @@ class _Darkness:
         t = np.subtract(1.0, e)
         t /= 1.0 + e
         np.copysign(t, x, out=t)  # tanh x
+        # The shares' derivatives (d/d(u|v) [, d/ds], across u|v, m cells, k) in one buffer: the
+        # contractions below then take both at once.
+        ds = np.empty((2 if edge_derivative else 1, 2, m, k))
         df = (0.5 * (t[0] - t[1])) * inv_grad_t[:, None, :]  # dF/du (module units)
-        dshare = df[:, :-1] - df[:, 1:]
-        by_u = np.empty((2 if edge_derivative else 1, m, k))  # dshare, [sshare] across u
-        by_u[0] = dshare[0]
+        np.subtract(df[:, :-1], df[:, 1:], out=ds[0])
         if edge_derivative:
             xt = lc - x * t
-            fs = 0.5 * (xt[0] - xt[1])  # dF/ds, s in px (the ln 2 cancels here too)
-            sshare = (fs[:, :-1] - fs[:, 1:]).astype(np.float64)
-            by_u[1] = sshare[0]
-        rows_d = colour_t[None, :, 0] * by_u[:, None, 0]  # (dshare|sshare, m rows, k)
-        for c in range(1, m):
-            rows_d += colour_t[None, :, c] * by_u[:, None, c]
-        by_v = (share[1] * rows_d).sum(axis=1)  # dD/du, [dD/ds from u]
+            fs = xt[0] - xt[1]  # 2 dF/ds, s in px (the ln 2 cancels here too)
+            np.subtract(fs[:, :-1], fs[:, 1:], out=ds[1])
+            ds[1] *= 0.5
+        rows_d = np.einsum("rck,sck->srk", colour_t, ds[:, 0])  # (d|s, m rows, k)
+        by_v = np.einsum("rk,srk->sk", share[1], rows_d)  # dD/du, [dD/ds from u]
+        by_rows = np.einsum("srk,rk->sk", ds[:, 1], rows)  # dD/dv, [dD/ds from v]
         d_uv = np.empty((2, k))
         d_uv[0] = by_v[0]
-        d_uv[1] = (dshare[1] * rows).sum(axis=0)
-        d_s = None
-        if edge_derivative:
-            d_s = by_v[1] + (sshare[1] * rows).sum(axis=0)
+        d_uv[1] = by_rows[0]
+        d_s = by_v[1] + by_rows[1] if edge_derivative else None
         return d_uv, d_s
 
 
@@ -382,7 +384,7 @@ class _Problem:
         self.n, self.geo, self.norm = n, geo, norm
         h, w = grey.shape
         g = _g_from_params(geo)
-        inv = np.linalg.inv(g)
+        inv = np.linalg.inv(g)  # (LAPACK's, as main: the pixels sampled follow it to the bit)
         ideal_corners = _apply(inv, _UNIT_SQUARE * n)
         sides = ideal_corners - ideal_corners[[1, 2, 3, 0]]
         module_px = float(np.sqrt((sides * sides).sum(axis=1)).mean()) * scale / n
@@ -428,6 +430,9 @@ class _Problem:
         self.ph_t[1:] = self.p_t
         self.corner_t = np.ascontiguousarray(corner.T)
         self.colour_t = colour_t
+        #: the pixels' module coordinates at ``geo`` (2, k): a pixel-centred template's points
+        #: (qrfield.detect.symbol_track._Template), not mapped again there
+        self.uv_t = np.ascontiguousarray(uv[ok].T)
         # px per module unit across u and across v edges (2, k): 1 / |du/dp|, 1 / |dv/dp|, with
         # d(u, v)/d(normalised ideal) = (G[:2, :2] - (u, v) G[2, :2]) / w and the lens' d ideal /
         # d pixel, component by component (whole (k, 2, 2) arrays cost several times as much).
@@ -466,10 +471,14 @@ class _Problem:
         return self.values - a + b * dark.value, (dark, uv, w, b)
 
     def jacobian(self, at: tuple, free_edge: bool) -> np.ndarray:
-        """The residuals' Jacobian at ``at`` (from :meth:`residuals`), transposed: (8 [+1] + 6, k)
-        with respect to (homography, [edge width,] lighting): J = d resid / d parameters =
-        -d model / d parameters. (Each parameter's row is contiguous: filling it and forming
-        J^T W J cost less than on (k, n).)"""
+        """The residuals' Jacobian at ``at`` (from :meth:`residuals`): (k, 8 [+1] + 6) with respect
+        to (homography, [edge width,] lighting): J = d resid / d parameters = -d model / d
+        parameters."""
+        return np.ascontiguousarray(self.jacobian_t(at, free_edge).T)
+
+    def jacobian_t(self, at: tuple, free_edge: bool) -> np.ndarray:
+        """:meth:`jacobian` transposed, (8 [+1] + 6, k): each parameter's row contiguous (filling it
+        and forming J^T W J cost less than on (k, n)); no transposed copy."""
         dark, uv, w, b = at
         d_uv, d_s = dark.derivatives(edge_derivative=free_edge)
         d = dark.value
@@ -485,7 +494,7 @@ class _Problem:
             np.multiply(b, d_s, out=jac[8])
         np.negative(ph, out=jac[col : col + 3])
         np.multiply(ph, d, out=jac[col + 3 : col + 6])
-        return np.ascontiguousarray(jac.T)
+        return jac
 
 
 def _g_from_params(theta: np.ndarray) -> np.ndarray:
@@ -542,7 +551,7 @@ def corner_covariance(dc: np.ndarray, cov: np.ndarray, corners_ideal: np.ndarray
     if lens.distorted:
         jl = lens.distort_jacobian(corners_ideal)
         out = jl @ out @ jl.transpose(0, 2, 1)
-    return out + MODEL_FLOOR_PX**2 * np.eye(2)
+    return out + _FLOOR_COV
 
 
 class _Solver:
@@ -555,8 +564,11 @@ class _Solver:
 
     @staticmethod
     def weights(resid: np.ndarray, scale: float) -> np.ndarray:
-        a = np.abs(resid)
-        return np.where(a <= HUBER_K * scale, 1.0, HUBER_K * scale / np.maximum(a, 1e-12))
+        # 1 within HUBER_K scales, else HUBER_K scale / |r| (the warm fit's form: three calls)
+        huber = HUBER_K * scale
+        w = np.abs(resid)
+        np.maximum(w, huber, out=w)
+        return np.divide(huber, w, out=w)
 
     @staticmethod
     def cost(resid: np.ndarray, scale: float) -> float:
@@ -764,7 +776,8 @@ def _finish(
             return fail("the fit diverged")
         corners = lens.distort(corners_ideal) - shift
         contrast = float(light[3])
-        moved = float(np.linalg.norm(corners - start, axis=1).max())
+        step = corners - start
+        moved = math.sqrt(float((step * step).sum(axis=1).max()))  # the largest corner's move
         if abs(contrast) < MIN_CONTRAST:
             return fail(f"too little contrast ({abs(contrast):.0f} grey levels)")
         # The starting corners on the same pixels (lighting refitted): the fallback's measure
@@ -782,7 +795,7 @@ def _finish(
             w = _Solver.weights(resid, robust)
             normal = (jac * w[:, None]).T @ jac
         try:
-            cov = robust**2 * np.linalg.inv(normal)[:8, :8]
+            cov = robust**2 * small_inverse(normal, symmetric=True)[:8, :8]
         except np.linalg.LinAlgError:
             return fail("the fit is singular")
         dc = _corners_jacobian(geo, n, norm, (inv, corners_norm)).reshape(4, 2, 8)
@@ -837,18 +850,18 @@ def polish(
     light = np.asarray(state.lighting, dtype=np.float64)
     with np.errstate(all="ignore"):
         resid, at = problem.residuals(geo, state.edge_px, light)
-        jac = problem.jacobian(at, True)
+        jac_t = problem.jacobian_t(at, True)  # (15, k): no transposed copy
         robust = _Solver.robust_scale(resid)
-        jw = jac * _Solver.weights(resid, robust)[:, None]
-        normal = jw.T @ jac  # the covariance's too (_finish)
+        jw_t = jac_t * _Solver.weights(resid, robust)
+        normal = jw_t @ jac_t.T  # the covariance's too (_finish)
         damped = normal.copy()
         damped.flat[:: len(damped) + 1] += 1e-9
         try:
-            delta = -small_solve(damped, jw.T @ resid, symmetric=True)  # J = d resid / d parameters
+            delta = -small_solve(damped, jw_t @ resid, symmetric=True)  # J = d resid / d parameters
         except np.linalg.LinAlgError:
             return SymbolFit(False, start.copy(), None, "the fit is singular")
         geo = geo + delta[:8]
         edge = float(np.clip(state.edge_px + delta[8], MIN_EDGE_PX, 6.0))
         light = light + delta[9:15]
-    last = (resid, jac, robust)
+    last = (resid, jac_t.T, robust)  # (the Jacobian unused: ``normal`` is given)
     return _finish(problem, start, geo, edge, light, last, lens, shift, 1, None, problem.module_px, normal)

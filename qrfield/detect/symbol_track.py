@@ -40,7 +40,6 @@ from qrfield.detect.symbol_fit import (
     FitState,
     SymbolFit,
     _Darkness,
-    _g_from_params,
     _layout,
     _params_from_g,
     _Problem,
@@ -163,9 +162,7 @@ class _Template:
         # Per-point terms with the points on the last axis (as the full fit's: every operation on
         # contiguous runs; the Jacobian is filled row by row, transposed).
         if samples is not None:
-            g = _g_from_params(samples.geo)
-            uvw = g[:, :2] @ samples.p_t + g[:, 2:3]
-            uv_t = uvw[:2] / uvw[2]
+            uv_t = samples.uv_t  # the pixels' module coordinates at the samples' geometry
             dark = _Darkness(uv_t - samples.corner_t, samples.inv_grad_t, samples.colour_t, edge_px)
             xy_t = samples.p_t
         else:
