@@ -149,6 +149,21 @@ def chi2_minimum(
     return None
 
 
+def corners_information(
+    corners_px: np.ndarray, camera: CameraModel, corners_cov: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(n_obs (8,), W (8, 8)): the corners V1..V4 (4, 2) px as the normalised ideal coordinates
+    (x1, y1, ..., x4, y4) the mirror test's chi-square is taken on, and their information matrix
+    (the inverse of their covariance, from ``corners_cov`` (4, 2, 2) px^2 through the undistortion),
+    as :func:`chi2_minimum` takes them."""
+    corners, flat = check_corners_single(corners_px)
+    x, y = normalised_single(corners, flat, camera)
+    info = block_diagonal(
+        information_blocks(normalised_cov_single(corners_cov, x, y, camera, has_distortion(camera)))
+    )
+    return np.array([v for pair in zip(x, y, strict=True) for v in pair]), info
+
+
 def refined_mirror_result(
     result: PoseResult, camera: CameraModel, side_mm: float, corners_cov: np.ndarray | None
 ) -> PoseResult | None:
@@ -164,11 +179,8 @@ def refined_mirror_result(
         return mirror_result(result, camera, side_mm, corners_cov)
     cam = check_camera(camera)
     side = check_side(side_mm)
-    corners, flat = check_corners_single(result.corners_px)
     cov = check_corners_cov(corners_cov)
-    x, y = normalised_single(corners, flat, cam)
-    info = block_diagonal(information_blocks(normalised_cov_single(cov, x, y, cam, has_distortion(cam))))
-    n_obs = np.array([v for pair in zip(x, y, strict=True) for v in pair])
+    n_obs, info = corners_information(result.corners_px, cam, cov)
     answer = chi2_minimum(result.rotation, result.position_mm, n_obs, info, side)
     mirror = chi2_minimum(result.alternative.rotation, result.alternative.position_mm, n_obs, info, side)
     if answer is not None and mirror is not None:

@@ -3,7 +3,8 @@
 - :mod:`.settings`: :class:`StreamSettings` (``continuity``, ``filter_s``), section ``stream`` of
   the run configuration;
 - :mod:`.continuity`: branch continuity, an ambiguous frame's flip resolved by the recent history;
-- :mod:`.kalman`: the optional constant-velocity filter on position and rotation;
+- :mod:`.crosscheck`: the numerical model's std raised to what the corners' best fit allows;
+- :mod:`.kalman`: the optional random-walk filter on position and rotation;
 - :mod:`.poses`: a pose's covariance as a stream works with it, and a result moved to a new pose;
 - :mod:`.stage`: :class:`StreamStage`, both after each frame's solve (``qrfield.pipeline.Pipeline``).
 """

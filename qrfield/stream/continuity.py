@@ -34,7 +34,10 @@ Both are reported with their covariance widened in the tilt plane where the bran
 resolved frame always, an unambiguous one when its mirror fits within NEAR_FOLD_CHI2:
 :func:`near_fold_widening`): near the fold of the planar ambiguity the linearised std of the tilt is
 several times too small, in the direction of the turn to the other branch and across it
-(docs/uncertainty.md, "Near the fold"). The history itself predicts from the unwidened poses. A
+(docs/uncertainty.md, "Near the fold"); before that, when the caller asks for it (``checked``: the
+stage does for the numerical model from a stream's second frame on), the covariance is raised to
+what the corners' best fit allows (:mod:`qrfield.stream.crosscheck`). The history itself predicts
+from the unwidened poses. A
 frame without a pose leaves the history to age. What the history chose is the mirror's own full
 result (:func:`qrfield.solvers.mirror.mirror_result`: its pose, std and reprojection), never the
 answer's numbers under the mirror's name.
@@ -184,18 +187,24 @@ def fold_rise(pose: PoseResult) -> float:
     return rise / max(1.0, float(pose.chi2) / FIT_DOF)
 
 
+def fit_scale(pose: PoseResult) -> float:
+    """chi2 / FIT_CHI2 when the pose's fit's chi-square is above FIT_CHI2 (the corners are further
+    off than their covariance says, by about that factor in variance), else 1 (also when unknown)."""
+    chi2 = float(pose.chi2)
+    return chi2 / FIT_CHI2 if math.isfinite(chi2) and chi2 > FIT_CHI2 else 1.0
+
+
 def fit_scaled(pose: PoseResult) -> PoseResult:
     """``pose`` with its covariance (``pose_cov``, (6, 6) over x, y, z mm and alpha, beta, gamma
-    deg; the std fields follow) scaled by chi2 / FIT_CHI2 when its fit's chi-square is above
-    FIT_CHI2 (the corners are further off than their covariance says, by about that factor in
-    variance); ``pose`` itself otherwise or when the chi-square or covariance is unknown."""
+    deg; the std fields follow) scaled by :func:`fit_scale`; ``pose`` itself when that is 1 or the
+    covariance is unknown."""
     from qrfield.solvers.uncertainty import pose_std
 
-    chi2 = float(pose.chi2)
+    scale = fit_scale(pose)
     cov = np.asarray(pose.pose_cov, dtype=float)
-    if not (math.isfinite(chi2) and chi2 > FIT_CHI2) or cov.shape != (6, 6):
+    if scale == 1.0 or cov.shape != (6, 6):
         return pose
-    pose_cov = cov * (chi2 / FIT_CHI2)
+    pose_cov = cov * scale
     position_std, angles_std = pose_std(pose_cov)
     return replace(pose, pose_cov=pose_cov, position_std_mm=position_std, angles_std_deg=angles_std)
 
@@ -225,12 +234,13 @@ def widening(pose: PoseResult, other_rotation: np.ndarray) -> np.ndarray | None:
     wanted = angle * angle / max(rise if math.isfinite(rise) else 1.0, 1.0)
     sight = np.asarray(pose.position_mm, dtype=float)
     sight = sight / float(np.linalg.norm(sight))
-    return _raise_to(wanted * (np.eye(3) - np.outer(sight, sight)), cov[3:, 3:])
+    return raise_to(wanted * (np.eye(3) - np.outer(sight, sight)), cov[3:, 3:])
 
 
-def _raise_to(floor: np.ndarray, cov: np.ndarray) -> np.ndarray | None:
-    """The positive part of ``floor - cov`` (both (3, 3)): what raises ``cov`` to at least
-    ``floor`` in every direction, whatever their axes; None when ``cov`` is already there."""
+def raise_to(floor: np.ndarray, cov: np.ndarray) -> np.ndarray | None:
+    """The positive part of ``floor - cov`` (both (3, 3), of one block: rotation or position): what
+    raises ``cov`` to at least ``floor`` in every direction, whatever their axes; None when ``cov``
+    is already there."""
     values, vectors = np.linalg.eigh(floor - cov)
     if not np.any(values > 0.0):
         return None
@@ -248,7 +258,7 @@ def position_widening(pose: PoseResult, other_position: np.ndarray) -> np.ndarra
     if cov.shape != (6, 6) or not (np.all(np.isfinite(cov[:3, :3])) and np.all(np.isfinite(step))):
         return None
     rise = fold_rise(pose)
-    return _raise_to(np.outer(step, step) / max(rise if math.isfinite(rise) else 1.0, 1.0), cov[:3, :3])
+    return raise_to(np.outer(step, step) / max(rise if math.isfinite(rise) else 1.0, 1.0), cov[:3, :3])
 
 
 def with_position_cov(pose: PoseResult, extra: np.ndarray | None) -> PoseResult:
@@ -316,6 +326,24 @@ def near_fold_position_widening(pose: PoseResult) -> np.ndarray | None:
     return None
 
 
+def _checked(
+    pose: PoseResult, checked: Callable[[PoseResult], tuple[np.ndarray | None, np.ndarray | None]] | None
+) -> tuple[PoseResult, np.ndarray | None, np.ndarray | None]:
+    """(``pose`` with what ``checked`` adds to its rotation and position covariance, those two
+    additions); ``pose`` and None, None without ``checked``."""
+    if checked is None:
+        return pose, None, None
+    extra, moved = checked(pose)
+    return with_position_cov(with_rotation_cov(pose, extra), moved), extra, moved
+
+
+def _sum(a: np.ndarray | None, b: np.ndarray | None) -> np.ndarray | None:
+    """a + b of two additions to a covariance block, either None for nothing."""
+    if a is None:
+        return b
+    return a if b is None else a + b
+
+
 def _frame_evidence(pose: PoseResult) -> float:
     """The frame's own evidence for the answer against the mirror branch (or, without a distinct
     mirror candidate, against the reflected plane the mirror test is run at): mirror_chi2 - chi2,
@@ -350,6 +378,7 @@ class BranchHistory:
         text: str | None,
         mirror: Callable[[PoseResult], PoseResult | None],
         reflected: Callable[[PoseResult], np.ndarray | None] | None = None,
+        checked: Callable[[PoseResult], tuple[np.ndarray | None, np.ndarray | None]] | None = None,
     ) -> Decision:
         """Decide one frame's pose (see the module doc).
 
@@ -361,6 +390,10 @@ class BranchHistory:
                 mirror candidate); called only for an ambiguous frame with a usable history.
             reflected: the rotation (3, 3) of the reflected plane the mirror search starts from,
                 for a pose without a distinct mirror candidate (None: unknown).
+            checked: what raises a resolved pose's covariance to what the corners' best fit
+                allows (rotation (3, 3) rad^2, position (3, 3) mm^2, each None when nothing:
+                :func:`qrfield.stream.crosscheck.crosscheck_widening`), applied before the
+                widening near the fold; None: no such check (a stream's first frame, IPPE).
         """
         if not usable_pose(pose):
             return Decision(pose, BY_FRAME, bool(pose.ambiguous))
@@ -369,10 +402,13 @@ class BranchHistory:
                 return Decision(pose, BY_FRAME, False)
             pose = fit_scaled(pose)
             self._remember(pose, t_ms, text)
+            pose, check, check_moved = _checked(pose, checked)
             extra = near_fold_widening(pose, reflected)
             moved = near_fold_position_widening(pose)
             out = with_position_cov(with_rotation_cov(pose, extra), moved)
-            return Decision(out, BY_FRAME, False, widening=extra, position_widening=moved)
+            return Decision(
+                out, BY_FRAME, False, widening=_sum(check, extra), position_widening=_sum(check_moved, moved)
+            )
         last = self._usable(pose, t_ms, text) if self.enabled else None
         if last is None:
             return Decision(pose, BY_FRAME, True)
@@ -383,6 +419,7 @@ class BranchHistory:
         # ambiguous run had); the pose reported carries the covariance widened towards the other branch.
         chosen = fit_scaled(chosen)
         self._remember(chosen, t_ms, text)
+        chosen, check, check_moved = _checked(chosen, checked)
         other = pose if flipped else self._other
         extra = moved = None
         if other is not None:
@@ -391,7 +428,14 @@ class BranchHistory:
         elif reflected is not None and (plane := reflected(chosen)) is not None:
             extra = widening(chosen, plane)
         chosen = with_position_cov(with_rotation_cov(chosen, extra), moved)
-        return Decision(replace(chosen, ambiguous=False), BY_HISTORY, False, flipped, extra, moved)
+        return Decision(
+            replace(chosen, ambiguous=False),
+            BY_HISTORY,
+            False,
+            flipped,
+            _sum(check, extra),
+            _sum(check_moved, moved),
+        )
 
     # ------------------------------------------------------------------ the rule
     def _usable(self, pose: PoseResult, t_ms: int, text: str | None) -> _Record | None:

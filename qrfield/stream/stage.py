@@ -26,7 +26,11 @@ branch and flag, and the same std unless, with continuity on, its fit's chi-squa
 FIT_CHI2 (its covariance scaled by chi2 / FIT_CHI2: :func:`qrfield.stream.continuity.fit_scaled`)
 or its mirror fits within NEAR_FOLD_CHI2, where the std of its tilt is widened
 (:func:`qrfield.stream.continuity.near_fold_widening`; near the fold the linearised std of the
-tilt is several times too small, docs/uncertainty.md).
+tilt is several times too small, docs/uncertainty.md). From a stream's second frame on, with
+continuity on, the numerical model's covariance is also raised to at least what the corners' best
+fit allows, H^-1 + d d^T (:func:`qrfield.stream.crosscheck.crosscheck_widening`: near frontal the
+length fit's linearised std is several times too small where the corners carried its tilt away
+from frontal); the filter counts that as shared in full, as the widening near the fold.
 """
 
 from __future__ import annotations
@@ -41,6 +45,7 @@ from qrfield.solvers.registry import uses_depth_model
 from qrfield.solvers.result import PoseResult
 from qrfield.status import usable_pose
 from qrfield.stream.continuity import BY_FRAME, BranchHistory, Decision
+from qrfield.stream.crosscheck import crosscheck_widening
 from qrfield.stream.kalman import PoseFilter, shared_scale
 from qrfield.stream.poses import moved_result, vector_cov
 from qrfield.stream.settings import StreamSettings
@@ -90,8 +95,10 @@ class _MethodStream:
     def __init__(self, settings: StreamSettings) -> None:
         self.history = BranchHistory(enabled=settings.continuity)
         self.filter = PoseFilter(settings.filter_s) if settings.filter_s > 0 else None
+        self.frames = 0  # the frames with a usable pose since the stream (re)started
 
     def reset(self) -> None:
+        self.frames = 0
         self.history.reset()
         if self.filter is not None:
             self.filter.reset()
@@ -144,13 +151,19 @@ class StreamStage:
         corners_cov: np.ndarray | None,
     ) -> None:
         """Continuity, then the filter, for one method's pose of one frame."""
+        checked = None
         if uses_depth_model(name):  # the numerical model: its mirror search ends on a minimum
             mirror = lambda p: mirror_result(p, camera, side_mm, corners_cov)  # noqa: E731
             reflected = lambda p: reflected_rotation(p, camera)  # noqa: E731
+            if state.frames > 0:  # the first frame is a single image: the solver's std
+                checked = lambda p: crosscheck_widening(p, camera, side_mm, corners_cov)  # noqa: E731
         else:  # IPPE's mirror may be its closed-form second solution: refined first
             mirror = lambda p: refined_mirror_result(p, camera, side_mm, corners_cov)  # noqa: E731
             reflected = mirror_start
-        decision = state.history.decide(pose, result.t_ms, text, mirror=mirror, reflected=reflected)
+        state.frames += 1
+        decision = state.history.decide(
+            pose, result.t_ms, text, mirror=mirror, reflected=reflected, checked=checked
+        )
         out, filtered, reset = decision.pose, False, ""
         if state.filter is not None and not decision.ambiguous:
             cov = vector_cov(out)
