@@ -24,18 +24,14 @@ frame on its std is raised to what the corners' best fit allows (qrfield/stream/
 
 from __future__ import annotations
 
-import copy
-
 import numpy as np
 import pytest
 
 from qrfield.geometry import angle_difference
 from qrfield.methods import METHODS
-from qrfield.pipeline import Pipeline
-from qrfield.sources import Frame
 from qrfield.status import usable_pose
-from qrfield.stream import StreamSettings, StreamStage
-from qrfield.testing.sequences import FPS, make_sequence
+from qrfield.stream import StreamSettings
+from qrfield.testing.sequences import make_sequence, replay, solve_sequence
 
 NAME = "frontal far 1.4 px"
 WINDOWS = [(2, 146), (43, 75)]  # (seed, frames from the first)
@@ -56,12 +52,7 @@ def solved(request) -> tuple[list, float]:
     """The window's frames solved each alone (continuity off, no filter), as a frame loop would."""
     seed, count = request.param
     sequence = make_sequence(NAME, seed, count)
-    pipeline = Pipeline(sequence.camera, sequence.side_mm, METHODS, stream=StreamSettings(continuity=False))
-    out = []
-    for i in range(count):
-        image, pose = sequence.frames[i]
-        out.append(pipeline.process(Frame(image, 1000.0 + i / FPS, i, truth=pose)))
-    return out, sequence.side_mm
+    return solve_sequence(sequence), sequence.side_mm
 
 
 @pytest.mark.slow
@@ -72,14 +63,8 @@ def solved(request) -> tuple[list, float]:
 )
 def test_no_frame_of_a_far_frontal_card_is_confidently_wrong(solved, settings) -> None:
     results, side = solved
-    stage = StreamStage(settings)
     posed = wrong = 0
-    for result in results:
-        again = copy.copy(result)
-        again.poses = dict(result.frame_poses or result.poses)
-        again.stream = {}
-        if again.poses:
-            stage.apply(again, side, result.detection.pose_cov)
+    for result, again in zip(results, replay(results, settings, side), strict=True):
         for method in METHODS:
             pose = again.poses.get(method)
             if usable_pose(pose):
@@ -97,23 +82,14 @@ def frontal_window() -> tuple[list, float]:
     """Frames 80-103 of the near frontal card at 450 mm, seed 93, solved each alone (the tracker
     run from frame 0, as a frame loop would)."""
     sequence = make_sequence(FRONTAL, 93, 104)
-    pipeline = Pipeline(sequence.camera, sequence.side_mm, METHODS, stream=StreamSettings(continuity=False))
-    out = []
-    for i, (image, pose) in enumerate(sequence.frames):
-        out.append(pipeline.process(Frame(image, 1000.0 + i / FPS, i, truth=pose)))
-    return out[80:], sequence.side_mm
+    return solve_sequence(sequence)[80:], sequence.side_mm
 
 
 @pytest.mark.slow
 def test_a_frontal_frame_with_one_minimum_is_resolved_when_frame_and_history_agree(frontal_window) -> None:
     results, side = frontal_window
-    stage = StreamStage(StreamSettings())
     resolved = []
-    for result in results:
-        again = copy.copy(result)
-        again.poses = dict(result.frame_poses or result.poses)
-        again.stream = {}
-        stage.apply(again, side, result.detection.pose_cov)
+    for result, again in zip(results, replay(results, StreamSettings(), side), strict=True):
         pose = again.poses["numerical"]
         assert usable_pose(pose)
         assert not _confidently_wrong(pose, result.truth)
@@ -131,11 +107,7 @@ def frontal_shared_error() -> tuple[list, float]:
     degrees off at a std of 0.4-0.6 (frame 90: 2.04 degrees, 5.0 std), where the reprojection fit of
     the same corners is 0.1-0.4 degree off (docs/uncertainty.md, "Ninth pass (issue 25s)")."""
     sequence = make_sequence(FRONTAL, 143, 96)
-    pipeline = Pipeline(sequence.camera, sequence.side_mm, METHODS, stream=StreamSettings(continuity=False))
-    out = []
-    for i, (image, pose) in enumerate(sequence.frames):
-        out.append(pipeline.process(Frame(image, 1000.0 + i / FPS, i, truth=pose)))
-    return out, sequence.side_mm
+    return solve_sequence(sequence), sequence.side_mm
 
 
 @pytest.mark.slow
@@ -148,13 +120,8 @@ def test_no_frame_of_a_frontal_card_with_a_shared_corner_error_is_confidently_wr
     frontal_shared_error, settings
 ) -> None:
     results, side = frontal_shared_error
-    stage = StreamStage(settings)
     wrong = []
-    for result in results:
-        again = copy.copy(result)
-        again.poses = dict(result.frame_poses or result.poses)
-        again.stream = {}
-        stage.apply(again, side, result.detection.pose_cov)
+    for result, again in zip(results, replay(results, settings, side), strict=True):
         for method in METHODS:
             pose = again.poses.get(method)
             assert usable_pose(pose)

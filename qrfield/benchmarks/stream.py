@@ -33,7 +33,6 @@ issue 25); branch continuity (the default); continuity and the filter at two tim
 from __future__ import annotations
 
 import argparse
-import copy
 import math
 import os
 import string
@@ -46,7 +45,7 @@ import numpy as np
 
 from qrfield.geometry import POSE_NAMES
 from qrfield.methods import METHODS
-from qrfield.testing.sequences import FPS, SEQUENCES, Sequence, make_sequence  # the drawn sequences
+from qrfield.testing.sequences import FPS, SEQUENCES, Sequence, make_sequence, replay, solve_sequence
 
 HELP = (
     "the live stream on drawn video sequences: flips resolved by history, the filter, never "
@@ -92,36 +91,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 # ---------------------------------------------------------------------- running and scoring
-
-
-def solve_sequence(sequence: Sequence) -> list[Any]:
-    """Each frame through the default pipeline (both methods) with the stream stage off."""
-    from qrfield.pipeline import Pipeline
-    from qrfield.sources.base import Frame
-    from qrfield.stream import StreamSettings
-
-    pipeline = Pipeline(sequence.camera, sequence.side_mm, METHODS, stream=StreamSettings(continuity=False))
-    out = []
-    for i, (image, pose) in enumerate(sequence.frames):
-        out.append(pipeline.process(Frame(image, 1000.0 + i / FPS, i, truth=pose)))
-    return out
-
-
-def replay(results: list[Any], settings: Any, side_mm: float) -> list[Any]:
-    """The frames' solver results through a fresh StreamStage with ``settings`` (copies)."""
-    from qrfield.stream import StreamStage
-
-    stage = StreamStage(settings)
-    out = []
-    for result in results:
-        again = copy.copy(result)
-        again.poses = dict(result.frame_poses or result.poses)
-        again.stream = {}
-        cov = None if result.detection is None else result.detection.pose_cov
-        if again.poses:
-            stage.apply(again, side_mm, cov)
-        out.append(again)
-    return out
 
 
 @dataclass
