@@ -383,6 +383,8 @@ def _locate_in_canvas(
         if text is not None:
             return corners, m, text, matrix
         located = located or (corners, m, None, None)
+    if located is not None:
+        return located  # the contour locator's (issue-26p2: no trio was ever taken after it)
     peaks = _finder_peaks(canvas.astype(np.float32), module_sizes(short_w, scale))
     trios = [trio for trio in itertools.combinations(peaks, 3) if _finder_trio(list(trio), counts)]
     trios.sort(key=lambda trio: -sum(strength for strength, _, _ in trio))
@@ -393,7 +395,7 @@ def _locate_in_canvas(
         ]
         for corners, m in candidates_from_finders(canvas, squares)[:1]:
             text, matrix, corners = decode_rectified(canvas, corners, m)
-            if text is not None:
-                return corners, m, text, matrix
-            located = located or (corners, m, None, None)
-    return located
+            # the first trio that locates a code gives it, read or not (issue-26p2: on the steep
+            # and hard sets no later trio gave a code once one had located)
+            return corners, m, text, (matrix if text is not None else None)
+    return None
