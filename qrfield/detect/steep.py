@@ -108,6 +108,7 @@ TRIOS = 6
 COARSE_TEMPLATE_PX = 36
 COARSE_REFINE_PX = 3
 COARSE_MARGIN = 0.05
+COARSE_PEAKS = 2 * MAX_PEAKS
 
 
 def compressed_blobs(grey: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, float, float, np.ndarray]]:
@@ -207,12 +208,14 @@ def _finder_triangle(points: list[np.ndarray], shortest_px: float, longest_px: f
     return False
 
 
-def _peaks(response: np.ndarray, radius: int, least: float = MIN_CORRELATION) -> list[tuple[int, int]]:
-    """(x, y) of the strongest local maxima of ``response``, at most MAX_PEAKS, at least
+def _peaks(
+    response: np.ndarray, radius: int, least: float = MIN_CORRELATION, most: int = MAX_PEAKS
+) -> list[tuple[int, int]]:
+    """(x, y) of the strongest local maxima of ``response``, at most ``most``, at least
     ``least``, each ``radius`` px from the stronger ones."""
     r = response.copy()
     out: list[tuple[int, int]] = []
-    for _ in range(MAX_PEAKS):
+    for _ in range(most):
         _, value, _, (x, y) = cv2.minMaxLoc(r)
         if value < least:
             break
@@ -344,7 +347,8 @@ def _coarse_peaks(
     response = cv2.matchTemplate(half, small, cv2.TM_CCOEFF_NORMED)
     r, out = COARSE_REFINE_PX, []
     limit_x, limit_y = image.shape[1] - size, image.shape[0] - size
-    for hx, hy in _peaks(response, max(int(3.5 * module / 2.0), 1), MIN_CORRELATION - COARSE_MARGIN):
+    coarse = _peaks(response, max(int(3.5 * module / 2.0), 1), MIN_CORRELATION - COARSE_MARGIN, COARSE_PEAKS)
+    for hx, hy in coarse:
         # the half template's centre (half px) -> canvas px -> the full template's top-left
         cx = 2.0 * (hx + (small.shape[0] - 1) / 2.0) + 0.5
         cy = 2.0 * (hy + (small.shape[0] - 1) / 2.0) + 0.5
