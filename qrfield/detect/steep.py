@@ -98,9 +98,11 @@ MIN_IMAGE_SCORE = 0.76
 PERSPECTIVE = (0.7, 1.4)
 FINDER_RATIO = 2.0
 #: Most finder candidates kept per canvas (the strongest over all sizes), and most triples of them
-#: tried (the strongest by summed correlation).
+#: tried (the strongest by summed correlation). TRIOS was 6 before issue-26p2: over the canvases of
+#: steep seeds 2026, 2027, 2031 (300 views each) and the hard set (seed 2024, 400 views) every
+#: code a triple located came from the strongest one (199 canvases); 2 keeps a margin.
 MAX_FINDERS = 8
-TRIOS = 6
+TRIOS = 2
 #: Finder templates of more than this side (px: modules above 4 canvas px) are correlated at half
 #: resolution (the template halved, at least 2 px a module), each peak then placed by the full
 #: template within COARSE_REFINE_PX of it; peaks are taken at half resolution down to
