@@ -28,7 +28,9 @@ backend explained (this backend runs last):
    MAX_FINDERS in all, at least MIN_CORRELATION) whose triples make a code's finder triangle
    (LEG_RANGE, RIGHT_ANGLE_DEG, sizes and legs within FINDER_RATIO; the TRIOS strongest) are
    handed as squares to the contour locator's triple search, which picks the finders and n by
-   the fixed patterns (>= 0.8 in the canvas) and decodes the rectified symbol. A code not
+   the fixed patterns (>= 0.8 in the canvas) and decodes the rectified symbol; the first triple
+   that locates a code gives it. The larger templates are correlated at half resolution
+   (COARSE_TEMPLATE_PX), their peaks placed at full resolution. A code not
    decoded must score MIN_IMAGE_SCORE in the image too, before the costly reading is tried.
 
 Through a distorting lens (``locate_steep(grey, lens)``) the blob's widths and the canvas are
@@ -423,12 +425,14 @@ def _locate_in_canvas(
 ) -> tuple[np.ndarray, int, str | None, np.ndarray | None] | None:
     """The code (corners V1..V4 canvas px, n, text or None, matrix or None) found in an upright
     (side, side) uint8 ``canvas`` made at ``scale`` from a blob of compressed width ``short_w``
-    px, or None: the first one decoded, else the first one located, of (1) the contour locator
-    on the canvas (qrfield.detect.finders.locate_by_finders: where the canvas shows the finders'
-    nested squares, their outlines hold the perspective better than squares of the templates'
-    sizes) and (2) the TRIOS strongest finder triples by correlation (summed correlation);
-    ``decode_rectified`` and ``candidates_from_finders`` are qrfield.detect.finders' (imported
-    once by the caller)."""
+    px, or None: (1) the contour locator on the canvas (qrfield.detect.finders.locate_by_finders:
+    where the canvas shows the finders' nested squares, their outlines hold the perspective better
+    than squares of the templates' sizes), the first one it decoded, else the first it located;
+    only when it locates nothing, (2) the TRIOS strongest finder triples by correlation (summed
+    correlation), tried in turn up to the first that locates a code, read in the canvas or not
+    (issue-26p2: before, every triple was tried until one decoded, and none ever did after
+    another had located); ``decode_rectified`` and ``candidates_from_finders`` are
+    qrfield.detect.finders' (imported once by the caller)."""
     from qrfield.detect.finders import locate_by_finders
 
     counts = module_counts(short_w)
