@@ -379,7 +379,8 @@ def _finder_peaks(image: np.ndarray, sizes: list[float]) -> list[tuple[float, np
     strongest first, a weaker peak dropped where a stronger one (of any size) lies within half a
     finder of it (one finder answers several sizes), at most MAX_FINDERS. Templates of more than
     COARSE_TEMPLATE_PX are correlated at half resolution and their peaks placed at full
-    resolution (:func:`_coarse_peaks`, issue-26p2: a quarter of the cost)."""
+    resolution (:func:`_coarse_peaks`, issue-26p2: this search's CPU time 0.75x on the hard set's
+    frames that reach the backend)."""
     found = []
     half = None
     for module in sizes:
@@ -430,9 +431,9 @@ def _locate_in_canvas(
     than squares of the templates' sizes), the first one it decoded, else the first it located;
     only when it locates nothing, (2) the TRIOS strongest finder triples by correlation (summed
     correlation), tried in turn up to the first that locates a code, read in the canvas or not
-    (issue-26p2: before, every triple was tried until one decoded, and none ever did after
-    another had located); ``decode_rectified`` and ``candidates_from_finders`` are
-    qrfield.detect.finders' (imported once by the caller)."""
+    (issue-26p2: before, every triple was tried until one decoded; on the steep and hard sets
+    measured that changed no detection, docs/detection.md); ``decode_rectified`` and
+    ``candidates_from_finders`` are qrfield.detect.finders' (imported once by the caller)."""
     from qrfield.detect.finders import locate_by_finders
 
     counts = module_counts(short_w)
@@ -455,7 +456,6 @@ def _locate_in_canvas(
         ]
         for corners, m in candidates_from_finders(canvas, squares)[:1]:
             text, matrix, corners = decode_rectified(canvas, corners, m)
-            # the first trio that locates a code gives it, read or not (issue-26p2: on the steep
-            # and hard sets no later trio gave a code once one had located)
+            # the first trio that locates a code gives it, read or not (issue-26p2)
             return corners, m, text, (matrix if text is not None else None)
     return None
