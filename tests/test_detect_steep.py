@@ -113,3 +113,78 @@ def test_tilted_chessboard_is_not_taken_for_a_code():
     frame = cv2.warpAffine(board, warp, (640, 480), dst=frame, borderMode=cv2.BORDER_TRANSPARENT)
     frame = cv2.GaussianBlur(frame, (0, 0), 0.9)
     assert find_candidates(frame, "steep") == []
+
+
+#: Steep-set views (seed 2026) whose canvas locates the code from the strongest finder triple
+#: (issue-26p2): 169 (distorted lens, 25 modules) and 2 (pinhole, 25 modules), located 1.2-1.8 px
+#: from the true corners (unrefined), not decoded in the canvas.
+FIRST_TRIO_VIEWS = (169, 2)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("index", FIRST_TRIO_VIEWS)
+def test_a_canvas_stops_at_the_first_trio_that_locates_the_code(index, monkeypatch):
+    """Once a finder triple locates a code in a canvas no further triple is fitted (the trio
+    fits were a third of the backend's cost; issue-26p2), and the code located is the view's own:
+    its modules, each corner within 2.5 px of cv2.projectPoints' truth. On main every one of the
+    TRIOS strongest triples was fitted unless one decoded."""
+    import qrfield.detect.finders as finders
+    import qrfield.detect.steep as steep
+    from qrfield.detect.lens import Lens
+
+    view = steep_view(index, 2026)
+    fits: list[list[bool]] = []  # per canvas: for each trio fit, whether it located a code
+    fit, locate = finders._candidates_from_finders, steep._locate_in_canvas
+
+    def counted_fit(grey, quads):
+        out = fit(grey, quads)
+        fits[-1].append(bool(out))
+        return out
+
+    def counted_locate(canvas, short_w, scale, decode, candidates):
+        fits.append([])
+        return locate(canvas, short_w, scale, decode, counted_fit)
+
+    monkeypatch.setattr(steep, "_locate_in_canvas", counted_locate)
+    found = steep.locate_steep(view.image, Lens(view.camera if view.camera.has_distortion else None))
+    assert any(any(canvas) for canvas in fits), "no trio located a code"
+    for canvas in fits:
+        if any(canvas):
+            assert canvas.index(True) == len(canvas) - 1, f"trios fitted after the first located: {canvas}"
+    close = [(c, n) for c, n, _, _ in found if np.linalg.norm(c - view.corners_px, axis=1).max() < 2.5]
+    assert len(close) == 1 and close[0][1] == view.modules
+
+
+def test_large_finder_templates_at_half_resolution_give_the_full_resolution_peaks():
+    """A drawn upright symbol of 5 px modules (finder template 45 px, above COARSE_TEMPLATE_PX, so
+    correlated at half resolution since issue-26p2): its three finder candidates are the three
+    strongest peaks of OpenCV's full-resolution correlation with the same template (place and
+    value), centred on the drawn finders (3.5 modules in from the symbol's corners)."""
+    import qrfield.detect.steep as steep
+
+    text = "qrfield half resolution"
+    matrix = np.array(segno.make(text, error="m", micro=False).matrix, dtype=bool)
+    n, px, quiet = matrix.shape[0], 5, 4
+    canvas = np.full(((n + 2 * quiet) * px,) * 2, 220, np.float32)
+    canvas[quiet * px : (quiet + n) * px, quiet * px : (quiet + n) * px] = np.where(
+        np.kron(matrix, np.ones((px, px), bool)), 30, 220
+    )
+    canvas = cv2.GaussianBlur(canvas, (0, 0), 0.8)
+    size = 9 * px
+    assert size > steep.COARSE_TEMPLATE_PX
+    peaks = steep._finder_peaks(canvas, [float(px)])[:3]
+    response = cv2.matchTemplate(canvas, steep._finder_template(size), cv2.TM_CCOEFF_NORMED)
+    full = []
+    r = response.copy()
+    for _ in range(3):  # OpenCV's three strongest, each finder's neighbourhood masked after it
+        _, value, _, (x, y) = cv2.minMaxLoc(r)
+        full.append((value, x + (size - 1) / 2.0, y + (size - 1) / 2.0))
+        r[max(y - 4 * px, 0) : y + 4 * px + 1, max(x - 4 * px, 0) : x + 4 * px + 1] = -1.0
+    for (value, centre, side), (v, x, y) in zip(peaks, full, strict=True):
+        assert side == size
+        np.testing.assert_allclose(centre, (x, y))
+        assert value == pytest.approx(v, abs=1e-6)
+    lo, hi = quiet * px - 0.5 + 3.5 * px, (quiet + n) * px - 0.5 - 3.5 * px  # pixel centres at integers
+    drawn = np.array([[lo, lo], [hi, lo], [lo, hi]])
+    got = np.array(sorted((tuple(c) for _, c, _ in peaks), key=lambda c: (c[1], c[0])))
+    np.testing.assert_allclose(got, drawn, atol=1.0)
