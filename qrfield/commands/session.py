@@ -422,7 +422,12 @@ def _run_undo(args: argparse.Namespace) -> int:
     with Session.open(args.folder) as session:
         outcome = session.undo() if args.row is None else session.withdraw(args.row)
         if not outcome.ok:
-            say(f"NOT withdrawn: {outcome.message}")
+            # This process ends now: nothing is kept in memory for a retry (the app's words), and a
+            # failed append is cut back, so rows.csv still holds the row in force.
+            say(
+                f"NOT withdrawn: {outcome.reason}; {session.rows_path.name} is unchanged and row "
+                f"{outcome.row} stays in force. Free space or fix permissions and run undo again"
+            )
             return 1
         print(f"withdrew row {outcome.row} (its line stays in rows.csv, marked withdrawn)")
     return 0
