@@ -220,6 +220,31 @@ def test_interactive_log_asks_each_field_with_the_forms_checks(tmp_path: Path, c
     assert [float(rows[1][f"gt_{k}"]) for k in BENCH] == list(BENCH.values())
 
 
+def test_interactive_log_asks_again_only_the_combination_its_angles_contradict(
+    tmp_path: Path, capsys
+) -> None:
+    """audit-1: a combination the angles contradict was refused only after the note, and then the
+    whole row was asked again from x, so the next answer typed (the right combination) went into
+    the note and the one after into x."""
+    folder = new_session(tmp_path, capsys)
+    # (15, -20, 10) deg has the signs of alpha+beta-gamma+, not of 'alpha' (docs/app.md, item 4).
+    answers = ["10", "-5", "300", "15", "-20", "10", "alpha", "alpha+beta-gamma+", "second card", "q"]
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    done = subprocess.run(
+        [sys.executable, "-m", "qrfield", *log_args(folder, tmp_path, "--frames", "2")],
+        input="\n".join(answers) + "\n",
+        capture_output=True,
+        text=True,
+        timeout=90,
+        env=env,
+    )
+    assert done.returncode == 0, done.stderr
+    assert "they fit 'alpha+beta-gamma+'" in done.stdout and done.stdout.count("logged row") == 1
+    (row,) = rows_of(folder)
+    assert (row["combo"], row["note"]) == ("alpha+beta-gamma+", "second card")
+    assert [float(row[f"gt_{k}"]) for k in BENCH] == list(BENCH.values())
+
+
 def test_new_and_list_use_the_apps_sessions_folder(tmp_path: Path, capsys, monkeypatch) -> None:
     """Issue 23: both needed a ROOT folder; the app's folder is $QRFIELD_SESSIONS_DIR, else the one
     chosen in the app (app.json), else ~/.local/share/qrfield/sessions."""
