@@ -15,7 +15,6 @@ glob patterns (``shots/*.png``, ``**`` for subfolders), each relative to the cur
 
 from __future__ import annotations
 
-import contextlib
 import glob
 import os
 import re
@@ -437,9 +436,6 @@ def read_image(
     except OSError as exc:
         raise ImageError(f"{text}: cannot read image: {exc.strerror or exc}") from None
     if size is None:
-        with contextlib.suppress(OSError):
-            if file.stat().st_size == 0:  # a capture or copy that never wrote: not "another format"
-                raise ImageError(f"{text}: cannot read image: the file is empty (0 bytes)")
         raise ImageError(
             f"{text}: cannot read image: not an image format whose size qrfield can read before "
             f"decoding ({PROBED_FORMATS})"
