@@ -634,7 +634,12 @@ def atomic_file(
     path = check_target(path)
     if not overwrite and os.path.lexists(path):
         raise FileExistsError(errno.EEXIST, "file exists", str(path))
-    fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=_temp_prefix(path), suffix=_TEMP_SUFFIX)
+    try:
+        fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=_temp_prefix(path), suffix=_TEMP_SUFFIX)
+    except OSError as exc:
+        # The system names the temporary file, a random name the user never gave: name the target
+        # (a read-only folder or medium said "x/.rows-clean.csv.u_1_5t6s.tmp: read-only file system").
+        raise OSError(exc.errno, exc.strerror, str(path)) from None
     tmp = Path(tmp_name)
     try:
         with contextlib.suppress(OSError):  # e.g. FAT file systems have no modes

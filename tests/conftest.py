@@ -4,6 +4,7 @@ kept out of the real home (every test sees an empty config and data folder of it
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -25,6 +26,20 @@ def _private_user_folders(tmp_path_factory: pytest.TempPathFactory) -> None:
     ):
         os.environ[name] = str(home / sub)
     os.environ.pop("QRFIELD_CALIB_DIR", None)
+
+
+@pytest.fixture(autouse=True)
+def _config_dir_restored() -> Iterator[None]:
+    """``main([..., "--config-dir", D])`` makes D this process's ``$QRFIELD_CONFIG_DIR``
+    (:func:`qrfield.paths.use_config_dir`, for the processes it starts): restored after each test,
+    so that a later test's subprocess does not read an earlier test's app.json (audit-1:
+    ``pytest tests/test_runconfig.py tests/test_run_cli.py`` failed on a file the first one left)."""
+    before = os.environ.get("QRFIELD_CONFIG_DIR")
+    yield
+    if before is None:
+        os.environ.pop("QRFIELD_CONFIG_DIR", None)
+    else:
+        os.environ["QRFIELD_CONFIG_DIR"] = before
 
 
 @pytest.fixture(scope="session")

@@ -77,11 +77,22 @@ def test_select_text_and_all_codes(tmp_path, camera_vga, capsys):
     cv2.imwrite(str(path), near.image)
     args = ["solve", str(path), "--camera", CAMERA, "--side-mm", "60", "--method", "ippe", "--json"]
     main(args)
-    assert [e["text"] for e in json.loads(capsys.readouterr().out)] == ["bravo"]  # the largest
+    out = capsys.readouterr()
+    assert [e["text"] for e in json.loads(out.out)] == ["bravo"]  # the largest
+    # audit-1: which of the codes was solved is said (stderr, one line), never chosen silently.
+    (note,) = [line for line in out.err.splitlines() if "codes in view" in line]
+    assert note == (
+        f"qrfield solve: {path}: 2 codes in view (others: 'alpha'); solving the largest, text 'bravo'; "
+        "--all-codes solves each, --detect-select-text TEXT picks one"
+    )
     main([*args, "--detect-select-text", "alpha"])
-    assert [e["text"] for e in json.loads(capsys.readouterr().out)] == ["alpha"]
+    out = capsys.readouterr()
+    assert [e["text"] for e in json.loads(out.out)] == ["alpha"]
+    assert "solving the largest with text 'alpha';" in out.err
     main([*args, "--all-codes"])
-    assert sorted(e["text"] for e in json.loads(capsys.readouterr().out)) == ["alpha", "bravo"]
+    out = capsys.readouterr()
+    assert sorted(e["text"] for e in json.loads(out.out)) == ["alpha", "bravo"]
+    assert "codes in view" not in out.err  # every code solved: nothing left out to mention
     assert main([*args, "--detect-select-text", "charlie"]) == 1
     (entry,) = json.loads(capsys.readouterr().out)
     assert entry["corners"] is None and "charlie" in entry["status"]

@@ -134,6 +134,34 @@ def test_atomic_write_replaces_all_or_nothing_and_keeps_the_mode(tmp_path, monke
     assert sorted(p.name for p in tmp_path.iterdir()) == ["profile.json"]  # no temporary file left
 
 
+def _unwritable_folder(tmp_path: Path, monkeypatch) -> Path:
+    """A folder in which no file can be made: the kernel's /sys refuses even root; elsewhere a
+    folder whose mkstemp raises what a read-only medium raises (EROFS, naming the temporary file)."""
+    sys_root = Path("/sys")
+    if sys_root.is_dir() and not os.access(sys_root, os.W_OK | os.X_OK):
+        return sys_root
+    made = tmp_path / "read-only"
+    made.mkdir()
+
+    def read_only(*args, dir=None, prefix="", suffix="", **kwargs):
+        raise OSError(30, "Read-only file system", os.path.join(str(dir), f"{prefix}u_1_5t6s{suffix}"))
+
+    monkeypatch.setattr(files.tempfile, "mkstemp", read_only)
+    return made
+
+
+def test_a_target_that_cannot_be_written_is_named_not_its_temporary_file(tmp_path, monkeypatch):
+    """audit-1: `session export` to a read-only medium said
+    "error: .../.rows-clean.csv.u_1_5t6s.tmp: read-only file system", a name the user never gave."""
+    target = _unwritable_folder(tmp_path, monkeypatch) / "rows-clean.csv"
+    with pytest.raises(OSError) as caught:
+        atomic_write(target, "row\n")
+    assert caught.value.filename == str(target)
+    message = files.describe_error(caught.value)
+    assert message.startswith(f"{target}: ") and ".tmp" not in message
+    assert not target.exists()
+
+
 def test_temporary_names_are_unpredictable_and_a_planted_symlink_is_not_followed(tmp_path, monkeypatch):
     # The old writer used ".NAME.tmp-<pid>": anyone could plant a symlink there to a file of the
     # user's and have it overwritten. mkstemp's names are random and it opens with O_EXCL.

@@ -170,6 +170,26 @@ def test_serial_without_a_port_takes_the_configured_one(tmp_path: Path) -> None:
     assert effective_settings(parser.parse_args(["--config-dir", str(tmp_path)])).serial_port is None
 
 
+def test_serial_without_a_port_never_streams_into_the_simulated_port(tmp_path: Path, capsys) -> None:
+    """audit-1: `qrfield run --serial` on a machine whose app never set a port streamed to loop://
+    (the default, and what the app saves when its Serial tab was never touched), said "connected"
+    and exited 0, while the controller on /dev/ttyUSB0 got nothing."""
+    fresh, saved = tmp_path / "fresh", tmp_path / "saved"
+    write_config(saved, serial=SerialLinkSettings())  # every field, as the app saves it on close
+    assert json.loads((saved / "app.json").read_text())["serial"]["port"] == "loop://"
+    for folder in (fresh, saved):
+        run = ["run", "--config-dir", str(folder), "--source", "virtual", "--frames", "1"]
+        assert main([*run, "--serial"]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "--serial without PORT" in err and "give --serial PORT" in err
+        assert str(folder / "app.json") in err and "loop://" in err and "connected" not in err
+    # Named on the command line, loop:// is a choice (a test): it runs.
+    run = ["run", "--config-dir", str(fresh), "--source", "virtual", "--frames", "1"]
+    assert main([*run, "--serial", "loop://"]) == 0
+    assert main([*run, "--serial", "--serial-port", "loop://"]) == 0
+    assert "serial loop://: connected" in capsys.readouterr().err
+
+
 def test_run_measures_with_the_configured_settings_and_notes_an_assumed_side(tmp_path: Path, capsys) -> None:
     from qrfield.camera import resolve_camera
     from qrfield.geometry import Pose

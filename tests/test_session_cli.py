@@ -138,6 +138,33 @@ def test_a_row_is_logged_only_once_it_is_on_disk(tmp_path: Path, capsys, monkeyp
     assert "unwritten line of rows.csv: 1," in out.err  # the row is not lost: the operator has it
 
 
+def test_an_undo_that_cannot_be_written_says_so_in_a_commands_words(
+    tmp_path: Path, capsys, monkeypatch
+) -> None:
+    """audit-1: a failed `session undo` printed the app's advice ("kept in memory ... Retry. Do not
+    close the app") from a process that was exiting, losing the record it said it kept."""
+    from qrfield.sessions.files import FileOps
+
+    folder = new_session(tmp_path, capsys)
+    truth = ["--truth=10,-5,300,15,-20,10", "--combo", "alpha+beta-gamma+", "--frames", "2"]
+    assert main(log_args(folder, tmp_path, *truth)) == 0
+    capsys.readouterr()
+    before = (folder / "rows.csv").read_bytes()
+
+    def full_disk(self, fd):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    with monkeypatch.context() as patch:
+        patch.setattr(FileOps, "fsync", full_disk)
+        assert main(["session", "undo", str(folder)]) == 1
+    err = capsys.readouterr().err
+    assert "NOT withdrawn" in err and "disk full" in err and "row 1 stays in force" in err
+    assert "Retry" not in err and "close the app" not in err and "kept in memory" not in err
+    assert (folder / "rows.csv").read_bytes() == before  # nothing torn, the row still in force
+    assert main(["session", "undo", str(folder)]) == 0  # once it can be written, undo works
+    assert [r["withdraws"] for r in rows_of(folder)] == ["", "1"]
+
+
 def test_undo_list_and_show(tmp_path: Path, capsys) -> None:
     folder = new_session(tmp_path, capsys)
     # `--truth virtual` names the virtual bench's pose; `bench`, its older spelling, still works.
@@ -191,6 +218,31 @@ def test_interactive_log_asks_each_field_with_the_forms_checks(tmp_path: Path, c
     rows = rows_of(folder)
     assert [r["combo"] for r in rows] == ["alpha+beta-gamma+"] * 2 and rows[0]["note"] == "typed by hand"
     assert [float(rows[1][f"gt_{k}"]) for k in BENCH] == list(BENCH.values())
+
+
+def test_interactive_log_asks_again_only_the_combination_its_angles_contradict(
+    tmp_path: Path, capsys
+) -> None:
+    """audit-1: a combination the angles contradict was refused only after the note, and then the
+    whole row was asked again from x, so the next answer typed (the right combination) went into
+    the note and the one after into x."""
+    folder = new_session(tmp_path, capsys)
+    # (15, -20, 10) deg has the signs of alpha+beta-gamma+, not of 'alpha' (docs/app.md, item 4).
+    answers = ["10", "-5", "300", "15", "-20", "10", "alpha", "alpha+beta-gamma+", "second card", "q"]
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    done = subprocess.run(
+        [sys.executable, "-m", "qrfield", *log_args(folder, tmp_path, "--frames", "2")],
+        input="\n".join(answers) + "\n",
+        capture_output=True,
+        text=True,
+        timeout=90,
+        env=env,
+    )
+    assert done.returncode == 0, done.stderr
+    assert "they fit 'alpha+beta-gamma+'" in done.stdout and done.stdout.count("logged row") == 1
+    (row,) = rows_of(folder)
+    assert (row["combo"], row["note"]) == ("alpha+beta-gamma+", "second card")
+    assert [float(row[f"gt_{k}"]) for k in BENCH] == list(BENCH.values())
 
 
 def test_new_and_list_use_the_apps_sessions_folder(tmp_path: Path, capsys, monkeypatch) -> None:

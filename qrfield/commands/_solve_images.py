@@ -36,6 +36,17 @@ def _camera_for(
         )
 
 
+def _say_several(path: str, detections: list[Any], chosen: Any, select_text: str) -> None:
+    """One stderr line: how many codes ``path`` shows and which one is solved (select_code's rule)."""
+    rule = f"the largest with text {select_text!r}" if select_text else f"the largest, text {chosen.text!r}"
+    others = sorted({repr(d.text) for d in detections if d is not chosen})
+    print(
+        f"qrfield solve: {path}: {len(detections)} codes in view (others: {', '.join(others)}); "
+        f"solving {rule}; --all-codes solves each, --detect-select-text TEXT picks one",
+        file=sys.stderr,
+    )
+
+
 def solve_images(
     args: argparse.Namespace, camera: CameraModel | None, methods: tuple[str, ...], settings: dict[str, Any]
 ) -> int:
@@ -67,6 +78,9 @@ def solve_images(
             detections = detector.detect(image)
             if not args.all_codes:
                 chosen = select_code(detections, detector_settings.select_text)
+                if chosen is not None and len(detections) > 1:
+                    # Said, not done silently: the pose printed may be of another code than meant.
+                    _say_several(path, detections, chosen, detector_settings.select_text)
                 detections = [chosen] if chosen is not None else []
             if not detections:
                 status = (

@@ -381,17 +381,18 @@ def _log_interactive(session: Any, recorder: Any, args: Any, combinations: Any, 
                         print(f"  {exc}; type it again", flush=True)
                         continue
                 value, message = validate_field(name, text, combinations)
+                if not message and name == "combo":
+                    # Checked against the angles here, so that only the combination is asked again
+                    # (it was checked after the note, and the whole row asked again from x).
+                    truth = GroundTruth(**{k: values[k] for k in FIELDS[:6]}, combo=value)
+                    problem = combo_problem(truth, args.force_combo, session.info.pose_frame)
+                    message = problem.removeprefix("--combo: ")
                 if not message:
                     values[name] = value
                     last[name] = text
                     break
                 print(f"  {name}: {message}", flush=True)
-        truth = GroundTruth(**{k: values[k] for k in FIELDS})
-        problem = combo_problem(truth, args.force_combo, session.info.pose_frame)
-        if problem:  # asked again, as the app asks before it logs
-            print(f"  combo: {problem.removeprefix('--combo: ')}", flush=True)
-            last.pop("combo", None)
-            continue
+        truth = GroundTruth(**{k: values[k] for k in FIELDS})  # its combination fits (checked above)
         frames = args.frames or session.info.frames_per_row
         print(f"measuring row {session.next_row}: {frames} frames…", flush=True)
         measurement = recorder.measure(
@@ -422,7 +423,12 @@ def _run_undo(args: argparse.Namespace) -> int:
     with Session.open(args.folder) as session:
         outcome = session.undo() if args.row is None else session.withdraw(args.row)
         if not outcome.ok:
-            say(f"NOT withdrawn: {outcome.message}")
+            # This process ends now: nothing is kept in memory for a retry (the app's words), and a
+            # failed append is cut back, so rows.csv still holds the row in force.
+            say(
+                f"NOT withdrawn: {outcome.reason}; {session.rows_path.name} is unchanged and row "
+                f"{outcome.row} stays in force. Free space or fix permissions and run undo again"
+            )
             return 1
         print(f"withdrew row {outcome.row} (its line stays in rows.csv, marked withdrawn)")
     return 0

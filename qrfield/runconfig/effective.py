@@ -129,7 +129,21 @@ def effective_settings(
     port = getattr(args, "serial", None) if args is not None else None
     serial_port = None
     if port is not None:
-        serial_port = port or groups["serial"].port
+        from qrfield.serial.port import LOOP_URL
+
+        configured = groups["serial"].port
+        origin = next(v.origin for v in values if v.section == "serial" and v.name == "port")
+        if not port and configured == LOOP_URL and origin != FROM_COMMAND_LINE:
+            # loop:// sends nothing anywhere, and it is both the default and what the app saves when
+            # its Serial tab was never set: a bare --serial on the robot streamed there, "connected",
+            # while the controller got nothing (audit-1). --serial-port loop:// is a choice: kept.
+            where = "none, so it is the default, " if origin == FROM_DEFAULT else ""
+            raise SettingError(
+                f"--serial without PORT takes the configured port, and {store.path} names {where}"
+                f"{LOOP_URL}: the simulated port, which sends nothing anywhere; give --serial PORT "
+                f"(/dev/ttyUSB0, COM3), or --serial {LOOP_URL} to test"
+            )
+        serial_port = port or configured
         if port:
             _set_origin(values, "serial", "port", port, FROM_COMMAND_LINE, "--serial")
     return Effective(store, groups, values, camera, serial_port)

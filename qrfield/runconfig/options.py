@@ -47,7 +47,8 @@ def add_run_arguments(
                 const="",
                 default=None,
                 help="send every frame's pose as a $QRF line and answer $QRC commands on PORT "
-                "(/dev/ttyUSB0, COM3, loop://); without PORT, the configured serial port",
+                "(/dev/ttyUSB0, COM3, loop://); without PORT, the configured serial port (refused when "
+                "that is loop://, the simulated port, unless --serial-port names it)",
             )
             add_arguments(group, section.cls, prefix=section.prefix)
         else:
