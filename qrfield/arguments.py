@@ -112,6 +112,12 @@ def one_line(text: str) -> str:
     return _CONTROL.sub(lambda m: repr(m.group())[1:-1], str(text))
 
 
+def split_list(text: str) -> list[str]:
+    """The items of a command-line list (docs/cli.md: commas, semicolons or spaces separate them),
+    empty items dropped: ``"-10, 5;300 0"`` -> ``["-10", "5", "300", "0"]``."""
+    return [p for p in _SEPARATORS.split(text.strip()) if p]
+
+
 def parse_numbers(
     text: Any,
     where: str,
@@ -128,7 +134,7 @@ def parse_numbers(
         count = len(names)
     if not isinstance(text, str):
         raise ValueError(f"{where}: expected a comma-separated list of numbers, got {text!r}")
-    parts = [p for p in _SEPARATORS.split(text.strip()) if p]
+    parts = split_list(text)
     if count is not None and len(parts) != count:
         shape = ",".join(names) if names else f"{count} numbers"
         raise ValueError(

@@ -432,6 +432,8 @@ def read_image(
     if not file.is_file():
         raise ImageError(f"{text}: cannot read image: not a regular file")
     try:
+        if file.stat().st_size == 0:  # a copy that failed, a file just created: not a wrong format
+            raise ImageError(f"{text}: cannot read image: the file is empty (0 bytes)")
         size = probe_size(file)
     except OSError as exc:
         raise ImageError(f"{text}: cannot read image: {exc.strerror or exc}") from None

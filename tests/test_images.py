@@ -103,6 +103,17 @@ def test_unknown_formats_and_damaged_headers_are_refused_with_a_reason(tmp_path)
         read_image(lying)
 
 
+def test_an_empty_file_is_said_to_be_empty(tmp_path, capsys):
+    """A 0-byte file (a copy that failed) is empty, not of an unknown format (audit-2)."""
+    empty = tmp_path / "empty.png"
+    empty.write_bytes(b"")
+    with pytest.raises(ImageError, match=r"cannot read image: the file is empty \(0 bytes\)"):
+        read_image(empty)
+    assert main(["solve", str(empty), "--focal-px", "500", "--side-mm", "50", "--json"]) == 1
+    (entry,) = json.loads(capsys.readouterr().out)
+    assert entry["status"] == "cannot read image: the file is empty (0 bytes)"
+
+
 def test_files_folders_and_globs_in_order(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     (tmp_path / "shots").mkdir()

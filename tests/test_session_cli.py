@@ -115,6 +115,36 @@ def test_a_bad_truth_names_each_field_and_logs_nothing(tmp_path: Path, capsys) -
     assert rows_of(folder) == []
 
 
+def test_a_name_without_ascii_letters_is_refused_saying_folder_names_are_ascii(
+    tmp_path: Path, capsys
+) -> None:
+    args = ["session", "new", str(tmp_path / "root"), "--config-dir", str(tmp_path / "cfg")]
+    assert main([*args, "--name", "测试"]) == 2
+    err = capsys.readouterr().err
+    assert "folder names are ASCII-only" in err and "has no letters or digits" not in err
+    assert not (tmp_path / "root").exists() or not any((tmp_path / "root").iterdir())
+
+
+def test_truth_takes_semicolons_and_spaces_as_every_list_does(tmp_path: Path, capsys) -> None:
+    """docs/cli.md: lists are separated by commas, semicolons or spaces; --truth too (audit-2).
+    Each field is then checked on its own: the out-of-range beta is named, not the list's shape."""
+    folder = new_session(tmp_path, capsys)
+    for truth in ("10;-5;300;15;-95;10", "10 -5 300 15 -95 10", "10, -5; 300 15,-95,10"):
+        assert main(log_args(folder, tmp_path, f"--truth={truth}", "--combo", "alpha")) == 2
+        err = capsys.readouterr().err
+        assert "beta: -95 deg is outside -90..90" in err and "give 6 numbers" not in err, truth
+    assert rows_of(folder) == []
+
+
+@pytest.mark.slow
+def test_a_truth_with_spaces_logs_the_numbers_typed(tmp_path: Path, capsys) -> None:
+    folder = new_session(tmp_path, capsys)
+    argv = log_args(folder, tmp_path, "--truth", "10 -5 300 0 0 0", "--combo", "alpha", "--frames", "1")
+    assert main([*argv, "--force-combo"]) == 0
+    (row,) = rows_of(folder)
+    assert [float(row[f"gt_{k}"]) for k in BENCH] == [10.0, -5.0, 300.0, 0.0, 0.0, 0.0]
+
+
 def test_a_row_is_logged_only_once_it_is_on_disk(tmp_path: Path, capsys, monkeypatch) -> None:
     from qrfield.sessions.files import FileOps
 

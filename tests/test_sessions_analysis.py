@@ -113,6 +113,15 @@ def test_analyze_names_a_missing_session(tmp_path, capsys):
     assert "no such session folder" in capsys.readouterr().err
 
 
+def test_analyze_says_a_file_is_not_a_session_folder(tmp_path, capsys):
+    """A file given for the folder is named a file, not missing (audit-2)."""
+    image = tmp_path / "two.png"
+    cv2.imwrite(str(image), np.zeros((8, 8), np.uint8))
+    assert main(["analyze", str(image)]) == 2
+    err = capsys.readouterr().err
+    assert "is a file, not a session folder" in err and "no such session folder" not in err
+
+
 @pytest.mark.parametrize(
     ("lo", "hi", "ticks"),
     [

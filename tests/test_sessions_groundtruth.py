@@ -52,8 +52,8 @@ def test_accepted_spellings(field, text, value):
         ("z", "0", ["> 0"]),
         ("z", "-300", ["> 0"]),
         ("beta", "95", ["-90..90"]),
-        ("alpha", "181", ["-180..180"]),
-        ("gamma", "-200", ["-180..180"]),
+        ("alpha", "181", ["outside (-180, 180]"]),  # the convention's range (docs/conventions.md)
+        ("gamma", "-200", ["outside (-180, 180]"]),
         ("x", "9000", ["outside"]),
         ("y", "nan", ["not a number"]),
         ("y", "1.2.3", ["not a number"]),

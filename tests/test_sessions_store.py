@@ -108,6 +108,9 @@ def test_an_existing_session_is_never_overwritten(tmp_path, camera_vga):
 def test_bad_arguments_are_named(tmp_path, camera_vga):
     with pytest.raises(SessionError, match="no letters or digits"):
         make(tmp_path, camera_vga, name=" /// ")
+    # Letters, but none ASCII: the message says that folder names are ASCII-only (audit-2).
+    with pytest.raises(SessionError, match="no ASCII letters or digits: folder names are ASCII-only"):
+        make(tmp_path, camera_vga, name="测试")
     with pytest.raises(SessionError, match="positive length"):
         Session.create(tmp_path, "x", camera=camera_vga, side_mm=0, solver="numerical")
     with pytest.raises(SessionError, match="solver 'pnp'"):

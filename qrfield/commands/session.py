@@ -189,12 +189,16 @@ def _add_log(parser: argparse.ArgumentParser) -> None:
 
 def _parse_truth(text: str, combo: str | None, combinations: Any) -> Any:
     """GroundTruth from ``--truth X,Y,Z,A,B,G`` and ``--combo``; GroundTruthError names each bad field."""
+    from qrfield.arguments import split_list
     from qrfield.sessions import FIELDS, GroundTruthError, parse_ground_truth
 
-    parts = [p.strip() for p in text.split(",")]
+    parts = split_list(text)  # commas, semicolons or spaces, as every list (docs/cli.md)
     if len(parts) != 6:
         raise GroundTruthError(
-            {"truth": f"{text!r}: give 6 numbers X,Y,Z,ALPHA,BETA,GAMMA (mm, degrees; dots for decimals)"}
+            {
+                "truth": f"{text!r}: give 6 numbers X,Y,Z,ALPHA,BETA,GAMMA (mm, degrees; dots for "
+                "decimals; separated by commas, semicolons or spaces; a unit joined to its number: 300mm)"
+            }
         )
     fields = dict(zip(FIELDS[:6], parts, strict=True))
     fields["combo"] = combo or ""

@@ -175,7 +175,7 @@ def _check_range(name: str, value: float) -> float:
             raise ValueError(f"{value:g} deg is outside -90..90 deg (beta = asin(R[0,2]))")
     elif name in ("alpha", "gamma"):
         if value < -180.0 or value > 180.0:
-            raise ValueError(f"{value:g} deg is outside -180..180 deg")
+            raise ValueError(f"{value:g} deg is outside (-180, 180] deg (-180 is taken as 180)")
         if value == -180.0:
             value = 180.0  # the same angle; the convention's range is (-180, 180]
     return value

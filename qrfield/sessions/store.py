@@ -248,6 +248,12 @@ def sanitize_name(name: str) -> str:
     cleaned = re.sub(r"[^A-Za-z0-9._-]+", "-", name.strip())
     cleaned = re.sub(r"-{2,}", "-", cleaned).strip("-.")[:60].strip("-.")
     if not cleaned:
+        if any(ch.isalnum() for ch in name):  # letters or digits, but none of them ASCII
+            raise SessionError(
+                f"session name {name!r} has no ASCII letters or digits: folder names are ASCII-only "
+                "(A-Z, a-z, 0-9, '.', '_', '-'); give a name with some, e.g. 'bench-1' (the notes "
+                "may be in any script)"
+            )
         raise SessionError(f"session name {name!r} has no letters or digits to make a folder name from")
     return cleaned
 
@@ -819,6 +825,10 @@ def read_session(path: str | os.PathLike[str]) -> tuple[SessionInfo, RowsContent
 
 def _read_info(folder: Path) -> SessionInfo:
     if not folder.is_dir():
+        if folder.exists():
+            raise SessionError(
+                f"{folder}: is a file, not a session folder (give the folder that holds {SESSION_FILE})"
+            )
         raise SessionError(f"{folder}: no such session folder")
     path = folder / SESSION_FILE
     try:
