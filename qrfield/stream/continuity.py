@@ -26,7 +26,14 @@ keeps the last resolved pose (unambiguous, or resolved by history) and decides a
    answer and the evidence (the history's, m_plane - m_answer, plus the frame's, mirror_chi2 -
    chi2 at the reflected plane, when that is for the answer) does not point at the reflected
    plane;
-4. otherwise the frame stays ambiguous (AMBIG on a live camera) and the history is kept as it was.
+4. otherwise the frame stays ambiguous (AMBIG on a live camera) and the history is kept as it was;
+5. with no usable history (a stream's first frames, after a gap or another code), an ambiguous
+   frame whose corners have one branch (no distinct mirror minimum: the mirror search from the
+   plane reflected about the line of sight ends at the answer) is reported as that branch, not
+   ambiguous and resolved by the frame, with its tilt covariance widened to cover the reflected
+   plane (as a resolved frame's, :func:`widening`): there is no flip to decide, only a flat valley
+   towards the plane, which the widened std covers (near frontal: the two "branches" merge). It
+   does not become the history. A frame with a distinct mirror stays ambiguous.
 
 An unambiguous frame resets the history to itself; so does a resolved one. A frame whose fit's
 chi-square exceeds FIT_CHI2 has its covariance scaled by chi2 / FIT_CHI2 first (:func:`fit_scaled`).
@@ -337,6 +344,33 @@ def _checked(
     return with_position_cov(with_rotation_cov(pose, extra), moved), extra, moved
 
 
+def _one_branch(
+    pose: PoseResult,
+    mirror: Callable[[PoseResult], PoseResult | None],
+    reflected: Callable[[PoseResult], np.ndarray | None] | None,
+    checked: Callable[[PoseResult], tuple[np.ndarray | None, np.ndarray | None]] | None,
+) -> Decision | None:
+    """An ambiguous frame with no usable history whose corners have one branch (rule 5 of the
+    module doc): its answer, unambiguous, resolved by the frame, the rotation covariance widened to
+    cover the reflected plane (:func:`widening`) after ``checked``; None when the frame has a
+    distinct mirror minimum or the plane is unknown (the frame stays ambiguous). The history is
+    not reset to it: the history holds only poses the corners or the history decided."""
+    if reflected is None or mirror(pose) is not None:
+        return None
+    plane = reflected(pose)
+    if plane is None:
+        return None
+    scaled, check, check_moved = _checked(fit_scaled(pose), checked)
+    extra = widening(scaled, plane)
+    return Decision(
+        replace(with_rotation_cov(scaled, extra), ambiguous=False),
+        BY_FRAME,
+        False,
+        widening=_sum(check, extra),
+        position_widening=check_moved,
+    )
+
+
 def _sum(a: np.ndarray | None, b: np.ndarray | None) -> np.ndarray | None:
     """a + b of two additions to a covariance block, either None for nothing."""
     if a is None:
@@ -411,6 +445,10 @@ class BranchHistory:
             )
         last = self._usable(pose, t_ms, text) if self.enabled else None
         if last is None:
+            if self.enabled:
+                alone = _one_branch(pose, mirror, reflected, checked)
+                if alone is not None:
+                    return alone
             return Decision(pose, BY_FRAME, True)
         chosen, flipped = self._choose(pose, last, mirror, reflected)
         if chosen is None:
