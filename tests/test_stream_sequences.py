@@ -31,7 +31,8 @@ from qrfield.geometry import angle_difference
 from qrfield.methods import METHODS
 from qrfield.status import usable_pose
 from qrfield.stream import StreamSettings
-from qrfield.testing.sequences import make_sequence, replay, solve_sequence
+from qrfield.stream.replay import replay, solve_sequence
+from qrfield.testing.sequences import make_sequence
 
 NAME = "frontal far 1.4 px"
 WINDOWS = [(2, 146), (43, 75)]  # (seed, frames from the first)

@@ -45,7 +45,8 @@ import numpy as np
 
 from qrfield.geometry import POSE_NAMES
 from qrfield.methods import METHODS
-from qrfield.testing.sequences import FPS, SEQUENCES, Sequence, make_sequence, replay, solve_sequence
+from qrfield.stream.replay import replay, solve_sequence
+from qrfield.testing.sequences import FPS, SEQUENCES, Sequence, make_sequence
 
 HELP = (
     "the live stream on drawn video sequences: flips resolved by history, the filter, never "
