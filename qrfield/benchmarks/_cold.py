@@ -8,8 +8,9 @@
    the rounds, the machine's load before and after; then where qrfield's time goes (cProfile's
    cumulative time of its steps over one pass, as shares).
 6. Several codes in one 1280x720 frame (1, 2, 4 and 8; qrfield.testing.hardset.multi_view):
-   CPU ms per frame, codes found (right text, corners within 0.5 px, reported good), and the
-   cost against one code.
+   CPU ms per frame (the code counts interleaved frame by frame within each round), codes found
+   (right text, corners within 0.5 px, reported good), and the cost against one code with the
+   spread of the rounds' own ratios.
 7. The share found by foreshortened module size (the code's shortest side over its modules) on
    the steep set (qrfield.testing.hardset.steep_view: alpha and beta each up to 55 deg): found
    with the right text and refined, reported good, reported good with a corner more than 0.5 px off;
@@ -97,6 +98,32 @@ def interleaved(
     return out
 
 
+def interleaved_groups(
+    groups: dict[int, Sequence[np.ndarray]], methods: dict[str, Callable[[np.ndarray], Any]], rounds: int
+) -> dict[int, dict[str, list[float]]]:
+    """CPU ms per frame of each method on each group of frames, per round: within a round frame i of
+    every group in turn (the methods one after the other on each), so that a change of the machine's
+    load during the run falls on every group alike (section 6: the groups are code counts, whose
+    ratio to one code is the figure; run group after group, a load step between two groups moved
+    that ratio by 0.2-0.4: issue-26m2)."""
+    out = {key: {name: [] for name in methods} for key in groups}
+    longest = max((len(frames) for frames in groups.values()), default=0)
+    for _ in range(rounds):
+        spent = {key: dict.fromkeys(methods, 0.0) for key in groups}
+        for index in range(longest):
+            for key, frames in groups.items():
+                if index >= len(frames):
+                    continue
+                for name, method in methods.items():
+                    t = time.process_time()
+                    method(frames[index])
+                    spent[key][name] += time.process_time() - t
+        for key, frames in groups.items():
+            for name in methods:
+                out[key][name].append(1e3 * spent[key][name] / max(len(frames), 1))
+    return out
+
+
 def _ratio_text(ms: dict[str, list[float]], name: str, base: str) -> str:
     per_round = [a / b for a, b in zip(ms[name], ms[base], strict=True) if b > 0]
     ratio = float(np.median(ms[name]) / np.median(ms[base]))
@@ -181,22 +208,23 @@ def several_codes(frames_per_count: int, seed: int, rounds: int) -> dict[int, fl
         f"\n6. several codes in one {camera.width}x{camera.height} frame "
         f"({frames_per_count} frames per count, "
         f"seed {seed}; qrfield.testing.hardset.multi_view, made in {time.perf_counter() - t0:.0f} s): "
-        f"CPU ms per frame, the median of {rounds} interleaved rounds; found: right text, corners within "
-        f"{FOUND_PX:g} px, reported good"
+        f"CPU ms per frame, the median of {rounds} rounds, the methods and the code counts interleaved "
+        f"frame by frame; x one code: the ratio of the medians (the rounds' own ratios); found: right "
+        f"text, corners within {FOUND_PX:g} px, reported good"
     )
     print(f"   {_load()}")
     detector = Detector(DetectorSettings(), camera=camera)
     print(
         f"{'codes':>6}{'zxing ms':>10}{'aruco ms':>10}{'qrfield ms':>12}{'x zxing':>9}{'found':>11}"
-        f"{'x one code':>12}"
+        f"{'x one code':>12}  rounds"
     )
+    methods: dict[str, Callable[[np.ndarray], Any]] = {"zxing": zxing, "qrfield": detector.detect}
+    if aruco is not None:
+        methods["aruco"] = aruco
+    timed = interleaved_groups({k: [v.image for v in frames] for k, frames in views.items()}, methods, rounds)
     cost: dict[int, float] = {}
     for count, frames in views.items():
-        images = [v.image for v in frames]
-        methods: dict[str, Callable[[np.ndarray], Any]] = {"zxing": zxing, "qrfield": detector.detect}
-        if aruco is not None:
-            methods["aruco"] = aruco
-        ms = interleaved(images, methods, rounds)
+        ms = timed[count]
         found = total = 0
         for view in frames:
             detections = detector.detect(view.image)
@@ -211,9 +239,12 @@ def several_codes(frames_per_count: int, seed: int, rounds: int) -> dict[int, fl
                 )
         cost[count] = float(np.median(ms["qrfield"]))
         aruco_ms = f"{np.median(ms['aruco']):10.2f}" if "aruco" in ms else f"{'-':>10}"
+        per_round = [a / b for a, b in zip(ms["qrfield"], timed[1]["qrfield"], strict=True) if b > 0]
+        spread = f"  {min(per_round):.2f}-{max(per_round):.2f}" if per_round else ""
         print(
             f"{count:>6}{np.median(ms['zxing']):10.2f}{aruco_ms}{cost[count]:12.2f}"
             f"{cost[count] / np.median(ms['zxing']):8.1f}x{found:>6}/{total:<4}{cost[count] / cost[1]:11.2f}x"
+            f"{spread}"
         )
     return {k: v / cost[1] for k, v in cost.items()}
 
