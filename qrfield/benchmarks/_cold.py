@@ -104,8 +104,9 @@ def interleaved_groups(
     """CPU ms per frame of each method on each group of frames, per round: within a round frame i of
     every group in turn (the methods one after the other on each), so that a change of the machine's
     load during the run falls on every group alike (section 6: the groups are code counts, whose
-    ratio to one code is the figure; run group after group, a load step between two groups moved
-    that ratio by 0.2-0.4: issue-26m2)."""
+    ratio to one code is the figure; timed group after group, two consecutive runs gave 2.99x and
+    3.22x for four codes, and each group's frames followed frames of their own count:
+    docs/detection.md, "Several codes' cost (issue-26m2)")."""
     out = {key: {name: [] for name in methods} for key in groups}
     longest = max((len(frames) for frames in groups.values()), default=0)
     for _ in range(rounds):
