@@ -108,8 +108,8 @@ def misfit_warning(result: Any) -> str:
 
     return (
         f"WARNING {result.method}: the corners do not fit the pose: {result.reprojection_px:.2f} px RMS off "
-        f"its projection, chi-square {result.chi2:.3g} > {FIT_CHI2} (the most their uncertainty allows, "
-        "0.99); the std assumes a right camera model, QR side and corners and is too small: check "
+        f"its projection, chi-square {result.chi2:.3g}, above {FIT_CHI2}, the 99 % bar of the corners' own "
+        "uncertainty; the std assumes a right camera model, QR side and corners and is too small: check "
         "--camera / --focal-px, --side-mm and the corners (docs/uncertainty.md)"
     )
 
