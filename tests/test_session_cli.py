@@ -115,6 +115,18 @@ def test_a_bad_truth_names_each_field_and_logs_nothing(tmp_path: Path, capsys) -
     assert rows_of(folder) == []
 
 
+def test_a_mistyped_virtual_truth_is_named_as_such(tmp_path: Path, capsys) -> None:
+    """``--truth virtal`` (a typo of 'virtual') is told apart from a short list of numbers."""
+    folder = new_session(tmp_path, capsys)
+    assert main(log_args(folder, tmp_path, "--truth", "virtal", "--combo", "alpha")) == 2
+    err = capsys.readouterr().err
+    assert "'virtal': did you mean 'virtual'?" in err and "or 'virtual' for the virtual bench" in err
+    assert main(log_args(folder, tmp_path, "--truth", "1,2,3", "--combo", "alpha")) == 2
+    err = capsys.readouterr().err
+    assert "did you mean" not in err and "give 6 numbers" in err
+    assert rows_of(folder) == []
+
+
 def test_a_name_without_ascii_letters_is_refused_saying_folder_names_are_ascii(
     tmp_path: Path, capsys
 ) -> None:
