@@ -369,3 +369,25 @@ def test_interactive_log_never_offers_a_withdrawn_rows_values(tmp_path: Path, ca
     assert "x (mm) [10.000]" in done.stdout and "[20.000]" not in done.stdout
     rows = [r for r in rows_of(folder) if r["row"]]
     assert [r["gt_x"] for r in rows] == ["10.000", "20.000", "10.000"]
+
+
+def test_a_file_source_that_ends_before_the_row_says_how_far_it_got(tmp_path: Path, capsys) -> None:
+    """A folder of 2 images (no code in them) gives 2 frames; a row of 5 frames cannot fill: the
+    message says 2 of 5 and how to ask for fewer or repeat them, and nothing is logged."""
+    import cv2
+
+    folder = new_session(tmp_path, capsys)
+    images = tmp_path / "frames"
+    images.mkdir()
+    for i in range(2):
+        cv2.imwrite(str(images / f"f{i}.png"), np.full((480, 640), 110, np.uint8))
+    args = log_args(folder, tmp_path, "--truth", "10,-5,300,15,-20,10", "--combo", "alpha+beta-gamma+")
+    args[args.index("virtual")] = str(images)
+    assert main([*args, "--frames", "5"]) == 1
+    err = capsys.readouterr().err
+    assert (
+        "nothing logged: the frame loop ended (the source stopped or failed) after 2 of the row's 5 frames"
+        in err
+    )
+    assert "--frames N asks for fewer, --loop repeats it" in err
+    assert rows_of(folder) == []

@@ -296,6 +296,9 @@ def _log_one(session: Any, recorder: Any, truth: Any, args: Any, follow: bool, e
     )
     if measurement is None:
         say(f"nothing logged: {recorder.last_problem}")
+        if ended() and recorder.frames_seen and getattr(args, "loop", None) is not True:
+            # A file source ended after its frames: an image is one, a folder one per file.
+            say("a video, an image or a folder ends: --frames N asks for fewer, --loop repeats it")
         return 1
     return _log(session, measurement, args.force_combo)
 
