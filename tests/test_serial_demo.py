@@ -139,3 +139,15 @@ def test_serial_demo_robot_recovers_the_known_transform_over_a_pty(tmp_path, cap
     err = difference(np.array(saved[key]), transform_from_pose(*truth))
     assert np.linalg.norm(err[:3]) < 2.0 and np.degrees(np.linalg.norm(err[3:])) < 0.3, err
     assert "error against the true" in out
+
+
+@pytest.mark.slow
+def test_serial_demo_to_a_port_that_never_opens_fails_saying_so(tmp_path, capsys):
+    """A path that is no serial port (missing, or a plain file): the link retries for the demo's
+    time, nothing is sent, and the command ends with exit code 1 and a line saying so (not 0)."""
+    plain = tmp_path / "notes.txt"
+    plain.write_text("not a port")
+    for port in (str(tmp_path / "missing"), str(plain)):
+        assert main(["serial-demo", port, "--seconds", "0.3"]) == 1
+        err = capsys.readouterr().err
+        assert f"qrfield serial-demo: {port} never opened: nothing was sent (last: cannot open" in err

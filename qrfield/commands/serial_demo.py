@@ -160,6 +160,11 @@ def run(args: argparse.Namespace) -> int:
     finally:
         link.close()
         restore_sigterm(previous)
+    status = link.status()
+    if not status.ever_connected:  # the link retried all along: said, and not a success
+        last = f" (last: {status.last_error})" if status.last_error else ""
+        print(f"qrfield serial-demo: {args.port} never opened: nothing was sent{last}", file=sys.stderr)
+        return 1
     return 0
 
 
