@@ -391,3 +391,13 @@ def test_a_file_source_that_ends_before_the_row_says_how_far_it_got(tmp_path: Pa
     )
     assert "--frames N asks for fewer, --loop repeats it" in err
     assert rows_of(folder) == []
+
+
+def test_list_of_a_file_says_it_is_not_a_folder(tmp_path: Path, capsys) -> None:
+    """``session list FILE`` (e.g. a session's rows.csv) exists: not "no such folder"."""
+    folder = new_session(tmp_path, capsys)
+    assert main(["session", "list", str(folder / "session.json")]) == 2
+    err = capsys.readouterr().err
+    assert "session.json: not a folder (give the folder that holds the sessions)" in err
+    assert main(["session", "list", str(tmp_path / "nowhere")]) == 2
+    assert "nowhere: no such folder" in capsys.readouterr().err

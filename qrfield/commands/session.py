@@ -492,6 +492,8 @@ def _run_list(args: argparse.Namespace) -> int:
             say(f"no sessions in {root} yet")
             return 0
     if not root.is_dir():
+        if root.exists():  # a session's file, or a typo that names a file: not "no such folder"
+            raise ValueError(f"{root}: not a folder (give the folder that holds the sessions)")
         raise ValueError(f"{root}: no such folder")
     folders = session_folders(root)
     if not folders:
