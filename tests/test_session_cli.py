@@ -394,7 +394,7 @@ def test_a_file_source_that_ends_before_the_row_says_how_far_it_got(tmp_path: Pa
 
 
 def test_list_of_a_file_says_it_is_not_a_folder(tmp_path: Path, capsys) -> None:
-    """``session list FILE`` (e.g. a session's rows.csv) exists: not "no such folder"."""
+    """``session list FILE`` (e.g. a session's session.json) exists: not "no such folder"."""
     folder = new_session(tmp_path, capsys)
     assert main(["session", "list", str(folder / "session.json")]) == 2
     err = capsys.readouterr().err
