@@ -151,3 +151,10 @@ def test_serial_demo_to_a_port_that_never_opens_fails_saying_so(tmp_path, capsys
         assert main(["serial-demo", port, "--seconds", "0.3"]) == 1
         err = capsys.readouterr().err
         assert f"qrfield serial-demo: {port} never opened: nothing was sent (last: cannot open" in err
+
+
+def test_serial_demo_refuses_a_noqr_period_that_leaves_no_pose(capsys):
+    """``--noqr-every S`` is 1 s of NOQR every S s: S of 1 s or less would send NOQR only."""
+    for value in ("0.5", "1"):
+        assert main(["serial-demo", "loop://", "--seconds", "0.2", "--noqr-every", value]) == 2
+        assert "--noqr-every must be 0 (never) or more than 1 s" in capsys.readouterr().err

@@ -131,6 +131,11 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("give PORT (a device path or loop://), or --robot")
     if args.seconds is not None and not 0 < args.seconds < math.inf:
         raise ValueError(f"--seconds must be a positive number of seconds, got {args.seconds}")
+    if 0 < args.noqr_every <= 1.0:  # 1 s of NOQR every S s: S <= 1 would be NOQR all the time
+        raise ValueError(
+            "--noqr-every must be 0 (never) or more than 1 s (1 s of NOQR every S s), "
+            f"got {args.noqr_every:g}"
+        )
     settings = validated(SerialLinkSettings(port=args.port, baud=args.baud, max_rate_hz=args.max_rate))
 
     previous = sigterm_as_interrupt()
