@@ -158,3 +158,17 @@ def test_serial_demo_refuses_a_noqr_period_that_leaves_no_pose(capsys):
     for value in ("0.5", "1"):
         assert main(["serial-demo", "loop://", "--seconds", "0.2", "--noqr-every", value]) == 2
         assert "--noqr-every must be 0 (never) or more than 1 s" in capsys.readouterr().err
+
+
+def test_serial_demo_robot_checks_its_out_dir_before_the_program_runs(tmp_path, capsys):
+    """``--robot --out-dir`` naming a file, or a folder under one that does not exist: refused at
+    once (exit 2, naming --out-dir), not after the whole calibration as "not saved: ...Error"."""
+    plain = tmp_path / "notes.txt"
+    plain.write_text("a file")
+    for out_dir, words in (
+        (plain, "a file of that name exists"),
+        (tmp_path / "no" / "deeper", "does not exist"),
+    ):
+        assert main(["serial-demo", "--robot", "--poses", "5", "--out-dir", str(out_dir)]) == 2
+        err = capsys.readouterr().err
+        assert f"--out-dir {out_dir}: cannot create the folder" in err and words in err

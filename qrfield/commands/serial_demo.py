@@ -22,6 +22,7 @@ import math
 import sys
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 from qrfield.commands._signals import restore_sigterm, sigterm_as_interrupt
 from qrfield.status import ResultStatus
@@ -126,6 +127,10 @@ def run(args: argparse.Namespace) -> int:
     if args.robot:
         if args.port is not None:
             raise ValueError("--robot plays both ends of its own pty: give no PORT")
+        if args.out_dir:  # before the robot's program runs, not when its result cannot be saved
+            from qrfield.files import make_folder
+
+            make_folder(Path(args.out_dir).expanduser(), "--out-dir")
         return _robot(args)
     if args.port is None:
         raise ValueError("give PORT (a device path or loop://), or --robot")
@@ -175,7 +180,6 @@ def run(args: argparse.Namespace) -> int:
 
 def _robot(args: argparse.Namespace) -> int:
     import tempfile
-    from pathlib import Path
 
     from qrfield.camera import DEFAULT_CAMERA, resolve_camera
     from qrfield.geometry import angles_from_rotation
