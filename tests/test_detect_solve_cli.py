@@ -113,3 +113,25 @@ def test_image_of_another_aspect_ratio_is_reported(tmp_path, capsys):
     assert main(["solve", str(path), "--camera", CAMERA, "--side-mm", "80", "--json"]) == 1
     (entry,) = json.loads(capsys.readouterr().out)
     assert entry["corners"] is None and "600x200" in entry["status"]
+
+
+@pytest.mark.slow
+def test_a_view_solved_with_a_wrong_focal_length_warns_of_the_misfit(tmp_path, camera_vga, capsys):
+    """A rendered tilted card solved with its true focal length fits its corners (no warning);
+    with twice that focal length no square's pose projects onto them within their uncertainty
+    (the detector's covariance): the JSON says ``"misfit": true`` and the table warns, while the
+    status, exit code and numbers stay those of a converged pose (issue 25: only the warning is new)."""
+    view = render_view(camera_vga, 40.0, Pose([-25.0, 15.0, 300.0], [30.0, -35.0, 20.0]))
+    path = tmp_path / "tilted.png"
+    cv2.imwrite(str(path), view.image)
+    base = ["solve", str(path), "--side-mm", "40", "--method", "ippe"]
+    for focal, misfit in ((camera_vga.fx, False), (2.0 * camera_vga.fx, True)):
+        assert main([*base, "--focal-px", repr(focal), "--json"]) == 0
+        (entry,) = json.loads(capsys.readouterr().out)
+        assert entry["status"] == "ok" and entry["misfit"] is misfit
+        assert (entry["chi2"] > 9.21) is misfit
+        assert all(v > 0 for v in entry["position_std_mm"])
+        assert main([*base, "--focal-px", repr(focal)]) == 0
+        out = capsys.readouterr().out
+        assert ("WARNING ippe: the corners do not fit the pose" in out) is misfit
+    assert "check --camera / --focal-px, --side-mm and the corners" in out

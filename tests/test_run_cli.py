@@ -247,3 +247,24 @@ def test_serial_link_sends_each_bench_pose_as_a_sim_qrf_line(tmp_path: Path) -> 
         assert np.allclose(frame["sigma"][:3], line["position_std_mm"], atol=0.051)  # its uncertainty too
     assert [f["seq"] for f in frames] == list(range(len(frames)))  # seq counts up from 0
     assert "frames sent" in done.stderr
+
+
+def test_several_codes_in_view_say_which_one_is_reported(tmp_path: Path, camera_vga) -> None:
+    """Two codes in each of two frames (texts 'alpha' far, 'bravo' near and larger): the lines
+    report 'bravo' (the largest), and stderr says so once, naming the other code (as ``solve``)."""
+    far = render_view(camera_vga, 60.0, Pose([-90.0, 0.0, 500.0], [0.0, 10.0, 5.0]), text="alpha")
+    near = render_view(
+        camera_vga, 60.0, Pose([55.0, 10.0, 330.0], [-10.0, 0.0, -20.0]), text="bravo", background=far.image
+    )
+    for i in range(2):
+        cv2.imwrite(str(tmp_path / f"{i}.png"), near.image)
+    done = qrfield(
+        "run", "--source", str(tmp_path), "--json-lines", "--side-mm", "60", "--camera", "picam-v2@640x480"
+    )
+    assert done.returncode == 0, done.stderr
+    assert [json.loads(line)["text"] for line in done.stdout.splitlines()] == ["bravo", "bravo"]
+    said = [line for line in done.stderr.splitlines() if "codes in view" in line]
+    assert said == [
+        "qrfield run: frame 0: 2 codes in view (others: 'alpha'); reporting the one with text 'bravo'; "
+        "--select-text TEXT picks one (else the largest)"
+    ]

@@ -139,3 +139,36 @@ def test_serial_demo_robot_recovers_the_known_transform_over_a_pty(tmp_path, cap
     err = difference(np.array(saved[key]), transform_from_pose(*truth))
     assert np.linalg.norm(err[:3]) < 2.0 and np.degrees(np.linalg.norm(err[3:])) < 0.3, err
     assert "error against the true" in out
+
+
+@pytest.mark.slow
+def test_serial_demo_to_a_port_that_never_opens_fails_saying_so(tmp_path, capsys):
+    """A path that is no serial port (missing, or a plain file): the link retries for the demo's
+    time, nothing is sent, and the command ends with exit code 1 and a line saying so (not 0)."""
+    plain = tmp_path / "notes.txt"
+    plain.write_text("not a port")
+    for port in (str(tmp_path / "missing"), str(plain)):
+        assert main(["serial-demo", port, "--seconds", "0.3"]) == 1
+        err = capsys.readouterr().err
+        assert f"qrfield serial-demo: {port} never opened: nothing was sent (last: cannot open" in err
+
+
+def test_serial_demo_refuses_a_noqr_period_that_leaves_no_pose(capsys):
+    """``--noqr-every S`` is 1 s of NOQR every S s: S of 1 s or less would send NOQR only."""
+    for value in ("0.5", "1"):
+        assert main(["serial-demo", "loop://", "--seconds", "0.2", "--noqr-every", value]) == 2
+        assert "--noqr-every must be 0 (never) or more than 1 s" in capsys.readouterr().err
+
+
+def test_serial_demo_robot_checks_its_out_dir_before_the_program_runs(tmp_path, capsys):
+    """``--robot --out-dir`` naming a file, or a folder under one that does not exist: refused at
+    once (exit 2, naming --out-dir), not after the whole calibration as "not saved: ...Error"."""
+    plain = tmp_path / "notes.txt"
+    plain.write_text("a file")
+    for out_dir, words in (
+        (plain, "a file of that name exists"),
+        (tmp_path / "no" / "deeper", "does not exist"),
+    ):
+        assert main(["serial-demo", "--robot", "--poses", "5", "--out-dir", str(out_dir)]) == 2
+        err = capsys.readouterr().err
+        assert f"--out-dir {out_dir}: cannot create the folder" in err and words in err

@@ -115,6 +115,18 @@ def test_a_bad_truth_names_each_field_and_logs_nothing(tmp_path: Path, capsys) -
     assert rows_of(folder) == []
 
 
+def test_a_mistyped_virtual_truth_is_named_as_such(tmp_path: Path, capsys) -> None:
+    """``--truth virtal`` (a typo of 'virtual') is told apart from a short list of numbers."""
+    folder = new_session(tmp_path, capsys)
+    assert main(log_args(folder, tmp_path, "--truth", "virtal", "--combo", "alpha")) == 2
+    err = capsys.readouterr().err
+    assert "'virtal': did you mean 'virtual'?" in err and "or 'virtual' for the virtual bench" in err
+    assert main(log_args(folder, tmp_path, "--truth", "1,2,3", "--combo", "alpha")) == 2
+    err = capsys.readouterr().err
+    assert "did you mean" not in err and "give 6 numbers" in err
+    assert rows_of(folder) == []
+
+
 def test_a_name_without_ascii_letters_is_refused_saying_folder_names_are_ascii(
     tmp_path: Path, capsys
 ) -> None:
@@ -357,3 +369,35 @@ def test_interactive_log_never_offers_a_withdrawn_rows_values(tmp_path: Path, ca
     assert "x (mm) [10.000]" in done.stdout and "[20.000]" not in done.stdout
     rows = [r for r in rows_of(folder) if r["row"]]
     assert [r["gt_x"] for r in rows] == ["10.000", "20.000", "10.000"]
+
+
+def test_a_file_source_that_ends_before_the_row_says_how_far_it_got(tmp_path: Path, capsys) -> None:
+    """A folder of 2 images (no code in them) gives 2 frames; a row of 5 frames cannot fill: the
+    message says 2 of 5 and how to ask for fewer or repeat them, and nothing is logged."""
+    import cv2
+
+    folder = new_session(tmp_path, capsys)
+    images = tmp_path / "frames"
+    images.mkdir()
+    for i in range(2):
+        cv2.imwrite(str(images / f"f{i}.png"), np.full((480, 640), 110, np.uint8))
+    args = log_args(folder, tmp_path, "--truth", "10,-5,300,15,-20,10", "--combo", "alpha+beta-gamma+")
+    args[args.index("virtual")] = str(images)
+    assert main([*args, "--frames", "5"]) == 1
+    err = capsys.readouterr().err
+    assert (
+        "nothing logged: the frame loop ended (the source stopped or failed) after 2 of the row's 5 frames"
+        in err
+    )
+    assert "--frames N asks for fewer, --loop repeats it" in err
+    assert rows_of(folder) == []
+
+
+def test_list_of_a_file_says_it_is_not_a_folder(tmp_path: Path, capsys) -> None:
+    """``session list FILE`` (e.g. a session's session.json) exists: not "no such folder"."""
+    folder = new_session(tmp_path, capsys)
+    assert main(["session", "list", str(folder / "session.json")]) == 2
+    err = capsys.readouterr().err
+    assert "session.json: not a folder (give the folder that holds the sessions)" in err
+    assert main(["session", "list", str(tmp_path / "nowhere")]) == 2
+    assert "nowhere: no such folder" in capsys.readouterr().err

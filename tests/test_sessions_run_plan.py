@@ -205,3 +205,23 @@ def test_a_session_in_the_tool_frame_is_refused_for_a_plan_of_camera_poses(
     refused = qrfield("session", "run-plan", str(session), "--plan", str(plan), "--source", "virtual")
     assert refused.returncode == 2 and "reports poses in the tool frame" in refused.stderr
     assert rows_of(session) == []
+
+
+@pytest.mark.slow
+def test_a_plan_whose_input_ends_says_nobody_answered_and_fails(tmp_path: Path, config_dir) -> None:
+    """Not the virtual bench, and stdin at its end (a script, ``< /dev/null``): the prompt gets no
+    answer; the run stops with a line saying so and exit code 1, not as a plain 'q' (exit 0)."""
+    import cv2
+
+    plan = tmp_path / "plan.csv"
+    plan.write_text("x,y,z,alpha,beta,gamma,combo,note\n0,0,300,15,0,0,alpha,\n", encoding="utf-8")
+    folder = tmp_path / "camera"
+    folder.mkdir()
+    cv2.imwrite(str(folder / "blank.png"), np.full((480, 640), 110, np.uint8))
+    session = new_session(tmp_path, "no input")
+    args = ("session", "run-plan", str(session), "--plan", str(plan), "--source", str(folder), "--loop")
+    done = qrfield(*args, stdin="")
+    assert done.returncode == 1, done.stderr
+    assert "end of input: no one answered the prompt" in done.stderr
+    assert "plan: 0 of 1 targets done" in done.stdout and rows_of(session) == []
+    assert qrfield(*args, stdin="q\n").returncode == 0  # a 'q' typed is a choice: exit 0

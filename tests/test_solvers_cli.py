@@ -162,3 +162,21 @@ def test_table_shows_the_std_under_each_pose_and_the_flip_column(view, capsys):
     assert "flip?" in out.splitlines()[1]
     std_lines = [line for line in out.splitlines() if line.startswith("  std")]
     assert len(std_lines) == 2 and all(line.count("+-") == 6 for line in std_lines)
+
+
+@pytest.mark.slow
+def test_corners_off_their_std_warn_of_a_misfit_in_the_table_and_json(view, capsys):
+    """The rendered view's exact corners fit (no warning); V3 moved 2 px right and 1.5 px up
+    under --corner-std-px 0.1 cannot be fitted by a square's pose (chi-square far above 9.21):
+    each method warns in the table and says ``"misfit": true`` in JSON; the exit code stays 0."""
+    moved = np.array(view.corners_px, dtype=float)
+    moved[2] += (2.0, -1.5)
+    base = ["solve", "--camera", "picam-v2@640x480", "--side-mm", str(SIDE), "--corner-std-px", "0.1"]
+    for corners, misfit in ((view.corners_px, False), (moved, True)):
+        assert main([*base, "--corners", _corner_text(corners), "--json"]) == 0
+        entries = json.loads(capsys.readouterr().out)
+        assert [e["misfit"] for e in entries] == [misfit, misfit]
+        assert main([*base, "--corners", _corner_text(corners)]) == 0
+        out = capsys.readouterr().out
+        for method in ("numerical", "ippe"):
+            assert (f"WARNING {method}: the corners do not fit the pose" in out) is misfit

@@ -14,7 +14,14 @@ import pytest
 from solver_cases import DISTORTED, SIDE_MM, cases
 
 from qrfield.camera import resolve_camera
-from qrfield.geometry import Pose, angle_difference, angles_from_rotation, project_points, rotation_matrix
+from qrfield.geometry import (
+    Pose,
+    angle_difference,
+    angles_from_rotation,
+    marker_vertices,
+    project_points,
+    rotation_matrix,
+)
 from qrfield.methods import METHODS
 from qrfield.solvers import SolverError, solve, solve_batch
 from qrfield.solvers import uncertainty as unc
@@ -354,3 +361,38 @@ def test_ambiguity_is_the_same_ratio_for_both_methods_on_hand_made_views(
     assert (answer < mirror) is answer_fits_better
     assert result.ambiguity == pytest.approx(min(answer, mirror) / max(answer, mirror), rel=1e-6)
     assert 0.0 < result.ambiguity < 1.0
+
+
+def test_a_fit_its_corners_covariance_cannot_explain_is_a_misfit_and_says_so_in_json():
+    """Exact projections of a known pose fit (chi2 ~ 0, misfit False); V3 moved by (2.0, -1.5) px
+    under a corner std of 0.1 px cannot be fitted by any square's pose. Independent truth: OpenCV's
+    least-squares fit of the square (IPPE_SQUARE, then solvePnPRefineLM) to the same corners leaves
+    a squared residual whose ratio to 0.1^2 is the chi-square; it is far above FIT_CHI2 (9.21)."""
+    camera = resolve_camera("picam-v2@640x480")
+    pose = Pose([-25.0, 15.0, 320.0], [25.0, -30.0, 40.0])
+    corners = project_points(
+        marker_vertices(SIDE_MM) @ rotation_matrix(pose.angles_deg).T + pose.position_mm, camera
+    )
+    bad = corners.copy()
+    bad[2] += (2.0, -1.5)
+    k = camera.K
+    obj = marker_vertices(SIDE_MM) * [1.0, -1.0, 1.0]  # IPPE_SQUARE's frame (+Y up), its vertex order
+    pts = np.ascontiguousarray(bad, dtype=np.float64)
+    ok, rvec, tvec = cv2.solvePnP(obj, pts, k, None, flags=cv2.SOLVEPNP_IPPE_SQUARE)
+    rvec, tvec = cv2.solvePnPRefineLM(obj, pts, k, None, rvec, tvec)
+    reproj, _ = cv2.projectPoints(obj, rvec, tvec, k, None)
+    opencv_chi2 = float(np.sum((reproj.reshape(4, 2) - bad) ** 2)) / 0.1**2
+    assert ok and opencv_chi2 > 10 * unc.FIT_CHI2
+    cov = unc.isotropic_cov(0.1)
+    for method in METHODS:
+        clean = solve(corners, camera, SIDE_MM, method, corners_cov=cov)
+        assert clean.converged and clean.chi2 < 1e-3 and clean.misfit is False
+        data = clean.to_json_dict()
+        assert data["misfit"] is False and data["chi2"] == pytest.approx(clean.chi2)
+        off = solve(bad, camera, SIDE_MM, method, corners_cov=cov)
+        assert off.converged and off.misfit is True
+        assert off.chi2 == pytest.approx(opencv_chi2, rel=0.05)
+        data = json.loads(json.dumps(off.to_json_dict(), allow_nan=False))
+        assert data["misfit"] is True and data["chi2"] > unc.FIT_CHI2
+        unknown = solve(bad, camera, SIDE_MM, method).to_json_dict()  # no covariance: no verdict
+        assert unknown["misfit"] is False and unknown["chi2"] is None

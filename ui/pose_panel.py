@@ -124,6 +124,14 @@ def solver_status_text(result: Any, mark: Any = None) -> tuple[str, bool]:
         ratio = f" (ambiguity {ambiguity:.2f})" if ambiguity is not None and math.isfinite(ambiguity) else ""
         parts.append(f"⚠ the mirror pose also fits the corners{ratio}: flip risk")
         warn = True
+    if getattr(result, "misfit", False):  # PoseResult.misfit: chi2 above the core's FIT_CHI2
+        from qrfield.solvers.uncertainty import FIT_CHI2
+
+        parts.append(
+            f"⚠ the corners do not fit the pose (chi² {result.chi2:.3g} > {FIT_CHI2}): "
+            "check the camera model and the QR side"
+        )
+        warn = True
     streamed = stream_text(mark)
     if streamed:
         parts.append(streamed)

@@ -152,7 +152,7 @@ class _Runner:
             )
         )
         tried: set[int] = set()
-        last = 0
+        last, outcome = 0, ""
         while self.thread.is_alive():
             target = self.progress.next_target(self.session.rows, after=last)
             if target is None or target.number in tried:
@@ -161,7 +161,7 @@ class _Runner:
             last = target.number
             print(f"{target.describe()} ({target.number} of {total})", flush=True)
             outcome = self._bench_target(target) if virtual else self._operator_target(target)
-            if outcome == "quit":
+            if outcome in ("quit", "eof"):
                 break
         counts = self.progress.counts(self.session.rows)
         states = self.progress.states(self.session.rows)
@@ -174,6 +174,12 @@ class _Runner:
         )
         if counts[TODO] and not self.thread.is_alive():
             say("the source stopped before the plan was done")
+            return 1
+        if counts[TODO] and outcome == "eof":
+            say(
+                "end of input: no one answered the prompt (run it in a terminal, or use --source "
+                "virtual); the rows logged so far are kept, run the same command to continue"
+            )
             return 1
         return 1 if self.failed else 0
 
@@ -216,7 +222,9 @@ class _Runner:
         self.guide.set_target(target)
         while True:
             answer = _ask("Enter when the jig is set, s to skip, q to stop: ")
-            if answer is None or answer.strip().lower() == "q":
+            if answer is None:  # stdin ended (a script, < /dev/null): nobody answers
+                return "eof"
+            if answer.strip().lower() == "q":
                 return "quit"
             if answer.strip().lower() == "s":
                 self.progress.skip(target.number)

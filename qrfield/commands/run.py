@@ -89,6 +89,23 @@ class _Events(LoopEventsBase):
         # Which profile file the camera model came from (docs/cli.md): said once, after the source
         # and the notes of its opening (the first lines say what is measured from, e.g. SIMULATED).
         self._camera_line = camera_line
+        self._several_said: set[frozenset[str]] = set()  # the sets of texts said by _say_several
+
+    def _say_several(self, result: Any) -> None:
+        """Several codes in view: which one is reported, said once per set of texts (as ``solve``
+        says it; the lines on stdout carry only the reported code's)."""
+        detections, chosen = getattr(result, "detections", None) or [], getattr(result, "detection", None)
+        if len(detections) < 2 or chosen is None:
+            return
+        texts = frozenset(d.text for d in detections)
+        if texts in self._several_said or len(self._several_said) >= 100:
+            return
+        self._several_said.add(texts)
+        others = sorted({repr(d.text) for d in detections if d is not chosen})
+        self.say(
+            f"frame {result.index}: {len(detections)} codes in view (others: {', '.join(others)}); "
+            f"reporting the one with text {chosen.text!r}; --select-text TEXT picks one (else the largest)"
+        )
 
     def _say_camera(self) -> None:
         if self._camera_line:
@@ -116,6 +133,7 @@ class _Events(LoopEventsBase):
 
     def processed(self, frame: Any, result: Any, behind: int) -> None:
         self._say_camera()
+        self._say_several(result)
         if self.writer.broken and self.link is None and self.loop is not None:
             self.loop.stop()  # the reader went away (e.g. `| head`) and nothing else listens
 

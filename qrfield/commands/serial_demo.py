@@ -22,6 +22,7 @@ import math
 import sys
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 from qrfield.commands._signals import restore_sigterm, sigterm_as_interrupt
 from qrfield.status import ResultStatus
@@ -126,11 +127,20 @@ def run(args: argparse.Namespace) -> int:
     if args.robot:
         if args.port is not None:
             raise ValueError("--robot plays both ends of its own pty: give no PORT")
+        if args.out_dir:  # before the robot's program runs, not when its result cannot be saved
+            from qrfield.files import make_folder
+
+            make_folder(Path(args.out_dir).expanduser(), "--out-dir")
         return _robot(args)
     if args.port is None:
         raise ValueError("give PORT (a device path or loop://), or --robot")
     if args.seconds is not None and not 0 < args.seconds < math.inf:
         raise ValueError(f"--seconds must be a positive number of seconds, got {args.seconds}")
+    if 0 < args.noqr_every <= 1.0:  # 1 s of NOQR every S s: S <= 1 would be NOQR all the time
+        raise ValueError(
+            "--noqr-every must be 0 (never) or more than 1 s (1 s of NOQR every S s), "
+            f"got {args.noqr_every:g}"
+        )
     settings = validated(SerialLinkSettings(port=args.port, baud=args.baud, max_rate_hz=args.max_rate))
 
     previous = sigterm_as_interrupt()
@@ -160,12 +170,16 @@ def run(args: argparse.Namespace) -> int:
     finally:
         link.close()
         restore_sigterm(previous)
+    status = link.status()
+    if not status.ever_connected:  # the link retried all along: said, and not a success
+        last = f" (last: {status.last_error})" if status.last_error else ""
+        print(f"qrfield serial-demo: {args.port} never opened: nothing was sent{last}", file=sys.stderr)
+        return 1
     return 0
 
 
 def _robot(args: argparse.Namespace) -> int:
     import tempfile
-    from pathlib import Path
 
     from qrfield.camera import DEFAULT_CAMERA, resolve_camera
     from qrfield.geometry import angles_from_rotation

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import difflib
 import signal
 import sys
 import threading
@@ -187,6 +188,10 @@ def _add_log(parser: argparse.ArgumentParser) -> None:
     )
 
 
+#: ``--truth`` words that mean the virtual bench's own pose ("bench": the older spelling).
+TRUTH_WORDS = ("virtual", "bench")
+
+
 def _parse_truth(text: str, combo: str | None, combinations: Any) -> Any:
     """GroundTruth from ``--truth X,Y,Z,A,B,G`` and ``--combo``; GroundTruthError names each bad field."""
     from qrfield.arguments import split_list
@@ -194,10 +199,15 @@ def _parse_truth(text: str, combo: str | None, combinations: Any) -> Any:
 
     parts = split_list(text)  # commas, semicolons or spaces, as every list (docs/cli.md)
     if len(parts) != 6:
+        word = text.strip().lower()
+        # A word is a mistyped 'virtual' more likely than a short list of numbers: say so.
+        near = difflib.get_close_matches(word, TRUTH_WORDS, n=1, cutoff=0.6) if word.isalpha() else []
+        hint = f"did you mean {near[0]!r}? " if near else ""
         raise GroundTruthError(
             {
-                "truth": f"{text!r}: give 6 numbers X,Y,Z,ALPHA,BETA,GAMMA (mm, degrees; dots for "
-                "decimals; separated by commas, semicolons or spaces; a unit joined to its number: 300mm)"
+                "truth": f"{text!r}: {hint}give 6 numbers X,Y,Z,ALPHA,BETA,GAMMA (mm, degrees; dots for "
+                "decimals; separated by commas, semicolons or spaces; a unit joined to its number: 300mm), "
+                "or 'virtual' for the virtual bench's own pose"
             }
         )
     fields = dict(zip(FIELDS[:6], parts, strict=True))
@@ -216,7 +226,7 @@ def _run_log(args: argparse.Namespace) -> int:
     if args.frames is not None and args.frames < 1:
         raise ValueError(f"--frames must be at least 1, got {args.frames}")
     combinations = known_combinations()
-    follow = (args.truth or "").strip().lower() in ("virtual", "bench")  # "bench": the older spelling
+    follow = (args.truth or "").strip().lower() in TRUTH_WORDS  # "bench": the older spelling
     truth = None
     if args.truth and not follow:
         truth = _parse_truth(args.truth, args.combo, combinations)
@@ -286,6 +296,9 @@ def _log_one(session: Any, recorder: Any, truth: Any, args: Any, follow: bool, e
     )
     if measurement is None:
         say(f"nothing logged: {recorder.last_problem}")
+        if ended() and recorder.frames_seen and getattr(args, "loop", None) is not True:
+            # A file source ended after its frames: an image is one, a folder one per file.
+            say("a video, an image or a folder ends: --frames N asks for fewer, --loop repeats it")
         return 1
     return _log(session, measurement, args.force_combo)
 
@@ -479,6 +492,8 @@ def _run_list(args: argparse.Namespace) -> int:
             say(f"no sessions in {root} yet")
             return 0
     if not root.is_dir():
+        if root.exists():  # a session's file, or a typo that names a file: not "no such folder"
+            raise ValueError(f"{root}: not a folder (give the folder that holds the sessions)")
         raise ValueError(f"{root}: no such folder")
     folders = session_folders(root)
     if not folders:

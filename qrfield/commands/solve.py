@@ -7,6 +7,7 @@ import json
 import math
 import re
 import sys
+from typing import Any
 
 from qrfield.arguments import add_side_argument, number, parse_numbers
 from qrfield.camera import add_camera_arguments
@@ -101,6 +102,18 @@ def _fmt(value: float | None, digits: int) -> str:
     return "-" if value is None or not math.isfinite(value) else f"{value:.{digits}f}"
 
 
+def misfit_warning(result: Any) -> str:
+    """The warning for a PoseResult whose fit's chi-square exceeds FIT_CHI2 (``result.misfit``)."""
+    from qrfield.solvers.uncertainty import FIT_CHI2
+
+    return (
+        f"WARNING {result.method}: the corners do not fit the pose: {result.reprojection_px:.2f} px RMS off "
+        f"its projection, chi-square {result.chi2:.3g}, above {FIT_CHI2}, the 99 % bar of the corners' own "
+        "uncertainty; the std assumes a right camera model, QR side and corners and is too small: check "
+        "--camera / --focal-px, --side-mm and the corners (docs/uncertainty.md)"
+    )
+
+
 def format_table(results: list) -> str:  # type: ignore[type-arg]
     """A human-readable table of PoseResults: one row per result (and one per mirror candidate)."""
     header = (
@@ -129,6 +142,8 @@ def format_table(results: list) -> str:  # type: ignore[type-arg]
                 lines.append(f"{'  std':<18}{cells}")
             if p.reason:
                 notes.append(f"{label.strip()}: {p.reason}")
+            if p is r and r.misfit:
+                notes.append(misfit_warning(r))
     lines.append("angles in degrees: R = Rx(alpha) Ry(beta) Rz(gamma); position = QR centre, camera frame")
     if any(r.ambiguous for r in results):
         lines.append(

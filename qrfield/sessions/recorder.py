@@ -265,7 +265,11 @@ class RowRecorder(BaseSink):
         try:
             while not self.wait(0.05):
                 if until is not None and until():
-                    self.last_problem = "the frame loop ended (the source stopped or failed)"
+                    got, wanted = self.progress or (0, 0)
+                    self.last_problem = (
+                        f"the frame loop ended (the source stopped or failed) after {got} of the "
+                        f"row's {wanted} frames"
+                    )
                     return None
                 expired = self.expire() if frame_timeout_s is not None else None
                 if expired is not None:

@@ -90,6 +90,10 @@ class PoseResult:
             chi-square optimum; about chi-square(2) distributed when the covariance is right), NaN
             without a covariance.
         mirror_chi2: the same for the mirror's branch (NaN without a covariance or a mirror).
+        misfit (property): ``chi2`` exceeds ``uncertainty.FIT_CHI2`` (9.21, the 0.99 quantile of
+            chi-square with 2 degrees of freedom): the corners are further off the pose's projection
+            than their covariance allows (a wrong camera model, side or corners), and the std
+            fields, which assume it does, are too small. False without a covariance.
     """
 
     method: str
@@ -112,6 +116,13 @@ class PoseResult:
     ambiguous: bool = False
     chi2: float = math.nan
     mirror_chi2: float = math.nan
+
+    @property
+    def misfit(self) -> bool:
+        """The fit's chi-square exceeds FIT_CHI2 (docstring of the class; docs/uncertainty.md)."""
+        from qrfield.solvers.uncertainty import is_misfit
+
+        return is_misfit(self.chi2)
 
     @classmethod
     def failed(cls, method: str, corners_px: np.ndarray, reason: str, iterations: int = 0) -> PoseResult:
@@ -147,6 +158,8 @@ class PoseResult:
             "position_std_mm": [_plain(v) for v in self.position_std_mm],
             "angles_std_deg": [_plain(v) for v in self.angles_std_deg],
             "ambiguous": bool(self.ambiguous),
+            "chi2": _plain(self.chi2),
+            "misfit": self.misfit,
         }
 
 

@@ -50,6 +50,16 @@ from qrfield.solvers.result import PoseResult, SolverError
 #: it leaves no flip unflagged, where 4 and 6 leave a few, each a pose tens of degrees off with a
 #: std of a degree (measured recall and precision: docs/uncertainty.md, ``qrfield benchmark pose``).
 FLIP_DELTA_CHI2 = 9.0
+#: The degrees of freedom of a branch's reprojection chi-square (``PoseResult.chi2``: 8 corner
+#: coordinates, 6 pose parameters).
+FIT_DOF = 2.0
+#: A fit whose chi-square exceeds this (the 0.99 quantile of chi-square with FIT_DOF degrees of
+#: freedom) says its corners are further off the pose's projection than their covariance allows:
+#: the camera model, the side or the corners are wrong, and the propagated std, which assumes they
+#: are right, is too small (``PoseResult.misfit``; ``qrfield solve`` warns; the live stream scales
+#: such a frame's covariance by chi2 / FIT_CHI2, :func:`qrfield.stream.continuity.fit_scaled`).
+#: About 1 % of fits whose corners are as their covariance says lie above it.
+FIT_CHI2 = 9.21
 #: Without a corner covariance the test falls back on the ratio of the two candidates' RMS
 #: reprojection errors (``PoseResult.ambiguity``): at or above this the mirror counts as fitting.
 AMBIGUITY_FALLBACK = 0.5
@@ -388,6 +398,12 @@ def branch_chi2(
     chi2 = ((r @ info) * r).sum(axis=-1) - (g * step).sum(axis=(-2, -1))
     out[front] = np.maximum(chi2, 0.0)
     return out
+
+
+def is_misfit(chi2: float) -> bool:
+    """A fit's reprojection chi-square (``PoseResult.chi2``) above FIT_CHI2: its corners are further
+    off than their covariance allows. False when unknown (NaN: no covariance, no pose)."""
+    return bool(math.isfinite(chi2) and chi2 > FIT_CHI2)
 
 
 def is_ambiguous(chi2_answer: float, chi2_mirror: float) -> bool:

@@ -61,7 +61,7 @@ import numpy as np
 from qrfield.geometry import rotation_from_vector, rotation_vector
 from qrfield.solvers.mirror import has_mirror
 from qrfield.solvers.result import PoseResult
-from qrfield.solvers.uncertainty import FLIP_DELTA_CHI2, FRAME_SHARED_SHARE
+from qrfield.solvers.uncertainty import FIT_CHI2, FIT_DOF, FLIP_DELTA_CHI2, FRAME_SHARED_SHARE, is_misfit
 from qrfield.status import usable_pose
 from qrfield.stream.poses import vector_cov
 
@@ -98,18 +98,13 @@ SAME_POSE_CHI2 = 1.0
 #: (about the geometric middle of 112 and 368) after the held-out seeds 41-43, with the blur-aware
 #: cold fit (issue 26e): an unflagged frame 2.3 degrees (4.7 std) off had a rise of 112.
 NEAR_FOLD_CHI2 = 200.0
-#: The degrees of freedom of a branch's chi-square (8 corner coordinates, 6 pose parameters): the
-#: rise to the mirror is counted in the units of the answer's own fit, chi2 / FIT_DOF when that is
-#: above 1 (:func:`fold_rise`).
-FIT_DOF = 2.0
-#: A fit whose chi-square exceeds this (the 0.99 quantile of chi-square with FIT_DOF degrees of
-#: freedom) says its corners are further off than their covariance allows (a tracked fit that
-#: stopped short of the far corner V3 in a fast swing: seed 53 of ``qrfield benchmark stream``,
-#: "fast swing far 1.4 px", frames 93-96, V3 0.5-0.9 px off with a std of 0.23, chi2 16-22, the
-#: pose 1.7 degrees and 7 mm off with a std of 0.5 degree): its covariance is scaled by
-#: chi2 / FIT_CHI2 (:func:`fit_scaled`). Below it a frame keeps its covariance (about 1 % of
-#: frames whose corners are as their covariance says lie above it).
-FIT_CHI2 = 9.21
+# The rise to the mirror is counted in the units of the answer's own fit, chi2 / FIT_DOF when that
+# is above 1 (:func:`fold_rise`). A fit whose chi-square exceeds FIT_CHI2 (both declared in
+# qrfield.solvers.uncertainty) says its corners are further off than their covariance allows (a
+# tracked fit that stopped short of the far corner V3 in a fast swing: seed 53 of ``qrfield
+# benchmark stream``, "fast swing far 1.4 px", frames 93-96, V3 0.5-0.9 px off with a std of 0.23,
+# chi2 16-22, the pose 1.7 degrees and 7 mm off with a std of 0.5 degree): its covariance is scaled
+# by chi2 / FIT_CHI2 (:func:`fit_scaled`). Below it a frame keeps its covariance.
 #: The same card: its centre moved by at most MAX_SHIFT_SIDES + MAX_SHIFT_SIDES_PER_S * dt code
 #: sides (mean side of V1..V4 in px) since the history's frame, and its size changed by less than
 #: the ratio MAX_SIZE_RATIO.
@@ -198,7 +193,7 @@ def fit_scale(pose: PoseResult) -> float:
     """chi2 / FIT_CHI2 when the pose's fit's chi-square is above FIT_CHI2 (the corners are further
     off than their covariance says, by about that factor in variance), else 1 (also when unknown)."""
     chi2 = float(pose.chi2)
-    return chi2 / FIT_CHI2 if math.isfinite(chi2) and chi2 > FIT_CHI2 else 1.0
+    return chi2 / FIT_CHI2 if is_misfit(chi2) else 1.0
 
 
 def fit_scaled(pose: PoseResult) -> PoseResult:

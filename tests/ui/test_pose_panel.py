@@ -75,6 +75,26 @@ def test_solver_status_lines() -> None:
     assert "ambiguity 0.40" in text and "flip risk" in text and warn
 
 
+def test_a_misfit_pose_warns_in_its_status_line() -> None:
+    """A real PoseResult whose corners V3 was moved (2.0, -1.5) px under a corner std of 0.1 px
+    (no square's pose fits: chi-square far above 9.21) warns; the exact projections do not."""
+    from qrfield.camera import resolve_camera
+    from qrfield.geometry import marker_vertices, project_points, rotation_matrix
+    from qrfield.solvers import solve
+    from qrfield.solvers.uncertainty import isotropic_cov
+
+    camera = resolve_camera("picam-v2@640x480")
+    pose = Pose([-25.0, 15.0, 320.0], [25.0, -30.0, 40.0])
+    corners = project_points(
+        marker_vertices(40.0) @ rotation_matrix(pose.angles_deg).T + pose.position_mm, camera
+    )
+    text, warn = solver_status_text(solve(corners, camera, 40.0, "ippe", corners_cov=isotropic_cov(0.1)))
+    assert "do not fit" not in text and not warn
+    corners[2] += (2.0, -1.5)
+    text, warn = solver_status_text(solve(corners, camera, 40.0, "ippe", corners_cov=isotropic_cov(0.1)))
+    assert "the corners do not fit the pose" in text and "> 9.21" in text and warn
+
+
 def test_each_value_shows_its_uncertainty_beside_it(qtbot) -> None:
     panel = PosePanel()
     qtbot.addWidget(panel)
