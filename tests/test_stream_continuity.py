@@ -336,12 +336,13 @@ def test_near_the_fold_the_position_is_widened_along_the_way_to_the_mirror() -> 
 
 def test_a_fit_worse_than_its_corners_covariance_allows_has_its_covariance_scaled_by_it() -> None:
     """A frame's chi-square above FIT_CHI2 (9.21, the 0.99 quantile of chi-square with 2 degrees
-    of freedom) scales its reported covariance by chi2 / 9.21 (hand-computed: chi2 = 36.84 doubles
-    every std); at chi2 = 5 the std is the solver's."""
+    of freedom) scales its reported covariance by 1 + (chi2 - 9.21) / 2, far beyond the bar the
+    Birge ratio chi2 / 2 (hand-computed: chi2 = 15.21 doubles every std, 39.21 quadruples it);
+    at chi2 = 5 the std is the solver's. (chi2 / 9.21 before issue-25u: 1.29 and 2.06 times.)"""
     from dataclasses import replace
 
     frame = solved(20_000, QUIET)
-    for chi2, factor in ((36.84, 2.0), (5.0, 1.0)):
+    for chi2, factor in ((15.21, 2.0), (39.21, 4.0), (5.0, 1.0)):
         pose = replace(frame, chi2=chi2, mirror_chi2=chi2 + 10_000.0)
         result = frame_result(pose, 0, 0, noise_px=QUIET)
         StreamStage().apply(result, SIDE_MM, result.detection.pose_cov)

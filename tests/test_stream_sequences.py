@@ -129,3 +129,37 @@ def test_no_frame_of_a_frontal_card_with_a_shared_corner_error_is_confidently_wr
             if _confidently_wrong(pose, result.truth):
                 wrong.append((result.index, method))
     assert wrong == []
+
+
+SWING = "fast swing far 1.4 px"
+
+
+@pytest.fixture(scope="module")
+def swing_misfit() -> tuple[list, float]:
+    """Frames 0-11 of the fast swing of a far card (modules of 1.4 px, 220 deg/s at its fastest),
+    seed 172, solved each alone: on frames 9-10 the tracker's warm fit left V3 and V4 about 3 px
+    off (their std 0.2-0.4 px), chi-square 21-54, the position 50-58 mm off along the line of
+    sight (docs/uncertainty.md, "Eleventh pass (issue-25u)")."""
+    sequence = make_sequence(SWING, 172, 12)
+    return solve_sequence(sequence), sequence.side_mm
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "settings",
+    [StreamSettings(), StreamSettings(filter_s=0.2), StreamSettings(filter_s=0.5)],
+    ids=["continuity", "filter 0.2 s", "filter 0.5 s"],
+)
+def test_no_frame_of_a_fast_swing_whose_corners_misfit_is_confidently_wrong(swing_misfit, settings) -> None:
+    results, side = swing_misfit
+    wrong, misfits = [], 0
+    for result, again in zip(results, replay(results, settings, side), strict=True):
+        for method in METHODS:
+            pose = again.poses.get(method)
+            if not usable_pose(pose):
+                continue
+            misfits += bool(result.frame_poses.get(method, pose).chi2 > 20.0)
+            if _confidently_wrong(pose, result.truth):
+                wrong.append((result.index, method))
+    assert misfits >= 1  # the window still holds the tracked fits that misfit
+    assert wrong == []

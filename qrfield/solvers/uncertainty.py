@@ -57,7 +57,7 @@ FIT_DOF = 2.0
 #: freedom) says its corners are further off the pose's projection than their covariance allows:
 #: the camera model, the side or the corners are wrong, and the propagated std, which assumes they
 #: are right, is too small (``PoseResult.misfit``; ``qrfield solve`` warns; the live stream scales
-#: such a frame's covariance by chi2 / FIT_CHI2, :func:`qrfield.stream.continuity.fit_scaled`).
+#: such a frame's covariance by 1 + (chi2 - FIT_CHI2) / FIT_DOF, :func:`qrfield.stream.continuity.fit_scale`).
 #: About 1 % of fits whose corners are as their covariance says lie above it.
 FIT_CHI2 = 9.21
 #: Without a corner covariance the test falls back on the ratio of the two candidates' RMS

@@ -36,7 +36,8 @@ keeps the last resolved pose (unambiguous, or resolved by history) and decides a
    does not become the history. A frame with a distinct mirror stays ambiguous.
 
 An unambiguous frame resets the history to itself; so does a resolved one. A frame whose fit's
-chi-square exceeds FIT_CHI2 has its covariance scaled by chi2 / FIT_CHI2 first (:func:`fit_scaled`).
+chi-square exceeds FIT_CHI2 has its covariance scaled by 1 + (chi2 - FIT_CHI2) / FIT_DOF first
+(:func:`fit_scaled`).
 Both are reported with their covariance widened in the tilt plane where the branches are close (a
 resolved frame always, an unambiguous one when its mirror fits within NEAR_FOLD_CHI2:
 :func:`near_fold_widening`): near the fold of the planar ambiguity the linearised std of the tilt is
@@ -104,7 +105,7 @@ NEAR_FOLD_CHI2 = 200.0
 # tracked fit that stopped short of the far corner V3 in a fast swing: seed 53 of ``qrfield
 # benchmark stream``, "fast swing far 1.4 px", frames 93-96, V3 0.5-0.9 px off with a std of 0.23,
 # chi2 16-22, the pose 1.7 degrees and 7 mm off with a std of 0.5 degree): its covariance is scaled
-# by chi2 / FIT_CHI2 (:func:`fit_scaled`). Below it a frame keeps its covariance.
+# by 1 + (chi2 - FIT_CHI2) / FIT_DOF (:func:`fit_scale`). Below it a frame keeps its covariance.
 #: The same card: its centre moved by at most MAX_SHIFT_SIDES + MAX_SHIFT_SIDES_PER_S * dt code
 #: sides (mean side of V1..V4 in px) since the history's frame, and its size changed by less than
 #: the ratio MAX_SIZE_RATIO.
@@ -190,10 +191,15 @@ def fold_rise(pose: PoseResult) -> float:
 
 
 def fit_scale(pose: PoseResult) -> float:
-    """chi2 / FIT_CHI2 when the pose's fit's chi-square is above FIT_CHI2 (the corners are further
-    off than their covariance says, by about that factor in variance), else 1 (also when unknown)."""
+    """1 + (chi2 - FIT_CHI2) / FIT_DOF when the pose's fit's chi-square is above FIT_CHI2 (the
+    corners are further off than their covariance says), else 1 (also when unknown): 1 at the bar,
+    and far beyond it about chi2 / FIT_DOF, the Birge ratio (the variance the residual shows per
+    degree of freedom). Before issue-25u it was chi2 / FIT_CHI2, 4.6 times less far beyond the
+    bar: on ``qrfield benchmark stream``'s seed 172, "fast swing far 1.4 px", frames 9-10 (a
+    tracked fit with V3 and V4 3 px off, chi2 21-54) were reported 50-58 mm off at 4.9-6.5 std in a
+    lateral coordinate; scaled thus they are 2.7-3.7 std off (docs/uncertainty.md, eleventh pass)."""
     chi2 = float(pose.chi2)
-    return chi2 / FIT_CHI2 if is_misfit(chi2) else 1.0
+    return 1.0 + (chi2 - FIT_CHI2) / FIT_DOF if is_misfit(chi2) else 1.0
 
 
 def fit_scaled(pose: PoseResult) -> PoseResult:

@@ -23,7 +23,8 @@ It records per method a :class:`StreamMark` in ``FrameResult.stream`` (``resolve
 ``filtered``) and keeps the frame's own solver results in ``FrameResult.frame_poses``. A single
 frame (no history, filter off or just started) comes out as the solvers made it: the same pose,
 branch and flag, and the same std unless, with continuity on, its fit's chi-square exceeds
-FIT_CHI2 (its covariance scaled by chi2 / FIT_CHI2: :func:`qrfield.stream.continuity.fit_scaled`)
+FIT_CHI2 (its covariance scaled by 1 + (chi2 - FIT_CHI2) / FIT_DOF:
+:func:`qrfield.stream.continuity.fit_scaled`)
 or its mirror fits within NEAR_FOLD_CHI2, where the std of its tilt is widened
 (:func:`qrfield.stream.continuity.near_fold_widening`; near the fold the linearised std of the
 tilt is several times too small, docs/uncertainty.md). From a stream's second frame on, with
