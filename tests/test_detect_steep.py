@@ -60,6 +60,21 @@ def test_steep_view_of_2px_modules_gives_its_pose(seed, index):
     assert np.abs(angle_difference(pose.angles_deg, view.pose.angles_deg)).max() < 2.0
 
 
+def _drawn_symbol(
+    text: str, px: int, quiet: int, dark: float, light: float, dtype: type
+) -> tuple[np.ndarray, int]:
+    """An upright symbol of ``text`` (segno, level M) drawn with square modules of ``px`` pixels
+    and a quiet zone of ``quiet`` modules: the image (pixel centres at integers) and the modules
+    per side n."""
+    matrix = np.array(segno.make(text, error="m", micro=False).matrix, dtype=bool)
+    n = matrix.shape[0]
+    image = np.full(((n + 2 * quiet) * px,) * 2, light, dtype)
+    image[quiet * px : (quiet + n) * px, quiet * px : (quiet + n) * px] = np.where(
+        np.kron(matrix, np.ones((px, px), bool)), dark, light
+    )
+    return image, n
+
+
 def test_a_symbol_decoded_turned_comes_back_in_its_own_corner_order():
     """decode_rectified from finders taken one place round (V4 given as V1): zxing-cpp reads the
     turned symbol, and the corners come back in the symbol's order (the true ones, drawn here).
@@ -68,12 +83,8 @@ def test_a_symbol_decoded_turned_comes_back_in_its_own_corner_order():
     from qrfield.detect.finders import decode_rectified
 
     text = "qrfield turned"
-    matrix = np.array(segno.make(text, error="m", micro=False).matrix, dtype=bool)
-    n, px, quiet = matrix.shape[0], 6, 4
-    image = np.full(((n + 2 * quiet) * px,) * 2, 230, np.uint8)
-    image[quiet * px : (quiet + n) * px, quiet * px : (quiet + n) * px] = np.where(
-        np.kron(matrix, np.ones((px, px), bool)), 25, 230
-    )
+    px, quiet = 6, 4
+    image, n = _drawn_symbol(text, px, quiet, 25, 230, np.uint8)
     lo, hi = quiet * px - 0.5, (quiet + n) * px - 0.5  # pixel centres at integers (OpenCV)
     true = np.array([[lo, lo], [hi, lo], [hi, hi], [lo, hi]])
     for turn in range(4):
@@ -163,12 +174,8 @@ def test_large_finder_templates_at_half_resolution_give_the_full_resolution_peak
     import qrfield.detect.steep as steep
 
     text = "qrfield half resolution"
-    matrix = np.array(segno.make(text, error="m", micro=False).matrix, dtype=bool)
-    n, px, quiet = matrix.shape[0], 5, 4
-    canvas = np.full(((n + 2 * quiet) * px,) * 2, 220, np.float32)
-    canvas[quiet * px : (quiet + n) * px, quiet * px : (quiet + n) * px] = np.where(
-        np.kron(matrix, np.ones((px, px), bool)), 30, 220
-    )
+    px, quiet = 5, 4
+    canvas, n = _drawn_symbol(text, px, quiet, 30, 220, np.float32)
     canvas = cv2.GaussianBlur(canvas, (0, 0), 0.8)
     size = 9 * px
     assert size > steep.COARSE_TEMPLATE_PX
