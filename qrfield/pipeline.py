@@ -14,6 +14,9 @@ Statuses (:class:`qrfield.status.ResultStatus`):
 Reported to other programs (``qrfield run`` output, the app), OK becomes AMBIG or SIM by the one rule
 of :func:`qrfield.status.reported_status` (:meth:`FrameResult.reported_status`), as on the serial link.
 
+A tracked code whose pose does not fit its corners (chi-square above RECHECK_CHI2) is detected
+again from scratch in the same frame, and the fresh detection kept when it fits better.
+
 After the solve, the stream stage (:class:`qrfield.stream.StreamStage`, docs/conventions.md "The
 live stream") resolves an ambiguous frame's flip from the stream's recent history and, with
 ``filter_s`` > 0, filters the pose: ``FrameResult.poses`` holds what is reported (``ambiguous``: the
@@ -29,7 +32,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -46,6 +49,15 @@ OK, NOQR, NOCONV, ERROR = ResultStatus.OK, ResultStatus.NOQR, ResultStatus.NOCON
 SIM = Reported.SIM
 #: The statuses of a FrameResult (qrfield.status.ResultStatus).
 RESULT_STATUSES = tuple(ResultStatus)
+#: A tracked code whose first method's pose fits its corners worse than this chi-square (the
+#: 0.9999 quantile of chi-square with 2 degrees of freedom: 1 in 10^4 of frames whose corners are
+#: as their covariance says) is detected again from scratch in the same frame, and the fresh
+#: detection kept when it fits better (:meth:`Pipeline._recheck`). Tracked fits can settle wrong
+#: in a fast swing: ``qrfield benchmark stream``, "fast swing far 1.4 px", seed 172, frame 10:
+#: V3 and V4 3 px off with a std of 0.3 px, chi-square 21, where a fresh detection puts every
+#: corner within 0.04 px. Above FIT_CHI2 (9.21, qrfield.solvers.uncertainty) rather than at it:
+#: a detection from scratch costs several tracked frames, and 1 % of right fits lie above 9.21.
+RECHECK_CHI2 = 18.42
 
 
 @dataclass
@@ -324,14 +336,31 @@ class Pipeline:
                 else f"{found} code(s) found, none with the text {self.select_text!r}"
             )
             return
+        t = time.perf_counter()
+        if not self._solved(result, camera):
+            return
+        if self._misfit_tracked(result):  # the tracked corners are not the code's: look again
+            self._recheck(frame, result, camera)
+        self.stream.apply(
+            result, self.side_mm, self._corners_cov(result)
+        )  # the flip from history, the filter
+        result.solve_ms = (time.perf_counter() - t) * 1000.0
+
+    @staticmethod
+    def _corners_cov(result: FrameResult) -> Any:
+        """The fit's covariance, or the one assumed for corners without (Detection.pose_cov)."""
+        return getattr(result.detection, "pose_cov", getattr(result.detection, "corners_cov", None))
+
+    def _solved(self, result: FrameResult, camera: CameraModel) -> bool:
+        """Solve ``result.detection`` with every method into ``result.poses`` and set the status;
+        False when the detection is untrusted (status NOCONV, nothing solved)."""
         untrusted = getattr(result.detection, "untrusted", "")
         if untrusted:
             result.status, result.reason = NOCONV, untrusted
-            return
-        # The fit's covariance, or the one assumed for corners without (Detection.pose_cov).
-        cov = getattr(result.detection, "pose_cov", getattr(result.detection, "corners_cov", None))
-        t = time.perf_counter()
+            return False
+        cov = self._corners_cov(result)
         errors = []
+        result.poses = {}
         if self._solve_methods is not None:
             try:
                 result.poses = self._solve_methods(
@@ -358,8 +387,36 @@ class Pipeline:
             result.status, result.reason = OK, "; ".join(errors)
         else:
             result.status, result.reason = NOCONV, primary.reason or f"{primary.method} did not converge"
-        self.stream.apply(result, self.side_mm, cov)  # the flip from history, the filter
-        result.solve_ms = (time.perf_counter() - t) * 1000.0
+        return True
+
+    def _misfit_tracked(self, result: FrameResult) -> bool:
+        """The selected code was followed by the tracker (backend "track") and the first method's
+        pose fits its corners worse than RECHECK_CHI2."""
+        primary = result.poses.get(self.methods[0])
+        chi2 = float(getattr(primary, "chi2", math.nan))
+        tracked = getattr(result.detection, "backend", "") == "track"
+        return tracked and math.isfinite(chi2) and chi2 > RECHECK_CHI2
+
+    def _recheck(self, frame: Frame, result: FrameResult, camera: CameraModel) -> None:
+        """Detect ``frame`` again from scratch (the tracker's ``recheck``, when it has one) and keep
+        that detection and its poses when its first method fits it better than the tracked one's;
+        else the tracked result stands (the stream stage widens its std by its misfit)."""
+        recheck = getattr(self._tracker, "recheck", None)
+        if recheck is None:
+            return
+        detections = list(recheck(frame.image))
+        chosen = self._select(detections, self.select_text)
+        if chosen is None:
+            return
+        trial = replace(result, detections=detections, detection=chosen, poses={})
+        if not self._solved(trial, camera):
+            return
+        before = result.poses.get(self.methods[0])
+        after = trial.poses.get(self.methods[0])
+        if after is None or not after.converged or not float(after.chi2) < float(before.chi2):
+            return
+        result.detections, result.detection, result.poses = trial.detections, chosen, trial.poses
+        result.status, result.reason = trial.status, trial.reason
 
     def reset(self, t0: float | None = None) -> None:
         """Start a new stream: the clock restarts, the tracker forgets the last code and the stream

@@ -321,3 +321,73 @@ def test_edge_line_corners_get_an_assumed_covariance_whose_pose_std_covers_the_e
     for share in (np.mean(np.abs(corner_z) < 2.0), np.mean(np.abs(z) < 2.0)):
         assert 0.85 <= share <= 1.0
     assert np.mean(np.abs(z) < 0.5) > 0.15  # and not so wide that it says nothing
+
+
+# ------------------------------------------------------------------ tracked corners that misfit
+
+
+@dataclass
+class TrackedDetection(FakeDetection):
+    backend: str = "track"
+
+
+class MisfitTracker:
+    """Tracks the rendered card with V3 moved 3 px (its covariance saying 0.05 px), as a warm fit
+    that settled wrong in a fast swing; ``recheck`` (a detection from scratch) gives the exact
+    corners, as a fresh detection of that frame did (seed 172 of the stream benchmark's fast swing)."""
+
+    def __init__(self, camera, side_mm: float, moved_px: float) -> None:
+        self.camera, self.side_mm, self.moved_px, self.truth = camera, side_mm, moved_px, None
+        self.rechecks = 0
+
+    def _exact(self, backend: str) -> TrackedDetection:
+        cov = np.tile(np.eye(2) * 0.05**2, (4, 1, 1))
+        return TrackedDetection(
+            self.truth.corners_px(self.camera, self.side_mm), corners_cov=cov, backend=backend
+        )
+
+    def update(self, image: np.ndarray) -> list[Any]:
+        tracked = self._exact("track")
+        tracked.corners_px[2] += [self.moved_px, 0.0]
+        return [tracked]
+
+    def recheck(self, image: np.ndarray) -> list[Any]:
+        self.rechecks += 1
+        return [self._exact("zxing")]
+
+
+@pytest.mark.parametrize("moved_px", [3.0, 0.0])
+def test_tracked_corners_their_pose_does_not_fit_are_detected_again(camera_vga, moved_px) -> None:
+    """V3 3 px off at a std of 0.05 px: the pose's chi-square is far above RECHECK_CHI2, so the frame
+    is detected again and that detection's pose (the rendered one) reported; with the tracked
+    corners exact no second detection runs."""
+    tracker = MisfitTracker(camera_vga, 50.0, moved_px)
+    pipeline = Pipeline(camera_vga, 50.0, METHODS, tracker=tracker, select=first_with_text)
+    settings = VirtualBenchSettings(fps=0.0, wobble_deg=10.0, wobble_mm=30.0, wobble_period_s=1.0)
+    with VirtualBenchSource(camera_vga, 50.0, settings) as source:
+        frame = source.read()
+    tracker.truth = frame.truth
+    result = pipeline.process(frame)
+    assert result.status == OK, result.reason
+    assert tracker.rechecks == (1 if moved_px else 0)
+    assert result.detection.backend == ("zxing" if moved_px else "track")
+    for method in METHODS:
+        pose = result.converged_pose(method)
+        assert np.allclose(pose.position_mm, frame.truth.position_mm, atol=1e-3), method
+        assert np.allclose(angle_difference(pose.angles_deg, frame.truth.angles_deg), 0.0, atol=1e-3)
+
+
+@pytest.mark.slow
+def test_a_fast_swings_tracked_fit_that_settled_wrong_is_replaced_by_a_fresh_detection() -> None:
+    """ "fast swing far 1.4 px", seed 172 (qrfield.testing.sequences), frame 10: the tracker's warm
+    fit left V3 and V4 about 3 px from the drawn corners (cv2.projectPoints of the truth) with a std
+    of 0.3 px, chi-square 21; detected again from scratch, every corner is within 0.1 px."""
+    from qrfield.stream.replay import solve_sequence
+    from qrfield.testing.hardset import true_corners
+    from qrfield.testing.sequences import make_sequence
+
+    sequence = make_sequence("fast swing far 1.4 px", 172, 11)
+    result = solve_sequence(sequence)[10]
+    truth = true_corners(sequence.camera, result.truth, sequence.side_mm)
+    assert result.detection is not None
+    assert np.abs(result.detection.corners_px - truth).max() < 0.1

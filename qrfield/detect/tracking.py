@@ -207,7 +207,8 @@ class Tracker:
 
     Attributes:
         last_mode: how the last frame was processed: "refined" (step 1 for every code, on a crop
-            around them), "roi" (step 2), "full" (full-frame detection) or "" before the first frame.
+            around them), "roi" (step 2), "full" (full-frame detection), "recheck" (the frame
+            detected again from scratch, :meth:`recheck`) or "" before the first frame.
     """
 
     def __init__(self, settings: DetectorSettings | None = None, camera: CameraModel | None = None) -> None:
@@ -259,6 +260,18 @@ class Tracker:
             return found + new
         self._tracks = [self._new_track(grey, d) for d in detections if self._follows(d)]
         self.last_mode = "full"
+        return detections
+
+    def recheck(self, image: np.ndarray) -> list[Detection]:
+        """The frame just given to :meth:`update` detected again from scratch (every backend, as a
+        full-frame detection), the tracks replaced by what it finds: for a caller that found the
+        tracked corners wrong (qrfield.pipeline: their pose does not fit them). Never raises on
+        image content."""
+        grey = as_grey(image)
+        detections = self.detector.detect(grey)
+        self._frames_since_full = 0
+        self._tracks = [self._new_track(grey, d) for d in detections if self._follows(d)]
+        self.last_mode = "recheck"
         return detections
 
     def _follows(self, detection: Detection) -> bool:
