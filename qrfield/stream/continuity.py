@@ -450,10 +450,13 @@ class BranchHistory:
                 alone = _one_branch(pose, mirror, reflected, checked)
                 if alone is not None:
                     return alone
+                # Still ambiguous (AMBIG on the wire, its fields filled): a misfit's std is scaled
+                # all the same (audit-serial: it went out with the solver's raw std).
+                return Decision(fit_scaled(pose), BY_FRAME, True)
             return Decision(pose, BY_FRAME, True)
         chosen, flipped = self._choose(pose, last, mirror, reflected)
         if chosen is None:
-            return Decision(pose, BY_FRAME, True)
+            return Decision(fit_scaled(pose), BY_FRAME, True)
         # The history predicts from the branch's linearised covariance (what the frames before an
         # ambiguous run had); the pose reported carries the covariance widened towards the other branch.
         chosen = fit_scaled(chosen)
