@@ -26,14 +26,16 @@ keeps the last resolved pose (unambiguous, or resolved by history) and decides a
    answer and the evidence (the history's, m_plane - m_answer, plus the frame's, mirror_chi2 -
    chi2 at the reflected plane, when that is for the answer) does not point at the reflected
    plane;
-4. otherwise the frame stays ambiguous (AMBIG on a live camera) and the history is kept as it was;
+4. otherwise the frame stays ambiguous (AMBIG on a live camera, its covariance scaled as any
+   misfit's, :func:`fit_scaled`) and the history is kept as it was;
 5. with no usable history (a stream's first frames, after a gap or another code), an ambiguous
    frame whose corners have one branch (no distinct mirror minimum: the mirror search from the
    plane reflected about the line of sight ends at the answer) is reported as that branch, not
    ambiguous and resolved by the frame, with its tilt covariance widened to cover the reflected
    plane (as a resolved frame's, :func:`widening`): there is no flip to decide, only a flat valley
    towards the plane, which the widened std covers (near frontal: the two "branches" merge). It
-   does not become the history. A frame with a distinct mirror stays ambiguous.
+   does not become the history. A frame with a distinct mirror stays ambiguous (its covariance
+   scaled as any misfit's).
 
 An unambiguous frame resets the history to itself; so does a resolved one. A frame whose fit's
 chi-square exceeds FIT_CHI2 has its covariance scaled by 1 + (chi2 - FIT_CHI2) / FIT_DOF first
