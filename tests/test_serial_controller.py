@@ -382,3 +382,18 @@ def test_the_example_lines_in_docs_serial_md_are_valid() -> None:
         if line.startswith(("$QRA", "$QRM")):
             parse_answer_line(data)
     assert not math.isnan(len(lines))
+
+
+def test_a_frame_after_the_meas_deadline_does_not_complete_it() -> None:
+    """audit-serial: MEAS,1 must be answered TIMEOUT when no converged frame came within 2 s + 1/5 s
+    (docs/conventions.md). The deadline is checked by poll(), which the link's thread runs only
+    while its port is open; a converged frame 2.5 s after the command, before the next poll (the
+    port just vanished), completed the MEAS as OK, 0.3 s late. Now the frame sees the deadline:
+    TIMEOUT, answered once."""
+    h = Harness()
+    h.command("MEAS", "1")  # deadline 2.2 s after the command
+    h.clock.t += 2.5
+    h.handler.on_result(ok(2500, [1, 2, 3], [0, 0, 0]), simulated=False)
+    h.handler.poll()
+    (answer,) = h.answers()
+    assert (answer["type"], answer["status"], answer["pose"]) == ("QRM", "TIMEOUT", None)

@@ -305,7 +305,10 @@ class CommandHandler:
             listener(result, simulated)
 
     def measure(self, result: Any, simulated: bool) -> None:
-        """Feed one frame result (in the frame the poses are reported in) to a running MEAS."""
+        """Feed one frame result (in the frame the poses are reported in) to a running MEAS; one
+        whose deadline has passed is answered first (:meth:`poll` runs only while the port is open:
+        a late frame must not complete it)."""
+        self._poll_meas()
         done = None
         with self._lock:
             t_ms = getattr(result, "t_ms", None)
