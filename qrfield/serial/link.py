@@ -14,7 +14,9 @@ clock), by docs/conventions.md's "Pacing, newest first":
   out no faster than ``max_rate_hz`` (0: as fast as frames and the port allow, ``$QRC,RATE``);
 - answers to commands wait only for the wire, and go out before any waiting pose;
 - NOSRC goes out every :data:`NOSRC_INTERVAL_S` while the source is down, the first at once; STALE
-  every ``stale_after_s`` while the source is up but nothing was published for that long;
+  every ``stale_after_s`` while the source is up but nothing was published for that long; either
+  discards a pose still waiting (held back by the rate limit): it is older than what the status
+  line says, and never follows it as OK (counted in ``frames_dropped``);
 - closing writes the answers and the pose still waiting, then one NOSRC (the last line before the
   run ends: the controller is told the source is gone, not left guessing from silence).
 
