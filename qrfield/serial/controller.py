@@ -24,9 +24,10 @@ The commands wait in one queue: a MEAS holds the commands after it until its ans
 answer per command, in order). Our decisions where the conventions leave room: commands are
 accepted in any case (``ping``); the ``$QRM`` seq counts the measurements (0, 1, ...); its t_ms is
 the capture time of the last frame averaged (of the last frame seen for a failure); a MEAS fails
-with NOSRC when the source is down at its deadline, else with the status of the last frame seen
-(NOQR or NOCONV) when no frame converged, else TIMEOUT; a MEAS over frames of which any is from a
-source other than a live camera is SIM, else AMBIG when any frame's flip was unresolved.
+with NOSRC when the source is down at its deadline (or the link closes first), else with the
+status of the last frame seen (NOQR or NOCONV) when no frame converged, else TIMEOUT; a MEAS over
+frames of which any is from a source other than a live camera is SIM, else AMBIG when any frame's
+flip was unresolved.
 """
 
 from __future__ import annotations
@@ -336,6 +337,19 @@ class CommandHandler:
         if done is not None:
             done[0].reply(done[1])
 
+    def finish(self) -> None:
+        """Closing (the run ends, the source is gone): a MEAS under way is answered NOSRC at once,
+        so each command still gets its answer; the commands queued behind it then run, a MEAS
+        among them answered so too. At most MAX_WAITING + 1 of them."""
+        for _ in range(MAX_WAITING + 1):
+            with self._lock:
+                meas, self._meas = self._meas, None
+                if meas is None:
+                    return
+                t_ms = meas.last_t_ms if meas.last_t_ms is not None else self._last_t_ms
+                line = codec.encode_measurement(self._next_seq(), t_ms, WireStatus.NOSRC)
+            meas.reply(line)
+
     def on_source_down(self) -> None:
         with self._lock:
             self._source_down = True
@@ -460,9 +474,11 @@ class GripperLink:
         return self
 
     def close(self, timeout: float = 2.0) -> None:
-        """Stop: a hand-eye solve under way is waited for (its answer goes out), then the link closes."""
+        """Stop: a hand-eye solve under way is waited for (its answer goes out), a MEAS under way is
+        answered NOSRC (:meth:`CommandHandler.finish`), then the link closes."""
         if self.handeye is not None:
             self.handeye.close(timeout)
+        self.commands.finish()  # a MEAS under way is answered NOSRC before the link's last line
         self.link.close(timeout)
 
     def status(self) -> LinkStatus:
