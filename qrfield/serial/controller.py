@@ -138,6 +138,7 @@ class CommandHandler:
         self.last_command = ""
         self.frame_listeners: list[Callable[[Any, bool], None]] = []
         self.pollers: list[Callable[[], None]] = []
+        self.closers: list[Callable[[], None]] = []  # answer what waits for frames, closing (TOOL)
         self.handlers: dict[str, Handler] = {
             "PING": self._ping,
             "HELLO": self._hello,
@@ -338,17 +339,23 @@ class CommandHandler:
             done[0].reply(done[1])
 
     def finish(self) -> None:
-        """Closing (the run ends, the source is gone): a MEAS under way is answered NOSRC at once,
-        so each command still gets its answer; the commands queued behind it then run, a MEAS
-        among them answered so too. At most MAX_WAITING + 1 of them."""
+        """Closing (the run ends, the source is gone): a MEAS under way is answered NOSRC at once
+        and each of ``closers`` answers what it keeps waiting for frames (a TOOL), so each command
+        still gets its answer; the commands queued behind them then run and are answered so too.
+        At most MAX_WAITING + 1 rounds."""
         for _ in range(MAX_WAITING + 1):
             with self._lock:
                 meas, self._meas = self._meas, None
-                if meas is None:
+                if meas is not None:
+                    t_ms = meas.last_t_ms if meas.last_t_ms is not None else self._last_t_ms
+                    line = codec.encode_measurement(self._next_seq(), t_ms, WireStatus.NOSRC)
+            if meas is not None:
+                meas.reply(line)
+            for closer in list(self.closers):
+                closer()
+            with self._lock:
+                if self._running is None:  # every command answered
                     return
-                t_ms = meas.last_t_ms if meas.last_t_ms is not None else self._last_t_ms
-                line = codec.encode_measurement(self._next_seq(), t_ms, WireStatus.NOSRC)
-            meas.reply(line)
 
     def on_source_down(self) -> None:
         with self._lock:
