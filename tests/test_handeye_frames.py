@@ -3,6 +3,7 @@ checked by Monte Carlo, the frame a calibration fits, and a FrameResult through 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -155,3 +156,22 @@ def test_in_frame_hands_every_call_on_with_the_result_moved(camera_vga):
         ("note", "hello"),
     ]
     assert frame_of(result) == "camera" and math.isfinite(result.primary.position_mm[0])
+
+
+def test_a_pose_whose_covariance_is_unknown_has_no_std_in_the_tool_frame(camera_vga):
+    """audit-serial: a pose with its covariance unknown in part (NaN, as at beta = +-90 degrees)
+    but a position std known in camera axes (0.1, 0.1, 2.0 mm: z is along the line of sight).
+    Through a quarter turn about z plus the calibration's own uncertainty, its tool-frame std is
+    not known: the camera axes' std must not be handed on as the tool axes' (it went out over
+    serial as the sigma of tool x, y, z: 2.0 mm on the wrong axis when the turn is about x).
+    Each std field is NaN (an empty sigma field on the wire)."""
+    result, _ = _frame_result(camera_vga)
+    pose = result.primary
+    cov = np.full((6, 6), np.nan)
+    cov[:3, :3] = np.diag([0.01, 0.01, 4.0])
+    pose = dataclasses.replace(
+        pose, pose_cov=cov, position_std_mm=np.array([0.1, 0.1, 2.0]), angles_std_deg=np.full(3, np.nan)
+    )
+    cal = calibration(transform=rigid(rotation_matrix([90.0, 0.0, 0.0]), [0.0, 0.0, 10.0]))
+    moved = PoseFrame("tool", cal).pose_result(pose)
+    assert np.all(np.isnan(moved.position_std_mm)) and np.all(np.isnan(moved.angles_std_deg))

@@ -382,3 +382,45 @@ def test_the_example_lines_in_docs_serial_md_are_valid() -> None:
         if line.startswith(("$QRA", "$QRM")):
             parse_answer_line(data)
     assert not math.isnan(len(lines))
+
+
+def test_a_frame_after_the_meas_deadline_does_not_complete_it() -> None:
+    """audit-serial: MEAS,1 must be answered TIMEOUT when no converged frame came within 2 s + 1/5 s
+    (docs/conventions.md). The deadline is checked by poll(), which the link's thread runs only
+    while its port is open; a converged frame 2.5 s after the command, before the next poll (the
+    port just vanished), completed the MEAS as OK, 0.3 s late. Now the frame sees the deadline:
+    TIMEOUT, answered once."""
+    h = Harness()
+    h.command("MEAS", "1")  # deadline 2.2 s after the command
+    h.clock.t += 2.5
+    h.handler.on_result(ok(2500, [1, 2, 3], [0, 0, 0]), simulated=False)
+    h.handler.poll()
+    (answer,) = h.answers()
+    assert (answer["type"], answer["status"], answer["pose"]) == ("QRM", "TIMEOUT", None)
+
+
+def test_a_meas_under_way_when_the_link_closes_is_answered_nosrc_before_the_last_line() -> None:
+    """audit-serial: a folder or video that ends ends ``qrfield run``, and the link closes; a MEAS
+    under way then (and a PING queued behind it) went unanswered, though each command gets one
+    answer. Now, closing, the MEAS is answered ``$QRM,...,NOSRC`` (the source is gone, as the last
+    ``$QRF`` NOSRC line says), the PING after it, both before that last line."""
+    port = FakePort()
+    settings = SerialLinkSettings(port="fake", max_rate_hz=1000, stale_after_s=0)
+    link = GripperLink(settings, opener=lambda s: port).start()
+    try:
+        assert link.wait_for_state(CONNECTED, 5)
+        link.on_result(ok(1, [1, 2, 3], [4, 5, 6]), simulated=False)
+        with port.lock:
+            port.incoming += command_line("MEAS", "5") + command_line("PING")
+        wait_until(lambda: link.commands.handled == 2, WAIT_S)
+        link.on_result(ok(2, [1, 2, 3], [4, 5, 6]), simulated=False)  # 1 of 5 frames
+    finally:
+        link.close()
+    frames, answers = frames_and_answers(bytes(port.written))
+    assert [(a["type"], a["status"] if a["type"] == "QRM" else a["result"]) for a in answers] == [
+        ("QRM", "NOSRC"),
+        ("QRA", "OK"),
+    ]
+    assert answers[0]["pose"] is None and frames[-1]["status"] == "NOSRC"
+    written = bytes(port.written)
+    assert written.index(b"$QRA,PING") < written.rindex(b"NOSRC*")

@@ -508,3 +508,24 @@ def test_status_snapshots_compare_across_two_calibrations(tmp_path) -> None:
     same_but_done = dataclasses.replace(shown[1], last=shown[0].last)
     assert same_but_done != shown[0]
     assert (tmp_path / "handeye.json.previous").is_file()  # the first, kept when the second was saved
+
+
+def test_closing_answers_a_waiting_tool_and_a_meas_queued_behind_it(tmp_path) -> None:
+    """audit-serial: the run ends (a folder or video ends) while a TOOL waits for its frame and a
+    MEAS and a PING wait behind it: each command still gets its one answer, in order, when the
+    link closes (CommandHandler.finish, which GripperLink.close calls): the TOOL ERR (no frame),
+    the MEAS NOSRC with empty fields, the PING OK. Before, none was answered."""
+    h = Harness(tmp_path)
+    h.command("TOOL", *tool_args(tool_for(transform_from_pose(*VIEWS[0]))))
+    h.command("MEAS", "3")
+    h.command("PING")
+    assert h.link.sent == []
+    h.handler.finish()
+    got = [parse_answer_line(line) for line in h.link.sent]
+    assert [(a["type"], a["command"] if a["type"] == "QRA" else "MEAS") for a in got] == [
+        ("QRA", "TOOL"),
+        ("QRM", "MEAS"),
+        ("QRA", "PING"),
+    ]
+    assert got[0]["result"] == "ERR" and got[0]["reason"] == "no frame: the run ended"
+    assert got[1]["status"] == "NOSRC" and got[1]["pose"] is None and got[2]["result"] == "OK"

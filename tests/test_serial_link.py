@@ -578,3 +578,57 @@ def test_thirty_seconds_at_9600_baud_every_line_carries_the_newest_pose_and_none
     # The wire is kept busy (the 1 ms steps leave it idle up to 1 ms a line), never over-full, and
     # carries far fewer lines than the 900 poses published.
     assert 0.9 * 30 < on_wire <= 30 + 0.2 and lines < 600
+
+
+def test_an_ambiguous_misfit_goes_out_ambig_with_the_streams_scaled_sigma() -> None:
+    """audit-serial: a live frame ambiguous with no history (a stream's first frame, a distinct
+    mirror) whose fit's chi-square is 39.21 goes out AMBIG with every sigma field 4 times the
+    solver's (hand-computed: variance x 1 + (39.21 - 9.21) / 2 = 16, docs/uncertainty.md), as an
+    unambiguous misfit's does; before, the AMBIG line carried the solver's raw std."""
+    from dataclasses import replace
+
+    from stream_cases import SIDE_MM, frame_result, solved
+
+    from qrfield.stream import StreamStage
+
+    class Recorder:
+        def publish(self, t_ms, position_mm, angles_deg, status, **kwargs):
+            self.sent = (status, kwargs)
+            return True
+
+    raw = next(r for r in (solved(seed, 0.15) for seed in range(50)) if r.converged and r.ambiguous)
+    pose = replace(raw, chi2=39.21, mirror_chi2=40.21)
+    result = frame_result(pose, 0, 0, noise_px=0.15)
+    StreamStage().apply(result, SIDE_MM, result.detection.pose_cov)
+    link = Recorder()
+    assert publish_result(link, result, simulated=False)
+    status, kwargs = link.sent
+    assert status == "AMBIG"
+    assert np.allclose(kwargs["std_position_mm"], 4.0 * pose.position_std_mm, rtol=1e-6)
+    assert np.allclose(kwargs["std_angles_deg"], 4.0 * pose.angles_std_deg, rtol=1e-6)
+
+
+@pytest.mark.parametrize("down", [False, True])
+def test_no_pose_goes_out_after_a_stale_or_nosrc_line_that_is_newer_than_it(down) -> None:
+    """audit-serial: at RATE 1 a pose published at 40 ms waits for its turn at 1 s; the frames
+    stop (STALE at 0.54 s: stale_after_s 0.5 after the last publish) or the source goes down
+    (NOSRC at 0.3 s). That waiting pose is older than the status line that went out first: it must
+    not follow it as OK (a pose 967 ms old, its t_ms before the STALE's, the controller told
+    nothing newer came and then handed an OK). Before, it did."""
+    box = outbox(max_rate_hz=1, stale_after_s=0.5)
+    box.put_pose(item(0, 0.0))
+    box.written(box.take(0.0), 0.0)
+    box.put_pose(item(33, 0.033))  # published at 0.033 s, rate-limited until 1 s
+    if down:
+        box.set_source_down(True, 0.3)
+    lines = []
+    for step in range(1, 3000):
+        now = step / 1000
+        out = box.take(now)
+        if out is not None:
+            box.written(out, now)
+            lines.append(parse_frame_line(out.line))
+    statuses = [line["status"] for line in lines]
+    first = statuses.index("NOSRC" if down else "STALE")
+    assert "OK" not in statuses[first:], statuses
+    assert box.expired == 1

@@ -141,7 +141,8 @@ class PoseFrame:
 
     def pose_result(self, result: Any) -> Any:
         """A PoseResult (and its mirror candidate) in this frame: position, angles, rotation,
-        vertices, and the std fields and pose_cov with the calibration's uncertainty added."""
+        vertices, and the std fields and pose_cov with the calibration's uncertainty added (all NaN
+        when the pose's covariance is not known in full: its std is the camera axes')."""
         if self.calibration is None or result is None:
             return result
         x, x_cov = self.calibration.transform, self.calibration.covariance
@@ -158,6 +159,9 @@ class PoseFrame:
         if new_cov is not None:
             std = np.sqrt(np.diag(new_cov))
             changes.update(pose_cov=new_cov, position_std_mm=std[:3], angles_std_deg=std[3:])
+        else:  # the camera axes' std is not the new axes' (audit-serial): unknown, NaN
+            unknown = np.full(3, np.nan)
+            changes.update(pose_cov=np.full((6, 6), np.nan), position_std_mm=unknown, angles_std_deg=unknown)
         if result.alternative is not None:
             changes["alternative"] = self.pose_result(result.alternative)
         return dataclasses.replace(result, **changes)

@@ -24,9 +24,10 @@ The commands wait in one queue: a MEAS holds the commands after it until its ans
 answer per command, in order). Our decisions where the conventions leave room: commands are
 accepted in any case (``ping``); the ``$QRM`` seq counts the measurements (0, 1, ...); its t_ms is
 the capture time of the last frame averaged (of the last frame seen for a failure); a MEAS fails
-with NOSRC when the source is down at its deadline, else with the status of the last frame seen
-(NOQR or NOCONV) when no frame converged, else TIMEOUT; a MEAS over frames of which any is from a
-source other than a live camera is SIM, else AMBIG when any frame's flip was unresolved.
+with NOSRC when the source is down at its deadline (or the link closes first), else with the
+status of the last frame seen (NOQR or NOCONV) when no frame converged, else TIMEOUT; a MEAS over
+frames of which any is from a source other than a live camera is SIM, else AMBIG when any frame's
+flip was unresolved.
 """
 
 from __future__ import annotations
@@ -137,6 +138,7 @@ class CommandHandler:
         self.last_command = ""
         self.frame_listeners: list[Callable[[Any, bool], None]] = []
         self.pollers: list[Callable[[], None]] = []
+        self.closers: list[Callable[[], None]] = []  # answer what waits for frames, closing (TOOL)
         self.handlers: dict[str, Handler] = {
             "PING": self._ping,
             "HELLO": self._hello,
@@ -305,7 +307,10 @@ class CommandHandler:
             listener(result, simulated)
 
     def measure(self, result: Any, simulated: bool) -> None:
-        """Feed one frame result (in the frame the poses are reported in) to a running MEAS."""
+        """Feed one frame result (in the frame the poses are reported in) to a running MEAS; one
+        whose deadline has passed is answered first (:meth:`poll` runs only while the port is open:
+        a late frame must not complete it)."""
+        self._poll_meas()
         done = None
         with self._lock:
             t_ms = getattr(result, "t_ms", None)
@@ -332,6 +337,25 @@ class CommandHandler:
                 done = (meas, self._answer(meas))
         if done is not None:
             done[0].reply(done[1])
+
+    def finish(self) -> None:
+        """Closing (the run ends, the source is gone): a MEAS under way is answered NOSRC at once
+        and each of ``closers`` answers what it keeps waiting for frames (a TOOL), so each command
+        still gets its answer; the commands queued behind them then run and are answered so too.
+        At most MAX_WAITING + 1 rounds."""
+        for _ in range(MAX_WAITING + 1):
+            with self._lock:
+                meas, self._meas = self._meas, None
+                if meas is not None:
+                    t_ms = meas.last_t_ms if meas.last_t_ms is not None else self._last_t_ms
+                    line = codec.encode_measurement(self._next_seq(), t_ms, WireStatus.NOSRC)
+            if meas is not None:
+                meas.reply(line)
+            for closer in list(self.closers):
+                closer()
+            with self._lock:
+                if self._running is None:  # every command answered
+                    return
 
     def on_source_down(self) -> None:
         with self._lock:
@@ -457,9 +481,11 @@ class GripperLink:
         return self
 
     def close(self, timeout: float = 2.0) -> None:
-        """Stop: a hand-eye solve under way is waited for (its answer goes out), then the link closes."""
+        """Stop: a hand-eye solve under way is waited for (its answer goes out), a MEAS under way is
+        answered NOSRC (:meth:`CommandHandler.finish`), then the link closes."""
         if self.handeye is not None:
             self.handeye.close(timeout)
+        self.commands.finish()  # a MEAS under way is answered NOSRC before the link's last line
         self.link.close(timeout)
 
     def status(self) -> LinkStatus:

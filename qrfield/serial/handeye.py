@@ -197,6 +197,7 @@ class HandEyeCommands:
         handler.handlers["HANDEYE"] = self._start_handeye
         handler.frame_listeners.append(self.on_frame)
         handler.pollers.append(self.poll)
+        handler.closers.append(self.abandon)
 
     # ----- TOOL
     def _start_tool(self, command: Any, reply: Callable[[bytes], None]) -> None:
@@ -300,6 +301,13 @@ class HandEyeCommands:
         with self._lock:
             self._last = f"{text[:60]} -> {line.decode('ascii', 'replace').split('*')[0][1:]}"
         reply(line)
+
+    def abandon(self) -> None:
+        """Closing: a TOOL still waiting for its frame is answered ``ERR,no frame: the run ended``."""
+        with self._lock:
+            tool, self._tool = self._tool, None
+        if tool is not None:
+            self._answer(tool.text, tool.reply, codec.encode_error("TOOL", "no frame: the run ended"))
 
     def clear(self) -> None:
         """Forget the pairs; a TOOL still waiting is answered ``ERR,pairs cleared`` now."""

@@ -14,7 +14,9 @@ clock), by docs/conventions.md's "Pacing, newest first":
   out no faster than ``max_rate_hz`` (0: as fast as frames and the port allow, ``$QRC,RATE``);
 - answers to commands wait only for the wire, and go out before any waiting pose;
 - NOSRC goes out every :data:`NOSRC_INTERVAL_S` while the source is down, the first at once; STALE
-  every ``stale_after_s`` while the source is up but nothing was published for that long;
+  every ``stale_after_s`` while the source is up but nothing was published for that long; either
+  discards a pose still waiting (held back by the rate limit): it is older than what the status
+  line says, and never follows it as OK (counted in ``frames_dropped``);
 - closing writes the answers and the pose still waiting, then one NOSRC (the last line before the
   run ends: the controller is told the source is gone, not left guessing from silence).
 
@@ -128,7 +130,7 @@ class LinkStatus:
     state: str  # connecting / connected / disconnected / closed
     port: str
     frames_sent: int = 0  # $QRF lines written (poses, STALE and NOSRC)
-    frames_dropped: int = 0  # poses superseded by a newer one before being written, or lost to a timeout
+    frames_dropped: int = 0  # poses superseded unsent (by a newer one, STALE, NOSRC), or timed out
     errors: int = 0
     last_error: str = ""
     pending: int = 0  # poses waiting for the port: 0 or 1, never more
@@ -214,6 +216,7 @@ class Outbox:
         self._created_at = now
         self._last_capture: tuple[int, float] | None = None  # (t_ms, captured_at) of the newest frame
         self.error = ""  # the last line that could not be encoded
+        self.expired = 0  # waiting poses discarded because a STALE or NOSRC line went out first
 
     # ----- inputs
     def put_pose(self, item: PoseItem) -> None:
@@ -298,12 +301,20 @@ class Outbox:
             return None
         if self.source_down and now >= self._nosrc_due:
             self._nosrc_due = now + NOSRC_INTERVAL_S
+            self._expire()
             return self.status_line(WireStatus.NOSRC, now)
         stale_at = max(self._last_publish_at + self.stale_after_s, self._stale_due)
         if not self.source_down and self.stale_after_s > 0 and now >= stale_at:
             self._stale_due = now + self.stale_after_s
+            self._expire()
             return self.status_line(WireStatus.STALE, now)
         return None
+
+    def _expire(self) -> None:
+        """A STALE or NOSRC line goes out: a pose still waiting (held back by the rate limit) is
+        older than what that line says, so it is discarded, never sent after it as OK."""
+        if self.pose.clear() is not None:
+            self.expired += 1
 
     def status_line(self, status: str, now: float) -> Outgoing:
         """A STALE or NOSRC line for now (t_ms the stream's clock, age_ms since the newest capture)."""
@@ -600,7 +611,10 @@ class SerialLink:
             line_rate_hz=recent / RATE_WINDOW_S,
             lag_ms=self._lag_ms,
             max_rate_hz=box.max_rate_hz,
-            **{**self._counts, "frames_dropped": self._counts["frames_dropped"] + box.pose.dropped},
+            **{
+                **self._counts,
+                "frames_dropped": self._counts["frames_dropped"] + box.pose.dropped + box.expired,
+            },
         )
 
     def _notify(self) -> None:

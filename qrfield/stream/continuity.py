@@ -26,14 +26,16 @@ keeps the last resolved pose (unambiguous, or resolved by history) and decides a
    answer and the evidence (the history's, m_plane - m_answer, plus the frame's, mirror_chi2 -
    chi2 at the reflected plane, when that is for the answer) does not point at the reflected
    plane;
-4. otherwise the frame stays ambiguous (AMBIG on a live camera) and the history is kept as it was;
+4. otherwise the frame stays ambiguous (AMBIG on a live camera, its covariance scaled as any
+   misfit's, :func:`fit_scaled`) and the history is kept as it was;
 5. with no usable history (a stream's first frames, after a gap or another code), an ambiguous
    frame whose corners have one branch (no distinct mirror minimum: the mirror search from the
    plane reflected about the line of sight ends at the answer) is reported as that branch, not
    ambiguous and resolved by the frame, with its tilt covariance widened to cover the reflected
    plane (as a resolved frame's, :func:`widening`): there is no flip to decide, only a flat valley
    towards the plane, which the widened std covers (near frontal: the two "branches" merge). It
-   does not become the history. A frame with a distinct mirror stays ambiguous.
+   does not become the history. A frame with a distinct mirror stays ambiguous (its covariance
+   scaled as any misfit's).
 
 An unambiguous frame resets the history to itself; so does a resolved one. A frame whose fit's
 chi-square exceeds FIT_CHI2 has its covariance scaled by 1 + (chi2 - FIT_CHI2) / FIT_DOF first
@@ -450,10 +452,13 @@ class BranchHistory:
                 alone = _one_branch(pose, mirror, reflected, checked)
                 if alone is not None:
                     return alone
+                # Still ambiguous (AMBIG on the wire, its fields filled): a misfit's std is scaled
+                # all the same (audit-serial: it went out with the solver's raw std).
+                return Decision(fit_scaled(pose), BY_FRAME, True)
             return Decision(pose, BY_FRAME, True)
         chosen, flipped = self._choose(pose, last, mirror, reflected)
         if chosen is None:
-            return Decision(pose, BY_FRAME, True)
+            return Decision(fit_scaled(pose), BY_FRAME, True)
         # The history predicts from the branch's linearised covariance (what the frames before an
         # ambiguous run had); the pose reported carries the covariance widened towards the other branch.
         chosen = fit_scaled(chosen)
