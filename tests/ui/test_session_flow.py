@@ -206,3 +206,40 @@ def test_a_row_averages_the_frames_the_loop_processed_and_its_note_is_not_kept(
         ("1", "card re-taped", str(FRAMES)),
         ("2", "", str(FRAMES)),
     ]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("change", ["side", "method", "source", "plot window"])
+def test_a_setting_changed_while_collecting_ends_the_row(make_window, qtbot, sessions, change) -> None:
+    """(audit-ui) The row recorder takes every frame the loop processes: a QR side, solver or
+    source changed in Setup while a row was being collected mixed the frames measured before
+    and after the change into one row (at 50 mm, then 60 mm: positions of two scales averaged).
+    The row ends at once with a message saying why, and nothing is written; a setting that
+    changes no measurement (the plots' time window) leaves the row collecting."""
+    from qrfield.sessions.criteria import MAX_FRAMES_PER_ROW
+
+    window = make_window({"source": "virtual", "method": "both", "side_mm": 50.0})
+    panel = window.session_panel
+    panel.row_settings.widgets["frames_per_row"].setValue(MAX_FRAMES_PER_ROW)  # never done in the test
+    panel.name_edit.setText("mid-row")
+    session = panel.create_from_form()
+    assert session is not None and session.info.frames_per_row == MAX_FRAMES_PER_ROW
+    qtbot.waitUntil(lambda: panel.form.follow_box.isEnabled() and not panel.blocked_reason(), timeout=WAIT_MS)
+    qtbot.mouseClick(panel.log_button, QtCore.Qt.MouseButton.LeftButton)
+    assert panel.collecting
+    if change == "side":
+        window.camera_controls.side_mm.setValue(60.0)  # as the operator types it in Setup › Camera
+    elif change == "method":
+        window.set_method("ippe")
+    elif change == "source":
+        window.set_source("virtual")  # Open again in Setup › Source
+    else:
+        window.camera_controls.plot_window_s.setValue(30.0)
+        assert panel.collecting and panel.status.text().startswith("collecting")
+        panel.cancel_row()
+        return
+    assert not panel.collecting
+    assert "not logged" in panel.status.text() and "changed while collecting" in panel.status.text()
+    assert panel.session.next_row == 1 and not panel.session.rows
+    _header, rows = rows_csv(panel.session.path)
+    assert rows == []
