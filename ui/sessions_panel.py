@@ -884,7 +884,15 @@ class SessionPanel(QtWidgets.QWidget):
         self.form.note.clear()  # a note belongs to its row: the next one starts without it
         passed = measurement.judgement.passed
         verdict = "pass" if passed else f"fail ({measurement.judgement.reason})"
-        self._after(outcome, f"logged row {outcome.row}: {verdict}", "ok" if passed else "fail")
+        average = measurement.average
+        misfit = (
+            f"; ⚠ {average.n_misfit} of its {average.n_converged} frames misfit their corners "
+            "(check the camera model and the QR side)"
+            if average.n_misfit
+            else ""
+        )
+        kind = "ok" if passed and not misfit else "fail"
+        self._after(outcome, f"logged row {outcome.row}: {verdict}{misfit}", kind)
         if outcome.ok and outcome.row is not None:
             self.rowLogged.emit(outcome.row)
 

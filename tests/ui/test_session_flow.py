@@ -243,3 +243,55 @@ def test_a_setting_changed_while_collecting_ends_the_row(make_window, qtbot, ses
     assert panel.session.next_row == 1 and not panel.session.rows
     _header, rows = rows_csv(panel.session.path)
     assert rows == []
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("model", ["wrong distortion", "right"])
+def test_a_row_of_misfit_frames_says_so_when_logged(make_window, qtbot, sessions, tmp_path, model) -> None:
+    """(audit-ui) Photos of the card rendered with picam-v2@640x480 (no distortion), measured
+    with a model of strong barrel distortion: every frame's fit misfits its corners
+    (PoseResult.misfit; chi2 in the thousands, checked with `qrfield solve --json`), which the
+    pose panel's status line says, but a row of them was logged as a plain "pass" or "fail".
+    The row's message now says how many of its frames misfit; with the right model it does not."""
+    import json
+
+    import cv2
+
+    from qrfield.camera import resolve_camera
+    from qrfield.geometry import Pose
+    from qrfield.render import render_view
+    from qrfield.runconfig import ConfigStore, RunSettings
+
+    camera = "picam-v2@640x480"
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    pose = Pose([-20.0, 15.0, 350.0], [15.0, -20.0, 10.0])
+    for i in range(3):
+        image = render_view(resolve_camera(camera), 50.0, pose, noise_sigma=2.0, seed=i).image
+        cv2.imwrite(str(folder / f"img{i}.png"), image)
+    if model != "right":
+        spec = json.loads((Path(__file__).parents[2] / "calib" / "picam-v2.json").read_text())
+        spec.update(name="picam-v2-barrel", dist=[-0.6, 0.4, 0.0, 0.0, 0.0])
+        (tmp_path / "barrel.json").write_text(json.dumps(spec))
+        camera = f"{tmp_path / 'barrel.json'}@640x480"
+    store = ConfigStore(tmp_path / "config")  # the folder plays in a loop (the window's own store)
+    run = RunSettings(source=str(folder), camera=camera, side_mm=50.0, method="numerical", loop=True)
+    store.set_group("run", run)
+    store.save()
+    window = make_window()
+    panel = window.session_panel
+    panel.row_settings.widgets["frames_per_row"].setValue(FRAMES)
+    panel.name_edit.setText("misfit")
+    assert panel.create_from_form() is not None
+    truth = {"x": "-20", "y": "15", "z": "350", "alpha": "15", "beta": "-20", "gamma": "10"}
+    panel.form.set_fields({**truth, "combo": "alpha+beta-gamma+"})
+    qtbot.waitUntil(lambda: not panel.blocked_reason(), timeout=WAIT_MS)
+    qtbot.waitUntil(panel.log_button.isEnabled, timeout=WAIT_MS)
+    with qtbot.waitSignal(panel.rowLogged, timeout=WAIT_MS):
+        qtbot.mouseClick(panel.log_button, LEFT)
+    status = panel.status.text()
+    assert status.startswith("logged row 1")
+    if model == "right":
+        assert "misfit" not in status and status == "logged row 1: pass"
+    else:
+        assert f"{FRAMES} of its {FRAMES} frames misfit" in status
