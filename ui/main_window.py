@@ -466,6 +466,7 @@ class MainWindow(QtWidgets.QMainWindow):
     def _reconfigure(self, reopen: bool) -> int:
         """New settings for the worker (``reopen``: and open the source again), plots and panel;
         the worker's request number."""
+        before = self._measuring()
         self.app_settings = app_settings_from(
             self.app_settings, self.source_controls, self.solver_controls, self.camera_controls
         )
@@ -476,8 +477,27 @@ class MainWindow(QtWidgets.QMainWindow):
         self.serial_panel.set_context(config.side_mm, config.camera.name, config.source)  # what HELLO reports
         request = self.worker.configure(config, reopen=reopen)
         self._source_requests[request] = config.source
+        changed = ["the source"] if reopen else []
+        after = self._measuring()
+        changed += [what for what, value in before.items() if after.get(what) != value]
+        if changed:  # a row being collected is not averaged across the change
+            self.session_panel.measuring_changed(" and ".join(changed))
         self.session_panel.refresh_state()
         return request
+
+    def _measuring(self) -> dict[str, Any]:
+        """What a frame's measured pose depends on, by the name a message gives it: a change of
+        any of them ends a row being collected (:meth:`SessionPanel.measuring_changed`). The
+        virtual bench's pose is not among them: it is the card, which the operator may move."""
+        app = self.app_settings
+        return {
+            "the camera model": app.camera,
+            "the QR side": app.side_mm,
+            "the solver": self.methods(),
+            "the solver settings": self.solver_controls.settings(),
+            "the detector settings": self.solver_controls.detector.value(),
+            "the live stream settings": self.solver_controls.stream.value(),
+        }
 
     def _show_criteria(self) -> None:
         session = self.session_panel.session

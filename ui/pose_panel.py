@@ -35,8 +35,9 @@ TRUTH = "true"
 #: Point sizes (values, headline, column headers, the "+- std" beside a value) and the value
 #: columns' width (px), by layout (compact: a small screen).
 SIZES = {False: (22, 15, 12, 11, 100), True: (13, 11, 9, 7, 56)}
-#: Grid rows: the headline, the simulated-source badge, the column headers, then the six values.
-FIRST_VALUE_ROW = 3
+#: Grid rows: the column headers, then the six values (the headline and the simulated-source
+#: badge are above the grid, the status lines and the verdict under it).
+FIRST_VALUE_ROW = 1
 NBSP = "\u00a0"
 #: The states the headline shows besides the pipeline's reported statuses: the link's own.
 NOSRC, STALE = WireStatus.NOSRC, WireStatus.STALE
@@ -145,7 +146,15 @@ class PosePanel(QtWidgets.QWidget):
 
     def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__(parent)
-        self._grid = QtWidgets.QGridLayout(self)
+        # The labels across the panel (headline, badge, status lines, verdict) are in a box layout
+        # around the values' grid, not grid cells spanning its columns: a grid gives a spanning
+        # word-wrapped label one line's height, and at 800x480 under the red banner "STALE: no
+        # frames; the values are the last measured" lost its second line behind the values.
+        self._outer = QtWidgets.QVBoxLayout(self)
+        self._grid = QtWidgets.QGridLayout()
+        self._status_box = QtWidgets.QVBoxLayout()
+        self._status_box.setContentsMargins(0, 0, 0, 0)
+        self._status_box.setSpacing(0)
         self._columns: list[str] = []
         self._cells: dict[str, list[QtWidgets.QLabel]] = {}
         self._headers: dict[str, QtWidgets.QLabel] = {}
@@ -175,6 +184,11 @@ class PosePanel(QtWidgets.QWidget):
         self.verdict = QtWidgets.QLabel("")
         self.verdict.setObjectName("verdict")
         self.verdict.setWordWrap(True)
+        self._outer.addWidget(self.headline)
+        self._outer.addWidget(self.badge)
+        self._outer.addLayout(self._grid)
+        self._outer.addLayout(self._status_box)
+        self._outer.addWidget(self.verdict)
         self._big = QtGui.QFont()
         self._big.setBold(True)
         self._big.setStyleHint(QtGui.QFont.StyleHint.Monospace)
@@ -199,6 +213,7 @@ class PosePanel(QtWidgets.QWidget):
         self._headline_pt = headline
         self._grid.setHorizontalSpacing(10 if self.compact else 18)
         self._grid.setVerticalSpacing(0 if self.compact else 6)
+        self._outer.setSpacing(0 if self.compact else 6)
         self._style_headline(self.headline.property("colour") or "")
         self.verdict.setStyleSheet("font-size: 8pt;" if self.compact else "")
         self.badge.setStyleSheet(BADGE_STYLE + (" font-size: 8pt;" if self.compact else ""))
@@ -214,16 +229,15 @@ class PosePanel(QtWidgets.QWidget):
         columns = [*methods, TRUTH] if truth else list(methods)
         if columns == self._columns:
             return
-        while self._grid.count():
-            item = self._grid.takeAt(0)
-            if item.widget() is not None and item.widget() not in (self.headline, self.badge, self.verdict):
-                item.widget().deleteLater()
+        for layout in (self._grid, self._status_box):
+            while layout.count():
+                item = layout.takeAt(0)
+                if item.widget() is not None:
+                    item.widget().deleteLater()
         self._columns = columns
         self._methods = tuple(methods)
         self._cells, self._headers, self._status = {}, {}, {}
         span = len(columns) + 2  # the row names, the columns, the units
-        self._grid.addWidget(self.headline, 0, 0, 1, span)
-        self._grid.addWidget(self.badge, 1, 0, 1, span)
         for c, name in enumerate(columns):
             self._add_column(c + 1, name)
         for r, (symbol, unit) in enumerate(ROWS):
@@ -231,15 +245,12 @@ class PosePanel(QtWidgets.QWidget):
             name_label.setFont(self._big)
             self._grid.addWidget(name_label, r + FIRST_VALUE_ROW, 0)
             self._grid.addWidget(QtWidgets.QLabel(unit), r + FIRST_VALUE_ROW, span - 1)
-        row = len(ROWS) + FIRST_VALUE_ROW
-        for name in methods:  # each solver's status line, then the verdict, across the panel
+        for name in methods:  # each solver's status line across the panel (the verdict under them)
             status = QtWidgets.QLabel("")
             status.setWordWrap(True)
             status.setObjectName(f"status_{name}")
-            self._grid.addWidget(status, row, 0, 1, span)
+            self._status_box.addWidget(status)
             self._status[name] = status
-            row += 1
-        self._grid.addWidget(self.verdict, row, 0, 1, span)
 
     def _add_column(self, column: int, name: str) -> None:
         """The header and the six value cells of method (or true pose) ``name`` in grid ``column``."""

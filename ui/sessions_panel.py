@@ -672,6 +672,21 @@ class SessionPanel(QtWidgets.QWidget):
             self._given_up(ended)
         self._update_state()
 
+    def measuring_changed(self, what: str) -> None:
+        """``what`` (e.g. "the QR side") changed in Setup: the frames after it are measured
+        differently, so a row being collected ends (nothing logged, the reason shown) instead of
+        averaging frames of both settings into one row. Nothing happens between rows."""
+        ended = self.recorder.give_up(f"{what} changed while collecting")
+        if ended is not None:
+            self._given_up(ended)
+            return
+        if self.guided and self.collecting and self.guide.cancel():
+            self.progress.setValue(0)
+            self._say(
+                f"target row not logged: {what} changed while collecting; press Log target again", "error"
+            )
+            self._update_state()
+
     def live_reason(self, now: float | None = None) -> str:
         """Why no live frames arrive ("" while they do)."""
         now = time.monotonic() if now is None else now
@@ -869,7 +884,15 @@ class SessionPanel(QtWidgets.QWidget):
         self.form.note.clear()  # a note belongs to its row: the next one starts without it
         passed = measurement.judgement.passed
         verdict = "pass" if passed else f"fail ({measurement.judgement.reason})"
-        self._after(outcome, f"logged row {outcome.row}: {verdict}", "ok" if passed else "fail")
+        average = measurement.average
+        misfit = (
+            f"; ⚠ {average.n_misfit} of its {average.n_converged} frames misfit their corners "
+            "(check the camera model and the QR side)"
+            if average.n_misfit
+            else ""
+        )
+        kind = "ok" if passed and not misfit else "fail"
+        self._after(outcome, f"logged row {outcome.row}: {verdict}{misfit}", kind)
         if outcome.ok and outcome.row is not None:
             self.rowLogged.emit(outcome.row)
 

@@ -78,6 +78,9 @@ class AveragedPose:
     sem_angles_deg: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
     n_filtered: int = 0
     n_resolved_by_history: int = 0
+    #: Averaged frames whose fit misfits its corners (``PoseResult.misfit``: chi-square above
+    #: FIT_CHI2; a wrong camera model, side or corners; their std and sigma are too small).
+    n_misfit: int = 0
 
     @property
     def filtered(self) -> bool:
@@ -153,7 +156,7 @@ def average_frames(frames: Iterable[Any], method: str = "") -> AveragedPose:
     iterations: list[float] = []
     reprojections: list[float] = []
     sigmas: list[np.ndarray] = []
-    n_frames = n_filtered = n_history = 0
+    n_frames = n_filtered = n_history = n_misfit = 0
     for index, item in enumerate(frames):
         n_frames += 1
         frame = method_result(item, method)
@@ -179,6 +182,7 @@ def average_frames(frames: Iterable[Any], method: str = "") -> AveragedPose:
         sigmas.append(_frame_sigma(frame, index))
         filtered, by_history = stream_mark(item, method)
         n_filtered += filtered
+        n_misfit += bool(_get(frame, "misfit", False))
         n_history += by_history
     n = len(positions)
     nan3 = np.full(3, np.nan)
@@ -217,6 +221,7 @@ def average_frames(frames: Iterable[Any], method: str = "") -> AveragedPose:
         sem_angles_deg=sem[3:],
         n_filtered=n_filtered,
         n_resolved_by_history=n_history,
+        n_misfit=n_misfit,
     )
 
 

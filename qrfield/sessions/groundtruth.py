@@ -8,6 +8,8 @@ Rules (every one gives a message naming the field, never a half row):
   - a number, optionally followed by the field's own unit: ``300``, ``300 mm``, ``12.5deg``,
     ``12.5 °``. Another unit (``30 cm``, ``0.2 rad``) is refused rather than converted, so a
     slip is seen, not silently rescaled.
+  - signs: ``-`` and ``+``, and the minus sign U+2212 and the full-width signs U+FF0D, U+FF0B
+    (what an on-screen keyboard or a copied "−10" may give; full-width digits are read as digits).
   - decimal separator: the dot. A single comma is also read as the decimal separator
     (``12,5`` = 12.5, what a European keyboard gives) unless exactly three digits follow it
     (``1,000``), which could be a thousands separator and is refused as ambiguous. Digit grouping
@@ -64,6 +66,8 @@ _OTHER_UNITS = {u for aliases in _UNIT_ALIASES.values() for u in aliases} | {
     "gon",
     "px",
 }
+#: Sign characters read as ASCII ``-`` / ``+``: the minus sign and the full-width minus and plus.
+_SIGNS = str.maketrans({"\u2212": "-", "\uff0d": "-", "\uff0b": "+"})
 _NUMBER = re.compile(r"^([+-]?(?:\d+(?:[.,]\d*)?|[.,]\d+)(?:[eE][+-]?\d+)?)\s*(.*)$")
 
 
@@ -139,7 +143,7 @@ def parse_number(text: Any, unit: str) -> float:
         raw = text.strip()
         if not raw:
             raise ValueError(f"empty: type a number in {unit}")
-        match = _NUMBER.match(raw)
+        match = _NUMBER.match(raw.translate(_SIGNS))
         if match is None:
             raise ValueError(f"{raw!r} is not a number (expected e.g. 12.5 {unit})")
         number, rest = match.group(1), match.group(2).strip()

@@ -558,3 +558,35 @@ def test_messages_come_and_go_in_one_place_and_never_move_a_button(
     moved = {k: (before[k].getRect(), after[k].getRect()) for k in before if after.get(k) != before[k]}
     assert not moved, moved
     assert not cut_labels(window) and (window.width(), window.height()) == (width, height)
+
+
+def test_a_source_that_ended_after_poses_cuts_no_text_at_800x480(
+    make_window, qtbot, tmp_path, monkeypatch, camera_vga
+) -> None:
+    """(audit-ui) A folder of three photos ends after its poses were shown: the red banner takes
+    its rows, the pose panel turns STALE over the last values, and at 800x480 the STALE headline
+    is whole (it wrapped onto a second line the panel had no room for, half behind the preview)."""
+    import cv2
+
+    from qrfield.geometry import Pose
+    from qrfield.render import render_view
+
+    monkeypatch.setenv("QRFIELD_SESSIONS_DIR", str(tmp_path / "sessions"))
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    pose = Pose([-20.0, 15.0, 350.0], [-10.0, 25.0, -30.0])
+    for i in range(3):
+        image = render_view(camera_vga, 50.0, pose, noise_sigma=2.0, seed=i).image
+        cv2.imwrite(str(folder / f"img{i}.png"), image)
+    window = make_window({"source": str(folder), "camera": "picam-v2@640x480", "method": "both"})
+    window.resize(800, 480)
+    panel = window.session_panel
+    panel.name_edit.setText("ended")
+    assert panel.create_from_form() is not None
+    qtbot.waitUntil(window.banner_row.isVisible, timeout=WAIT_MS)
+    qtbot.waitUntil(lambda: window.pose_panel.headline.text().startswith("STALE"), timeout=WAIT_MS)
+    settle(qtbot)
+    assert (window.width(), window.height()) == (800, 480)
+    headline = window.pose_panel.headline
+    assert not clipped_by_parents(headline), headline.visibleRegion().boundingRect()
+    assert not cut_labels(window) and not overlaps(window), (cut_labels(window), overlaps(window))

@@ -4,7 +4,7 @@ operator picks is kept while it agrees, and fields turn red only once typed into
 from __future__ import annotations
 
 import pytest
-from PySide6 import QtCore
+from PySide6 import QtCore, QtGui, QtWidgets
 
 from qrfield.sessions import known_combinations
 from qrfield.sessions.combo_signs import sign_table
@@ -87,3 +87,35 @@ def test_follow_the_bench_is_offered_only_while_frames_carry_a_true_pose(form) -
     assert form.fields()["beta"] == "40" and form.combo.currentText() == "beta"
     form.bench_gone()  # a camera instead: nothing to follow
     assert not form.follow_box.isVisible() and not form.following
+
+
+def type_keys(form: GroundTruthForm, name: str, text: str) -> None:
+    """Type ``text`` into field ``name`` as a keyboard sends it, one key event per character
+    (QTest's keyClicks aborts on characters beyond Latin-1, such as the minus sign U+2212)."""
+    edit = form.edits[name]
+    edit.setFocus()
+    edit.selectAll()
+    for char in text:
+        for kind in (QtCore.QEvent.Type.KeyPress, QtCore.QEvent.Type.KeyRelease):
+            event = QtGui.QKeyEvent(
+                kind, QtCore.Qt.Key.Key_unknown, QtCore.Qt.KeyboardModifier.NoModifier, char
+            )
+            QtWidgets.QApplication.sendEvent(edit, event)
+
+
+def test_a_minus_sign_from_an_on_screen_keyboard_is_a_minus(form, qtbot) -> None:
+    """(audit-ui) "−10" typed with the minus sign U+2212 (an on-screen keyboard's, or copied
+    from a document) was refused as "'−10' is not a number" beside a field that reads like -10;
+    it is -10, as the full-width "－５" is -5. A dash between numbers is still refused."""
+    type_angles(qtbot, form, "15", "0", "10")
+    type_keys(form, "beta", "\u221220")
+    type_keys(form, "x", "\uff0d\uff15")
+    for name, text in (("y", "-5"), ("z", "300 mm")):
+        type_into(qtbot, form, name, text)
+    assert form.valid and not form.shown_errors(), form.shown_errors()
+    truth = form.truth()
+    assert truth is not None
+    assert list(truth.position_mm) == [-5.0, -5.0, 300.0] and list(truth.angles_deg) == [15.0, -20.0, 10.0]
+    assert form.combo.currentText() == "alpha+beta-gamma+"  # the signs were read as typed
+    type_keys(form, "gamma", "10\u221220")
+    assert not form.valid and "gamma" in form.shown_errors()

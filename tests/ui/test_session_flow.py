@@ -206,3 +206,92 @@ def test_a_row_averages_the_frames_the_loop_processed_and_its_note_is_not_kept(
         ("1", "card re-taped", str(FRAMES)),
         ("2", "", str(FRAMES)),
     ]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("change", ["side", "method", "source", "plot window"])
+def test_a_setting_changed_while_collecting_ends_the_row(make_window, qtbot, sessions, change) -> None:
+    """(audit-ui) The row recorder takes every frame the loop processes: a QR side, solver or
+    source changed in Setup while a row was being collected mixed the frames measured before
+    and after the change into one row (at 50 mm, then 60 mm: positions of two scales averaged).
+    The row ends at once with a message saying why, and nothing is written; a setting that
+    changes no measurement (the plots' time window) leaves the row collecting."""
+    from qrfield.sessions.criteria import MAX_FRAMES_PER_ROW
+
+    window = make_window({"source": "virtual", "method": "both", "side_mm": 50.0})
+    panel = window.session_panel
+    panel.row_settings.widgets["frames_per_row"].setValue(MAX_FRAMES_PER_ROW)  # never done in the test
+    panel.name_edit.setText("mid-row")
+    session = panel.create_from_form()
+    assert session is not None and session.info.frames_per_row == MAX_FRAMES_PER_ROW
+    qtbot.waitUntil(lambda: panel.form.follow_box.isEnabled() and not panel.blocked_reason(), timeout=WAIT_MS)
+    qtbot.mouseClick(panel.log_button, QtCore.Qt.MouseButton.LeftButton)
+    assert panel.collecting
+    if change == "side":
+        window.camera_controls.side_mm.setValue(60.0)  # as the operator types it in Setup › Camera
+    elif change == "method":
+        window.set_method("ippe")
+    elif change == "source":
+        window.set_source("virtual")  # Open again in Setup › Source
+    else:
+        window.camera_controls.plot_window_s.setValue(30.0)
+        assert panel.collecting and panel.status.text().startswith("collecting")
+        panel.cancel_row()
+        return
+    assert not panel.collecting
+    assert "not logged" in panel.status.text() and "changed while collecting" in panel.status.text()
+    assert panel.session.next_row == 1 and not panel.session.rows
+    _header, rows = rows_csv(panel.session.path)
+    assert rows == []
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("model", ["wrong distortion", "right"])
+def test_a_row_of_misfit_frames_says_so_when_logged(make_window, qtbot, sessions, tmp_path, model) -> None:
+    """(audit-ui) Photos of the card rendered with picam-v2@640x480 (no distortion), measured
+    with a model of strong barrel distortion: every frame's fit misfits its corners
+    (PoseResult.misfit; chi2 in the thousands, checked with `qrfield solve --json`), which the
+    pose panel's status line says, but a row of them was logged as a plain "pass" or "fail".
+    The row's message now says how many of its frames misfit; with the right model it does not."""
+    import json
+
+    import cv2
+
+    from qrfield.camera import resolve_camera
+    from qrfield.geometry import Pose
+    from qrfield.render import render_view
+    from qrfield.runconfig import ConfigStore, RunSettings
+
+    camera = "picam-v2@640x480"
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    pose = Pose([-20.0, 15.0, 350.0], [15.0, -20.0, 10.0])
+    for i in range(3):
+        image = render_view(resolve_camera(camera), 50.0, pose, noise_sigma=2.0, seed=i).image
+        cv2.imwrite(str(folder / f"img{i}.png"), image)
+    if model != "right":
+        spec = json.loads((Path(__file__).parents[2] / "calib" / "picam-v2.json").read_text())
+        spec.update(name="picam-v2-barrel", dist=[-0.6, 0.4, 0.0, 0.0, 0.0])
+        (tmp_path / "barrel.json").write_text(json.dumps(spec))
+        camera = f"{tmp_path / 'barrel.json'}@640x480"
+    store = ConfigStore(tmp_path / "config")  # the folder plays in a loop (the window's own store)
+    run = RunSettings(source=str(folder), camera=camera, side_mm=50.0, method="numerical", loop=True)
+    store.set_group("run", run)
+    store.save()
+    window = make_window()
+    panel = window.session_panel
+    panel.row_settings.widgets["frames_per_row"].setValue(FRAMES)
+    panel.name_edit.setText("misfit")
+    assert panel.create_from_form() is not None
+    truth = {"x": "-20", "y": "15", "z": "350", "alpha": "15", "beta": "-20", "gamma": "10"}
+    panel.form.set_fields({**truth, "combo": "alpha+beta-gamma+"})
+    qtbot.waitUntil(lambda: not panel.blocked_reason(), timeout=WAIT_MS)
+    qtbot.waitUntil(panel.log_button.isEnabled, timeout=WAIT_MS)
+    with qtbot.waitSignal(panel.rowLogged, timeout=WAIT_MS):
+        qtbot.mouseClick(panel.log_button, LEFT)
+    status = panel.status.text()
+    assert status.startswith("logged row 1")
+    if model == "right":
+        assert "misfit" not in status and status == "logged row 1: pass"
+    else:
+        assert f"{FRAMES} of its {FRAMES} frames misfit" in status

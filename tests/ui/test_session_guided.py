@@ -215,3 +215,26 @@ def test_open_report_writes_the_report_and_opens_it(guided_window, qtbot, monkey
     page = report.read_text(encoding="utf-8")
     assert "1 of 1 rows pass" in page and page.count('<img src="data:image/png;base64,') == 2
     assert "report:" in tab.state.text() and tab.report_button.isEnabled()
+
+
+@pytest.mark.slow
+def test_a_setting_changed_while_a_target_is_collected_ends_its_row(guided_window, qtbot) -> None:
+    """(audit-ui) As for Log row (tests/ui/test_session_flow.py): the QR side changed in Setup
+    while a target's row is collected ends the row, nothing logged, the reason said."""
+    from qrfield.sessions.criteria import MAX_FRAMES_PER_ROW
+
+    window = guided_window()
+    panel = window.session_panel
+    panel.row_settings.widgets["frames_per_row"].setValue(MAX_FRAMES_PER_ROW)  # never done in the test
+    panel.name_edit.setText("guided-mid-row")
+    assert panel.create_from_form() is not None
+    qtbot.mouseClick(panel.plan_button, LEFT)
+    assert panel.guided, panel.status.text()
+    set_bench(qtbot, window, PLAN[0])
+    qtbot.waitUntil(lambda: panel.log_button.isEnabled(), timeout=WAIT_MS)
+    qtbot.mouseClick(panel.log_button, LEFT)
+    assert panel.collecting, panel.status.text()
+    window.camera_controls.side_mm.setValue(60.0)
+    assert not panel.collecting
+    assert "not logged" in panel.status.text() and "changed while collecting" in panel.status.text()
+    assert rows_csv(panel.session.path)[1] == [] and shown_target(panel) == 1
