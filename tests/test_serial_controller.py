@@ -337,12 +337,21 @@ class FakePort:
 WAIT_S = 10.0
 
 
-def test_gripper_link_answers_on_its_port_and_sends_ok_only_for_an_unambiguous_live_pose() -> None:
+def connected_link() -> tuple[FakePort, GripperLink]:
+    """A GripperLink on a FakePort (no rate limit, no STALE lines), started and connected; the
+    caller closes it."""
     port = FakePort()
     settings = SerialLinkSettings(port="fake", max_rate_hz=1000, stale_after_s=0)
     link = GripperLink(settings, opener=lambda s: port).start()
+    if not link.wait_for_state(CONNECTED, 5):
+        link.close()  # a test never leaves the link's thread running
+        raise AssertionError("the link did not connect to its fake port")
+    return port, link
+
+
+def test_gripper_link_answers_on_its_port_and_sends_ok_only_for_an_unambiguous_live_pose() -> None:
+    port, link = connected_link()
     try:
-        assert link.wait_for_state(CONNECTED, 5)
         link.on_result(ok(1, [1, 2, 3], [4, 5, 6]), simulated=True)
         wait_until(lambda: b"SIM*" in port.written, WAIT_S)
         link.on_result(ok(2, [1, 2, 3], [4, 5, 6], ambiguous=True), simulated=False)
@@ -404,11 +413,8 @@ def test_a_meas_under_way_when_the_link_closes_is_answered_nosrc_before_the_last
     under way then (and a PING queued behind it) went unanswered, though each command gets one
     answer. Now, closing, the MEAS is answered ``$QRM,...,NOSRC`` (the source is gone, as the last
     ``$QRF`` NOSRC line says), the PING after it, both before that last line."""
-    port = FakePort()
-    settings = SerialLinkSettings(port="fake", max_rate_hz=1000, stale_after_s=0)
-    link = GripperLink(settings, opener=lambda s: port).start()
+    port, link = connected_link()
     try:
-        assert link.wait_for_state(CONNECTED, 5)
         link.on_result(ok(1, [1, 2, 3], [4, 5, 6]), simulated=False)
         with port.lock:
             port.incoming += command_line("MEAS", "5") + command_line("PING")
