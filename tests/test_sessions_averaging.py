@@ -182,3 +182,21 @@ def test_sigma_is_the_mean_per_frame_uncertainty_and_std_the_frame_to_frame_spre
     assert np.all(np.isnan(plain.sigma_position_mm)) and np.all(np.isnan(plain.sigma_angles_deg))
     with pytest.raises(ValueError, match="position_std_mm needs 3 values"):
         average_frames([{**frames[0], "position_std_mm": [0.1, 0.2]}])
+
+
+def test_a_row_misfits_when_most_of_its_frames_do_not_when_one_does():
+    """A right camera model and side still put about 1 % of frames above FIT_CHI2 (chi-square(2)
+    0.99), so a row of 10 with one misfit frame is not a misfit row; one with 6 of 10 is (a wrong
+    model or side misfits every frame); the count is kept either way."""
+    from qrfield.solvers.uncertainty import FIT_CHI2
+
+    def framed(misfit: bool) -> SimpleNamespace:
+        f = frame([0.0, 0.0, 300.0], [1.0, 2.0, 3.0])
+        f.chi2 = 2.0 * FIT_CHI2 if misfit else 1.0
+        f.misfit = misfit
+        return f
+
+    one = average_frames([framed(i == 0) for i in range(10)])
+    most = average_frames([framed(i < 6) for i in range(10)])
+    assert (one.n_misfit, one.mostly_misfit) == (1, False)
+    assert (most.n_misfit, most.mostly_misfit) == (6, True)

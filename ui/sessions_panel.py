@@ -888,7 +888,7 @@ class SessionPanel(QtWidgets.QWidget):
         misfit = (
             f"; ⚠ {average.n_misfit} of its {average.n_converged} frames misfit their corners "
             "(check the camera model and the QR side)"
-            if average.n_misfit
+            if average.mostly_misfit
             else ""
         )
         kind = "ok" if passed and not misfit else "fail"

@@ -60,6 +60,12 @@ def circular_mean_deg(angles_deg: Sequence[float] | np.ndarray) -> float:
     return float(wrap_degrees(math.degrees(math.atan2(s, c))))
 
 
+#: A row is said to misfit (:attr:`AveragedPose.mostly_misfit`) when more than this share of its
+#: frames do: with a wrong camera model or side every frame does; with right ones about 1 % of
+#: frames lie above FIT_CHI2 by chance, so a row of 10-30 frames often holds one.
+MISFIT_ROW_SHARE = 0.5
+
+
 @dataclass(frozen=True)
 class AveragedPose:
     """What N frames measured (mm and degrees; NaN where no converged frame)."""
@@ -81,6 +87,13 @@ class AveragedPose:
     #: Averaged frames whose fit misfits its corners (``PoseResult.misfit``: chi-square above
     #: FIT_CHI2; a wrong camera model, side or corners; their std and sigma are too small).
     n_misfit: int = 0
+
+    @property
+    def mostly_misfit(self) -> bool:
+        """More than MISFIT_ROW_SHARE of the averaged frames misfit their corners: the row's
+        camera model, side or corners are wrong (one frame in a hundred of right fits lies above
+        FIT_CHI2, 2-3 % of tracked ones at modules of 1.2-1.4 px: a frame or two is not that)."""
+        return self.n_converged > 0 and self.n_misfit > MISFIT_ROW_SHARE * self.n_converged
 
     @property
     def filtered(self) -> bool:
