@@ -119,3 +119,23 @@ def test_a_logged_row_records_the_mean_uncertainty_and_whether_the_filter_was_on
     assert (
         rows[1]["sem_z"] == "1.000" and rows[1]["filtered"] == "1" and rows[1]["resolved_by_history"] == "4"
     )
+    assert rows[0]["n_misfit"] == rows[1]["n_misfit"] == "0"
+
+
+def test_a_logged_row_counts_its_frames_that_misfit_their_corners(tmp_path, camera_vga) -> None:
+    """Two of four frames with a chi-square above FIT_CHI2 (PoseResult.misfit): the row's
+    ``n_misfit`` is 2 in rows.csv."""
+    import csv
+
+    from qrfield.sessions import GroundTruth, Session, measure
+    from qrfield.solvers.uncertainty import FIT_CHI2, is_misfit
+
+    frames = [_frame([0, 0, z], [0, 0, 0], [1.0] * 6) for z in (299.0, 301.0, 299.0, 301.0)]
+    for k, f in enumerate(frames):
+        f.chi2 = 3.0 * FIT_CHI2 if k < 2 else 1.0
+        f.misfit = is_misfit(f.chi2)
+    session = Session.create(tmp_path, "misfit", camera=camera_vga, side_mm=50.0, solver="numerical")
+    assert session.log(measure(frames, GroundTruth(0, 0, 300, 0, 0, 0, "still"))).ok
+    with session.rows_path.open(encoding="utf-8") as f:
+        (row,) = list(csv.DictReader(f))
+    assert row["n_misfit"] == "2"

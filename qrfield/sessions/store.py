@@ -110,7 +110,9 @@ REQUIRED_COLUMNS = (
 #: frames share most of their error: qrfield.sessions.averaging, docs/uncertainty.md), ``filtered``
 #: 1 when the row's frames were the stream filter's (``--filter-s`` on), else 0, and
 #: ``resolved_by_history`` the number of its frames whose flip the stream's history resolved
-#: (docs/conventions.md, "The live stream").
+#: (docs/conventions.md, "The live stream"), and ``n_misfit`` the number of its averaged frames
+#: whose pose misfits their corners (``PoseResult.misfit``: chi-square above FIT_CHI2; most of
+#: them: the camera model, side or corners are wrong, :attr:`AveragedPose.mostly_misfit`).
 EXTRA_COLUMNS = (
     "std_x",
     "std_y",
@@ -136,6 +138,7 @@ EXTRA_COLUMNS = (
     "sem_gamma",
     "filtered",
     "resolved_by_history",
+    "n_misfit",
 )
 COLUMNS = REQUIRED_COLUMNS + EXTRA_COLUMNS
 SESSION_FILE = "session.json"
@@ -360,6 +363,7 @@ def measurement_values(measurement: Measurement, number: int, time_text: str) ->
         "withdraws": "",
         "filtered": "1" if a.filtered else "0",
         "resolved_by_history": str(a.n_resolved_by_history),
+        "n_misfit": str(a.n_misfit),
     }
     for k, axis in enumerate("xyz"):
         values[axis] = _fmt(a.position_mm[k])
