@@ -84,18 +84,9 @@ def _aruco() -> Callable[[np.ndarray], Any] | None:
 def interleaved(
     frames: Sequence[np.ndarray], methods: dict[str, Callable[[np.ndarray], Any]], rounds: int
 ) -> dict[str, list[float]]:
-    """CPU ms per frame of each method, per round: the methods one after the other on each frame."""
-    out: dict[str, list[float]] = {name: [] for name in methods}
-    for _ in range(rounds):
-        spent = dict.fromkeys(methods, 0.0)
-        for frame in frames:
-            for name, method in methods.items():
-                t = time.process_time()
-                method(frame)
-                spent[name] += time.process_time() - t
-        for name in methods:
-            out[name].append(1e3 * spent[name] / max(len(frames), 1))
-    return out
+    """CPU ms per frame of each method, per round: the methods one after the other on each frame
+    (:func:`interleaved_groups` with one group)."""
+    return interleaved_groups({0: frames}, methods, rounds)[0]
 
 
 def interleaved_groups(
