@@ -24,7 +24,10 @@ flag after history), ``FrameResult.frame_poses`` the frame's own solve, ``FrameR
 the stage did (``resolved_by``, ``filtered``).
 
 Timing: ``t_ms`` is the frame's capture time in ms since the stream started (the first frame
-processed, or the ``t0`` given); ``latency_ms`` runs from capture to the finished result.
+processed, or the ``t0`` given); for a recording (a frame with ``t_media``, e.g. a video file) it
+follows the recording's own clock from the frame where it began, so the stream stage sees the
+recorded times however fast the file is decoded; ``latency_ms`` runs from capture to the finished
+result.
 """
 
 from __future__ import annotations
@@ -259,6 +262,9 @@ class Pipeline:
         self.solver_settings = dict(solver_settings or {})
         self.select_text = str(getattr(detector_settings, "select_text", "") or "")
         self.t0 = t0
+        self._media_anchor: tuple[float, float] | None = None  # (t_ms, t_media s) where a recording began
+        self._last_media = -math.inf
+        self._last_t_ms = -math.inf
         self._own_tracker = tracker is None
         if tracker is None or select is None:
             from qrfield import detect
@@ -301,9 +307,7 @@ class Pipeline:
 
     def process(self, frame: Frame) -> FrameResult:
         """Detect, select and solve one frame; never raises (problems become status and reason)."""
-        if self.t0 is None:
-            self.t0 = frame.t_capture
-        t_ms = max(0, round((frame.t_capture - self.t0) * 1000.0))
+        t_ms = self._stream_ms(frame)
         result = FrameResult(
             frame.index, t_ms, NOQR, truth=frame.truth, label=frame.label, t_capture=frame.t_capture
         )
@@ -313,6 +317,27 @@ class Pipeline:
             result.status, result.reason = ERROR, f"{type(exc).__name__}: {exc}"
         result.latency_ms = (time.monotonic() - frame.t_capture) * 1000.0
         return result
+
+    def _stream_ms(self, frame: Frame) -> int:
+        """The frame's ``t_ms``: ms since the stream started, on the capture clock, or for a
+        recording (``frame.t_media`` set) on its own clock from the frame where it began; a recording
+        whose clock steps back (it started again) begins anew a second after the last frame."""
+        if self.t0 is None:
+            self.t0 = frame.t_capture
+        wall_ms = (frame.t_capture - self.t0) * 1000.0
+        media = frame.t_media
+        if media is None or not math.isfinite(media):
+            self._media_anchor = None
+            t_ms = wall_ms
+        else:
+            anchor = self._media_anchor
+            if anchor is None or media < self._last_media:
+                start = max(wall_ms, self._last_t_ms + 1000.0)  # -inf: the stream's first frame
+                anchor = self._media_anchor = (start, media)
+            self._last_media = media
+            t_ms = anchor[0] + (media - anchor[1]) * 1000.0
+        self._last_t_ms = max(self._last_t_ms, t_ms)
+        return max(0, round(t_ms))
 
     def _process(self, frame: Frame, result: FrameResult) -> None:
         try:
@@ -422,6 +447,9 @@ class Pipeline:
         """Start a new stream: the clock restarts, the tracker forgets the last code and the stream
         stage its history and filter."""
         self.t0 = t0
+        self._media_anchor = None
+        if t0 is None:
+            self._last_t_ms = -math.inf
         self.stream.reset()
         reset = getattr(self._tracker, "reset", None)
         if callable(reset):

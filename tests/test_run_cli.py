@@ -133,6 +133,21 @@ def test_folder_source_runs_to_its_end(tmp_path: Path, camera_vga) -> None:
     assert "skipped 3.png" in done.stderr and "end after 5 files" in done.stderr
 
 
+def test_a_video_files_lines_carry_its_own_times(tmp_path: Path) -> None:
+    """A clip written at 5 frames/s and decoded as fast as it goes: t_ms is the clip's (0, 200, 400,
+    ...), not the decoding's, so the stream's history and filter see the recorded motion."""
+    clip = tmp_path / "clip.avi"
+    writer = cv2.VideoWriter(str(clip), cv2.VideoWriter_fourcc(*"MJPG"), 5.0, (160, 120), False)
+    assert writer.isOpened(), "this OpenCV build cannot write MJPG .avi"
+    for i in range(4):
+        writer.write(np.full((120, 160), 40 + 40 * i, np.uint8))
+    writer.release()
+    done = qrfield("run", "--source", str(clip), "--json-lines", "--focal-px", "200", "--size", "160x120")
+    assert done.returncode == 0, done.stderr
+    lines = [json.loads(line) for line in done.stdout.splitlines()]
+    assert [line["t_ms"] for line in lines] == [0, 200, 400, 600]
+
+
 def test_unopenable_source_is_one_clear_error(tmp_path: Path) -> None:
     done = qrfield("run", "--source", str(tmp_path / "missing.avi"))
     assert done.returncode == 1

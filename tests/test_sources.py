@@ -194,6 +194,17 @@ def test_video_file_ends_or_loops(video_file: Path) -> None:
     assert np.allclose(again[VIDEO_FRAMES:], again[:2], atol=1)
 
 
+def test_a_video_files_frames_carry_the_files_own_times(video_file: Path) -> None:
+    """The file was written at 10 frames/s: frame i is at i / 10 s on its clock, however fast it is
+    decoded; a loop's next pass starts VIDEO_LOOP_GAP_S after the last frame, never back at 0."""
+    with VideoFileSource(video_file, loop=True) as source:
+        times = [source.read().t_media for _ in range(VIDEO_FRAMES + 2)]
+    first = [0.1 * i for i in range(VIDEO_FRAMES)]
+    assert times[:VIDEO_FRAMES] == pytest.approx(first, abs=1e-9)
+    again = first[-1] + opencv_module.VIDEO_LOOP_GAP_S
+    assert times[VIDEO_FRAMES:] == pytest.approx([again, again + 0.1], abs=1e-9)
+
+
 def test_missing_or_undecodable_video_is_a_clear_error(tmp_path: Path) -> None:
     with pytest.raises(SourceError, match="no such file"):
         VideoFileSource(tmp_path / "nope.avi").open()

@@ -43,6 +43,11 @@ class Frame:
         index: 0, 1, 2, ... in the order the source delivered them since it was opened.
         truth: the true pose (mm, degrees) for the virtual bench; None for real cameras.
         label: where the frame came from, for humans (file name, camera name); may be empty.
+        t_media: the frame's time on its recording's own clock, s (a video file's timestamp, from
+            its first frame), or None for a live source, whose clock is ``t_capture``. The stream's
+            time (``FrameResult.t_ms``: the history's age, the filter's steps) follows it, so a file
+            gives the same poses however fast it is decoded; ages and latencies stay on
+            ``t_capture``.
     """
 
     image: np.ndarray
@@ -50,6 +55,7 @@ class Frame:
     index: int
     truth: Pose | None = None
     label: str = ""
+    t_media: float | None = None
 
     def __post_init__(self) -> None:
         image = self.image

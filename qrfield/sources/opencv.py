@@ -24,6 +24,12 @@ FFMPEG_LOG_LEVEL = ("OPENCV_FFMPEG_LOGLEVEL", "-8")
 
 #: Consecutive failed grabs after which a USB camera counts as gone.
 USB_MAX_FAILED_READS = 5
+#: A video file whose container gives no usable frame rate is timed at this rate (frames/s).
+VIDEO_FALLBACK_FPS = 30.0
+#: A looping video's next pass starts this long after the last frame of the one before (s), more
+#: than the stream's 0.5 s history and filter gap (docs/conventions.md, "The live stream"): the
+#: card's pose jumps back to the first frame's, and that must not be read as motion.
+VIDEO_LOOP_GAP_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -261,10 +267,30 @@ class VideoFileSource(FrameSource):
         self.pace = pace
         self._cap: cv2.VideoCapture | None = None
         self._pacer = Pacer(0.0)
+        self._fps = VIDEO_FALLBACK_FPS
+        self._pass_start_s = 0.0  # media time of this pass' first frame (loops add to it)
+        self._last_s: float | None = None  # media time of the last frame delivered
 
     @property
     def description(self) -> str:
         return f"video file {self.path}" + (" (looping)" if self.loop else "")
+
+    def _media_time(self, pass_start: bool) -> float:
+        """The frame just read's time on the file's clock, s since its first frame: the container's
+        timestamp (``CAP_PROP_POS_MSEC``, after ``read`` the frame just read's: cap_ffmpeg_impl.hpp's
+        ``get_position``), or one frame period after the last where it gives none that moves
+        forward (raw streams report 0); loops continue after :data:`VIDEO_LOOP_GAP_S`."""
+        assert self._cap is not None
+        if pass_start and self._last_s is not None:
+            self._pass_start_s = self._last_s + VIDEO_LOOP_GAP_S
+        pos_ms = self._cap.get(cv2.CAP_PROP_POS_MSEC)
+        t = self._pass_start_s + pos_ms / 1000.0 if np.isfinite(pos_ms) and pos_ms >= 0 else None
+        if self._last_s is not None and (t is None or t <= self._last_s):
+            t = self._last_s + 1.0 / self._fps
+        elif t is None:
+            t = self._pass_start_s
+        self._last_s = t
+        return t
 
     def _open_impl(self) -> None:
         if not self.path.is_file():
@@ -279,21 +305,27 @@ class VideoFileSource(FrameSource):
             cap.release()
             raise SourceError(f"video file {self.path}: OpenCV cannot decode it (unknown format or codec)")
         file_fps = cap.get(cv2.CAP_PROP_FPS)
-        self._pacer = Pacer(file_fps if self.pace and 0 < file_fps < 1000 else 0.0)
+        usable_fps = bool(np.isfinite(file_fps) and 0 < file_fps < 1000)
+        self._pacer = Pacer(file_fps if self.pace and usable_fps else 0.0)
+        self._fps = float(file_fps) if usable_fps else VIDEO_FALLBACK_FPS
+        self._pass_start_s, self._last_s = 0.0, None
         self._cap = cap
 
     def _read_impl(self, index: int) -> Frame:
         assert self._cap is not None
         self._pacer.wait()
         ok, image = self._cap.read()
+        looped = False
         if not ok and self.loop and index > 0:
             self._cap.set(cv2.CAP_PROP_POS_FRAMES, 0)
             ok, image = self._cap.read()
+            looped = True
         if not ok or image is None:
             if index == 0:
                 raise SourceError(f"video file {self.path}: no frame could be decoded")
             raise EndOfStream(f"video file {self.path}: end after {index} frames")
-        return Frame(image, time.monotonic(), index, label=f"{self.path.name} #{index}")
+        t_media = self._media_time(looped)
+        return Frame(image, time.monotonic(), index, label=f"{self.path.name} #{index}", t_media=t_media)
 
     def _close_impl(self) -> None:
         if self._cap is not None:
