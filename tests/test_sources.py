@@ -205,6 +205,23 @@ def test_a_video_files_frames_carry_the_files_own_times(video_file: Path) -> Non
     assert times[VIDEO_FRAMES:] == pytest.approx([again, again + 0.1], abs=1e-9)
 
 
+def test_a_clip_in_mpeg4_part_2_says_its_corners_are_coarser_than_their_std(tmp_path: Path) -> None:
+    """OpenCV's mp4v writer (FFmpeg reports FMP4) codes a small code's edges coarsely enough that
+    its corners move several times their std (docs/headless.md): the source says so; MJPG does not."""
+    notes = {}
+    for fourcc, name in (("mp4v", "clip.mp4"), ("MJPG", "clip.avi")):
+        writer = cv2.VideoWriter(str(tmp_path / name), cv2.VideoWriter_fourcc(*fourcc), 10.0, SIZE, False)
+        if not writer.isOpened():
+            pytest.skip(f"this OpenCV build cannot write {fourcc}")
+        for i in range(3):
+            writer.write(np.full(SIZE[::-1], 60 * i, np.uint8))
+        writer.release()
+        with VideoFileSource(tmp_path / name) as source:
+            notes[fourcc] = list(source.notes)
+    assert any("MPEG-4 Part 2" in note and "std" in note for note in notes["mp4v"]), notes
+    assert notes["MJPG"] == []
+
+
 def test_missing_or_undecodable_video_is_a_clear_error(tmp_path: Path) -> None:
     with pytest.raises(SourceError, match="no such file"):
         VideoFileSource(tmp_path / "nope.avi").open()

@@ -30,6 +30,10 @@ VIDEO_FALLBACK_FPS = 30.0
 #: than the stream's 0.5 s history and filter gap (docs/conventions.md, "The live stream"): the
 #: card's pose jumps back to the first frame's, and that must not be read as motion.
 VIDEO_LOOP_GAP_S = 1.0
+#: FourCCs (as the container reports them, upper case) of MPEG-4 Part 2, OpenCV's ``mp4v``
+#: writer's codec (FFmpeg reports it as FMP4): at its default quality it moves a small code's
+#: corners several times more than their std says (docs/headless.md, "A video file's clock").
+COARSE_VIDEO_CODECS = ("FMP4", "MP4V", "XVID", "DIVX", "DX50")
 
 
 @dataclass(frozen=True)
@@ -309,6 +313,13 @@ class VideoFileSource(FrameSource):
         self._pacer = Pacer(file_fps if self.pace and usable_fps else 0.0)
         self._fps = float(file_fps) if usable_fps else VIDEO_FALLBACK_FPS
         self._pass_start_s, self._last_s = 0.0, None
+        code = int(cap.get(cv2.CAP_PROP_FOURCC)) & 0xFFFFFFFF
+        fourcc = code.to_bytes(4, "little").decode("latin-1").strip("\0 ").upper()
+        if fourcc in COARSE_VIDEO_CODECS:
+            self.notes.append(
+                f"{self.path.name} is MPEG-4 Part 2 ({fourcc}): its coding moves small codes' corners "
+                "more than their std says; for measurements record FFV1, MJPG or VP8/VP9"
+            )
         self._cap = cap
 
     def _read_impl(self, index: int) -> Frame:
