@@ -79,6 +79,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--fps", type=seconds("--fps"), default=0.0, help="the bench's frame rate (0 = as fast as it renders)"
     )
     parser.add_argument(
+        "--x-mm",
+        type=float,
+        default=10.0,
+        help="the bench's true x, mm (default 10; 150 wobbles the card across the image's right edge)",
+    )
+    parser.add_argument(
+        "--wobble-mm", type=seconds("--wobble-mm"), default=10.0, help="the bench's x wobble, mm (10)"
+    )
+    parser.add_argument(
         "--port", choices=("pty", "loop"), default="pty", help="the serial twin (default pty)"
     )
     parser.add_argument(
@@ -325,17 +334,20 @@ class Sample:
     wrong: int
     rows: int
     rows_csv: int
+    said: int
 
 
 class Sampler:
     """A frame loop sink: per-frame latency and period; a :class:`Sample` every ``every`` frames."""
 
-    def __init__(self, every: int, deadline: float, controller: Controller, operator: Operator) -> None:
+    def __init__(
+        self, every: int, deadline: float, controller: Controller, operator: Operator, said: Any
+    ) -> None:
         import numpy as np
 
         self.np = np
         self.every, self.deadline = every, deadline
-        self.controller, self.operator = controller, operator
+        self.controller, self.operator, self.said = controller, operator, said
         self.loop: Any = None
         self.samples: list[Sample] = []
         self.t0 = time.monotonic()
@@ -391,6 +403,7 @@ class Sampler:
             wrong=counts.wrong,
             rows=self.operator.logged,
             rows_csv=self.operator.rows_on_disk(),
+            said=sum(self.said.values()),
         )
         self.samples.append(s)
         print(_sample_line(s), flush=True)
@@ -399,7 +412,7 @@ class Sampler:
 HEADER = (
     f"{'t s':>7}{'frames':>8}{'fps':>6}{'RSS MB':>8}{'thr':>5}{'OS thr':>7}{'fds':>5}"
     f"{'lat med':>8}{'lat p99':>8}{'per med':>8}{'per p99':>8}{'$QRF':>8}{'gaps':>5}{'bad':>4}"
-    f"{'cmds':>6}{'answ':>6}{'wrong':>6}{'rows':>5}{'csv':>5}"
+    f"{'cmds':>6}{'answ':>6}{'wrong':>6}{'rows':>5}{'csv':>5}{'said':>6}"
 )
 
 
@@ -407,7 +420,7 @@ def _sample_line(s: Sample) -> str:
     return (
         f"{s.t_s:>7.0f}{s.frames:>8}{s.fps:>6.1f}{s.rss_mb:>8.1f}{s.threads:>5}{s.os_threads:>7}{s.fds:>5}"
         f"{s.latency_med:>8.1f}{s.latency_p99:>8.1f}{s.period_med:>8.1f}{s.period_p99:>8.1f}"
-        f"{s.lines:>8}{s.seq_gaps:>5}{s.bad:>4}{s.sent:>6}{s.answered:>6}{s.wrong:>6}{s.rows:>5}{s.rows_csv:>5}"
+        f"{s.lines:>8}{s.seq_gaps:>5}{s.bad:>4}{s.sent:>6}{s.answered:>6}{s.wrong:>6}{s.rows:>5}{s.rows_csv:>5}{s.said:>6}"
     )
 
 
@@ -450,7 +463,8 @@ def _run_args(args: argparse.Namespace, config_dir: Path, port: str) -> argparse
             "--virtual-wobble-deg",
             "5",
             "--virtual-wobble-mm",
-            "10",
+            f"{args.wobble_mm:g}",
+            f"--virtual-x-mm={args.x_mm:g}",
             "--virtual-wobble-period-s",
             "8",
             "--serial",
@@ -520,7 +534,7 @@ def run(args: argparse.Namespace) -> int:
         controller = Controller(read, write, args.ping_s, args.meas_s)
         operator = Operator(session, recorder, args.row_s, args.row_frames)
         deadline = time.monotonic() + (args.minutes * 60.0 if not args.frames else 1e12)
-        sampler = Sampler(args.sample_frames, deadline, controller, operator)
+        sampler = Sampler(args.sample_frames, deadline, controller, operator, notes)
         loop = FrameLoop(
             config, events=events, sinks=[stdout_sink, link, recorder, sampler], max_frames=args.frames
         )
@@ -537,7 +551,7 @@ def run(args: argparse.Namespace) -> int:
         print(
             "lat: capture to result ms; per: ms between frames; $QRF: lines the controller read; gaps: "
             "seq gaps; bad: CRC/cut/malformed; cmds/answ/wrong: commands sent, answered, answered out "
-            "of order; rows: logged; csv: rows in rows.csv",
+            "of order; rows: logged; csv: rows in rows.csv; said: messages the run said on stderr (notes)",
             flush=True,
         )
         print(HEADER, flush=True)
@@ -613,6 +627,7 @@ def run(args: argparse.Namespace) -> int:
             ("fds", "fds"),
             ("latency_med", "ms latency (median)"),
             ("period_med", "ms between frames (median)"),
+            ("said", "messages said"),
         ):
             slope, rms = _slope_per_hour(after, name)
             first, last = getattr(after[0], name), getattr(after[-1], name)
