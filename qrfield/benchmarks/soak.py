@@ -318,6 +318,7 @@ class Sample:
     t_s: float
     frames: int
     fps: float
+    cpu_ms: float
     rss_mb: float
     threads: int
     os_threads: int
@@ -352,7 +353,7 @@ class Sampler:
         self.samples: list[Sample] = []
         self.t0 = time.monotonic()
         self._last_at = self.t0
-        self._window_at, self._window_frames = self.t0, 0
+        self._window_at, self._window_frames, self._window_cpu = self.t0, 0, cpu_s()
         self.latency = np.zeros(every)
         self.period = np.zeros(every)
         self.frames = 0
@@ -382,11 +383,14 @@ class Sampler:
         np = self.np
         counts, _waiting = self.controller.snapshot()
         fps = (self.frames - self._window_frames) / max(1e-9, now - self._window_at)
-        self._window_at, self._window_frames = now, self.frames
+        cpu = cpu_s()
+        cpu_ms = 1000.0 * (cpu - self._window_cpu) / max(1, self.frames - self._window_frames)
+        self._window_at, self._window_frames, self._window_cpu = now, self.frames, cpu
         s = Sample(
             t_s=now - self.t0,
             frames=self.frames,
             fps=fps,
+            cpu_ms=cpu_ms,
             rss_mb=rss_mb(),
             threads=threading.active_count(),
             os_threads=os_threads(),
@@ -410,7 +414,7 @@ class Sampler:
 
 
 HEADER = (
-    f"{'t s':>7}{'frames':>8}{'fps':>6}{'RSS MB':>8}{'thr':>5}{'OS thr':>7}{'fds':>5}"
+    f"{'t s':>7}{'frames':>8}{'fps':>6}{'CPU/f':>6}{'RSS MB':>8}{'thr':>5}{'OS thr':>7}{'fds':>5}"
     f"{'lat med':>8}{'lat p99':>8}{'per med':>8}{'per p99':>8}{'$QRF':>8}{'gaps':>5}{'bad':>4}"
     f"{'cmds':>6}{'answ':>6}{'wrong':>6}{'rows':>5}{'csv':>5}{'said':>6}"
 )
@@ -418,7 +422,7 @@ HEADER = (
 
 def _sample_line(s: Sample) -> str:
     return (
-        f"{s.t_s:>7.0f}{s.frames:>8}{s.fps:>6.1f}{s.rss_mb:>8.1f}{s.threads:>5}{s.os_threads:>7}{s.fds:>5}"
+        f"{s.t_s:>7.0f}{s.frames:>8}{s.fps:>6.1f}{s.cpu_ms:>6.1f}{s.rss_mb:>8.1f}{s.threads:>5}{s.os_threads:>7}{s.fds:>5}"
         f"{s.latency_med:>8.1f}{s.latency_p99:>8.1f}{s.period_med:>8.1f}{s.period_p99:>8.1f}"
         f"{s.lines:>8}{s.seq_gaps:>5}{s.bad:>4}{s.sent:>6}{s.answered:>6}{s.wrong:>6}{s.rows:>5}{s.rows_csv:>5}{s.said:>6}"
     )
@@ -549,6 +553,7 @@ def run(args: argparse.Namespace) -> int:
             flush=True,
         )
         print(
+            "CPU/f: the process's CPU ms a frame (loop, link, controller, operator); "
             "lat: capture to result ms; per: ms between frames; $QRF: lines the controller read; gaps: "
             "seq gaps; bad: CRC/cut/malformed; cmds/answ/wrong: commands sent, answered, answered out "
             "of order; rows: logged; csv: rows in rows.csv; said: messages the run said on stderr (notes)",
@@ -625,6 +630,7 @@ def run(args: argparse.Namespace) -> int:
             ("threads", "threads"),
             ("os_threads", "OS threads"),
             ("fds", "fds"),
+            ("cpu_ms", "CPU ms a frame"),
             ("latency_med", "ms latency (median)"),
             ("period_med", "ms between frames (median)"),
             ("said", "messages said"),
