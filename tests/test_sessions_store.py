@@ -560,3 +560,43 @@ def test_reading_a_large_session_holds_a_few_bytes_a_row_not_the_file(tmp_path, 
     assert active == 40_000 and last == 40_000
     # Measured: 2.7 MB (1 MiB read chunks and 8 bytes a row); a dict a row was some 140 MB.
     assert peak < 4e6, f"peak {peak / 1e6:.1f} MB for a {size / 1e6:.1f} MB file"
+
+
+class _NoSync(FileOps):
+    """Appends without fsync: many rows fast (what is measured is memory, not the disk)."""
+
+    def fsync(self, fd):
+        pass
+
+
+def test_rows_logged_in_a_long_session_are_read_from_the_file_not_kept(tmp_path, camera_vga):
+    """A session open all day: each row logged was kept whole in memory (its dict of texts, some
+    5 KB) for as long as the session was open. Once on disk it is read from there, as the rows of a
+    resumed session are: memory stays a few bytes a row. Truth: csv.DictReader over the file."""
+    import gc
+    import tracemalloc
+
+    session = make(tmp_path, camera_vga, file_ops=_NoSync())
+    row = a_row(note="a note, with a comma")  # quoted in the file: the csv module's path
+    assert session.log(row).ok
+    gc.collect()
+    tracemalloc.start()
+    try:
+        before = tracemalloc.get_traced_memory()[0]
+        for _ in range(50):
+            assert session.log(row).ok
+        gc.collect()
+        kept = tracemalloc.get_traced_memory()[0] - before
+    finally:
+        tracemalloc.stop()
+    assert kept < 10_000, f"{kept / 50:.0f} bytes kept a row"  # whole rows: 240 KB
+    with open(session.rows_path, newline="", encoding="utf-8") as f:
+        truth = [r for r in csv.DictReader(f) if r["row"].strip().isdigit()]
+    rows = session.rows
+    assert len(rows) == len(truth) == 51 and session.next_row == 52
+    for got, expected in zip(rows, truth, strict=True):
+        assert got.confirmed and got.values == {k: v for k, v in expected.items() if k in got.values}
+    assert rows[-1].values["note"] == "a note, with a comma" and rows.by_number(7).number == 7
+    assert session.undo().row == 51 and rows[-1].withdrawn and rows.max_number() == 51
+    assert session.log(row).ok and rows[-1].number == 52 and rows[-2].withdrawn
+    session.close()

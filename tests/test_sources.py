@@ -183,6 +183,30 @@ def test_virtual_bench_out_of_view_pose_still_delivers_a_frame(camera_vga) -> No
         assert any("out of view" in note for note in source.notes)
 
 
+def test_virtual_bench_notes_stay_bounded_over_a_long_run() -> None:
+    # A card wobbling across the image edge: every out-of-view frame has its own vertex pixels in
+    # the text, and the bench made a note of each: ``notes`` grew a string a frame for as long as
+    # it ran (and the frame loop copied the list each frame). One note each time the card leaves
+    # the view, at most MAX_VIEW_NOTES over the bench's life.
+    from qrfield.sources.virtual import MAX_VIEW_NOTES
+
+    camera = CameraModel.from_focal(100.0, 80, 60)  # tiny frames: fast to render
+    # At z 300 mm the card's right edge leaves the 80 px image beyond x = 96 mm.
+    settings = VirtualBenchSettings(fps=0.0, noise_sigma=0.0, blur_px=0.0)
+    with VirtualBenchSource(camera, 50.0, settings) as source:
+        for i in range(10):  # one excursion, the card moving at the edge: one note
+            source.set_settings(settings.with_pose(Pose([100.0 + 0.5 * i, 0.0, 300.0], [0, 0, 0])))
+            source.read()
+        assert len(source.notes) == 1 and "out of view" in source.notes[0]
+        for i in range(MAX_VIEW_NOTES + 2):  # in view, out of view, again and again
+            source.set_settings(settings.with_pose(Pose([0.0, 0.0, 300.0], [0, 0, 0])))
+            source.read()
+            source.set_settings(settings.with_pose(Pose([110.0 + 0.5 * i, 0.0, 300.0], [0, 0, 0])))
+            source.read()
+        assert len(source.notes) == MAX_VIEW_NOTES
+        assert "not noted" in source.notes[-1]
+
+
 def test_video_file_ends_or_loops(video_file: Path) -> None:
     with VideoFileSource(video_file) as source:
         levels = [float(source.read().image.mean()) for _ in range(VIDEO_FRAMES)]

@@ -587,8 +587,18 @@ class RowList(Sequence[LoggedRow]):
 
     # -------------------------------------------------------------- rows
     def append(self, row: LoggedRow) -> None:
-        """A row logged by this process (kept as it is: its ``confirmed`` flag changes)."""
+        """A row logged by this process (kept as it is while its ``confirmed`` flag may change:
+        until :meth:`stored`)."""
         self._added.append(row)
+
+    def stored(self, row: LoggedRow, offset: int, length: int) -> None:
+        """``row``, logged by this process, is on disk now, its line at ``offset`` (``length`` bytes
+        without the newline): from now on it is read from there like the rows before it, not kept
+        (a row kept a logged row's values, some 5 KB, for as long as the session was open: a day of
+        rows grew without bound). Rows are stored in the order they were logged."""
+        if self._added and self._added[0] is row and offset >= self._end:
+            del self._added[0]
+            self._keep(offset, length, row.number)
 
     def max_number(self) -> int:
         """The largest row number (0 without rows), without reading a line."""
@@ -1123,6 +1133,7 @@ class Session:
         error: OSError | SessionError | None = None
         while self.pending:
             record = self.pending[0]
+            offset = self._good_size  # where the record's line goes (after the confirmed ones)
             try:
                 self._append(record.line)
             except (OSError, SessionError) as exc:
@@ -1132,6 +1143,7 @@ class Session:
             self.pending.pop(0)
             if record.row is not None:
                 record.row.confirmed = True
+                self.rows.stored(record.row, offset, len(record.line) - 1)
             logged.append(record.label)
         waiting = tuple(r.label for r in self.pending)
         if error is None:

@@ -21,6 +21,12 @@ from qrfield.render import RenderError, render_view
 from qrfield.settings import setting, validated
 from qrfield.sources.base import Frame, FrameSource, Pacer
 
+#: The most notes a bench makes of its card leaving the view, over its life: one each time the card
+#: leaves (not one a frame: the vertex pixels in the text change with every frame of a wobble, and
+#: a note a frame grew ``notes`` without bound, copied by the frame loop each frame, and said each on
+#: ``run``'s stderr), then no more once this many were made (the last one says so).
+MAX_VIEW_NOTES = 10
+
 
 @dataclass(frozen=True)
 class VirtualBenchSettings:
@@ -116,6 +122,8 @@ class VirtualBenchSource(FrameSource):
         self._lock = threading.Lock()
         self._pacer = Pacer(self._settings.fps)
         self._t0 = 0.0
+        self._in_view = True  # the last frame showed the whole card (a note when it leaves)
+        self._view_notes = 0  # notes made of the card leaving the view (at most MAX_VIEW_NOTES)
 
     @property
     def description(self) -> str:
@@ -155,9 +163,21 @@ class VirtualBenchSource(FrameSource):
                 image = render_view(self.camera, self.side_mm, pose, allow_partial=True, **kwargs).image
             except RenderError:
                 image = np.full((self.camera.height, self.camera.width), 110, np.uint8)
-            if not self.notes or self.notes[-1] != str(exc):
-                self.notes.append(str(exc))
+            self._note_out_of_view(str(exc))
+        else:
+            self._in_view = True
         return Frame(image, t, index, truth=pose, label=f"virtual #{index}")
+
+    def _note_out_of_view(self, why: str) -> None:
+        """A note when the card leaves the view (the frame before it showed it whole), at most
+        MAX_VIEW_NOTES over the bench's life (:data:`MAX_VIEW_NOTES`)."""
+        leaving, self._in_view = self._in_view, False
+        if not leaving or self._view_notes >= MAX_VIEW_NOTES:
+            return
+        self._view_notes += 1
+        if self._view_notes == MAX_VIEW_NOTES:
+            why += f" (noted {MAX_VIEW_NOTES} times: further times the code leaves the view are not noted)"
+        self.notes.append(why)
 
     def _close_impl(self) -> None:
         pass
