@@ -280,7 +280,7 @@ def adversity_view(condition: str, index: int, seed: int = 3031) -> AdversityVie
     if condition == "twins":
         gap = float(rng.uniform(1.0, 3.0))  # modules of card between the two cards
         step = side + (2 * (QUIET_MODULES + CARD_MARGIN_MODULES) + gap) * side / n
-        extent = np.concatenate([extent, extent + [step, 0.0, 0.0]])
+        extent = np.concatenate([extent, extent + np.array([step, 0.0, 0.0])])
         detail = f"gap {gap:.1f} modules"
     second = None
     if condition == "neighbour":
