@@ -69,7 +69,8 @@ OCCLUDED_SHARE = (0.05, 0.20)
 class Code:
     """One code in a view: true corners V1..V4 (4, 2) px (cv2.projectPoints, distortion included,
     in the code's own vertex order), its pose (marker to camera, mm and degrees), side L (mm),
-    text, modules per side and smallest module side (px)."""
+    text, modules per side, smallest module side (px) and module matrix (n, n) bool as drawn
+    (True = dark, row 0 and column 0 at V1; ``mirrored``: transposed)."""
 
     corners_px: np.ndarray
     pose: Pose
@@ -77,6 +78,7 @@ class Code:
     text: str
     modules: int
     module_px: float
+    matrix: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -303,15 +305,17 @@ def adversity_view(condition: str, index: int, seed: int = 3031) -> AdversityVie
         light, dark = dark, light
     scene = rasterise(camera, pose, side, matrix, background, light, dark)
     corners = true_corners(camera, pose, side)
-    codes = [Code(corners, pose, side, text, n, shortest_module_px(corners, n))]
+    codes = [Code(corners, pose, side, text, n, shortest_module_px(corners, n), matrix)]
     if condition == "twins":
         rot = pose.rotation
         pose2 = Pose(pose.position_mm + rot[:, 0] * step, pose.angles_deg)
         card = rasterise(camera, pose2, side, matrix, background, light, dark)
-        drawn = card != background
+        # (the rasteriser's grey levels are float32: outside the card it is the background to
+        # 1e-5, not exactly; an exact test drew the second card's bounding box over the first)
+        drawn = np.abs(card - background) > 1e-3
         scene[drawn] = card[drawn]
         corners2 = true_corners(camera, pose2, side)
-        codes.append(Code(corners2, pose2, side, text, n, shortest_module_px(corners2, n)))
+        codes.append(Code(corners2, pose2, side, text, n, shortest_module_px(corners2, n), matrix))
     if second is not None:
         text2, matrix2, n2, side2, offset, turn = second
         rot = pose.rotation
@@ -320,7 +324,7 @@ def adversity_view(condition: str, index: int, seed: int = 3031) -> AdversityVie
         ink = rasterise(camera, pose2, side2, matrix2, light, light, dark)
         scene = scene * (ink / light)  # printed on the same sheet: its ink darkens what is under
         corners2 = true_corners(camera, pose2, side2)
-        codes.append(Code(corners2, pose2, side2, text2, n2, shortest_module_px(corners2, n2)))
+        codes.append(Code(corners2, pose2, side2, text2, n2, shortest_module_px(corners2, n2), matrix2))
     h, w = scene.shape
     code = codes[0]
     if condition == "occluded":
