@@ -89,6 +89,31 @@ CORNER_BLOCK_CELLS = 8 + QUIET_RINGS
 MIN_CORNER_SUPPORT = 0.75
 
 
+#: Grey level from which a pixel is taken as clipped (a specular glare spot's core).
+SATURATED_GREY = 250.0
+#: A refined code with at least this many of its dark modules (the darker colour's cells of the
+#: decoded matrix, else of the fixed patterns) reading SATURATED_GREY or more at their centres
+#: lies under a glare spot: the clipped pixels, outliers the fit's Huber weights bound but do not
+#: drop, pull every corner by 0.1-0.25 px, 3-6 times the fit's std (adversity set, seed 3031).
+GLARE_MIN_CELLS = 2
+#: Each corner's std is then taken GLARE_STD_FACTOR times larger (its covariance times the square).
+GLARE_STD_FACTOR = 3.0
+
+
+def glare_cells(
+    grey: np.ndarray, corners: np.ndarray, cells: np.ndarray, inverted: bool, lens: Lens | None = None
+) -> int:
+    """How many of the darker-colour cells of the cell map ``cells`` (dark modules; light ones for
+    an ``inverted`` code) read SATURATED_GREY or more at their centres, at ``corners`` V1..V4 px."""
+    n = cells.shape[0] - 2 * QUIET_RINGS
+    rows, cols = np.nonzero(cells < 0.5 if inverted else cells > 0.5)
+    if not rows.size:
+        return 0
+    xy = np.column_stack([cols + 0.5 - QUIET_RINGS, rows + 0.5 - QUIET_RINGS])
+    values = sample_bilinear(grey, module_points_px(lens, corners, n, xy))
+    return int(np.sum(values >= SATURATED_GREY))
+
+
 #: Least share of a decoded matrix's modules that must show their colour in the image (sampled at
 #: module centres from the starting corners) for the fit to use the data modules; else (a matrix
 #: of another code, mirrored, or corners too far off) the fixed patterns alone are fitted.
@@ -393,7 +418,13 @@ class Detector:
         if refined and cov is not None:
             cells = result.cells if result.cells is not None else fixed_cells(modules)
             backed = backed_cov(grey, result.corners_px, cov, cells, self.lens)
-            if backed is not cov:  # a corner the image does not back: its own std does not stand
+            decoded = candidate.symbol
+            if decoded is not None and decoded.shape == (modules, modules):
+                cells = decoded_cells(decoded)  # as decoded: glare makes the confirmed matrix NaN
+            inverted = check_patterns(grey, result.corners_px, modules, self.lens).inverted
+            if glare_cells(grey, result.corners_px, cells, inverted, self.lens) >= GLARE_MIN_CELLS:
+                backed = np.asarray(backed) * GLARE_STD_FACTOR**2
+            if backed is not cov:  # the image does not back the fit's own std
                 cov = backed
                 corner_quality = np.sqrt(np.trace(cov, axis1=1, axis2=2))
         quality = quality_of(score, cov) if refined else UNREFINED_QUALITY_FACTOR * score
