@@ -74,6 +74,46 @@ BLUR_CHECK_MODULE_PX = 2.0
 PATTERN_SLACK_BLURRED = 0.05
 
 
+#: Cells (modules) per side of the block at each corner whose colours must back that corner: the
+#: symbol's 8 modules nearest the corner (V1, V2, V4: the finder pattern and its separator) and
+#: the QUIET_RINGS rings of quiet zone beyond it.
+CORNER_BLOCK_CELLS = 8 + QUIET_RINGS
+#: Least share of a corner's block (its known cells: the fixed patterns and the data modules the
+#: image confirmed) that must show its colour at the fitted corners for the corner's own
+#: covariance to stand. Below it (a glare spot on a finder pattern, a finger or another card over
+#: the corner) the corner is extrapolated from the rest of the symbol and can be 0.5-1 px off at a
+#: std of 0.02-0.08 px (docs/detection.md, "Adversity"); its covariance is widened to what a
+#: backend's own corner is off by (UNREFINED_STD_MODULES), so it is not reported good and its
+#: pose's std covers it. On the hard set's good detections the least block share is 0.80 (seed
+#: 2024, 150 views; modules of 1.3-1.6 px), on the adversity set's wrong ones 0.63-0.67.
+MIN_CORNER_SUPPORT = 0.75
+
+
+#: Grey level from which a pixel is taken as clipped (a specular glare spot's core).
+SATURATED_GREY = 250.0
+#: A refined code with at least this many of its dark modules (the darker colour's cells of the
+#: decoded matrix, else of the fixed patterns) reading SATURATED_GREY or more at their centres
+#: lies under a glare spot: the clipped pixels, outliers the fit's Huber weights bound but do not
+#: drop, pull every corner by 0.1-0.25 px, 3-6 times the fit's std (adversity set, seed 3031).
+GLARE_MIN_CELLS = 2
+#: Each corner's std is then taken GLARE_STD_FACTOR times larger (its covariance times the square).
+GLARE_STD_FACTOR = 3.0
+
+
+def glare_cells(
+    grey: np.ndarray, corners: np.ndarray, cells: np.ndarray, inverted: bool, lens: Lens | None = None
+) -> int:
+    """How many of the darker-colour cells of the cell map ``cells`` (dark modules; light ones for
+    an ``inverted`` code) read SATURATED_GREY or more at their centres, at ``corners`` V1..V4 px."""
+    n = cells.shape[0] - 2 * QUIET_RINGS
+    rows, cols = np.nonzero(cells < 0.5 if inverted else cells > 0.5)
+    if not rows.size:
+        return 0
+    xy = np.column_stack([cols + 0.5 - QUIET_RINGS, rows + 0.5 - QUIET_RINGS])
+    values = sample_bilinear(grey, module_points_px(lens, corners, n, xy))
+    return int(np.sum(values >= SATURATED_GREY))
+
+
 #: Least share of a decoded matrix's modules that must show their colour in the image (sampled at
 #: module centres from the starting corners) for the fit to use the data modules; else (a matrix
 #: of another code, mirrored, or corners too far off) the fixed patterns alone are fitted.
@@ -147,6 +187,72 @@ def confirmed_matrix(
     if float(np.mean(seen_dark == dark)) < MATRIX_AGREEMENT:
         return None
     return verified_matrix(values.reshape(n, n), matrix, dark_level, light_level)
+
+
+def corner_support(
+    grey: np.ndarray,
+    corners: np.ndarray,
+    cells: np.ndarray,
+    check: PatternCheck,
+    lens: Lens | None = None,
+    offset: tuple[int, int] = (0, 0),
+) -> np.ndarray:
+    """(4,) share of each corner's block (CORNER_BLOCK_CELLS square of the cell map ``cells`` at
+    V1..V4, known cells only) whose centre shows its colour at ``corners`` (px of ``grey``, a crop
+    at ``offset``), by the threshold between ``check``'s dark and light levels; NaN for a corner
+    with no known cell in view."""
+    size = cells.shape[0]
+    n = size - 2 * QUIET_RINGS
+    block = CORNER_BLOCK_CELLS
+    threshold = 0.5 * (check.dark + check.light)
+    out = np.full(4, np.nan)
+    if not np.isfinite(threshold):
+        return out
+    for k, (r0, c0) in enumerate(
+        ((0, 0), (0, size - block), (size - block, size - block), (size - block, 0))
+    ):
+        part = cells[r0 : r0 + block, c0 : c0 + block]
+        rows, cols = np.nonzero(np.isfinite(part))
+        if not rows.size:
+            continue
+        xy = np.column_stack([c0 + cols + 0.5 - QUIET_RINGS, r0 + rows + 0.5 - QUIET_RINGS])
+        values = sample_bilinear(grey, module_points_px(lens, corners, n, xy, offset))
+        seen = np.isfinite(values)
+        if not seen.any():
+            continue
+        dark = part[rows, cols] > 0.5
+        seen_dark = values > threshold if check.inverted else values < threshold
+        out[k] = float(np.mean((seen_dark == dark)[seen]))
+    return out
+
+
+def backed_cov(
+    grey: np.ndarray,
+    corners: np.ndarray,
+    cov: np.ndarray,
+    cells: np.ndarray | None,
+    lens: Lens | None = None,
+) -> np.ndarray:
+    """The fit's corner covariance ``cov`` (4, 2, 2) px^2, with each corner whose block the image
+    does not back (:func:`corner_support` below MIN_CORNER_SUPPORT) widened to at least the
+    assumed covariance of a backend's own corner (UNREFINED_STD_MODULES modules per coordinate)."""
+    from qrfield.detect.detection import MIN_ASSUMED_STD_PX, UNREFINED_STD_MODULES
+
+    n = cells.shape[0] - 2 * QUIET_RINGS if cells is not None else 0
+    if cells is None or n < 21:
+        return cov
+    check = check_patterns(grey, corners, n, lens)
+    support = corner_support(grey, corners, cells, check, lens)
+    weak = support < MIN_CORNER_SUPPORT
+    if not weak.any():
+        return cov
+    sides = np.linalg.norm(np.roll(corners, -1, axis=0) - corners, axis=1)
+    module = float(sides.mean()) / n
+    out = np.array(cov, dtype=np.float64)
+    for k in np.nonzero(weak)[0]:
+        std = max(UNREFINED_STD_MODULES[k] * module, MIN_ASSUMED_STD_PX)
+        out[k] = out[k] + np.eye(2) * max(std**2 - float(np.linalg.eigvalsh(out[k]).min()), 0.0)
+    return out
 
 
 def symbol_cells(
@@ -308,18 +414,31 @@ class Detector:
             # (a worn print, a real photo's glare), are only kept for a code whose text was read;
             # their quality stays below GOOD_QUALITY.
             return None
-        quality = quality_of(score, result.corners_cov) if refined else UNREFINED_QUALITY_FACTOR * score
+        cov, corner_quality = result.corners_cov, result.corner_quality
+        if refined and cov is not None:
+            cells = result.cells if result.cells is not None else fixed_cells(modules)
+            backed = backed_cov(grey, result.corners_px, cov, cells, self.lens)
+            decoded = candidate.symbol
+            if decoded is not None and decoded.shape == (modules, modules):
+                cells = decoded_cells(decoded)  # as decoded: glare makes the confirmed matrix NaN
+            inverted = check_patterns(grey, result.corners_px, modules, self.lens).inverted
+            if glare_cells(grey, result.corners_px, cells, inverted, self.lens) >= GLARE_MIN_CELLS:
+                backed = np.asarray(backed) * GLARE_STD_FACTOR**2
+            if backed is not cov:  # the image does not back the fit's own std
+                cov = backed
+                corner_quality = np.sqrt(np.trace(cov, axis1=1, axis2=2))
+        quality = quality_of(score, cov) if refined else UNREFINED_QUALITY_FACTOR * score
         return Detection(
             result.corners_px,
             candidate.text,
             quality,
-            result.corner_quality,
+            corner_quality,
             backend or candidate.backend,
             refined,
             modules,
             symbol=result.matrix,
             fit_state=result.fit_state,
-            corners_cov=result.corners_cov,
+            corners_cov=cov,
         )
 
     def read(self, grey: np.ndarray, candidate: Candidate) -> Candidate | None:
