@@ -31,6 +31,7 @@ Conditions (the keys of a :data:`VARIED_SEQUENCES` entry besides the trajectory)
 from __future__ import annotations
 
 import math
+import zlib
 from dataclasses import dataclass
 from typing import Any
 
@@ -56,19 +57,28 @@ HIDE_SLIDE_S = 0.15
 VARIED_SEQUENCES: dict[str, dict[str, Any]] = {
     "blurred swing 400 mm": dict(kind="swing", version=2, z=400.0, exposure_ms=8.0),
     "blurred swing far 1.4 px": dict(kind="swing", version=2, module=1.4, exposure_ms=8.0),
+    "jpeg, blurred swing far 1.4 px": dict(
+        kind="swing", version=2, module=1.4, exposure_ms=12.0, jpeg=(50, 70)
+    ),
     "jpeg frontal far 1.4 px": dict(kind="frontal", version=2, module=1.4, jpeg=(50, 85)),
     "jpeg sweep 300 mm": dict(kind="sweep", version=2, z=300.0, jpeg=(50, 85)),
     "covered, flipped 450 mm": dict(kind="flip", version=2, z=450.0, hide=(0.3, 1.5), hide_by="cover"),
     "left view, flipped far 1.4 px": dict(
         kind="flip", version=2, module=1.4, hide=(0.3, 1.5), hide_by="exit"
     ),
+    "briefly covered, flipped far 1.4 px": dict(
+        kind="flip", version=2, module=1.4, hide=(0.3, 0.45), hide_by="cover"
+    ),
     "covered wobble 450 mm": dict(kind="wobble", version=2, z=450.0, hide=(0.3, 1.5), hide_by="cover"),
     "dropped frames sweep 300 mm": dict(kind="sweep", version=2, z=300.0, drops=(0.1, 0.7)),
     "dropped frames far 1.4 px": dict(kind="frontal", version=2, module=1.4, drops=(0.1, 0.7)),
+    "dropped frames swing far 1.4 px": dict(kind="swing", version=2, module=1.4, drops=(0.1, 0.7)),
     "flicker wobble 450 mm": dict(kind="wobble", version=2, z=450.0, flicker=True),
     "version 1 frontal far 1.4 px": dict(kind="frontal", version=1, module=1.4),
     "version 6 wobble 250 mm": dict(kind="wobble", version=6, z=250.0),
-    "distorted off-axis far 1.4 px": dict(kind="frontal", version=2, module=1.4, distorted=True, offset=220.0),
+    "distorted off-axis far 1.4 px": dict(
+        kind="frontal", version=2, module=1.4, distorted=True, offset=220.0
+    ),
     "slow tilt through frontal far 1.4 px": dict(kind="tilt", version=2, module=1.4),
 }
 #: The kinds whose lag is measured (as in qrfield.testing.sequences.LAG_KINDS).
@@ -186,7 +196,7 @@ def make_varied(name: str, seed: int, count: int) -> VariedSequence:
     from qrfield.testing.hardset import DISTORTED_CAMERA, _pinhole, rasterise
 
     spec = VARIED_SEQUENCES[name]
-    index = list(VARIED_SEQUENCES).index(name)
+    index = zlib.crc32(name.encode())  # the name's own streams: adding a sequence moves no other
     rng = np.random.default_rng([seed, 251, index])
     camera = DISTORTED_CAMERA if spec.get("distorted") else _pinhole()
     matrix = _symbol(rng, int(spec["version"]))
