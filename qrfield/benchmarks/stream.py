@@ -73,7 +73,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--seeds",
         default=None,
-        help="sequence seeds (default 11,12,13, tuned on 1,2; with --varied 311,312,313, diagnosed on 301-303)",
+        help="sequence seeds (default 11,12,13, tuned on 1,2; with --varied 311,312,313, "
+        "diagnosed on 301-303)",
     )
     parser.add_argument(
         "--varied",
