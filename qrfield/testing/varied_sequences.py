@@ -67,7 +67,7 @@ VARIED_SEQUENCES: dict[str, dict[str, Any]] = {
         kind="flip", version=2, module=1.4, hide=(0.3, 1.5), hide_by="exit"
     ),
     "briefly covered, flipped far 1.4 px": dict(
-        kind="flip", version=2, module=1.4, hide=(0.3, 0.45), hide_by="cover"
+        kind="flip", version=2, module=1.4, hide=(0.3, 0.45), hide_by="cover", tilt=(2.0, 4.0)
     ),
     "covered wobble 450 mm": dict(kind="wobble", version=2, z=450.0, hide=(0.3, 1.5), hide_by="cover"),
     "dropped frames sweep 300 mm": dict(kind="sweep", version=2, z=300.0, drops=(0.1, 0.7)),
@@ -105,9 +105,13 @@ def _hide_window(rng: np.random.Generator, spec: dict[str, Any]) -> tuple[float,
 
 
 def _special_trajectory(
-    kind: str, rng: np.random.Generator, z_mm: float, window: tuple[float, float] | None
+    kind: str,
+    rng: np.random.Generator,
+    z_mm: float,
+    window: tuple[float, float] | None,
+    tilt_range: tuple[float, float] = (8.0, 20.0),
 ) -> tuple[Any, bool]:
-    """The kinds of this module: "flip" (held tilted 8-20 degrees about one axis, the tilt's sign
+    """The kinds of this module: "flip" (held tilted ``tilt_range`` degrees about one axis, the tilt's sign
     changed while hidden, within ``window``, or at 2 s) and "tilt" (a slow tilt, 4-6 deg/s, from
     -12 to +12 degrees and on, through frontal); else the clean sequences' kinds."""
     from qrfield.geometry import Pose
@@ -116,7 +120,7 @@ def _special_trajectory(
     g0 = float(rng.uniform(-30.0, 30.0))
     if kind == "flip":
         axis = int(rng.integers(2))
-        tilt = float(rng.uniform(8.0, 20.0)) * (1.0 if rng.random() < 0.5 else -1.0)
+        tilt = float(rng.uniform(*tilt_range)) * (1.0 if rng.random() < 0.5 else -1.0)
         other = _wave(rng, 3.0, 0.1, 0.3)
         wx, wy = _wave(rng, 6, 0.05, 0.2), _wave(rng, 5, 0.05, 0.2)
         start, end = window if window is not None else (1.9, 2.1)
@@ -203,7 +207,7 @@ def make_varied(name: str, seed: int, count: int) -> VariedSequence:
     n = matrix.shape[0]
     z = camera.fx * SIDE_MM / (n * spec["module"]) if spec.get("module") else float(spec["z"])
     window = _hide_window(rng, spec)
-    pose_at, moving = _special_trajectory(str(spec["kind"]), rng, z, window)
+    pose_at, moving = _special_trajectory(str(spec["kind"]), rng, z, window, spec.get("tilt", (8.0, 20.0)))
     slide = _exit_slide(window, z, camera) if window and spec.get("hide_by") == "exit" else None
     pose_at = _offset(pose_at, float(spec.get("offset", 0.0)), slide)
     light, dark, background = rng.uniform(180, 230), rng.uniform(20, 60), rng.uniform(60, 170)
