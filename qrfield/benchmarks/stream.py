@@ -24,6 +24,13 @@ issue 25); branch continuity (the default); continuity and the filter at two tim
    component); on the still card the jitter (the frame-to-frame std of the angles: RMS of
    successive differences / sqrt(2), worst angle); on the moving cards (sweep, wobble, swings,
    turn) the lag: the delay (frames) that best aligns the reported angles with the truth.
+   With ``--varied``, section 1 runs the varied sequences instead
+   (qrfield/testing/varied_sequences.py; ``--seeds`` default 311, 312, 313; diagnosed on 301-303):
+   motion blur of an 8 and a 12 ms exposure in fast swings, JPEG compression (quality 50-85), a
+   code covered or leaving view for 0.3-1.5 s (its tilt's sign flipped meanwhile, on two of them),
+   dropped frames (gaps of 0.1-0.7 s, capture times jittered), flicker and an exposure step, QR
+   versions 1 and 6, the distorted lens far off the axis, a slow tilt through frontal at modules
+   of 1.4 px. A hidden frame counts as a frame without a pose (its truth is the card's pose).
 2. Still cards (``--still-seeds``, default 111; FRAME_SHARED_SHARE was measured on 101 and 102):
    how much of a frame's variance the frames of a still card share, and the calibration of a
    session row's / MEAS answer's standard uncertainty (``qrfield.sessions.averaging``) over N
