@@ -61,6 +61,9 @@ VARIED_SEQUENCES: dict[str, dict[str, Any]] = {
         kind="swing", version=2, module=1.4, exposure_ms=12.0, jpeg=(50, 70)
     ),
     "jpeg frontal far 1.4 px": dict(kind="frontal", version=2, module=1.4, jpeg=(50, 85)),
+    "jpeg frontal 450 mm": dict(kind="frontal", version=2, z=450.0, jpeg=(50, 85)),
+    "jpeg frontal far 1.2 px": dict(kind="frontal", version=3, module=1.2, jpeg=(50, 85)),
+    "jpeg still 450 mm": dict(kind="still", version=2, z=450.0, jpeg=(50, 85)),
     "jpeg sweep 300 mm": dict(kind="sweep", version=2, z=300.0, jpeg=(50, 85)),
     "covered, flipped 450 mm": dict(kind="flip", version=2, z=450.0, hide=(0.3, 1.5), hide_by="cover"),
     "left view, flipped far 1.4 px": dict(
@@ -70,6 +73,7 @@ VARIED_SEQUENCES: dict[str, dict[str, Any]] = {
         kind="flip", version=2, module=1.4, hide=(0.3, 0.45), hide_by="cover", tilt=(2.0, 4.0)
     ),
     "covered wobble 450 mm": dict(kind="wobble", version=2, z=450.0, hide=(0.3, 1.5), hide_by="cover"),
+    "dropped frames frontal 450 mm": dict(kind="frontal", version=2, z=450.0, drops=(0.1, 0.7)),
     "dropped frames sweep 300 mm": dict(kind="sweep", version=2, z=300.0, drops=(0.1, 0.7)),
     "dropped frames far 1.4 px": dict(kind="frontal", version=2, module=1.4, drops=(0.1, 0.7)),
     "dropped frames swing far 1.4 px": dict(kind="swing", version=2, module=1.4, drops=(0.1, 0.7)),
