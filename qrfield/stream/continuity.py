@@ -44,7 +44,9 @@ Both are reported with their covariance widened in the tilt plane where the bran
 resolved frame always, an unambiguous one when its mirror fits within NEAR_FOLD_CHI2:
 :func:`near_fold_widening`): near the fold of the planar ambiguity the linearised std of the tilt is
 several times too small, in the direction of the turn to the other branch and across it
-(docs/uncertainty.md, "Near the fold"); before that, when the caller asks for it (``checked``: the
+(docs/uncertainty.md, "Near the fold"), and the position's covariance with it by what the widened
+tilt carries into the position along the corners' valley (:func:`coupled_position_widening`;
+docs/uncertainty.md, "Varied sequences (varied)"); before that, when the caller asks for it (``checked``: the
 stage does for the numerical model from a stream's second frame on), the covariance is raised to
 what the corners' best fit allows (:mod:`qrfield.stream.crosscheck`). The history itself predicts
 from the unwidened poses. A
