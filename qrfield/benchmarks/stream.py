@@ -24,6 +24,13 @@ issue 25); branch continuity (the default); continuity and the filter at two tim
    component); on the still card the jitter (the frame-to-frame std of the angles: RMS of
    successive differences / sqrt(2), worst angle); on the moving cards (sweep, wobble, swings,
    turn) the lag: the delay (frames) that best aligns the reported angles with the truth.
+   With ``--varied``, section 1 runs the varied sequences instead
+   (qrfield/testing/varied_sequences.py; ``--seeds`` default 311, 312, 313; diagnosed on 301-303):
+   motion blur of an 8 and a 12 ms exposure in fast swings, JPEG compression (quality 50-85), a
+   code covered or leaving view for 0.3-1.5 s (its tilt's sign flipped meanwhile, on two of them),
+   dropped frames (gaps of 0.1-0.7 s, capture times jittered), flicker and an exposure step, QR
+   versions 1 and 6, the distorted lens far off the axis, a slow tilt through frontal at modules
+   of 1.4 px. A hidden frame counts as a frame without a pose (its truth is the card's pose).
 2. Still cards (``--still-seeds``, default 111; FRAME_SHARED_SHARE was measured on 101 and 102):
    how much of a frame's variance the frames of a still card share, and the calibration of a
    session row's / MEAS answer's standard uncertainty (``qrfield.sessions.averaging``) over N
@@ -55,6 +62,8 @@ HELP = (
 
 #: Seeds the stream's thresholds were tuned on (qrfield/stream/continuity.py, kalman.py).
 TUNING_SEEDS = (1, 2)
+#: Seeds the varied sequences' confidently wrong frames were diagnosed (and fixed) on.
+VARIED_TUNING_SEEDS = (301, 302, 303)
 #: Seeds the still cards' shared share (FRAME_SHARED_SHARE) was measured on.
 STILL_TUNING_SEEDS = (101, 102)
 #: The criteria (the thesis') and "confidently wrong" (the issue's: outside 4 sigma and beyond them).
@@ -68,7 +77,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from qrfield.arguments import count
     from qrfield.limits import MAX_BENCHMARK_COUNT as MAX
 
-    parser.add_argument("--seeds", default="11,12,13", help="sequence seeds (default 11,12,13; tuned on 1,2)")
+    parser.add_argument(
+        "--seeds",
+        default=None,
+        help="sequence seeds (default 11,12,13, tuned on 1,2; with --varied 311,312,313, "
+        "diagnosed on 301-303)",
+    )
+    parser.add_argument(
+        "--varied",
+        action="store_true",
+        help="section 1 on the varied sequences instead (motion blur, JPEG, a code hidden and back, "
+        "dropped frames, flicker, versions 1 and 6, a distorted lens off the axis, a slow tilt: "
+        "qrfield/testing/varied_sequences.py)",
+    )
     parser.add_argument(
         "--frames", type=count("--frames", 1, MAX), default=150, help="frames per sequence (default 150, 5 s)"
     )
@@ -298,12 +319,25 @@ def _row(label: str, s: Score, extra: str) -> str:
 
 
 def _sequences(args: argparse.Namespace) -> None:
-    seeds = [int(s) for s in str(args.seeds).split(",") if s.strip()]
-    names = [n.strip() for n in args.only.split(",") if n.strip()] or list(SEQUENCES)
-    tuned = sorted(set(seeds) & set(TUNING_SEEDS))
+    varied = bool(getattr(args, "varied", False))
+    if varied:
+        from qrfield.testing.varied_sequences import VARIED_SEQUENCES, make_varied
+
+        table, make, tuning, kind = VARIED_SEQUENCES, make_varied, VARIED_TUNING_SEEDS, "varied"
+        default = "311,312,313"
+    else:
+        table, make, tuning, kind, default = SEQUENCES, make_sequence, TUNING_SEEDS, "drawn", "11,12,13"
+    seeds = [int(s) for s in str(args.seeds or default).split(",") if s.strip()]
+    names = [n.strip() for n in args.only.split(",") if n.strip()] or list(table)
+    tuned = sorted(set(seeds) & set(tuning))
+    tuned_on = f"{tuning[0]}-{tuning[-1]}" if varied else ",".join(map(str, tuning))
     print(
-        f"1. drawn sequences, {args.frames} frames at {FPS:g} fps, seeds {','.join(map(str, seeds))}"
-        + (f" (seeds {tuned} were used for tuning)" if tuned else " (not used for tuning: tuned on 1,2)")
+        f"1. {kind} sequences, {args.frames} frames at {FPS:g} fps, seeds {','.join(map(str, seeds))}"
+        + (
+            f" (seeds {tuned} were used for tuning)"
+            if tuned
+            else f" (not used for tuning: tuned on {tuned_on})"
+        )
     )
     print(
         "   meet: share of all frames within 2 deg / 5 mm; flagged: of posed frames, ambiguous after "
@@ -318,7 +352,7 @@ def _sequences(args: argparse.Namespace) -> None:
     for name in names:
         started = time.perf_counter()
         for seed in seeds:
-            sequence = make_sequence(name, seed, args.frames)
+            sequence = make(name, seed, args.frames)
             solved = solve_sequence(sequence)
             runs = [(label, replay(solved, settings, sequence.side_mm)) for label, settings in all_modes]
             print(f"\n   {name}, seed {seed}: {corner_calibration(sequence, solved)}")

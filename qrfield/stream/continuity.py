@@ -44,7 +44,9 @@ Both are reported with their covariance widened in the tilt plane where the bran
 resolved frame always, an unambiguous one when its mirror fits within NEAR_FOLD_CHI2:
 :func:`near_fold_widening`): near the fold of the planar ambiguity the linearised std of the tilt is
 several times too small, in the direction of the turn to the other branch and across it
-(docs/uncertainty.md, "Near the fold"); before that, when the caller asks for it (``checked``: the
+(docs/uncertainty.md, "Near the fold"), and the position's covariance with it by what the widened
+tilt carries into the position along the corners' valley (:func:`coupled_position_widening`;
+docs/uncertainty.md, "Varied sequences (varied)"); before that, when the caller asks for it (``checked``: the
 stage does for the numerical model from a stream's second frame on), the covariance is raised to
 what the corners' best fit allows (:mod:`qrfield.stream.crosscheck`). The history itself predicts
 from the unwidened poses. A
@@ -271,6 +273,42 @@ def position_widening(pose: PoseResult, other_position: np.ndarray) -> np.ndarra
     return raise_to(np.outer(step, step) / max(rise if math.isfinite(rise) else 1.0, 1.0), cov[:3, :3])
 
 
+def coupled_position_widening(
+    pose: PoseResult, rotation_extra: np.ndarray | None, moved: np.ndarray | None
+) -> np.ndarray | None:
+    """What is added to ``pose``'s position covariance (3, 3) mm^2 when ``rotation_extra`` (3, 3)
+    rad^2 (:func:`widening`) is added to its rotation's, given ``moved`` (3, 3) mm^2 (or None)
+    already added towards the other branch's position (:func:`position_widening`): at least what
+    the widened tilt carries into the position along the corners' valley, B E B^T with
+    B = C_pw C_ww^-1 the position's regression on the rotation in the pose's own covariance C
+    (:func:`qrfield.stream.poses.vector_cov`; minimising the corners' chi-square over the position
+    at a given rotation moves it by B dw, to first order), E = ``rotation_extra``; and at least
+    ``moved``. None when nothing is added.
+
+    Why: the widening makes the tilt's std honest near the fold, but without this the position's
+    std stayed the linearised one, which there is too small along the depth in the same way (the
+    varied sequences, docs/uncertainty.md "Varied sequences (varied)": a far card in a blurred,
+    JPEG-compressed swing, seed 303 frame 44, IPPE 7.5 degrees off at a widened std of 4.1,
+    unflagged, its depth 7.7 mm off at a std of 1.2)."""
+    if rotation_extra is None:
+        return moved
+    cov = vector_cov(pose)
+    if cov is None:
+        return moved
+    try:
+        regression = np.linalg.solve(cov[3:, 3:], cov[3:, :3]).T  # C_pw C_ww^-1 (C_ww symmetric)
+    except np.linalg.LinAlgError:
+        return moved
+    carried = regression @ np.asarray(rotation_extra, dtype=float) @ regression.T
+    if not np.all(np.isfinite(carried)):
+        return moved
+    carried = 0.5 * (carried + carried.T)
+    if moved is None:
+        return carried
+    beyond = raise_to(cov[:3, :3] + carried, cov[:3, :3] + moved)
+    return _sum(moved, beyond)
+
+
 def with_position_cov(pose: PoseResult, extra: np.ndarray | None) -> PoseResult:
     """``pose`` with ``extra`` (3, 3) mm^2 added to its position covariance (the std fields
     follow); ``pose`` itself when ``extra`` is None."""
@@ -365,12 +403,13 @@ def _one_branch(
         return None
     scaled, check, check_moved = _checked(fit_scaled(pose), checked)
     extra = widening(scaled, plane)
+    moved = coupled_position_widening(scaled, extra, None)
     return Decision(
-        replace(with_rotation_cov(scaled, extra), ambiguous=False),
+        replace(with_position_cov(with_rotation_cov(scaled, extra), moved), ambiguous=False),
         BY_FRAME,
         False,
         widening=_sum(check, extra),
-        position_widening=check_moved,
+        position_widening=_sum(check_moved, moved),
     )
 
 
@@ -441,7 +480,7 @@ class BranchHistory:
             self._remember(pose, t_ms, text)
             pose, check, check_moved = _checked(pose, checked)
             extra = near_fold_widening(pose, reflected)
-            moved = near_fold_position_widening(pose)
+            moved = coupled_position_widening(pose, extra, near_fold_position_widening(pose))
             out = with_position_cov(with_rotation_cov(pose, extra), moved)
             return Decision(
                 out, BY_FRAME, False, widening=_sum(check, extra), position_widening=_sum(check_moved, moved)
@@ -471,6 +510,7 @@ class BranchHistory:
             moved = position_widening(chosen, other.position_mm)
         elif reflected is not None and (plane := reflected(chosen)) is not None:
             extra = widening(chosen, plane)
+        moved = coupled_position_widening(chosen, extra, moved)
         chosen = with_position_cov(with_rotation_cov(chosen, extra), moved)
         return Decision(
             replace(chosen, ambiguous=False),

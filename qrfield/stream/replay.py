@@ -13,16 +13,21 @@ def solve_sequence(sequence: Sequence) -> list[Any]:
     """Each frame of ``sequence`` through the default pipeline (every method in
     :data:`qrfield.methods.METHODS`, the tracker on) with the stream stage off, as a frame loop
     would solve it frame by frame: a list of :class:`qrfield.pipeline.FrameResult`, one per frame,
-    each carrying its drawn truth (``truth``) and times ``1000 + i / FPS`` s."""
+    each carrying its drawn truth (``truth``) and times ``1000 + i / FPS`` s; a sequence with
+    capture times and frame numbers of its own (``times_s``, ``indices``:
+    :class:`qrfield.testing.varied_sequences.VariedSequence`) is given those instead."""
     from qrfield.methods import METHODS
     from qrfield.pipeline import Pipeline
     from qrfield.sources.base import Frame
     from qrfield.stream import StreamSettings
 
     pipeline = Pipeline(sequence.camera, sequence.side_mm, METHODS, stream=StreamSettings(continuity=False))
+    count = len(sequence.frames)
+    times = getattr(sequence, "times_s", ()) or [i / FPS for i in range(count)]
+    indices = getattr(sequence, "indices", ()) or range(count)
     out = []
-    for i, (image, pose) in enumerate(sequence.frames):
-        out.append(pipeline.process(Frame(image, 1000.0 + i / FPS, i, truth=pose)))
+    for (image, pose), t, i in zip(sequence.frames, times, indices, strict=True):
+        out.append(pipeline.process(Frame(image, 1000.0 + t, i, truth=pose)))
     return out
 
 

@@ -27,11 +27,13 @@ FIT_CHI2 (its covariance scaled by 1 + (chi2 - FIT_CHI2) / FIT_DOF:
 :func:`qrfield.stream.continuity.fit_scaled`)
 or its mirror fits within NEAR_FOLD_CHI2, where the std of its tilt is widened
 (:func:`qrfield.stream.continuity.near_fold_widening`; near the fold the linearised std of the
-tilt is several times too small, docs/uncertainty.md). From a stream's second frame on, with
-continuity on, the numerical model's covariance is also raised to at least what the corners' best
-fit allows, H^-1 + d d^T (:func:`qrfield.stream.crosscheck.crosscheck_widening`: near frontal the
-length fit's linearised std is several times too small where the corners carried its tilt away
-from frontal); the filter counts that as shared in full, as the widening near the fold.
+tilt is several times too small, docs/uncertainty.md) and its position's with it, along the
+corners' valley (:func:`qrfield.stream.continuity.coupled_position_widening`). From a stream's
+second frame on, with continuity on, the numerical model's covariance is also raised to at
+least what the corners' best fit allows, H^-1 + d d^T
+(:func:`qrfield.stream.crosscheck.crosscheck_widening`: near frontal the length fit's linearised
+std is several times too small where the corners carried its tilt away from frontal); the
+filter counts that as shared in full, as the widening near the fold.
 """
 
 from __future__ import annotations
