@@ -42,9 +42,10 @@ def test_a_recording_decoded_fast_is_timed_and_filtered_on_its_own_clock() -> No
     assert sum(r.stream["numerical"].filtered for r in got) >= 6
     differs = False
     for a, b, c in zip(want, got, _run(sequence, on_decode_clock), strict=True):
-        np.testing.assert_allclose(b.poses["numerical"].angles_deg, a.poses["numerical"].angles_deg, atol=1e-9)
-        np.testing.assert_allclose(b.poses["numerical"].position_mm, a.poses["numerical"].position_mm, atol=1e-9)
-        differs |= not np.allclose(c.poses["numerical"].angles_deg, a.poses["numerical"].angles_deg, atol=1e-3)
+        want_pose, got_pose = a.poses["numerical"], b.poses["numerical"]
+        np.testing.assert_allclose(got_pose.angles_deg, want_pose.angles_deg, atol=1e-9)
+        np.testing.assert_allclose(got_pose.position_mm, want_pose.position_mm, atol=1e-9)
+        differs |= not np.allclose(c.poses["numerical"].angles_deg, want_pose.angles_deg, atol=1e-3)
     assert differs  # the decode clock would have changed what the filter reports
 
 

@@ -222,7 +222,8 @@ def run(args: argparse.Namespace) -> int:
             f"{(t_make + t_detect) / n:>8.2f}"
         )
     print(
-        "found/good: the (first; twins: either) code found / found with quality >= 0.85 (refined); p90: 90th pct of "
+        "found/good: the (first; twins: either) code found / found with quality >= 0.85 (refined); "
+        "p90: 90th pct of "
         "the good ones' worst corner error; bad good: good but a corner > 0.5 px off or another "
         "text; >4 sd: good, a corner > 0.1 px off and outside 4 sd of its covariance; bad pose: a "
         "converged pose > 2 deg / 5 mm and > 4 sd off, neither ambiguous nor misfit; refused: "
