@@ -32,6 +32,7 @@ from qrfield.methods import METHODS
 from qrfield.status import usable_pose
 from qrfield.stream import StreamSettings
 from qrfield.stream.replay import replay, solve_sequence
+from qrfield.testing.scoring import confidently_wrong
 from qrfield.testing.sequences import make_sequence
 
 NAME = "frontal far 1.4 px"
@@ -40,16 +41,6 @@ NAME = "frontal far 1.4 px"
 MODES = [StreamSettings(), StreamSettings(filter_s=0.2), StreamSettings(filter_s=0.5)]
 MODE_IDS = ["continuity", "filter 0.2 s", "filter 0.5 s"]
 WINDOWS = [(2, 146), (43, 75)]  # (seed, frames from the first)
-
-
-def _confidently_wrong(pose, truth) -> bool:
-    if pose.ambiguous:
-        return False
-    dp = pose.position_mm - truth.position_mm
-    da = angle_difference(pose.angles_deg, truth.angles_deg)
-    angle = bool(np.any((np.abs(da) > 2.0) & (np.abs(da) > 4.0 * pose.angles_std_deg)))
-    position = bool(np.linalg.norm(dp) > 5.0 and np.any(np.abs(dp) > 4.0 * pose.position_std_mm))
-    return angle or position
 
 
 def _wrong_frames(results: list, side: float, settings: StreamSettings) -> tuple[list, list]:
@@ -61,7 +52,7 @@ def _wrong_frames(results: list, side: float, settings: StreamSettings) -> tuple
             pose = again.poses.get(method)
             if usable_pose(pose):
                 posed.append((result.index, method))
-                if _confidently_wrong(pose, result.truth):
+                if confidently_wrong(pose, result.truth):
                     wrong.append((result.index, method))
     return posed, wrong
 
@@ -76,7 +67,7 @@ def solved(request) -> tuple[list, float]:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("settings", MODES, ids=MODE_IDS)
-def test_no_frame_of_a_far_frontal_card_is_confidently_wrong(solved, settings) -> None:
+def test_no_frame_of_a_far_frontal_card_isconfidently_wrong(solved, settings) -> None:
     results, side = solved
     posed, wrong = _wrong_frames(results, side, settings)
     assert len(posed) >= len(results)  # the far card is found in every frame, by at least one method
@@ -101,7 +92,7 @@ def test_a_frontal_frame_with_one_minimum_is_resolved_when_frame_and_history_agr
     for result, again in zip(results, replay(results, StreamSettings(), side), strict=True):
         pose = again.poses["numerical"]
         assert usable_pose(pose)
-        assert not _confidently_wrong(pose, result.truth)
+        assert not confidently_wrong(pose, result.truth)
         if not pose.ambiguous:
             da = angle_difference(pose.angles_deg, result.truth.angles_deg)
             assert np.all(np.abs(da) <= 2.0)  # what the history resolves is right
@@ -121,7 +112,7 @@ def frontal_shared_error() -> tuple[list, float]:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("settings", MODES, ids=MODE_IDS)
-def test_no_frame_of_a_frontal_card_with_a_shared_corner_error_is_confidently_wrong(
+def test_no_frame_of_a_frontal_card_with_a_shared_corner_error_isconfidently_wrong(
     frontal_shared_error, settings
 ) -> None:
     results, side = frontal_shared_error
@@ -145,7 +136,7 @@ def swing_misfit() -> tuple[list, float]:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("settings", MODES, ids=MODE_IDS)
-def test_no_frame_of_a_fast_swing_whose_corners_misfit_is_confidently_wrong(swing_misfit, settings) -> None:
+def test_no_frame_of_a_fast_swing_whose_corners_misfit_isconfidently_wrong(swing_misfit, settings) -> None:
     results, side = swing_misfit
     misfits = [r.index for r in results for p in r.poses.values() if usable_pose(p) and p.chi2 > 20.0]
     assert misfits  # the window still holds the tracked fits that misfit

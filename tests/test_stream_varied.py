@@ -14,27 +14,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from qrfield.geometry import angle_difference
 from qrfield.methods import METHODS
 from qrfield.status import usable_pose
 from qrfield.stream import StreamSettings
 from qrfield.stream.kalman import GAP_S
 from qrfield.stream.replay import replay, solve_sequence
+from qrfield.testing.scoring import confidently_wrong
 from qrfield.testing.sequences import FPS
 from qrfield.testing.varied_sequences import make_varied
 
 MODES = [StreamSettings(), StreamSettings(filter_s=0.2), StreamSettings(filter_s=0.5)]
 MODE_IDS = ["continuity", "filter 0.2 s", "filter 0.5 s"]
-
-
-def _confidently_wrong(pose, truth) -> bool:
-    if pose.ambiguous:
-        return False
-    dp = pose.position_mm - truth.position_mm
-    da = angle_difference(pose.angles_deg, truth.angles_deg)
-    angle = bool(np.any((np.abs(da) > 2.0) & (np.abs(da) > 4.0 * pose.angles_std_deg)))
-    position = bool(np.linalg.norm(dp) > 5.0 and np.any(np.abs(dp) > 4.0 * pose.position_std_mm))
-    return angle or position
 
 
 def _wrong(results: list, side: float, settings: StreamSettings) -> list:
@@ -44,9 +34,15 @@ def _wrong(results: list, side: float, settings: StreamSettings) -> list:
     for again in replay(results, settings, side):
         for method in METHODS:
             pose = again.poses.get(method)
-            if usable_pose(pose) and _confidently_wrong(pose, again.truth):
+            if usable_pose(pose) and confidently_wrong(pose, again.truth):
                 out.append((again.index, method))
     return out
+
+
+def _solved(name: str, seed: int, count: int) -> tuple:
+    """The varied sequence ``name`` (seed, frames) and its frames solved with the stream off."""
+    sequence = make_varied(name, seed, count)
+    return sequence, solve_sequence(sequence)
 
 
 COVERED = "briefly covered, flipped far 1.4 px"
@@ -56,8 +52,7 @@ COVERED = "briefly covered, flipped far 1.4 px"
 def covered() -> tuple:
     """Seed 302's first 90 frames: a far card (modules of 1.4 px) 2-4 degrees from frontal, covered
     for 0.3 s (frames 54-62) while its tilt changes sign."""
-    sequence = make_varied(COVERED, 302, 90)
-    return sequence, solve_sequence(sequence)
+    return _solved(COVERED, 302, 90)
 
 
 @pytest.mark.slow
@@ -95,8 +90,7 @@ DROPPED = "dropped frames far 1.4 px"
 def dropped() -> tuple:
     """Seed 303's 150 frames of a far card near frontal (modules of 1.4 px) with three runs of
     dropped frames (there: one gap of 0.6 s, the runs overlap) and capture times jittered by 2 ms."""
-    sequence = make_varied(DROPPED, 303, 150)
-    return sequence, solve_sequence(sequence)
+    return _solved(DROPPED, 303, 150)
 
 
 @pytest.mark.slow
@@ -130,8 +124,7 @@ def blurred() -> tuple:
     corner V3 is 0.66 px off (its std 0.28); IPPE's answer, unambiguous near the fold (its mirror
     23 worse), is 7.5 degrees off in tilt and 7.7 mm in depth: the tilt's std widened to 4.1
     degrees, the depth's linearised 1.2 mm (docs/uncertainty.md, "Varied sequences (varied)")."""
-    sequence = make_varied(BLURRED, 303, 46)
-    return sequence, solve_sequence(sequence)
+    return _solved(BLURRED, 303, 46)
 
 
 @pytest.mark.slow

@@ -50,7 +50,7 @@ COMBO = "alpha+beta-gamma+"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from qrfield.arguments import count, seconds, seed, whole_number
+    from qrfield.arguments import count, rate, seconds, seed, whole_number
     from qrfield.limits import MAX_BENCHMARK_COUNT
 
     parser.add_argument(
@@ -76,7 +76,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="samples before this are left out of the slopes, s (default 60)",
     )
     parser.add_argument(
-        "--fps", type=seconds("--fps"), default=0.0, help="the bench's frame rate (0 = as fast as it renders)"
+        "--fps", type=rate("--fps"), default=0.0, help="the bench's frame rate (0 = as fast as it renders)"
     )
     parser.add_argument(
         "--x-mm",

@@ -53,6 +53,7 @@ import numpy as np
 from qrfield.geometry import POSE_NAMES
 from qrfield.methods import METHODS
 from qrfield.stream.replay import replay, solve_sequence
+from qrfield.testing.scoring import confidently_wrong, meets, pose_errors
 from qrfield.testing.sequences import FPS, SEQUENCES, Sequence, make_sequence
 
 HELP = (
@@ -67,7 +68,6 @@ VARIED_TUNING_SEEDS = (301, 302, 303)
 #: Seeds the still cards' shared share (FRAME_SHARED_SHARE) was measured on.
 STILL_TUNING_SEEDS = (101, 102)
 #: The criteria (the thesis') and "confidently wrong" (the issue's: outside 4 sigma and beyond them).
-ANGLE_DEG, POSITION_MM, WRONG_SIGMA = 2.0, 5.0, 4.0
 #: Filter time constants of the benchmark, s.
 FILTER_S = (0.2, 0.5)
 COMPONENTS = POSE_NAMES
@@ -132,26 +132,6 @@ class Score:
     lag_frames: float = math.nan
 
 
-def _errors(pose: Any, truth: Any) -> tuple[np.ndarray, np.ndarray]:
-    from qrfield.geometry import angle_difference
-
-    return pose.position_mm - truth.position_mm, angle_difference(pose.angles_deg, truth.angles_deg)
-
-
-def confidently_wrong(pose: Any, truth: Any) -> bool:
-    """Not flagged, and an angle more than 2 deg and 4 of its std off, or the position more than
-    5 mm off and a coordinate more than 4 of its std off."""
-    if pose.ambiguous:
-        return False
-    dp, da = _errors(pose, truth)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        angle = bool(np.any((np.abs(da) > ANGLE_DEG) & ~(np.abs(da) <= WRONG_SIGMA * pose.angles_std_deg)))
-        position = bool(
-            np.linalg.norm(dp) > POSITION_MM and np.any(~(np.abs(dp) <= WRONG_SIGMA * pose.position_std_mm))
-        )
-    return angle or position
-
-
 def lag_frames(times: np.ndarray, angles: np.ndarray, pose_at: Callable[[float], Any]) -> float:
     """The delay (frames, 0.25 steps from -2 to 15) that best aligns reported angles (k, 3) at
     ``times`` (s) with the truth at the times minus that delay (least RMS difference)."""
@@ -183,8 +163,8 @@ def score(sequence: Sequence, results: list[Any], method: str) -> Score:
         out.by_history += bool(mark is not None and mark.resolved_by == "history")
         out.flipped += bool(mark is not None and mark.flipped)
         out.filtered += bool(mark is not None and mark.filtered)
-        dp, da = _errors(pose, truth)
-        out.meet += bool(np.all(np.abs(da) <= ANGLE_DEG) and np.linalg.norm(dp) <= POSITION_MM)
+        dp, da = pose_errors(pose, truth)
+        out.meet += meets(pose, truth)
         out.flagged += bool(pose.ambiguous)
         out.wrong += confidently_wrong(pose, truth)
         if not pose.ambiguous:
@@ -207,11 +187,6 @@ def score(sequence: Sequence, results: list[Any], method: str) -> Score:
 MISS_KINDS = ("no pose", "flagged", "wrong branch", "off, frame alone", "off, by history")
 
 
-def _meets(pose: Any, truth: Any) -> bool:
-    dp, da = _errors(pose, truth)
-    return bool(np.all(np.abs(da) <= ANGLE_DEG) and np.linalg.norm(dp) <= POSITION_MM)
-
-
 def misses(results: list[Any], method: str) -> dict[str, int]:
     """Why frames miss 2 deg / 5 mm, per kind of MISS_KINDS: no usable pose; flagged ambiguous after
     history; the wrong branch (unflagged, and the frame's other branch, its mirror candidate or,
@@ -226,7 +201,7 @@ def misses(results: list[Any], method: str) -> dict[str, int]:
         if not usable_pose(pose):
             out["no pose"] += 1
             continue
-        if _meets(pose, truth):
+        if meets(pose, truth):
             continue
         if pose.ambiguous:
             out["flagged"] += 1
@@ -237,7 +212,7 @@ def misses(results: list[Any], method: str) -> dict[str, int]:
             other = frame
         else:
             other = frame.alternative if has_mirror(frame) else None
-        if other is not None and _meets(other, truth):
+        if other is not None and meets(other, truth):
             out["wrong branch"] += 1
         elif mark is not None and mark.resolved_by == "history":
             out["off, by history"] += 1
@@ -255,7 +230,7 @@ def tilt_precision(results: list[Any], method: str) -> tuple[float, float]:
     for result in results:
         pose = result.poses.get(method)
         if usable_pose(pose):
-            errors.append(_errors(pose, result.truth)[1][:2])
+            errors.append(pose_errors(pose, result.truth)[1][:2])
             stds.append(pose.angles_std_deg[:2])
     if not errors:
         return math.nan, math.nan
@@ -473,7 +448,7 @@ def _still(args: argparse.Namespace) -> None:
             for r in results:
                 pose = r.poses.get(method)
                 if usable_pose(pose) and not pose.ambiguous:
-                    dp, da = _errors(pose, truth)
+                    dp, da = pose_errors(pose, truth)
                     errors.append(np.concatenate([dp, da]))
                     sigmas.append(np.concatenate([pose.position_std_mm, pose.angles_std_deg]))
             if len(errors) < max(args.still_frames // 2, 2):
@@ -498,7 +473,7 @@ def _still(args: argparse.Namespace) -> None:
                 if len(frames) < n:
                     continue
                 mean = average_frames(frames[:n], method)
-                error = np.concatenate(_errors_of_mean(mean, truth))
+                error = np.concatenate(pose_errors(mean, truth))
                 sem = np.concatenate([mean.sem_position_mm, mean.sem_angles_deg])
                 spread = np.concatenate([mean.std_position_mm, mean.std_angles_deg]) / math.sqrt(n)
                 ours.append(error / sem)
@@ -509,12 +484,6 @@ def _still(args: argparse.Namespace) -> None:
                 nv = np.sqrt(np.nanmean(np.array(naive) ** 2, axis=0))
                 line += "   naive spread/sqrt(N): " + " ".join(f"{v:5.2f}" for v in nv)
             print(line)
-
-
-def _errors_of_mean(mean: Any, truth: Any) -> tuple[np.ndarray, np.ndarray]:
-    from qrfield.geometry import angle_difference
-
-    return mean.position_mm - truth.position_mm, angle_difference(mean.angles_deg, truth.angles_deg)
 
 
 def run(args: argparse.Namespace) -> int:
